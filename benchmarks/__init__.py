@@ -1,0 +1,1 @@
+"""vgtarm benchmarks: ``python -m benchmarks`` runs them all."""

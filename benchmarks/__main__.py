@@ -1,0 +1,24 @@
+"""Run every benchmark and print Markdown tables (paste them into docs/benchmarks.md)."""
+
+from __future__ import annotations
+
+import sys
+
+from . import bench_model
+from .common import machine
+
+MODULES = {"model": bench_model}
+
+
+def main(argv: list[str]) -> None:
+    chosen = argv or list(MODULES)
+    unknown = [name for name in chosen if name not in MODULES]
+    if unknown:
+        raise SystemExit(f"unknown benchmark {unknown[0]!r}; choose from {sorted(MODULES)}")
+    print(f"machine: {machine()}")
+    for name in chosen:
+        MODULES[name].run()
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

@@ -1,0 +1,520 @@
+"""Desired tip paths sampled at a fixed period.
+
+A :class:`Path` holds the desired tip position, velocity and acceleration in the base frame at
+uniformly spaced times ``t_k = t0 + k*dt``. It is built by one of the constructors below:
+
+- :func:`case1` -- the closed curve of the paper's first case study (eq. 22);
+- :func:`case2` -- the two straight lines of the second case study (eq. 23);
+- :func:`waypoints` -- timed waypoints joined by rest-to-rest cubics, quintics or a C2 spline;
+- :func:`from_samples` / :func:`from_csv` -- sampled positions, fitted with a C2 spline.
+
+Velocities and accelerations are always exact derivatives of the position model (analytic for
+the closed-form paths, the spline's own derivatives for fitted data), never finite differences.
+Units are SI throughout: seconds, metres, m/s, m/s^2.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.interpolate import CubicSpline
+
+from .errors import PathError
+
+FloatArray = NDArray[np.float64]
+
+_CSV_COLUMNS = ("t", "x", "y", "z")
+_COUNT_TOLERANCE = 1e-9
+"""Slack, in units of ``dt``, when counting how many samples fit in a duration."""
+_UNIFORM_RTOL = 1e-9
+"""Relative tolerance, on ``dt``, for sample times to count as uniformly spaced."""
+
+
+@dataclass(frozen=True, eq=False)
+class Path:
+    """A desired tip path sampled at a fixed period.
+
+    Attributes:
+        name: Label of the path (e.g. ``"case1"``).
+        t: Sample times, shape ``(N,)``, s; uniform, ``t_k = t0 + k*dt``, ``N >= 2``.
+        position: Tip position in the base frame, shape ``(N, 3)``, m.
+        velocity: Tip velocity, shape ``(N, 3)``, m/s.
+        acceleration: Tip acceleration, shape ``(N, 3)``, m/s^2.
+
+    The arrays are copied to float64 on construction and made read-only. Invalid shapes,
+    non-finite values or non-uniform times raise :class:`~vgtarm.errors.PathError`.
+    """
+
+    name: str
+    t: FloatArray
+    position: FloatArray
+    velocity: FloatArray
+    acceleration: FloatArray
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str):
+            raise PathError(f"name must be a str, got {type(self.name).__name__}")
+        t = _frozen_array("t", self.t)
+        if t.ndim != 1 or t.shape[0] < 2:
+            raise PathError(f"t must have shape (N,) with N >= 2, got shape {t.shape}")
+        _require_finite("t", t)
+        n = t.shape[0]
+        for field in ("position", "velocity", "acceleration"):
+            values = _frozen_array(field, getattr(self, field))
+            if values.shape != (n, 3):
+                raise PathError(f"{field} must have shape ({n}, 3) to match t, got shape {values.shape}")
+            _require_finite(field, values)
+            object.__setattr__(self, field, values)
+        step = (t[-1] - t[0]) / (n - 1)
+        if not step > 0.0:
+            raise PathError(f"t must be strictly increasing, got t[0]={float(t[0])!r}, t[-1]={float(t[-1])!r}")
+        deviation = np.abs(t - (t[0] + np.arange(n) * step))
+        worst = int(np.argmax(deviation))
+        if deviation[worst] > _uniform_tolerance(step, t):
+            raise PathError(
+                f"t must be uniformly spaced (t_k = t0 + k*dt, dt={float(step)!r}); "
+                f"t[{worst}]={float(t[worst])!r} is off by {deviation[worst]:.3g} s"
+            )
+        object.__setattr__(self, "t", t)
+
+    @property
+    def dt(self) -> float:
+        """Sampling period, s."""
+        return float((self.t[-1] - self.t[0]) / (len(self) - 1))
+
+    def __len__(self) -> int:
+        """Number of samples ``N``."""
+        return int(self.t.shape[0])
+
+
+def case1(
+    dt: float = 1e-3,
+    *,
+    x0: float = 0.0,
+    y0: float = 0.0,
+    z0: float = 0.66,
+    ax: float = 0.06,
+    ay: float = 0.06,
+    az: float = 0.03,
+    duration: float = 2 * math.pi,
+) -> Path:
+    """Closed curve of case study 1 (paper eq. 22).
+
+    ``X = x0 + ax sin t``, ``Y = y0 + ay cos t``, ``Z = z0 + az sin(2t) cos(2t)``, sampled at
+    ``t_k = k*dt`` for ``k = 0 .. floor(duration/dt)`` (6284 samples at the defaults).
+
+    Args:
+        dt: Sampling period, s, > 0.
+        x0, y0, z0: Centre of the curve, m.
+        ax, ay, az: Amplitudes, m.
+        duration: Length of the path, s, >= dt.
+
+    Returns:
+        A :class:`Path` named ``"case1"`` with analytic velocity and acceleration.
+    """
+    dt = _check_dt(dt)
+    for field, value in (("x0", x0), ("y0", y0), ("z0", z0), ("ax", ax), ("ay", ay), ("az", az)):
+        _check_finite_scalar(field, value)
+    duration = _check_positive("duration", duration)
+    t = _sample_times(0.0, duration, dt, "duration")
+    sin_t, cos_t = np.sin(t), np.cos(t)
+    # Z uses sin(2t) cos(2t) = sin(4t) / 2.
+    sin_4t, cos_4t = np.sin(4 * t), np.cos(4 * t)
+    position = np.column_stack((x0 + ax * sin_t, y0 + ay * cos_t, z0 + 0.5 * az * sin_4t))
+    velocity = np.column_stack((ax * cos_t, -ay * sin_t, 2 * az * cos_4t))
+    acceleration = np.column_stack((-ax * sin_t, -ay * cos_t, -8 * az * sin_4t))
+    return Path("case1", t, position, velocity, acceleration)
+
+
+def case2(
+    dt: float = 1e-3,
+    *,
+    corners: Sequence[Sequence[float]] | ArrayLike = (
+        (0.03, -0.04, 0.64),
+        (-0.04, 0.03, 0.68),
+        (0.04, 0.05, 0.62),
+    ),
+    durations: Sequence[float] | ArrayLike = (2.0, 2.0),
+) -> Path:
+    """Straight lines through corners, case study 2 (paper eq. 23).
+
+    Each line is a rest-to-rest cubic in time, ``x(tau) = Pa + (3 tau^2 - 2 tau^3)(Pb - Pa)``
+    with ``tau = (t - t_a)/T``, so the velocity is zero at every corner. Samples are
+    ``t_k = k*dt`` up to the total duration (4001 samples at the defaults).
+
+    Args:
+        dt: Sampling period, s, > 0.
+        corners: Corner points in the base frame, shape ``(M, 3)`` with ``M >= 2``, m.
+        durations: Time spent on each line, shape ``(M - 1,)``, s, each > 0.
+
+    Returns:
+        A :class:`Path` named ``"case2"``.
+    """
+    dt = _check_dt(dt)
+    points = _as_points("corners", corners)
+    spans = _as_float_array("durations", durations)
+    if spans.shape != (points.shape[0] - 1,):
+        raise PathError(
+            f"durations must have one entry per line, shape ({points.shape[0] - 1},) for "
+            f"{points.shape[0]} corners, got shape {spans.shape}"
+        )
+    for i, span in enumerate(spans):
+        if not (math.isfinite(span) and span > 0.0):
+            raise PathError(f"durations[{i}] must be finite and > 0, got {float(span)!r}")
+    times = np.concatenate(([0.0], np.cumsum(spans)))
+    return waypoints(times, points, dt, blend="cubic", name="case2")
+
+
+def waypoints(
+    times: Sequence[float] | ArrayLike,
+    points: Sequence[Sequence[float]] | ArrayLike,
+    dt: float = 1e-3,
+    *,
+    blend: str = "cubic",
+    name: str | None = None,
+) -> Path:
+    """Path through timed waypoints.
+
+    Samples are ``t_k = times[0] + k*dt`` up to ``times[-1]`` (included within 1e-9 dt). A
+    sample that falls on a waypoint time belongs to the later segment.
+
+    Args:
+        times: Waypoint times, shape ``(M,)``, s, strictly increasing, ``M >= 2``.
+        points: Waypoint positions, shape ``(M, 3)``, m.
+        dt: Sampling period, s, > 0.
+        blend: How consecutive waypoints are joined:
+            ``"cubic"`` -- rest-to-rest cubic ``3 tau^2 - 2 tau^3`` per segment (zero velocity
+            at each waypoint, acceleration jumps there);
+            ``"quintic"`` -- rest-to-rest quintic ``10 tau^3 - 15 tau^4 + 6 tau^5`` (zero
+            velocity and acceleration at each waypoint);
+            ``"spline"`` -- one C2 cubic spline through all waypoints with zero velocity at
+            both ends (it does not stop at interior waypoints).
+        name: Label of the path; defaults to ``"waypoints-<blend>"``.
+
+    Returns:
+        A :class:`Path` with the exact derivatives of the chosen blend.
+    """
+    sampler = _BLENDS.get(blend) if isinstance(blend, str) else None
+    if sampler is None:
+        raise PathError(f"blend must be one of {sorted(_BLENDS)}, got {blend!r}")
+    dt = _check_dt(dt)
+    knots, pts = _check_samples(times, points, "times", "points", lambda i: f"index {i}")
+    t = _sample_times(knots[0], knots[-1] - knots[0], dt, "times[-1] - times[0]")
+    position, velocity, acceleration = sampler(knots, pts, t, dt)
+    label = name if name is not None else f"waypoints-{blend}"
+    return Path(label, t, position, velocity, acceleration)
+
+
+def from_samples(
+    t: Sequence[float] | ArrayLike,
+    position: Sequence[Sequence[float]] | ArrayLike,
+    dt: float | None = None,
+    *,
+    name: str = "samples",
+) -> Path:
+    """Path fitted through sampled positions and resampled at a fixed period.
+
+    A C2 cubic spline (:class:`scipy.interpolate.CubicSpline`, ``bc_type="not-a-knot"``) is
+    fitted through the samples; velocity and acceleration are its first and second derivatives.
+    "not-a-knot" is used rather than "natural" because it imposes no zero-acceleration condition
+    at the ends, which would bias a path that starts or ends while accelerating. With two
+    samples the fit is the straight line between them, with three a parabola.
+
+    Args:
+        t: Sample times, shape ``(n,)``, s, strictly increasing, ``n >= 2``.
+        position: Sampled tip positions, shape ``(n, 3)``, m.
+        dt: Output sampling period, s, > 0. Defaults to the spacing of ``t`` if that is uniform
+            to 1e-9 relative; otherwise it is required.
+        name: Label of the path.
+
+    Returns:
+        A :class:`Path` sampled at ``t[0] + k*dt`` up to ``t[-1]``.
+    """
+    times, points = _check_samples(t, position, "t", "position", lambda i: f"index {i}")
+    return _fit_spline(times, points, dt, name, "t", lambda i: f"index {i}")
+
+
+def from_csv(file: str | os.PathLike[str], dt: float | None = None, *, name: str | None = None) -> Path:
+    """Path read from a CSV file of sampled positions, fitted as in :func:`from_samples`.
+
+    The file has a header row ``t,x,y,z`` (case-insensitive, whitespace around the names
+    allowed) and one row per sample: time in s, position in m. Blank lines are skipped.
+
+    Args:
+        file: Path of the CSV file.
+        dt: Output sampling period, s, > 0; defaults to the rows' spacing if it is uniform.
+        name: Label of the path; defaults to the file's stem.
+
+    Returns:
+        A :class:`Path` sampled at ``t[0] + k*dt`` up to the last row's time.
+
+    Raises:
+        PathError: The file cannot be read, or a header, row or value is invalid; the message
+            names the file and the line (1-based, the header being line 1).
+    """
+    label = os.fspath(file)
+    try:
+        with open(file, newline="", encoding="utf-8-sig") as handle:
+            rows = _numbered_rows(csv.reader(handle))
+    except OSError as exc:
+        raise PathError(f"cannot read path file {label!r}: {exc.strerror or exc}") from exc
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise PathError(f"path file {label!r} is not a readable CSV text file: {exc}") from exc
+    if not rows:
+        raise PathError(f"path file {label!r} is empty; expected a header row t,x,y,z")
+    header_line, header = rows[0]
+    found = tuple(cell.strip().lower() for cell in header)
+    if found != _CSV_COLUMNS:
+        raise PathError(
+            f"path file {label!r}: line {header_line}: header must be the columns t,x,y,z, "
+            f"found {','.join(cell.strip() for cell in header)!r}"
+        )
+    if len(rows) < 3:
+        raise PathError(f"path file {label!r}: need at least 2 data rows after the header, got {len(rows) - 1}")
+    data = np.empty((len(rows) - 1, 4))
+    lines = []
+    for k, (line, row) in enumerate(rows[1:]):
+        if len(row) != len(_CSV_COLUMNS):
+            raise PathError(f"path file {label!r}: line {line}: expected 4 fields (t,x,y,z), found {len(row)}: {row!r}")
+        for j, (column, cell) in enumerate(zip(_CSV_COLUMNS, row, strict=True)):
+            try:
+                data[k, j] = float(cell)
+            except ValueError:
+                raise PathError(
+                    f"path file {label!r}: line {line}, column {column!r}: {cell.strip()!r} is not a number"
+                ) from None
+            if not math.isfinite(data[k, j]):
+                raise PathError(f"path file {label!r}: line {line}, column {column!r}: {cell.strip()!r} is not finite")
+        lines.append(line)
+
+    def where(i: int) -> str:
+        return f"line {lines[i]}"
+
+    stem = os.path.splitext(os.path.basename(label))[0]
+    try:
+        times, points = _check_samples(data[:, 0], data[:, 1:], "t", "x,y,z", where)
+        return _fit_spline(times, points, dt, name if name is not None else stem, "t", where)
+    except PathError as exc:
+        raise PathError(f"path file {label!r}: {exc}") from None
+
+
+def _numbered_rows(reader: Any) -> list[tuple[int, list[str]]]:
+    """Non-blank CSV rows with the (1-based) file line on which each one ends."""
+    numbered = []
+    for row in reader:
+        if row and any(cell.strip() for cell in row):
+            numbered.append((reader.line_num, row))
+    return numbered
+
+
+def _fit_spline(
+    times: FloatArray,
+    points: FloatArray,
+    dt: float | None,
+    name: str,
+    field: str,
+    where: Callable[[int], str],
+) -> Path:
+    """Fit a not-a-knot cubic spline through checked samples and resample it every ``dt``.
+
+    ``field`` names the times and ``where(i)`` sample ``i`` in error messages.
+    """
+    n = times.shape[0]
+    if dt is None:
+        step = (times[-1] - times[0]) / (n - 1)
+        spacing = np.diff(times)
+        worst = int(np.argmax(np.abs(spacing - step)))
+        if abs(spacing[worst] - step) > _UNIFORM_RTOL * step:
+            raise PathError(
+                f"{field} is not uniformly spaced: step {float(spacing[worst])!r} s from "
+                f"{where(worst)} to {where(worst + 1)}, mean step {float(step)!r} s; "
+                "pass dt to choose the output sampling period"
+            )
+        dt = float(step)
+    dt = _check_dt(dt)
+    t = _sample_times(times[0], times[-1] - times[0], dt, f"{field}[-1] - {field}[0]")
+    spline = CubicSpline(times, points, axis=0, bc_type="not-a-knot")
+    return Path(name, t, spline(t), spline(t, 1), spline(t, 2))
+
+
+def _sample_cubic(
+    knots: FloatArray, points: FloatArray, t: FloatArray, dt: float
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Rest-to-rest cubic ``s = 3 tau^2 - 2 tau^3`` per segment; returns (N, 3) x, v, a."""
+    return _sample_segments(
+        knots,
+        points,
+        t,
+        dt,
+        lambda u: (3 * u**2 - 2 * u**3, 6 * u - 6 * u**2, 6 - 12 * u),
+    )
+
+
+def _sample_quintic(
+    knots: FloatArray, points: FloatArray, t: FloatArray, dt: float
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Rest-to-rest quintic ``s = 10 tau^3 - 15 tau^4 + 6 tau^5``; returns (N, 3) x, v, a."""
+    return _sample_segments(
+        knots,
+        points,
+        t,
+        dt,
+        lambda u: (
+            10 * u**3 - 15 * u**4 + 6 * u**5,
+            30 * u**2 - 60 * u**3 + 30 * u**4,
+            60 * u - 180 * u**2 + 120 * u**3,
+        ),
+    )
+
+
+def _sample_spline(
+    knots: FloatArray, points: FloatArray, t: FloatArray, dt: float
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """C2 cubic spline through all points, zero velocity at both ends; (N, 3) x, v, a."""
+    spline = CubicSpline(knots, points, axis=0, bc_type="clamped")
+    return spline(t), spline(t, 1), spline(t, 2)
+
+
+def _sample_segments(
+    knots: FloatArray,
+    points: FloatArray,
+    t: FloatArray,
+    dt: float,
+    profile: Callable[[FloatArray], tuple[FloatArray, FloatArray, FloatArray]],
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Evaluate a per-segment blend ``x = Pa + s(tau)(Pb - Pa)`` at times ``t``.
+
+    ``profile(tau)`` returns ``s``, ``ds/dtau`` and ``d2s/dtau2``. A sample within a
+    millionth of ``dt`` below a knot counts as on it and goes to the later segment.
+    """
+    segment = np.searchsorted(knots, t + 1e-6 * dt, side="right") - 1
+    segment = np.clip(segment, 0, knots.shape[0] - 2)
+    span = knots[segment + 1] - knots[segment]
+    tau = np.clip((t - knots[segment]) / span, 0.0, 1.0)
+    s, ds, dds = profile(tau)
+    delta = points[segment + 1] - points[segment]
+    position = points[segment] + s[:, None] * delta
+    velocity = (ds / span)[:, None] * delta
+    acceleration = (dds / span**2)[:, None] * delta
+    return position, velocity, acceleration
+
+
+_BLENDS = MappingProxyType({"cubic": _sample_cubic, "quintic": _sample_quintic, "spline": _sample_spline})
+"""Waypoint blends by name: ``sampler(knots, points, t, dt) -> (position, velocity, accel)``."""
+
+
+def _check_samples(
+    times: object,
+    points: object,
+    times_field: str,
+    points_field: str,
+    where: Callable[[int], str],
+) -> tuple[FloatArray, FloatArray]:
+    """Validate timed points; ``where(i)`` names sample ``i`` in messages.
+
+    Returns times of shape ``(n,)`` and points of shape ``(n, 3)`` as float64 copies.
+    """
+    knots = _as_float_array(times_field, times)
+    if knots.ndim != 1:
+        raise PathError(f"{times_field} must be 1-dimensional, got shape {knots.shape}")
+    pts = _as_points(points_field, points)
+    if knots.shape[0] != pts.shape[0]:
+        raise PathError(
+            f"{times_field} and {points_field} must have the same length, got "
+            f"{knots.shape[0]} times and {pts.shape[0]} points"
+        )
+    bad = np.flatnonzero(~np.isfinite(knots))
+    if bad.size:
+        i = int(bad[0])
+        raise PathError(f"{where(i)}: {times_field} is {float(knots[i])!r}, must be finite")
+    bad_rows, bad_cols = np.nonzero(~np.isfinite(pts))
+    if bad_rows.size:
+        i, j = int(bad_rows[0]), int(bad_cols[0])
+        raise PathError(f"{where(i)}: {points_field} column {'xyz'[j]!r} is {float(pts[i, j])!r}, must be finite")
+    steps = np.diff(knots)
+    bad = np.flatnonzero(steps <= 0.0)
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise PathError(
+            f"{where(i)}: {times_field} must be strictly increasing, got "
+            f"{float(knots[i])!r} after {float(knots[i - 1])!r} ({where(i - 1)})"
+        )
+    return knots, pts
+
+
+def _as_points(field: str, value: object) -> FloatArray:
+    """``value`` as a float64 array of shape ``(n, 3)``, else PathError naming ``field``."""
+    points = _as_float_array(field, value)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise PathError(f"{field} must have shape (n, 3), got shape {points.shape}")
+    if points.shape[0] < 2:
+        raise PathError(f"{field}: need at least 2 points, got {points.shape[0]}")
+    return points
+
+
+def _as_float_array(field: str, value: object) -> FloatArray:
+    """``value`` as a new float64 array, else PathError naming ``field``."""
+    try:
+        return np.array(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise PathError(f"{field} must be an array of numbers, got {value!r} ({exc})") from None
+
+
+def _frozen_array(field: str, value: object) -> FloatArray:
+    """A read-only float64 copy of ``value``."""
+    array = _as_float_array(field, value)
+    array.flags.writeable = False
+    return array
+
+
+def _require_finite(field: str, values: FloatArray) -> None:
+    """Raise PathError naming the first non-finite entry of ``values``."""
+    bad = np.argwhere(~np.isfinite(values))
+    if bad.size:
+        index = tuple(int(i) for i in bad[0])
+        raise PathError(f"{field}{list(index)} is {float(values[index])!r}, must be finite")
+
+
+def _check_finite_scalar(field: str, value: object) -> float:
+    """``value`` as a finite float, else PathError naming ``field``."""
+    try:
+        number = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise PathError(f"{field} must be a real number, got {value!r}") from None
+    if not math.isfinite(number):
+        raise PathError(f"{field} must be finite, got {number!r}")
+    return number
+
+
+def _check_positive(field: str, value: object) -> float:
+    """``value`` as a finite float > 0, else PathError naming ``field``."""
+    number = _check_finite_scalar(field, value)
+    if number <= 0.0:
+        raise PathError(f"{field} must be > 0, got {number!r}")
+    return number
+
+
+def _check_dt(dt: object) -> float:
+    """The sampling period as a finite float > 0, s."""
+    return _check_positive("dt", dt)
+
+
+def _sample_times(start: float, duration: float, dt: float, field: str) -> FloatArray:
+    """Times ``start + k*dt`` for ``k = 0 .. floor(duration/dt + 1e-9)``, shape ``(N,)``, s."""
+    count = math.floor(duration / dt + _COUNT_TOLERANCE) + 1
+    if count < 2:
+        raise PathError(f"{field} = {float(duration)!r} s is shorter than dt = {dt!r} s; need 2 samples")
+    return float(start) + np.arange(count, dtype=np.float64) * float(dt)
+
+
+def _uniform_tolerance(step: float, t: FloatArray) -> float:
+    """Allowed deviation of sample times from ``t0 + k*dt``, s."""
+    return _UNIFORM_RTOL * step + 8 * np.finfo(np.float64).eps * float(np.max(np.abs(t)))

@@ -1,0 +1,212 @@
+"""The user-facing robot: parameters plus the compiled model, with batch-first methods.
+
+Every method takes arrays whose last axis is the joint (or force) vector and broadcasts over the
+leading axes: ``q`` of shape ``(..., 7)`` gives results of shape ``(..., ...)``. One call on a
+batch runs one compiled loop, so prefer batches to Python loops over single configurations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .assembly import check_assembly, triangle_margins
+from .compiled import CompiledBackend, InterpretedBackend, get_backend
+from .errors import InputError
+from .parameters import RobotParameters, load_parameters
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class ForwardKinematics:
+    """Forward kinematics of a batch of configurations (leading shape ``S``).
+
+    Attributes:
+        passive: ``S + (2, 4)`` passive angles ``(alpha, beta, gamma, theta)`` of each module (rad).
+        platform_position: ``S + (2, 3)`` platform centres O1, O2 in F0 (m).
+        platform_rotation: ``S + (2, 3, 3)`` orientations C01, C02 of the platform frames.
+        tip: ``S + (3,)`` tip point P in F0 (m).
+        rotation: ``S + (3, 3)`` end-effector orientation C03.
+    """
+
+    passive: Array
+    platform_position: Array
+    platform_rotation: Array
+    tip: Array
+    rotation: Array
+
+
+@dataclass(frozen=True)
+class BiasAccelerations:
+    """Velocity-product ("bias") accelerations, i.e. accelerations when ``qdd = 0``.
+
+    Attributes:
+        tip: ``S + (3,)`` of the tip point (m/s^2), so ``a_tip = J_P qdd + tip``.
+        angular: ``S + (3,)`` of the end-effector frame (rad/s^2).
+        com: ``S + (3, 3)`` of each body's centre of mass (bodies 7, 8, 9).
+        body_angular: ``S + (3, 3)`` of each body frame.
+    """
+
+    tip: Array
+    angular: Array
+    com: Array
+    body_angular: Array
+
+
+def _as_array(value: ArrayLike, name: str, last: int) -> Array:
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be an array of numbers, got {value!r}") from None
+    if array.ndim == 0 or array.shape[-1] != last:
+        raise InputError(f"{name} must have shape (..., {last}), got shape {array.shape}")
+    if not np.isfinite(array).all():
+        index = np.argwhere(~np.isfinite(array))[0]
+        raise InputError(f"{name} must be finite; {name}[{', '.join(map(str, index))}] = {array[tuple(index)]}")
+    return array
+
+
+class Robot:
+    """A manipulator model: :class:`RobotParameters` evaluated through the compiled backend.
+
+    Build one with :func:`load_robot`. ``robot.with_parameters(p)`` gives a robot with other
+    parameters sharing the same compiled code (for example a controller's imperfect model).
+    """
+
+    def __init__(
+        self,
+        parameters: RobotParameters,
+        backend: CompiledBackend | InterpretedBackend | None = None,
+    ) -> None:
+        self.parameters = parameters
+        self.backend = backend if backend is not None else get_backend()
+        self._p = parameters.vector()
+
+    def __repr__(self) -> str:
+        return f"Robot({self.parameters.name!r}, backend={self.backend.kind!r})"
+
+    @property
+    def parameter_vector(self) -> Array:
+        """The flat parameter vector (45,) given to the compiled functions."""
+        return self._p.copy()
+
+    def with_parameters(self, parameters: RobotParameters) -> Robot:
+        """A robot with other parameters and the same compiled model."""
+        return Robot(parameters, self.backend)
+
+    # -- helpers -----------------------------------------------------------------------------
+
+    def _evaluate(
+        self, name: str, named: list[tuple[str, ArrayLike, int]], check_q: bool = True
+    ) -> tuple[tuple[int, ...], list[Array]]:
+        arrays = [_as_array(value, label, size) for label, value, size in named]
+        try:
+            shape = np.broadcast_shapes(*[a.shape[:-1] for a in arrays])
+        except ValueError:
+            shapes = ", ".join(f"{label} {a.shape}" for (label, _, _), a in zip(named, arrays, strict=True))
+            raise InputError(f"leading shapes do not broadcast: {shapes}") from None
+        if check_q:
+            check_assembly(arrays[0], self.parameters.b, self.parameters.d, where=named[0][0])
+        n = int(np.prod(shape, dtype=int))
+        flat = [np.broadcast_to(a, shape + a.shape[-1:]).reshape(n, a.shape[-1]) for a in arrays]
+        outputs = self.backend.evaluate(name, [*flat, self._p], n)
+        return shape, outputs
+
+    # -- kinematics --------------------------------------------------------------------------
+
+    def is_assemblable(self, q: ArrayLike, margin: float = 0.0) -> NDArray[np.bool_]:
+        """Whether each configuration ``(..., 7)`` can be assembled with the given margin (m)."""
+        qa = _as_array(q, "q", 7)
+        return np.asarray((triangle_margins(qa, self.parameters.b, self.parameters.d) > margin).all(axis=-1))
+
+    def forward_kinematics(self, q: ArrayLike) -> ForwardKinematics:
+        """Passive angles, platform frames, tip point and orientation (paper eqs. 1-11)."""
+        shape, out = self._evaluate("fk", [("q", q, 7)])
+        passive, o1, c01, o2, c02, tip, c03 = out
+        return ForwardKinematics(
+            passive=passive.reshape(shape + (2, 4)),
+            platform_position=np.stack([o1, o2], axis=1).reshape(shape + (2, 3)),
+            platform_rotation=np.stack([c01, c02], axis=1).reshape(shape + (2, 3, 3)),
+            tip=tip.reshape(shape + (3,)),
+            rotation=c03.reshape(shape + (3, 3)),
+        )
+
+    def tip_position(self, q: ArrayLike) -> Array:
+        """Tip point P in F0, ``(..., 3)`` (m). Cheaper than the full forward kinematics."""
+        shape, (tip,) = self._evaluate("tip", [("q", q, 7)])
+        return tip.reshape(shape + (3,))
+
+    def tip_jacobian(self, q: ArrayLike) -> Array:
+        """Translational Jacobian of the tip ``J_P = dP/dq``, ``(..., 3, 7)``."""
+        shape, (jp, _) = self._evaluate("jac", [("q", q, 7)])
+        return jp.reshape(shape + (3, 7))
+
+    def angular_jacobian(self, q: ArrayLike) -> Array:
+        """Angular Jacobian of the end-effector (F0 components), ``(..., 3, 7)``."""
+        shape, (_, jw) = self._evaluate("jac", [("q", q, 7)])
+        return jw.reshape(shape + (3, 7))
+
+    def com_jacobians(self, q: ArrayLike) -> tuple[Array, Array]:
+        """Jacobians of the bodies' centres of mass and angular velocities, each ``(..., 3, 3, 7)``.
+
+        Axis ``-3`` is the body (platform 1, platform 2, end-effector).
+        """
+        shape, (jv, jw) = self._evaluate("com_jac", [("q", q, 7)])
+        return jv.reshape(shape + (3, 3, 7)), jw.reshape(shape + (3, 3, 7))
+
+    def tip_velocity(self, q: ArrayLike, qd: ArrayLike) -> tuple[Array, Array]:
+        """Tip velocity ``J_P qd`` (m/s) and end-effector angular velocity (rad/s), ``(..., 3)`` each."""
+        shape, (v, w) = self._evaluate("velocity", [("q", q, 7), ("qd", qd, 7)])
+        return v.reshape(shape + (3,)), w.reshape(shape + (3,))
+
+    def bias_accelerations(self, q: ArrayLike, qd: ArrayLike) -> BiasAccelerations:
+        """Accelerations due to ``qd`` alone (``qdd = 0``): ``Jdot qd`` of the tip and bodies."""
+        shape, (tip, ang, com, body_ang) = self._evaluate("bias_acc", [("q", q, 7), ("qd", qd, 7)])
+        return BiasAccelerations(
+            tip=tip.reshape(shape + (3,)),
+            angular=ang.reshape(shape + (3,)),
+            com=com.reshape(shape + (3, 3)),
+            body_angular=body_ang.reshape(shape + (3, 3)),
+        )
+
+    # -- dynamics ----------------------------------------------------------------------------
+
+    def mass_matrix(self, q: ArrayLike) -> Array:
+        """Mass matrix ``M(q)`` of eq. 15, ``(..., 7, 7)``."""
+        shape, (m,) = self._evaluate("mass", [("q", q, 7)])
+        return m.reshape(shape + (7, 7))
+
+    def bias_forces(self, q: ArrayLike, qd: ArrayLike) -> Array:
+        """``C(q, qd)`` of eq. 15: velocity products + gravity + viscous friction, ``(..., 7)``."""
+        shape, (c,) = self._evaluate("bias_forces", [("q", q, 7), ("qd", qd, 7)])
+        return c.reshape(shape + (7,))
+
+    def forward_dynamics(self, q: ArrayLike, qd: ArrayLike, F: ArrayLike, f_tip: ArrayLike | None = None) -> Array:
+        """Joint accelerations ``M^-1 (F + J_P^T f_tip - C)``, ``(..., 7)``.
+
+        ``F`` are the actuator efforts (N, and N m for the twist); ``f_tip`` the force acting
+        on the end-effector at the tip point, in F0 (N), default zero.
+        """
+        f = np.zeros(3) if f_tip is None else f_tip
+        shape, (qdd,) = self._evaluate("fd", [("q", q, 7), ("qd", qd, 7), ("F", F, 7), ("f_tip", f, 3)])
+        return qdd.reshape(shape + (7,))
+
+    def inverse_dynamics(self, q: ArrayLike, qd: ArrayLike, qdd: ArrayLike, f_tip: ArrayLike | None = None) -> Array:
+        """Actuator efforts ``M qdd + C - J_P^T f_tip`` that produce ``qdd``, ``(..., 7)``."""
+        f = np.zeros(3) if f_tip is None else f_tip
+        shape, (F,) = self._evaluate("id", [("q", q, 7), ("qd", qd, 7), ("qdd", qdd, 7), ("f_tip", f, 3)])
+        return F.reshape(shape + (7,))
+
+    def energy(self, q: ArrayLike, qd: ArrayLike) -> tuple[Array, Array]:
+        """Kinetic and potential (gravity) energy, each of shape ``(...)`` (J)."""
+        shape, (t, v) = self._evaluate("energy", [("q", q, 7), ("qd", qd, 7)])
+        return t.reshape(shape), v.reshape(shape)
+
+
+def load_robot(config: str | Path | None = None) -> Robot:
+    """Load a robot: the shipped reference robot, or the TOML file ``config``."""
+    return Robot(load_parameters(config))

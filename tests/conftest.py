@@ -1,0 +1,48 @@
+"""Shared fixtures and helpers of the test suite."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import vgtarm
+from vgtarm.assembly import triangle_margins
+
+#: Step of central finite differences: about eps**(1/3), the best balance of truncation and
+#: round-off for first derivatives.
+FD_STEP = 6e-6
+
+
+@pytest.fixture(scope="session")
+def robot() -> vgtarm.Robot:
+    return vgtarm.load_robot()
+
+
+def random_configurations(robot: vgtarm.Robot, n: int, seed: int = 0, margin: float = 0.01) -> np.ndarray:
+    """``n`` configurations drawn uniformly inside the joint limits and assemblable with ``margin``."""
+    rng = np.random.default_rng(seed)
+    p = robot.parameters
+    chosen: list[np.ndarray] = []
+    while sum(len(c) for c in chosen) < n:
+        q = rng.uniform(p.lower, p.upper, size=(2 * n, 7))
+        ok = (triangle_margins(q, p.b, p.d) > margin).all(axis=1)
+        chosen.append(q[ok])
+    return np.concatenate(chosen)[:n]
+
+
+def central_difference(f, x: np.ndarray, h: float = FD_STEP) -> np.ndarray:
+    """Jacobian of ``f`` (batched, (n, k) -> (n, ...)) at ``x`` (n, k) by central differences.
+
+    Returns ``(n, ..., k)``.
+    """
+    columns = []
+    for i in range(x.shape[-1]):
+        e = np.zeros(x.shape[-1])
+        e[i] = h
+        columns.append((f(x + e) - f(x - e)) / (2 * h))
+    return np.stack(columns, axis=-1)
+
+
+def assert_close(actual, desired, *, rtol: float = 1e-7, atol: float = 1e-9, what: str = "") -> None:
+    """One tolerance helper for the suite: relative to the larger magnitude, plus an absolute floor."""
+    np.testing.assert_allclose(actual, desired, rtol=rtol, atol=atol, err_msg=what)
