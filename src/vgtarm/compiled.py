@@ -37,8 +37,15 @@ logger = logging.getLogger("vgtarm")
 
 _PACKAGE_DIR = Path(__file__).resolve().parent
 #: Sources whose text defines the compiled library (any change gives a new cache key).
-_MODEL_SOURCES = ("symbolic.py", "functions.py", "parameters.py", "compiled.py")
-_DRIVER_SOURCES = ("csrc/batch.c",)
+_MODEL_SOURCES = (
+    "symbolic.py",
+    "functions.py",
+    "functions_ik.py",
+    "functions_control.py",
+    "parameters.py",
+    "compiled.py",
+)
+_DRIVER_SOURCES = ("csrc/batch.c", "csrc/closed_loop.c")
 _CFLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off")
 _GENERATED_NAME = "vgtarm_model"
 
@@ -183,7 +190,7 @@ class InterpretedBackend:
 
 def build_functions() -> dict[str, ca.Function]:
     """Build every CasADi function of the model (a second or so)."""
-    return {key: builder() for key, builder in functions.BUILDERS.items()}
+    return {key: builder() for key, builder in functions.all_builders().items()}
 
 
 def cache_dir() -> Path:
@@ -268,7 +275,7 @@ def _compiled_backend(compiler: str) -> CompiledBackend:
     meta = folder / f"vgtarm_{key}.json"
     if library.exists() and meta.exists():
         signatures = _load_signatures(meta)
-        if set(signatures) == set(functions.BUILDERS):
+        if set(signatures) == set(functions.all_builders()):
             return CompiledBackend(library, signatures)
     built = build_functions()
     logger.info("compiling the vgtarm model into %s (once per model version)", library)

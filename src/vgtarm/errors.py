@@ -33,4 +33,8 @@ class UnreachableError(VgtarmError, RuntimeError):
 
 
 class SimulationError(VgtarmError, RuntimeError):
-    """A closed-loop simulation diverged; the samples up to the failure are kept."""
+    """A closed-loop simulation diverged; ``result`` keeps the samples up to the failure."""
+
+    def __init__(self, message: str, result: object = None) -> None:
+        super().__init__(message)
+        self.result = result

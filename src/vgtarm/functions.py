@@ -139,8 +139,8 @@ def energy() -> ca.Function:
     )
 
 
-#: Every exported function, by name (the compiled library holds all of them).
-BUILDERS: dict[str, Builder] = {
+#: The model's functions, by name.
+MODEL_BUILDERS: dict[str, Builder] = {
     "fk": fk,
     "tip": tip,
     "jac": jacobians,
@@ -153,3 +153,17 @@ BUILDERS: dict[str, Builder] = {
     "id": inverse_dynamics,
     "energy": energy,
 }
+
+
+def all_builders() -> dict[str, Builder]:
+    """Every function the compiled library exports: the model's, inverse kinematics' and the
+    closed loop's (each family defined in its own module of the model layer)."""
+    from . import functions_control, functions_ik
+
+    builders = dict(MODEL_BUILDERS)
+    for family in (functions_ik.BUILDERS, functions_control.BUILDERS):
+        clash = set(builders) & set(family)
+        if clash:
+            raise RuntimeError(f"duplicate compiled function names: {sorted(clash)}")
+        builders.update(family)
+    return builders

@@ -1,0 +1,48 @@
+"""Computed force control (paper eqs. 18-20)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..robot import Robot
+from .gains import Gains
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class ComputedForceControl:
+    """``F = M^(q) [qdd_d + Kp e + Kv e_dot] + C^(q, qd)``, ``e = q_d - q``, with fixed gains.
+
+    ``M^``, ``C^`` come from the controller's own model, which the simulator lets differ from
+    the plant's. The controller does not know the external force.
+    """
+
+    gains: Gains
+    name: str = field(default="cfc")
+
+    @classmethod
+    def with_gains(cls, Kp: ArrayLike, Kv: ArrayLike) -> ComputedForceControl:
+        """Controller with gains from scalars (times the identity), diagonals or matrices."""
+        return cls(Gains.of(Kp, Kv))
+
+    def effort(
+        self,
+        model: Robot,
+        q: ArrayLike,
+        qd: ArrayLike,
+        q_d: ArrayLike,
+        qd_d: ArrayLike,
+        qdd_d: ArrayLike,
+        gains: Gains | None = None,
+    ) -> Array:
+        """Actuator efforts ``(..., 7)`` for states and references ``(..., 7)`` (eq. 20)."""
+        g = gains or self.gains
+        e = np.asarray(q_d, dtype=float) - np.asarray(q, dtype=float)
+        e_dot = np.asarray(qd_d, dtype=float) - np.asarray(qd, dtype=float)
+        qdd_ref = np.asarray(qdd_d, dtype=float) + e @ g.Kp.T + e_dot @ g.Kv.T
+        M = model.mass_matrix(q)
+        return (M @ qdd_ref[..., None])[..., 0] + model.bias_forces(q, qd)

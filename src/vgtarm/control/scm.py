@@ -1,0 +1,146 @@
+"""The switching control method (paper Section V-C).
+
+While the tip position error ``|P(q_d) - P(q)|`` exceeds a threshold, the full 7x7 gain
+matrices ``Kp`` and ``Kv`` of computed force control are chosen by the paper's genetic
+algorithm (:mod:`vgtarm.ga`); otherwise the fixed gains are used.
+
+**The fitness.** The paper minimises "the Euclidean norm of the trajectory errors" without
+saying over what. A one-step prediction cannot serve: with explicit Euler,
+``q_{k+1} = q_k + dt qd_k`` does not depend on the gains at all. vgtarm therefore predicts the
+tip over a *horizon* of ``H`` control periods (default 20, i.e. 20 ms at 1 ms) under the
+controller's model and takes ``sqrt(sum_{j=1..H} |P(q_d,k+j) - P(q^_k+j)|^2)``. Under its own
+model, computed force control cancels ``M^`` and ``C^`` exactly, so the predicted joints obey
+``qdd = qdd_d + Kp e + Kv e_dot``; they are advanced with explicit Euler and mapped to the tip
+with the exact forward kinematics. The gains first act on the tip at ``j = 2``; the horizon sets
+how far ahead the GA looks (see the tests and the report for its effect).
+
+**Seeding.** The first population holds the fixed gains (exactly representable: the diagonal
+at the upper bound, the rest at the lower bound) and random individuals; with elitism the GA's
+choice is therefore never predicted to be worse than the fixed gains.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..errors import InputError
+from ..ga import GAOptions, GAResult, minimize
+from ..robot import Robot
+from .gains import Gains
+
+Array = NDArray[np.float64]
+
+#: Prediction of the tip error of candidate gains: ``(Kp (P, 7, 7), Kv (P, 7, 7)) -> (P,)``.
+Predictor = Callable[[Array, Array], Array]
+
+
+@dataclass(frozen=True)
+class SwitchingControl:
+    """Computed force control whose gains are retuned by the GA while the error is large.
+
+    Attributes:
+        fixed: the gains used while the tip error is at most ``threshold``.
+        threshold: tip position error (m) above which the GA chooses the gains (paper: 0.2 mm).
+        kp_bounds, kv_bounds: bounds of every element of ``Kp`` and ``Kv`` (paper: [0, 5000]
+            and [0, 300] in case 1; [0, 15000] and [0, 600] in case 2).
+        ga: the genetic algorithm's options (paper Appendix B by default).
+        horizon: prediction horizon of the fitness, in control periods (>= 1).
+        seed_fixed_gains: put the fixed gains into the first population.
+    """
+
+    fixed: Gains
+    threshold: float = 2e-4
+    kp_bounds: tuple[float, float] = (0.0, 5000.0)
+    kv_bounds: tuple[float, float] = (0.0, 300.0)
+    ga: GAOptions = field(default_factory=GAOptions)
+    horizon: int = 20
+    seed_fixed_gains: bool = True
+    name: str = "scm"
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.threshold) and self.threshold > 0):
+            raise InputError(f"threshold = {self.threshold!r}: expected a positive tip error (m)")
+        for label, (lo, hi) in (("kp_bounds", self.kp_bounds), ("kv_bounds", self.kv_bounds)):
+            if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+                raise InputError(f"{label} = {(lo, hi)!r}: expected finite (min, max) with min < max")
+        if not (isinstance(self.horizon, int | np.integer) and self.horizon >= 1):
+            raise InputError(f"horizon = {self.horizon!r}: expected a whole number of control periods >= 1")
+
+    @classmethod
+    def with_gains(cls, Kp: ArrayLike, Kv: ArrayLike, **options: object) -> SwitchingControl:
+        """Switching control around fixed gains from scalars, diagonals or matrices."""
+        return cls(Gains.of(Kp, Kv), **options)  # type: ignore[arg-type]
+
+    @property
+    def gains(self) -> Gains:
+        """The fixed gains (used below the threshold)."""
+        return self.fixed
+
+    def bounds(self) -> tuple[Array, Array]:
+        """Lower and upper bounds of the 98 genes: ``Kp`` row by row, then ``Kv``."""
+        lower = np.concatenate([np.full(49, self.kp_bounds[0]), np.full(49, self.kv_bounds[0])])
+        upper = np.concatenate([np.full(49, self.kp_bounds[1]), np.full(49, self.kv_bounds[1])])
+        return lower, upper
+
+    @staticmethod
+    def split(genes: Array) -> tuple[Array, Array]:
+        """Genes ``(P, 98)`` to ``Kp`` and ``Kv`` ``(P, 7, 7)``."""
+        genes = np.asarray(genes, dtype=float)
+        return genes[..., :49].reshape(genes.shape[:-1] + (7, 7)), genes[..., 49:].reshape(genes.shape[:-1] + (7, 7))
+
+    def tune(self, predict: Predictor, rng: np.random.Generator) -> tuple[Gains, GAResult]:
+        """Run the GA on the predicted tip error; returns the chosen gains and the GA's record."""
+        lower, upper = self.bounds()
+
+        def cost(genes: Array) -> Array:
+            Kp, Kv = self.split(genes)
+            return predict(Kp, Kv)
+
+        initial = None
+        if self.seed_fixed_gains:
+            initial = np.concatenate([self.fixed.Kp.ravel(), self.fixed.Kv.ravel()])[None, :]
+        result = minimize(cost, lower, upper, options=self.ga, seed=rng, initial=initial)
+        Kp, Kv = self.split(result.x)
+        return Gains.of(Kp, Kv), result
+
+
+def predict_tip_error(
+    model: Robot,
+    dt: float,
+    q0: ArrayLike,
+    qd0: ArrayLike,
+    q_d: ArrayLike,
+    qd_d: ArrayLike,
+    qdd_d: ArrayLike,
+    tip_d: ArrayLike,
+    Kp: ArrayLike,
+    Kv: ArrayLike,
+) -> Array:
+    """NumPy reference of the GA's fitness (the compiled ``vgt_ga_fitness`` computes the same).
+
+    ``q0``, ``qd0`` (7,): the state at sample k; ``q_d``, ``qd_d``, ``qdd_d`` (H+1, 7) and
+    ``tip_d`` (H+1, 3): the reference at samples k .. k+H; ``Kp``, ``Kv`` (P, 7, 7). Returns the
+    predicted tip-error norm of each candidate, (P,); +inf where the prediction leaves the set of
+    assemblable configurations.
+    """
+    Kp_a, Kv_a = np.asarray(Kp, dtype=float), np.asarray(Kv, dtype=float)
+    refs = [np.asarray(a, dtype=float) for a in (q_d, qd_d, qdd_d, tip_d)]
+    n_cand = len(Kp_a)
+    q = np.tile(np.asarray(q0, dtype=float), (n_cand, 1))
+    qd = np.tile(np.asarray(qd0, dtype=float), (n_cand, 1))
+    total = np.zeros(n_cand)
+    alive = np.ones(n_cand, dtype=bool)
+    for j in range(len(refs[0]) - 1):
+        e = refs[0][j] - q
+        e_dot = refs[1][j] - qd
+        a = refs[2][j] + np.einsum("pil,pl->pi", Kp_a, e) + np.einsum("pil,pl->pi", Kv_a, e_dot)
+        q = q + dt * qd
+        qd = qd + dt * a
+        alive &= np.isfinite(q).all(axis=1) & model.is_assemblable(np.where(np.isfinite(q), q, 0.0))
+        safe = np.where(alive[:, None], q, model.parameters.home)
+        total += ((refs[3][j + 1] - model.tip_position(safe)) ** 2).sum(axis=1)
+    return np.where(alive, np.sqrt(total), np.inf)

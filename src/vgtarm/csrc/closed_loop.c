@@ -1,0 +1,277 @@
+/* Closed-loop drivers for the CasADi-generated model (part of vgtarm).
+ *
+ * vgt_simulate runs computed force control on the plant for a range of samples in one call;
+ * vgt_ga_fitness predicts, for a batch of gain candidates, the tip tracking error over a horizon
+ * under the controller's model. Both call the generated functions through pointers filled in by
+ * vgtarm/closedloop.py; the Python reference loop in vgtarm/simulation/python_loop.py does the
+ * same computation and the tests hold the two to each other.
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef long long int vgt_int;
+typedef int (*vgt_fn)(const double **arg, double **res, vgt_int *iw, double *w, int mem);
+
+typedef struct {
+    vgt_fn f;
+    vgt_int sz_arg, sz_res, sz_iw, sz_w;
+} vgt_call;
+
+typedef struct {
+    vgt_call cfc;       /* q, qd, q_d, qd_d, qdd_d, Kp, Kv, p -> F          */
+    vgt_call fd;        /* q, qd, F, f, p -> qdd                            */
+    vgt_call tip_state; /* q, qd, p -> tip, tip velocity                    */
+    vgt_call tip;       /* q, p -> tip                                      */
+} vgt_model;
+
+typedef struct {
+    double dt;              /* control period (s)                                         */
+    int integrator;         /* 0 explicit Euler, 1 semi-implicit Euler, 2 classical RK4   */
+    int substeps;           /* integration steps per control period                       */
+    int cutting;            /* 1: cutting force -F0 V/|V| on the tool                      */
+    double cutting_force;   /* F0 (N)                                                     */
+    double cutting_speed;   /* |V| below which the cutting force is zero (m/s)            */
+    double threshold;       /* stop before controlling a sample whose tip error exceeds it */
+    double limit_tolerance; /* distance outside a joint limit that counts as divergence   */
+} vgt_settings;
+
+typedef struct {
+    long n;                                 /* number of samples                          */
+    const double *q_d, *qd_d, *qdd_d;       /* (n, 7) joint reference                      */
+    const double *tip_d;                    /* (n, 3) desired tip P(q_d)                    */
+    const double *disturbance;              /* (n, 3) random tool force, held per sample   */
+    const double *p_plant, *p_ctrl;         /* (45) parameter vectors                      */
+    const double *G, *h;                    /* (12, 7), (12) assembly margins G q + h      */
+    const double *q_min, *q_max;            /* (7) joint limits                            */
+    double *q, *qd;                         /* (n, 7) state; row 0 is the initial state    */
+    double *F, *f_ext, *tip, *error;        /* (n, 7), (n, 3), (n, 3), (n)                 */
+} vgt_run;
+
+enum {
+    VGT_DONE = 0,
+    VGT_ABOVE_THRESHOLD = 1,
+    VGT_NOT_FINITE = -1,
+    VGT_NOT_ASSEMBLABLE = -2,
+    VGT_OUTSIDE_LIMITS = -3,
+    VGT_FUNCTION_FAILED = -4,
+    VGT_NO_MEMORY = -5
+};
+
+typedef struct {
+    const double **arg;
+    double **res;
+    vgt_int *iw;
+    double *w;
+} vgt_work;
+
+static vgt_int max4(vgt_int a, vgt_int b, vgt_int c, vgt_int d)
+{
+    vgt_int m = a > b ? a : b;
+    m = m > c ? m : c;
+    return (m > d ? m : d) + 1;
+}
+
+static int work_alloc(vgt_work *wk, const vgt_model *m)
+{
+    wk->arg = malloc(sizeof(double *) * (size_t)max4(m->cfc.sz_arg, m->fd.sz_arg, m->tip_state.sz_arg, m->tip.sz_arg));
+    wk->res = malloc(sizeof(double *) * (size_t)max4(m->cfc.sz_res, m->fd.sz_res, m->tip_state.sz_res, m->tip.sz_res));
+    wk->iw = malloc(sizeof(vgt_int) * (size_t)max4(m->cfc.sz_iw, m->fd.sz_iw, m->tip_state.sz_iw, m->tip.sz_iw));
+    wk->w = malloc(sizeof(double) * (size_t)max4(m->cfc.sz_w, m->fd.sz_w, m->tip_state.sz_w, m->tip.sz_w));
+    return wk->arg && wk->res && wk->iw && wk->w;
+}
+
+static void work_free(vgt_work *wk)
+{
+    free(wk->arg);
+    free(wk->res);
+    free(wk->iw);
+    free(wk->w);
+}
+
+static int call(const vgt_call *c, vgt_work *wk, int n_in, const double **in, int n_out, double **out)
+{
+    for (int i = 0; i < n_in; ++i) wk->arg[i] = in[i];
+    for (int j = 0; j < n_out; ++j) wk->res[j] = out[j];
+    return c->f(wk->arg, wk->res, wk->iw, wk->w, 0);
+}
+
+/* Tool force of one sample: cutting force opposing the tip velocity V plus the disturbance. */
+static void tool_force(const vgt_settings *s, const double *V, const double *dist, double *f)
+{
+    double speed = sqrt(V[0] * V[0] + V[1] * V[1] + V[2] * V[2]);
+    for (int i = 0; i < 3; ++i) {
+        f[i] = dist[i];
+        if (s->cutting && speed > s->cutting_speed) f[i] -= s->cutting_force * V[i] / speed;
+    }
+}
+
+/* Joint acceleration of the plant at (q, qd) under effort F; the cutting force is evaluated at
+ * this state (so RK4 stages see it change), the disturbance is held over the sample. */
+static int acceleration(const vgt_model *m, const vgt_settings *s, const vgt_run *r, vgt_work *wk,
+                        const double *q, const double *qd, const double *F, const double *dist,
+                        double *qdd, double *f_used)
+{
+    double tip[3], V[3], f[3];
+    const double *in_ts[3] = {q, qd, r->p_plant};
+    double *out_ts[2] = {tip, V};
+    if (call(&m->tip_state, wk, 3, in_ts, 2, out_ts)) return VGT_FUNCTION_FAILED;
+    tool_force(s, V, dist, f);
+    if (f_used) memcpy(f_used, f, sizeof f);
+    const double *in_fd[5] = {q, qd, F, f, r->p_plant};
+    double *out_fd[1] = {qdd};
+    if (call(&m->fd, wk, 5, in_fd, 1, out_fd)) return VGT_FUNCTION_FAILED;
+    return VGT_DONE;
+}
+
+static int integrate(const vgt_model *m, const vgt_settings *s, const vgt_run *r, vgt_work *wk,
+                     const double *q0, const double *qd0, const double *F, const double *dist,
+                     double *q1, double *qd1)
+{
+    int steps = s->substeps > 0 ? s->substeps : 1;
+    double h = s->dt / steps;
+    double q[7], qd[7], a[7];
+    memcpy(q, q0, sizeof q);
+    memcpy(qd, qd0, sizeof qd);
+    for (int step = 0; step < steps; ++step) {
+        int status;
+        if (s->integrator == 2) {
+            double kq[4][7], kv[4][7], qs[7], vs[7];
+            const double c[4] = {0.0, 0.5, 0.5, 1.0};
+            for (int stage = 0; stage < 4; ++stage) {
+                for (int i = 0; i < 7; ++i) {
+                    qs[i] = stage ? q[i] + c[stage] * h * kq[stage - 1][i] : q[i];
+                    vs[i] = stage ? qd[i] + c[stage] * h * kv[stage - 1][i] : qd[i];
+                }
+                status = acceleration(m, s, r, wk, qs, vs, F, dist, kv[stage], NULL);
+                if (status) return status;
+                memcpy(kq[stage], vs, sizeof vs);
+            }
+            for (int i = 0; i < 7; ++i) {
+                q[i] += h / 6.0 * (kq[0][i] + 2.0 * kq[1][i] + 2.0 * kq[2][i] + kq[3][i]);
+                qd[i] += h / 6.0 * (kv[0][i] + 2.0 * kv[1][i] + 2.0 * kv[2][i] + kv[3][i]);
+            }
+        } else {
+            status = acceleration(m, s, r, wk, q, qd, F, dist, a, NULL);
+            if (status) return status;
+            for (int i = 0; i < 7; ++i) {
+                if (s->integrator == 1) {
+                    qd[i] += h * a[i];
+                    q[i] += h * qd[i];
+                } else {
+                    q[i] += h * qd[i];
+                    qd[i] += h * a[i];
+                }
+            }
+        }
+    }
+    memcpy(q1, q, sizeof q);
+    memcpy(qd1, qd, sizeof qd);
+    return VGT_DONE;
+}
+
+static int check_state(const vgt_settings *s, const vgt_run *r, const double *q, const double *qd)
+{
+    for (int i = 0; i < 7; ++i)
+        if (!isfinite(q[i]) || !isfinite(qd[i])) return VGT_NOT_FINITE;
+    for (int row = 0; row < 12; ++row) {
+        double margin = r->h[row];
+        for (int i = 0; i < 7; ++i) margin += r->G[7 * row + i] * q[i];
+        if (!(margin > 0.0)) return VGT_NOT_ASSEMBLABLE;
+    }
+    for (int i = 0; i < 7; ++i)
+        if (q[i] < r->q_min[i] - s->limit_tolerance || q[i] > r->q_max[i] + s->limit_tolerance)
+            return VGT_OUTSIDE_LIMITS;
+    return VGT_DONE;
+}
+
+/* Run samples k0 .. k1-1 with the gains Kp, Kv (row-major 7x7). Sample k: measure the tip and
+ * its error, stop if it exceeds the threshold (*stop = k, before any control), compute the
+ * effort and the tool force, and integrate to sample k+1 (unless k is the last sample).
+ * On any other stop, *stop is the sample whose state failed. */
+int vgt_simulate(const vgt_model *m, const vgt_settings *s, const vgt_run *r,
+                 const double *Kp, const double *Kv, long k0, long k1, long *stop)
+{
+    vgt_work wk;
+    int status = VGT_DONE;
+    *stop = k1;
+    if (!work_alloc(&wk, m)) {
+        work_free(&wk);
+        return VGT_NO_MEMORY;
+    }
+    for (long k = k0; k < k1; ++k) {
+        const double *q = r->q + 7 * k, *qd = r->qd + 7 * k;
+        double V[3];
+        double *tip = r->tip + 3 * k;
+        const double *in_ts[3] = {q, qd, r->p_plant};
+        double *out_ts[2] = {tip, V};
+        if (call(&m->tip_state, &wk, 3, in_ts, 2, out_ts)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
+        const double *td = r->tip_d + 3 * k;
+        double e0 = td[0] - tip[0], e1 = td[1] - tip[1], e2 = td[2] - tip[2];
+        r->error[k] = sqrt(e0 * e0 + e1 * e1 + e2 * e2);
+        if (s->threshold > 0.0 && r->error[k] > s->threshold) { status = VGT_ABOVE_THRESHOLD; *stop = k; break; }
+        double *F = r->F + 7 * k;
+        const double *in_c[8] = {q, qd, r->q_d + 7 * k, r->qd_d + 7 * k, r->qdd_d + 7 * k, Kp, Kv, r->p_ctrl};
+        double *out_c[1] = {F};
+        if (call(&m->cfc, &wk, 8, in_c, 1, out_c)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
+        const double *dist = r->disturbance + 3 * k;
+        tool_force(s, V, dist, r->f_ext + 3 * k);
+        if (k + 1 >= r->n) continue;
+        double *q1 = r->q + 7 * (k + 1), *qd1 = r->qd + 7 * (k + 1);
+        status = integrate(m, s, r, &wk, q, qd, F, dist, q1, qd1);
+        if (status == VGT_DONE) status = check_state(s, r, q1, qd1);
+        if (status != VGT_DONE) { *stop = k + 1; break; }
+    }
+    work_free(&wk);
+    return status;
+}
+
+/* Predicted tip error of n_cand gain candidates over `horizon` control periods from the state
+ * (q0, qd0) at the reference rows 0..horizon. Under the controller's own model, computed force
+ * control cancels M^ and C^ exactly, so the predicted joints obey qdd = qdd_d + Kp e + Kv e_dot;
+ * they are advanced by explicit Euler (the paper's integrator) and mapped to the tip with the
+ * forward kinematics. fitness = sqrt(sum_j |tip_d[j] - P(q_j)|^2), j = 1..horizon; a candidate
+ * whose prediction leaves the assemblable set gets +inf. */
+int vgt_ga_fitness(const vgt_model *m, const double *p_ctrl, double dt, long horizon,
+                   const double *q0, const double *qd0, const double *q_d, const double *qd_d,
+                   const double *qdd_d, const double *tip_d, long n_cand, const double *Kp,
+                   const double *Kv, double *fitness)
+{
+    vgt_work wk;
+    if (!work_alloc(&wk, m)) {
+        work_free(&wk);
+        return VGT_NO_MEMORY;
+    }
+    for (long c = 0; c < n_cand; ++c) {
+        const double *kp = Kp + 49 * c, *kv = Kv + 49 * c;
+        double q[7], qd[7], a[7], tip[3], sum = 0.0;
+        memcpy(q, q0, sizeof q);
+        memcpy(qd, qd0, sizeof qd);
+        for (long j = 0; j < horizon; ++j) {
+            double e[7], ed[7];
+            for (int i = 0; i < 7; ++i) {
+                e[i] = q_d[7 * j + i] - q[i];
+                ed[i] = qd_d[7 * j + i] - qd[i];
+            }
+            for (int i = 0; i < 7; ++i) {
+                double acc = qdd_d[7 * j + i];
+                for (int l = 0; l < 7; ++l) acc += kp[7 * i + l] * e[l] + kv[7 * i + l] * ed[l];
+                a[i] = acc;
+            }
+            for (int i = 0; i < 7; ++i) {
+                q[i] += dt * qd[i];
+                qd[i] += dt * a[i];
+            }
+            const double *in_t[2] = {q, p_ctrl};
+            double *out_t[1] = {tip};
+            if (call(&m->tip, &wk, 2, in_t, 1, out_t)) { sum = INFINITY; break; }
+            const double *td = tip_d + 3 * (j + 1);
+            double d0 = td[0] - tip[0], d1 = td[1] - tip[1], d2 = td[2] - tip[2];
+            sum += d0 * d0 + d1 * d1 + d2 * d2;
+            if (!isfinite(sum)) { sum = INFINITY; break; }
+        }
+        fitness[c] = sqrt(sum);
+    }
+    work_free(&wk);
+    return VGT_DONE;
+}

@@ -1,0 +1,8 @@
+"""Closed-loop simulation of the manipulator under computed force or switching control."""
+
+from .external import ExternalForce
+from .reference import JointReference
+from .result import GAActivation, SimulationResult
+from .simulator import INTEGRATORS, simulate
+
+__all__ = ["INTEGRATORS", "ExternalForce", "GAActivation", "JointReference", "SimulationResult", "simulate"]

@@ -1,0 +1,66 @@
+"""External force on the tool (paper eq. 16)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..errors import InputError
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class ExternalForce:
+    """Cutting force ``-F0 V/|V|`` opposing the tip velocity plus a bounded random disturbance.
+
+    Attributes:
+        cutting: whether the cutting force acts.
+        cutting_force: ``F0`` (N); paper: 20 N.
+        cutting_speed: tip speed (m/s) below which the cutting force is zero (the tool does not
+            cut while it rests); 1 mm/s by default.
+        disturbance: whether the disturbance acts.
+        eta: bounds (N) of the disturbance: each component uniform in ``[-eta_i, eta_i]``, drawn
+            once per control period from a seeded generator; paper: (5, 5, 5) N.
+    """
+
+    cutting: bool = True
+    cutting_force: float = 20.0
+    cutting_speed: float = 1e-3
+    disturbance: bool = True
+    eta: tuple[float, float, float] = (5.0, 5.0, 5.0)
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.cutting_force) and self.cutting_force >= 0):
+            raise InputError(f"cutting_force = {self.cutting_force!r}: expected a force >= 0 (N)")
+        if not (np.isfinite(self.cutting_speed) and self.cutting_speed >= 0):
+            raise InputError(f"cutting_speed = {self.cutting_speed!r}: expected a speed >= 0 (m/s)")
+        eta = np.asarray(self.eta, dtype=float)
+        if eta.shape != (3,) or not (np.isfinite(eta).all() and (eta >= 0).all()):
+            raise InputError(f"eta = {self.eta!r}: expected three bounds >= 0 (N)")
+
+    @classmethod
+    def none(cls) -> ExternalForce:
+        """No external force at all."""
+        return cls(cutting=False, disturbance=False)
+
+    @property
+    def active(self) -> bool:
+        """Whether any part acts."""
+        return self.cutting or (self.disturbance and any(e > 0 for e in self.eta))
+
+    def disturbance_samples(self, n: int, rng: np.random.Generator) -> Array:
+        """The disturbance at ``n`` control periods, ``(n, 3)`` (zeros when off)."""
+        if not self.disturbance:
+            return np.zeros((n, 3))
+        return rng.uniform(-1.0, 1.0, size=(n, 3)) * np.asarray(self.eta)
+
+    def cutting_at(self, velocity: ArrayLike) -> Array:
+        """Cutting force for tip velocities ``(..., 3)``."""
+        v = np.asarray(velocity, dtype=float)
+        speed = np.linalg.norm(v, axis=-1, keepdims=True)
+        if not self.cutting:
+            return np.zeros_like(v)
+        return np.where(speed > self.cutting_speed, -self.cutting_force * v / np.maximum(speed, 1e-300), 0.0)

@@ -1,0 +1,189 @@
+"""The record of one closed-loop run: time series, GA activations and a summary."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..parameters import JOINT_NAMES
+
+Array = NDArray[np.float64]
+
+#: Controller mode per sample.
+MODE_FIXED, MODE_GA, MODE_NOT_RUN = 0, 1, -1
+
+
+@dataclass(frozen=True)
+class GAActivation:
+    """One call of the genetic algorithm by the switching method."""
+
+    sample: int
+    time_s: float
+    generations: int
+    evaluations: int
+    best_fitness: float
+    fixed_gains_fitness: float
+    error_before_m: float
+    error_after_m: float
+    wall_time_s: float
+
+
+@dataclass(frozen=True, eq=False)
+class SimulationResult:
+    """Time series of a run (N samples at period ``dt``) and what happened.
+
+    Arrays: ``t`` (N,); ``tip_desired``, ``tip`` (N, 3) m; ``tip_error`` (N,) m (``|P(q_d) -
+    P(q)|``); ``q_desired``, ``qd_desired``, ``q``, ``qd`` (N, 7); ``effort`` (N, 7) N and N m;
+    ``f_ext`` (N, 3) N, the force on the tool; ``mode`` (N,) 0 fixed gains, 1 GA gains, -1 not
+    reached. Samples after a failure are NaN (``mode == -1``).
+    """
+
+    t: Array
+    tip_desired: Array
+    tip: Array
+    tip_error: Array
+    q_desired: Array
+    qd_desired: Array
+    q: Array
+    qd: Array
+    effort: Array
+    f_ext: Array
+    mode: NDArray[np.int8]
+    activations: tuple[GAActivation, ...]
+    success: bool
+    message: str
+    wall_time_s: float
+    ga_time_s: float
+    metadata: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def dt(self) -> float:
+        """Control period (s)."""
+        return float(self.metadata.get("dt_s", self.t[1] - self.t[0]))
+
+    @property
+    def completed(self) -> int:
+        """Number of samples reached."""
+        return int(np.count_nonzero(self.mode != MODE_NOT_RUN))
+
+    def summary(self) -> dict[str, Any]:
+        """Figures of the run, as written to ``summary.json``."""
+        n = self.completed
+        err = self.tip_error[:n]
+        transient = float(self.metadata.get("transient_s", 0.2))
+        after = err[self.t[:n] >= self.t[0] + transient]
+        forces = self.effort[:n, :6]
+        torque = self.effort[:n, 6]
+        summary: dict[str, Any] = {key: self.metadata[key] for key in self.metadata}
+        summary.update(
+            success=self.success,
+            message=self.message,
+            samples=len(self.t),
+            samples_completed=n,
+            simulated_time_s=float(self.t[n - 1] - self.t[0]) if n else 0.0,
+            wall_time_s=self.wall_time_s,
+            real_time_factor=(float(self.t[n - 1] - self.t[0]) / self.wall_time_s)
+            if n and self.wall_time_s > 0
+            else None,
+            max_tip_error_m=_max(err),
+            rms_tip_error_m=_rms(err),
+            max_tip_error_after_transient_m=_max(after),
+            rms_tip_error_after_transient_m=_rms(after),
+            time_of_max_tip_error_s=float(self.t[int(np.nanargmax(err))]) if n else None,
+            peak_force_n=_max(np.abs(forces)),
+            rms_force_n=_rms(forces),
+            peak_twist_torque_nm=_max(np.abs(torque)),
+            peak_external_force_n=_max(np.linalg.norm(self.f_ext[:n], axis=1)),
+            ga_activations=len(self.activations),
+            ga_time_s=self.ga_time_s,
+            ga_time_per_activation_s=self.ga_time_s / len(self.activations) if self.activations else None,
+            time_in_ga_mode_s=float(np.count_nonzero(self.mode == MODE_GA) * self.dt),
+        )
+        return summary
+
+    def save(self, folder: str | Path) -> Path:
+        """Write ``timeseries.csv``, ``ga_activations.csv`` and ``summary.json`` into ``folder``.
+
+        Each file is written to a temporary name and renamed into place; ``summary.json`` comes
+        last, so a folder with a summary holds a complete result.
+        """
+        out = Path(folder)
+        out.mkdir(parents=True, exist_ok=True)
+        stale = out / "summary.json"
+        if stale.exists():
+            stale.unlink()
+        columns, table = self._table()
+        _atomic_write(out / "timeseries.csv", _csv(columns, table))
+        act_columns = list(GAActivation.__dataclass_fields__)
+        act_rows = np.array([[getattr(a, c) for c in act_columns] for a in self.activations], dtype=float)
+        _atomic_write(out / "ga_activations.csv", _csv(act_columns, act_rows.reshape(-1, len(act_columns))))
+        _atomic_write(out / "summary.json", json.dumps(_jsonable(self.summary()), indent=2) + "\n")
+        return out
+
+    def _table(self) -> tuple[list[str], Array]:
+        columns = ["t", "x_d", "y_d", "z_d", "x", "y", "z", "tip_error"]
+        columns += [f"{n}_d" for n in JOINT_NAMES] + list(JOINT_NAMES)
+        columns += [f"d{n}_d" for n in JOINT_NAMES] + [f"d{n}" for n in JOINT_NAMES]
+        columns += [f"F_{n}" for n in JOINT_NAMES] + ["fx", "fy", "fz", "mode"]
+        table = np.column_stack(
+            [
+                self.t,
+                self.tip_desired,
+                self.tip,
+                self.tip_error,
+                self.q_desired,
+                self.q,
+                self.qd_desired,
+                self.qd,
+                self.effort,
+                self.f_ext,
+                self.mode.astype(float),
+            ]
+        )
+        return columns, table
+
+
+def _max(values: Array) -> float | None:
+    return float(np.max(values)) if values.size else None
+
+
+def _rms(values: Array) -> float | None:
+    return float(np.sqrt(np.mean(np.square(values)))) if values.size else None
+
+
+def _csv(columns: list[str], table: Array) -> str:
+    lines = [",".join(columns)]
+    lines += [",".join("" if np.isnan(v) else f"{v:.17g}" for v in row) for row in table]
+    return "\n".join(lines) + "\n"
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file in the same folder."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            handle.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise

@@ -1,0 +1,311 @@
+"""Closed-loop simulation: a plant, a controller with its own model, a reference, tool forces.
+
+The plant is the model of :class:`~vgtarm.robot.Robot` driven by the actuator efforts and the
+external tool force; the controller runs once per control period (the reference's sampling
+period) with its own copy of the parameters, so it can be given a wrong model. Integrators:
+
+- ``euler``: explicit Euler at the control period (the paper's choice);
+- ``semi_implicit_euler``: velocity first, then position (symplectic, same cost);
+- ``rk4``: classical Runge-Kutta with ``substeps`` steps per control period; the efforts and the
+  disturbance are held over the period (zero-order hold), the cutting force follows the state.
+
+With a C compiler the whole loop runs in compiled code (``csrc/closed_loop.c``); without one, in
+NumPy (:mod:`vgtarm.simulation.python_loop`), with the same results.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+
+from ..assembly import linear_form
+from ..closedloop import (
+    ABOVE_THRESHOLD,
+    DONE,
+    FUNCTION_FAILED,
+    NO_MEMORY,
+    NOT_ASSEMBLABLE,
+    NOT_FINITE,
+    OUTSIDE_LIMITS,
+    ClosedLoopDriver,
+    LoopArrays,
+    LoopSettings,
+)
+from ..compiled import CompiledBackend
+from ..control.cfc import ComputedForceControl
+from ..control.scm import SwitchingControl
+from ..errors import InputError, SimulationError
+from ..parameters import JOINT_NAMES, RobotParameters
+from ..robot import Robot
+from .external import ExternalForce
+from .python_loop import PythonLoop
+from .reference import HasJointReference, JointReference
+from .result import MODE_FIXED, MODE_GA, MODE_NOT_RUN, GAActivation, SimulationResult
+
+#: Integrators by name.
+INTEGRATORS: dict[str, str] = {
+    "euler": "explicit Euler at the control period (the paper's)",
+    "semi_implicit_euler": "semi-implicit (symplectic) Euler at the control period",
+    "rk4": "classical Runge-Kutta, `substeps` steps per control period",
+}
+
+_FAILURES = {
+    NOT_FINITE: "the state is no longer finite (NaN or infinity)",
+    NOT_ASSEMBLABLE: "a leg set can no longer be assembled",
+    OUTSIDE_LIMITS: "a joint is far outside its limits",
+    FUNCTION_FAILED: "a model function failed",
+    NO_MEMORY: "out of memory",
+}
+
+Controller = ComputedForceControl | SwitchingControl
+Progress = Callable[[int, int], None]
+
+
+def simulate(
+    plant: Robot,
+    reference: HasJointReference,
+    controller: Controller,
+    *,
+    controller_model: RobotParameters | Robot | None = None,
+    external_force: ExternalForce | None = None,
+    integrator: str = "euler",
+    substeps: int = 1,
+    seed: int = 0,
+    initial_state: tuple[np.ndarray, np.ndarray] | None = None,
+    limit_tolerance: float = 0.05,
+    transient_s: float = 0.2,
+    metadata: Mapping[str, Any] | None = None,
+    progress: Progress | None = None,
+) -> SimulationResult:
+    """Run ``controller`` on ``plant`` along ``reference`` and return the record of the run.
+
+    Args:
+        plant: the simulated robot (its parameters are the truth).
+        reference: joint reference ``t``, ``q``, ``qd``, ``qdd`` (an IK result works).
+        controller: :class:`ComputedForceControl` or :class:`SwitchingControl`.
+        controller_model: the controller's parameters (default: the plant's, an exact model).
+        external_force: tool force (default: none).
+        integrator: a name of :data:`INTEGRATORS`; ``substeps`` integration steps per period.
+        seed: seeds the disturbance and the genetic algorithm; the same seed gives the same run.
+        initial_state: ``(q0, qd0)``; default: at rest at ``q_d(0)`` (the paper's start).
+        limit_tolerance: distance (m, rad) outside a joint limit at which the run is stopped.
+        transient_s: length of the start transient excluded from the "after transient" figures.
+        metadata: extra entries for the summary (case name, ...).
+        progress: called as ``progress(samples_done, samples_total)`` now and then.
+
+    Raises:
+        SimulationError: the run diverged; ``error.result`` holds the samples up to then.
+        InputError: a bad argument (the message names it).
+    """
+    if integrator not in INTEGRATORS:
+        raise InputError(f"integrator = {integrator!r}: expected one of {sorted(INTEGRATORS)}")
+    if not (isinstance(substeps, int) and substeps >= 1):
+        raise InputError(f"substeps = {substeps!r}: expected a whole number >= 1")
+    if not isinstance(controller, ComputedForceControl | SwitchingControl):
+        raise InputError(f"controller = {controller!r}: expected ComputedForceControl or SwitchingControl")
+    if not (isinstance(seed, int | np.integer) and seed >= 0):
+        raise InputError(f"seed = {seed!r}: expected a whole number >= 0")
+    ref = JointReference.of(reference)
+    external = external_force or ExternalForce.none()
+    if isinstance(controller_model, Robot):
+        model = controller_model
+    else:
+        model = plant.with_parameters(controller_model or plant.parameters)
+    n, dt = len(ref.t), ref.dt
+    tip_d = plant.tip_position(ref.q)
+    dist_seed, ga_seed = np.random.SeedSequence(int(seed)).spawn(2)
+    disturbance = external.disturbance_samples(n, np.random.default_rng(dist_seed))
+    ga_rng = np.random.default_rng(ga_seed)
+    q0, qd0 = initial_state if initial_state is not None else (ref.q[0], np.zeros(7))
+    G, h = linear_form(plant.parameters.b, plant.parameters.d)
+    arrays = LoopArrays(
+        q_d=ref.q,
+        qd_d=ref.qd,
+        qdd_d=ref.qdd,
+        tip_d=tip_d,
+        disturbance=disturbance,
+        p_plant=plant.parameter_vector,
+        p_ctrl=model.parameter_vector,
+        G=G,
+        h=h,
+        q_min=plant.parameters.lower,
+        q_max=plant.parameters.upper,
+        q0=np.asarray(q0, dtype=float),
+        qd0=np.asarray(qd0, dtype=float),
+    )
+    loop: ClosedLoopDriver | PythonLoop
+    if isinstance(plant.backend, CompiledBackend) and isinstance(model.backend, CompiledBackend):
+        loop = ClosedLoopDriver(plant.backend)
+    else:
+        loop = PythonLoop(plant, model)
+    settings = LoopSettings(
+        dt=dt,
+        integrator=integrator,
+        substeps=substeps,
+        cutting=external.cutting,
+        cutting_force=external.cutting_force,
+        cutting_speed=external.cutting_speed,
+        threshold=controller.threshold if isinstance(controller, SwitchingControl) else 0.0,
+        limit_tolerance=limit_tolerance,
+    )
+    mode = np.full(n, MODE_NOT_RUN, dtype=np.int8)
+    activations: list[GAActivation] = []
+    fixed = controller.gains
+    start = time.perf_counter()
+    ga_time = 0.0
+    k = 0
+    status = DONE
+    chunk = max(n // 100, 1) if progress else n
+    while k < n:
+        k_end = min(k + chunk, n)
+        status, stop = loop.simulate(settings, arrays, fixed.Kp, fixed.Kv, k, k_end)
+        mode[k:stop] = MODE_FIXED
+        if status == DONE:
+            k = k_end
+            if progress:
+                progress(k, n)
+            continue
+        if status != ABOVE_THRESHOLD:
+            break
+        assert isinstance(controller, SwitchingControl)
+        k = stop
+        ga_start = time.perf_counter()
+        gains, activation = _tune(controller, loop, model, arrays, k, dt, ga_rng)
+        unswitched = LoopSettings(**{**settings.__dict__, "threshold": 0.0})
+        status, stop = loop.simulate(unswitched, arrays, gains.Kp, gains.Kv, k, k + 1)
+        elapsed = time.perf_counter() - ga_start
+        ga_time += elapsed
+        mode[k] = MODE_GA
+        if status != DONE:
+            after = float("nan")
+        else:
+            after = float(arrays.error[k]) if k + 1 >= n else _tip_error(plant, arrays, k + 1)
+        activations.append(
+            GAActivation(
+                sample=k,
+                time_s=float(ref.t[k]),
+                generations=activation[0],
+                evaluations=activation[1],
+                best_fitness=activation[2],
+                fixed_gains_fitness=activation[3],
+                error_before_m=float(arrays.error[k]),
+                error_after_m=after,
+                wall_time_s=elapsed,
+            )
+        )
+        if status != DONE:
+            break
+        k += 1
+    wall = time.perf_counter() - start
+    success = status in (DONE, ABOVE_THRESHOLD) and k >= n
+    if success:
+        message = "completed"
+    else:
+        failed_at = stop
+        message = (
+            f"diverged at t = {ref.t[min(failed_at, n - 1)]:.4f} s (sample {failed_at} of {n}): "
+            f"{_FAILURES.get(status, f'status {status}')}{_where(plant, arrays, failed_at)}"
+        )
+        mode[failed_at:] = MODE_NOT_RUN
+    info: dict[str, Any] = {
+        "controller": controller.name,
+        "external_force": external.active,
+        "cutting_force": external.cutting,
+        "disturbance": external.disturbance,
+        "seed": int(seed),
+        "dt_s": dt,
+        "integrator": integrator,
+        "substeps": substeps,
+        "reference_rates": ref.rates,
+        "transient_s": transient_s,
+        "controller_model": model.parameters.name,
+        "plant": plant.parameters.name,
+        "backend": plant.backend.kind,
+    }
+    if isinstance(controller, SwitchingControl):
+        info.update(
+            threshold_m=controller.threshold,
+            ga_horizon=controller.horizon,
+            kp_bounds=list(controller.kp_bounds),
+            kv_bounds=list(controller.kv_bounds),
+        )
+    info.update(dict(metadata or {}))
+    result = SimulationResult(
+        t=ref.t.copy(),
+        tip_desired=tip_d,
+        tip=_blank(arrays.tip, mode),
+        tip_error=_blank(arrays.error, mode),
+        q_desired=ref.q.copy(),
+        qd_desired=ref.qd.copy(),
+        q=_blank(arrays.q, mode),
+        qd=_blank(arrays.qd, mode),
+        effort=_blank(arrays.F, mode),
+        f_ext=_blank(arrays.f_ext, mode),
+        mode=mode,
+        activations=tuple(activations),
+        success=success,
+        message=message,
+        wall_time_s=wall,
+        ga_time_s=ga_time,
+        metadata=info,
+    )
+    if not success:
+        raise SimulationError(message, result)
+    return result
+
+
+def _tune(
+    controller: SwitchingControl,
+    loop: ClosedLoopDriver | PythonLoop,
+    model: Robot,
+    arrays: LoopArrays,
+    k: int,
+    dt: float,
+    rng: np.random.Generator,
+) -> tuple[Any, tuple[int, int, float, float]]:
+    """Run the GA at sample ``k``; returns the gains and (generations, evaluations, best, fixed)."""
+    end = min(k + controller.horizon, arrays.n - 1)
+    if end == k:  # the last sample: nothing left to predict, keep the fixed gains
+        return controller.gains, (0, 0, 0.0, 0.0)
+    window = slice(k, end + 1)
+    inp = arrays.inputs
+
+    def predict(Kp: np.ndarray, Kv: np.ndarray) -> np.ndarray:
+        return loop.ga_fitness(
+            model.parameter_vector,
+            dt,
+            arrays.q[k],
+            arrays.qd[k],
+            inp["q_d"][window],
+            inp["qd_d"][window],
+            inp["qdd_d"][window],
+            inp["tip_d"][window],
+            Kp,
+            Kv,
+        )
+
+    fixed_fitness = float(predict(controller.gains.Kp[None], controller.gains.Kv[None])[0])
+    gains, result = controller.tune(predict, rng)
+    return gains, (result.generations, result.n_evaluations, float(result.cost), fixed_fitness)
+
+
+def _tip_error(plant: Robot, arrays: LoopArrays, k: int) -> float:
+    return float(np.linalg.norm(arrays.inputs["tip_d"][k] - plant.tip_position(arrays.q[k])))
+
+
+def _blank(values: np.ndarray, mode: np.ndarray) -> np.ndarray:
+    out = values.copy()
+    out[mode == MODE_NOT_RUN] = np.nan
+    return out
+
+
+def _where(plant: Robot, arrays: LoopArrays, k: int) -> str:
+    q = arrays.q[min(k, arrays.n - 1)]
+    if not np.isfinite(q).all():
+        return ""
+    lower, upper = plant.parameters.lower, plant.parameters.upper
+    outside = [f"{JOINT_NAMES[i]} = {q[i]:.4g}" for i in range(7) if not lower[i] <= q[i] <= upper[i]]
+    return f" ({', '.join(outside)})" if outside else ""
