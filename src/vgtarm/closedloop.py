@@ -9,6 +9,7 @@ their NumPy reference implementation otherwise.
 from __future__ import annotations
 
 import ctypes
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -175,6 +176,8 @@ class ClosedLoopDriver:
         self._simulate.restype = ctypes.c_int
         self._fitness = backend.library.vgt_ga_fitness
         self._fitness.restype = ctypes.c_int
+        vp, long_ = ctypes.c_void_p, ctypes.c_long
+        self._fitness.argtypes = [vp, vp, ctypes.c_double, long_, vp, vp, vp, vp, vp, vp, long_, vp, vp, vp]
 
     def simulate(
         self, settings: LoopSettings, arrays: LoopArrays, Kp: Array, Kv: Array, k0: int, k1: int
@@ -205,6 +208,36 @@ class ClosedLoopDriver:
         )
         return int(status), int(stop.value)
 
+    def ga_predictor(
+        self, p_ctrl: Array, dt: float, q0: Array, qd0: Array, q_d: Array, qd_d: Array, qdd_d: Array, tip_d: Array
+    ) -> Callable[[Array, Array], Array]:
+        """The GA's fitness for one state and reference window, bound once for many calls.
+
+        ``q0``, ``qd0`` (7,): the state at sample k; ``q_d``, ``qd_d``, ``qdd_d`` (H+1, 7) and
+        ``tip_d`` (H+1, 3): the reference at samples k .. k+H. The returned function maps
+        ``Kp``, ``Kv`` (n, 7, 7) to the predicted tip-error norms (n,).
+        """
+        fixed = [np.ascontiguousarray(a, dtype=np.float64) for a in (p_ctrl, q0, qd0, q_d, qd_d, qdd_d, tip_d)]
+        head = (
+            ctypes.byref(self._model),
+            fixed[0].ctypes.data,
+            ctypes.c_double(dt),
+            len(fixed[3]) - 1,
+            *[a.ctypes.data for a in fixed[1:]],
+        )
+
+        def predict(Kp: Array, Kv: Array) -> Array:
+            kp = np.ascontiguousarray(Kp, dtype=np.float64)
+            kv = np.ascontiguousarray(Kv, dtype=np.float64)
+            fitness = np.empty(kp.shape[0])
+            status = self._fitness(*head, kp.shape[0], kp.ctypes.data, kv.ctypes.data, fitness.ctypes.data)
+            if status != DONE:
+                raise MemoryError("the compiled GA fitness could not allocate its work arrays")
+            assert fixed  # the bound arrays live as long as this function
+            return fitness
+
+        return predict
+
     def ga_fitness(
         self,
         p_ctrl: Array,
@@ -218,23 +251,5 @@ class ClosedLoopDriver:
         Kp: Array,
         Kv: Array,
     ) -> Array:
-        """Predicted tip-error norm of each candidate: ``Kp``, ``Kv`` (n, 7, 7), reference rows
-        ``0 .. H`` (``q_d`` etc. of shape (H+1, .)); returns (n,)."""
-        horizon = len(q_d) - 1
-        arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (p_ctrl, q0, qd0, q_d, qd_d, qdd_d, tip_d, Kp, Kv)]
-        n = len(arrays[-1])
-        fitness = np.empty(n)
-        status = self._fitness(
-            ctypes.byref(self._model),
-            _ptr(arrays[0]),
-            ctypes.c_double(dt),
-            ctypes.c_long(horizon),
-            *[_ptr(a) for a in arrays[1:]][:6],
-            ctypes.c_long(n),
-            _ptr(arrays[7]),
-            _ptr(arrays[8]),
-            _ptr(fitness),
-        )
-        if status != DONE:
-            raise MemoryError("the compiled GA fitness could not allocate its work arrays")
-        return fitness
+        """Predicted tip-error norm of each candidate (see :meth:`ga_predictor`), (n,)."""
+        return self.ga_predictor(p_ctrl, dt, q0, qd0, q_d, qd_d, qdd_d, tip_d)(Kp, Kv)

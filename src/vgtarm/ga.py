@@ -221,9 +221,12 @@ def _decode(
 ) -> NDArray[np.float64]:
     """Unchecked :func:`decode`."""
     n_genes = lower.shape[0]
-    grouped = bits.reshape(*bits.shape[:-1], n_genes, n_bits)
     top = float(2**n_bits - 1)
-    fraction = (grouped @ _weights(n_bits)) / top
+    if n_bits == 8:  # the paper's coding: one byte per gene, packed by NumPy (same values, ~10x faster)
+        codes = np.packbits(bits, axis=-1).astype(np.float64)
+    else:
+        codes = bits.reshape(*bits.shape[:-1], n_genes, n_bits) @ _weights(n_bits)
+    fraction = codes / top
     values = np.minimum(lower + fraction * (upper - lower), upper)
     return np.where(fraction == 1.0, upper, values)
 

@@ -25,17 +25,17 @@ int vgt_batch(vgt_fn f, vgt_int sz_arg, vgt_int sz_res, vgt_int sz_iw, vgt_int s
         double **res = malloc(sizeof(double *) * (size_t)(sz_res > 0 ? sz_res : 1));
         vgt_int *iw = malloc(sizeof(vgt_int) * (size_t)(sz_iw > 0 ? sz_iw : 1));
         double *w = malloc(sizeof(double) * (size_t)(sz_w > 0 ? sz_w : 1));
-        if (!arg || !res || !iw || !w) {
-            status |= 2;
-        } else {
+        int ok = arg && res && iw && w;
+        if (!ok) status |= 2;
+        /* every thread reaches the loop (a worksharing construct must not be skipped) */
 #ifdef _OPENMP
 #pragma omp for schedule(static)
 #endif
-            for (long k = 0; k < n; ++k) {
-                for (int i = 0; i < n_in; ++i) arg[i] = in[i] + k * in_stride[i];
-                for (int j = 0; j < n_out; ++j) res[j] = out[j] + k * out_stride[j];
-                if (f(arg, res, iw, w, 0)) status |= 1;
-            }
+        for (long k = 0; k < n; ++k) {
+            if (!ok) continue;
+            for (int i = 0; i < n_in; ++i) arg[i] = in[i] + k * in_stride[i];
+            for (int j = 0; j < n_out; ++j) res[j] = out[j] + k * out_stride[j];
+            if (f(arg, res, iw, w, 0)) status |= 1;
         }
         free(arg);
         free(res);

@@ -226,6 +226,40 @@ int vgt_simulate(const vgt_model *m, const vgt_settings *s, const vgt_run *r,
     return status;
 }
 
+/* Predicted tip-error norm of one candidate (see vgt_ga_fitness). */
+static double predict_one(const vgt_model *m, vgt_work *wk, const double *p_ctrl, double dt, long horizon,
+                          const double *q0, const double *qd0, const double *q_d, const double *qd_d,
+                          const double *qdd_d, const double *tip_d, const double *kp, const double *kv)
+{
+    double q[7], qd[7], a[7], tip[3], sum = 0.0;
+    memcpy(q, q0, sizeof q);
+    memcpy(qd, qd0, sizeof qd);
+    for (long j = 0; j < horizon; ++j) {
+        double e[7], ed[7];
+        for (int i = 0; i < 7; ++i) {
+            e[i] = q_d[7 * j + i] - q[i];
+            ed[i] = qd_d[7 * j + i] - qd[i];
+        }
+        for (int i = 0; i < 7; ++i) {
+            double acc = qdd_d[7 * j + i];
+            for (int l = 0; l < 7; ++l) acc += kp[7 * i + l] * e[l] + kv[7 * i + l] * ed[l];
+            a[i] = acc;
+        }
+        for (int i = 0; i < 7; ++i) {
+            q[i] += dt * qd[i];
+            qd[i] += dt * a[i];
+        }
+        const double *in_t[2] = {q, p_ctrl};
+        double *out_t[1] = {tip};
+        if (call(&m->tip, wk, 2, in_t, 1, out_t)) return INFINITY;
+        const double *td = tip_d + 3 * (j + 1);
+        double d0 = td[0] - tip[0], d1 = td[1] - tip[1], d2 = td[2] - tip[2];
+        sum += d0 * d0 + d1 * d1 + d2 * d2;
+        if (!isfinite(sum)) return INFINITY;
+    }
+    return sqrt(sum);
+}
+
 /* Predicted tip error of n_cand gain candidates over `horizon` control periods from the state
  * (q0, qd0) at the reference rows 0..horizon. Under the controller's own model, computed force
  * control cancels M^ and C^ exactly, so the predicted joints obey qdd = qdd_d + Kp e + Kv e_dot;
@@ -237,41 +271,23 @@ int vgt_ga_fitness(const vgt_model *m, const double *p_ctrl, double dt, long hor
                    const double *qdd_d, const double *tip_d, long n_cand, const double *Kp,
                    const double *Kv, double *fitness)
 {
-    vgt_work wk;
-    if (!work_alloc(&wk, m)) {
+    int status = VGT_DONE;
+#ifdef _OPENMP
+#pragma omp parallel if (n_cand * horizon >= 200) reduction(| : status)
+#endif
+    {
+        vgt_work wk;
+        int ok = work_alloc(&wk, m);
+        if (!ok) status |= 1;
+        /* every thread reaches the loop (a worksharing construct must not be skipped) */
+#ifdef _OPENMP
+#pragma omp for schedule(static)
+#endif
+        for (long c = 0; c < n_cand; ++c)
+            fitness[c] = ok ? predict_one(m, &wk, p_ctrl, dt, horizon, q0, qd0, q_d, qd_d, qdd_d, tip_d,
+                                          Kp + 49 * c, Kv + 49 * c)
+                            : INFINITY;
         work_free(&wk);
-        return VGT_NO_MEMORY;
     }
-    for (long c = 0; c < n_cand; ++c) {
-        const double *kp = Kp + 49 * c, *kv = Kv + 49 * c;
-        double q[7], qd[7], a[7], tip[3], sum = 0.0;
-        memcpy(q, q0, sizeof q);
-        memcpy(qd, qd0, sizeof qd);
-        for (long j = 0; j < horizon; ++j) {
-            double e[7], ed[7];
-            for (int i = 0; i < 7; ++i) {
-                e[i] = q_d[7 * j + i] - q[i];
-                ed[i] = qd_d[7 * j + i] - qd[i];
-            }
-            for (int i = 0; i < 7; ++i) {
-                double acc = qdd_d[7 * j + i];
-                for (int l = 0; l < 7; ++l) acc += kp[7 * i + l] * e[l] + kv[7 * i + l] * ed[l];
-                a[i] = acc;
-            }
-            for (int i = 0; i < 7; ++i) {
-                q[i] += dt * qd[i];
-                qd[i] += dt * a[i];
-            }
-            const double *in_t[2] = {q, p_ctrl};
-            double *out_t[1] = {tip};
-            if (call(&m->tip, &wk, 2, in_t, 1, out_t)) { sum = INFINITY; break; }
-            const double *td = tip_d + 3 * (j + 1);
-            double d0 = td[0] - tip[0], d1 = td[1] - tip[1], d2 = td[2] - tip[2];
-            sum += d0 * d0 + d1 * d1 + d2 * d2;
-            if (!isfinite(sum)) { sum = INFINITY; break; }
-        }
-        fitness[c] = sqrt(sum);
-    }
-    work_free(&wk);
-    return VGT_DONE;
+    return status ? VGT_NO_MEMORY : VGT_DONE;
 }

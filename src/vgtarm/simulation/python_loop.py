@@ -6,6 +6,8 @@ the same computation sample by sample through the :class:`~vgtarm.robot.Robot` m
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -104,18 +106,12 @@ class PythonLoop:
                 return status, k + 1
         return DONE, k1
 
-    def ga_fitness(
-        self,
-        p_ctrl: Array,
-        dt: float,
-        q0: Array,
-        qd0: Array,
-        q_d: Array,
-        qd_d: Array,
-        qdd_d: Array,
-        tip_d: Array,
-        Kp: Array,
-        Kv: Array,
-    ) -> Array:
-        """The GA's fitness, as :func:`vgtarm.control.scm.predict_tip_error`."""
-        return predict_tip_error(self.model, dt, q0, qd0, q_d, qd_d, qdd_d, tip_d, Kp, Kv)
+    def ga_predictor(
+        self, p_ctrl: Array, dt: float, q0: Array, qd0: Array, q_d: Array, qd_d: Array, qdd_d: Array, tip_d: Array
+    ) -> Callable[[Array, Array], Array]:
+        """The GA's fitness for one state and window, as :func:`vgtarm.control.scm.predict_tip_error`."""
+
+        def predict(Kp: Array, Kv: Array) -> Array:
+            return predict_tip_error(self.model, dt, q0, qd0, q_d, qd_d, qdd_d, tip_d, Kp, Kv)
+
+        return predict

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -13,6 +11,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..fileio import atomic_write_text
 from ..parameters import JOINT_NAMES
 
 Array = NDArray[np.float64]
@@ -121,11 +120,11 @@ class SimulationResult:
         if stale.exists():
             stale.unlink()
         columns, table = self._table()
-        _atomic_write(out / "timeseries.csv", _csv(columns, table))
+        atomic_write_text(out / "timeseries.csv", _csv(columns, table))
         act_columns = list(GAActivation.__dataclass_fields__)
         act_rows = np.array([[getattr(a, c) for c in act_columns] for a in self.activations], dtype=float)
-        _atomic_write(out / "ga_activations.csv", _csv(act_columns, act_rows.reshape(-1, len(act_columns))))
-        _atomic_write(out / "summary.json", json.dumps(_jsonable(self.summary()), indent=2) + "\n")
+        atomic_write_text(out / "ga_activations.csv", _csv(act_columns, act_rows.reshape(-1, len(act_columns))))
+        atomic_write_text(out / "summary.json", json.dumps(_jsonable(self.summary()), indent=2) + "\n")
         return out
 
     def _table(self) -> tuple[list[str], Array]:
@@ -175,15 +174,3 @@ def _jsonable(value: Any) -> Any:
     if isinstance(value, float) and not np.isfinite(value):
         return None
     return value
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file in the same folder."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise

@@ -154,6 +154,7 @@ def simulate(
     mode = np.full(n, MODE_NOT_RUN, dtype=np.int8)
     activations: list[GAActivation] = []
     fixed = controller.gains
+    unswitched = LoopSettings(**{**settings.__dict__, "threshold": 0.0})
     start = time.perf_counter()
     ga_time = 0.0
     k = 0
@@ -174,31 +175,28 @@ def simulate(
         k = stop
         ga_start = time.perf_counter()
         gains, activation = _tune(controller, loop, model, arrays, k, dt, ga_rng)
-        unswitched = LoopSettings(**{**settings.__dict__, "threshold": 0.0})
+        sample = k
         status, stop = loop.simulate(unswitched, arrays, gains.Kp, gains.Kv, k, k + 1)
+        mode[k] = MODE_GA
+        k += 1
+        after = _tip_error(plant, arrays, k) if status == DONE and k < n else float("nan")
         elapsed = time.perf_counter() - ga_start
         ga_time += elapsed
-        mode[k] = MODE_GA
-        if status != DONE:
-            after = float("nan")
-        else:
-            after = float(arrays.error[k]) if k + 1 >= n else _tip_error(plant, arrays, k + 1)
         activations.append(
             GAActivation(
-                sample=k,
-                time_s=float(ref.t[k]),
+                sample=sample,
+                time_s=float(ref.t[sample]),
                 generations=activation[0],
                 evaluations=activation[1],
                 best_fitness=activation[2],
                 fixed_gains_fitness=activation[3],
-                error_before_m=float(arrays.error[k]),
+                error_before_m=float(arrays.error[sample]),
                 error_after_m=after,
                 wall_time_s=elapsed,
             )
         )
         if status != DONE:
             break
-        k += 1
     wall = time.perf_counter() - start
     success = status in (DONE, ABOVE_THRESHOLD) and k >= n
     if success:
@@ -273,20 +271,16 @@ def _tune(
     window = slice(k, end + 1)
     inp = arrays.inputs
 
-    def predict(Kp: np.ndarray, Kv: np.ndarray) -> np.ndarray:
-        return loop.ga_fitness(
-            model.parameter_vector,
-            dt,
-            arrays.q[k],
-            arrays.qd[k],
-            inp["q_d"][window],
-            inp["qd_d"][window],
-            inp["qdd_d"][window],
-            inp["tip_d"][window],
-            Kp,
-            Kv,
-        )
-
+    predict = loop.ga_predictor(
+        model.parameter_vector,
+        dt,
+        arrays.q[k],
+        arrays.qd[k],
+        inp["q_d"][window],
+        inp["qd_d"][window],
+        inp["qdd_d"][window],
+        inp["tip_d"][window],
+    )
     fixed_fitness = float(predict(controller.gains.Kp[None], controller.gains.Kv[None])[0])
     gains, result = controller.tune(predict, rng)
     return gains, (result.generations, result.n_evaluations, float(result.cost), fixed_fitness)

@@ -1,0 +1,462 @@
+"""Figures of closed-loop runs, like the paper's Figs. 4-9.
+
+Every function draws into an Axes passed as ``ax`` (or into a new :class:`~matplotlib.figure.Figure`
+when ``ax`` is None) and returns it; nothing here touches pyplot's global state or calls
+``show()``, so the module works headless without choosing a backend. Lengths are plotted in mm,
+angles in mrad, forces in N and torques in N m; the result records stay in SI units.
+
+- :func:`plot_path_3d`: desired and actual tip paths in 3-D (Figs. 4 and 7).
+- :func:`plot_tip_error`: tip position error against time for compared runs (Figs. 5 and 8).
+- :func:`plot_efforts`: leg forces and twist torque of one run (Figs. 6 and 9).
+- :func:`plot_joint_errors`: joint tracking errors ``q_d - q`` of one run.
+- :func:`comparison_figure`: the three views above in one figure.
+- :func:`save_figure`: write a figure atomically, format from the suffix.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.colors import to_hex
+from matplotlib.figure import Figure
+from matplotlib.patches import Patch
+from matplotlib.ticker import MaxNLocator
+from mpl_toolkits.mplot3d.axes3d import Axes3D
+from numpy.typing import NDArray
+
+from .errors import InputError
+from .parameters import JOINT_NAMES
+from .simulation.result import MODE_GA, SimulationResult
+
+__all__ = [
+    "comparison_figure",
+    "label_of",
+    "plot_efforts",
+    "plot_joint_errors",
+    "plot_path_3d",
+    "plot_tip_error",
+    "save_figure",
+]
+
+#: Metres to millimetres, radians to milliradians.
+_MILLI = 1e3
+#: Number of leg actuators (the six prismatic joints); the last joint is the twist.
+_N_LEGS = 6
+#: Smallest 3-D box side, as a fraction of the largest, so planar paths keep some depth.
+_MIN_BOX_FRACTION = 0.15
+#: Fill colour of spans in GA mode.
+_GA_COLOR = "tab:orange"
+#: Default size of a new figure of one panel (inches).
+_PANEL_SIZE = (7.0, 4.0)
+
+
+def label_of(result: SimulationResult) -> str:
+    """Short legend label of a run from its metadata.
+
+    The controller name upper-cased (``"CFC"``, ``"SCM"``), then ``" + tool force"`` when
+    ``metadata["external_force"]`` is true and ``" (FD rates)"`` when the reference rates were
+    obtained by finite differences, e.g. ``"CFC + tool force (FD rates)"``.
+    """
+    _check_result(result, "result")
+    meta = result.metadata
+    label = str(meta.get("controller", "run")).upper()
+    if meta.get("external_force"):
+        label += " + tool force"
+    if meta.get("reference_rates") == "finite_difference":
+        label += " (FD rates)"
+    return label
+
+
+def plot_path_3d(
+    results: SimulationResult | Sequence[SimulationResult],
+    *,
+    labels: Sequence[str] | None = None,
+    ax: Axes3D | None = None,
+    title: str | None = None,
+) -> Axes3D:
+    """Desired tip path (of the first run) and the actual tip path of each run, in 3-D.
+
+    Args:
+        results: one run or a sequence of runs; ``tip_desired`` and ``tip`` are (N, 3) m.
+        labels: one legend label per run (default: :func:`label_of`).
+        ax: a 3-D Axes to draw into (``projection="3d"``); a new figure when None.
+        title: Axes title (default: "Tip path").
+
+    Returns:
+        The 3-D Axes; coordinates in mm, box aspect from the data ranges so that a millimetre
+        has about the same length along each axis. NaN samples (runs that stopped early) are
+        left out of the lines.
+    """
+    runs, names = _runs_and_labels(results, labels)
+    if ax is None:
+        ax = Figure(figsize=(6.5, 5.5), layout="constrained").add_subplot(projection="3d")
+    elif not isinstance(ax, Axes3D):
+        raise InputError(f"ax must be a 3-D Axes (projection='3d'), got {type(ax).__name__}")
+    desired = runs[0].tip_desired * _MILLI
+    ax.plot(desired[:, 0], desired[:, 1], desired[:, 2], "k--", lw=1.2, label="desired")
+    points = [desired]
+    for run, name in zip(runs, names, strict=True):
+        tip = run.tip * _MILLI
+        ax.plot(tip[:, 0], tip[:, 1], tip[:, 2], lw=1.2, label=f"actual, {name}")
+        points.append(tip)
+    ax.plot(*desired[0], "ko", ms=4, label="start")
+    stacked = np.concatenate(points)
+    stacked = stacked[np.isfinite(stacked).all(axis=1)]
+    if len(stacked):
+        lo, hi = stacked.min(axis=0), stacked.max(axis=0)
+        span = hi - lo
+        side = max(float(span.max()), 1e-6)
+        half = np.maximum(span, _MIN_BOX_FRACTION * side) / 2
+        mid = (lo + hi) / 2
+        ax.set_xlim(mid[0] - half[0], mid[0] + half[0])
+        ax.set_ylim(mid[1] - half[1], mid[1] + half[1])
+        ax.set_zlim(mid[2] - half[2], mid[2] + half[2])
+        ax.set_box_aspect(tuple(2 * half), zoom=1.1)
+    for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+        axis.set_major_locator(MaxNLocator(nbins=5, steps=[1, 2, 2.5, 5, 10]))
+    ax.set_xlabel("x (mm)", labelpad=6)
+    ax.set_ylabel("y (mm)", labelpad=6)
+    ax.set_zlabel("z (mm)", labelpad=8)
+    ax.set_title(title if title is not None else "Tip path")
+    ax.legend(loc="upper left", fontsize="small")
+    return ax
+
+
+def plot_tip_error(
+    results: SimulationResult | Sequence[SimulationResult],
+    *,
+    labels: Sequence[str] | None = None,
+    ax: Axes | None = None,
+    threshold: float | None = None,
+    log: bool = False,
+    title: str | None = None,
+) -> Axes:
+    """Absolute tip position error ``|P(q_d) - P(q)|`` (mm) against time (s) of compared runs.
+
+    Args:
+        results: one run or a sequence of runs; ``t`` (N,) s, ``tip_error`` (N,) m.
+        labels: one legend label per run (default: :func:`label_of`).
+        ax: Axes to draw into; a new figure when None.
+        threshold: SCM error threshold (m), drawn as a dashed horizontal line. None takes
+            ``metadata["threshold_m"]`` of the first run that has one; no line if none has.
+        log: logarithmic error axis (non-positive errors are left out).
+        title: Axes title (default: "Tip position error").
+
+    Returns:
+        The Axes, with one line per run and the threshold line. The spans in GA mode
+        (``mode == 1``) of each run are marked by a bar in the run's colour in a grey strip
+        below the error axis. NaN samples (runs that stopped early) are left out.
+    """
+    runs, names = _runs_and_labels(results, labels)
+    ax = _new_axes(ax)
+    if threshold is None:
+        threshold = next((r.metadata["threshold_m"] for r in runs if r.metadata.get("threshold_m") is not None), None)
+    if threshold is not None:
+        value = _as_float(threshold)
+        if value is None or not (np.isfinite(value) and value > 0):
+            raise InputError(f"threshold = {threshold!r}: expected a positive tip error (m)")
+        threshold = value
+    bars: list[tuple[str, list[tuple[float, float]], str]] = []
+    for run, name in zip(runs, names, strict=True):
+        error = run.tip_error * _MILLI
+        if log:
+            error = np.where(error > 0, error, np.nan)
+        (line,) = ax.plot(run.t, error, lw=1.2, label=name)
+        spans = _spans(run.t, run.mode == MODE_GA)
+        if spans:
+            bars.append((to_hex(line.get_color()), spans, name))
+    if threshold is not None:
+        ax.axhline(threshold * _MILLI, color="k", ls="--", lw=1.0, label="SCM threshold")
+    if log:
+        ax.set_yscale("log")
+    else:
+        ax.set_ylim(bottom=0)
+    if bars:
+        _ga_strip(ax, bars, log)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("tip error |P(q_d) − P(q)| (mm)")
+    ax.set_title(title if title is not None else "Tip position error")
+    ax.grid(True, alpha=0.3)
+    _legend_above(ax)
+    return ax
+
+
+def plot_efforts(
+    result: SimulationResult,
+    *,
+    ax: Axes | None = None,
+    title: str | None = None,
+    joints: Sequence[str] | None = None,
+) -> Axes:
+    """Leg actuator forces (N) and the twist torque (N m, right axis) of one run against time (s).
+
+    Args:
+        result: the run; ``effort`` (N, 7): six leg forces in N, then the twist torque in N m.
+        ax: Axes to draw into (the force axis); a new figure when None.
+        title: Axes title (default: "Actuator efforts, <label>").
+        joints: names from :data:`vgtarm.parameters.JOINT_NAMES` to draw (default: all); the
+            twist torque gets a twin y-axis on the right when ``"psi3"`` is among them.
+
+    Returns:
+        The primary (force) Axes; spans in GA mode (``mode == 1``) are shaded.
+    """
+    _check_result(result, "result")
+    chosen = _joint_indices(joints)
+    ax = _new_axes(ax)
+    handles: list[Any] = []
+    for j in chosen:
+        if j < _N_LEGS:
+            handles += ax.plot(result.t, result.effort[:, j], lw=1.0, label=f"F_{JOINT_NAMES[j]}")
+    twin = None
+    if _N_LEGS in chosen:
+        twin = ax.twinx()
+        handles += twin.plot(
+            result.t, result.effort[:, _N_LEGS], color="k", ls="--", lw=1.0, label=f"τ_{JOINT_NAMES[_N_LEGS]} (right)"
+        )
+        twin.set_ylabel(f"twist torque τ_{JOINT_NAMES[_N_LEGS]} (N m)")
+    if _shade_ga(ax, result):
+        handles.append(Patch(color=_GA_COLOR, alpha=0.2, label="GA gains"))
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("leg force (N)" if any(j < _N_LEGS for j in chosen) else "")
+    ax.set_title(title if title is not None else f"Actuator efforts, {label_of(result)}")
+    ax.grid(True, alpha=0.3)
+    _legend_above(ax, handles)
+    return ax
+
+
+def plot_joint_errors(result: SimulationResult, *, ax: Axes | None = None, title: str | None = None) -> Axes:
+    """Joint tracking errors ``q_d - q`` of one run against time (s).
+
+    The six legs in mm on the left axis, the twist ``psi3`` in mrad on a twin axis on the right
+    (dashed black line); spans in GA mode are shaded.
+
+    Args:
+        result: the run; ``q_desired`` and ``q`` (N, 7), legs in m, twist in rad.
+        ax: Axes to draw into (the leg axis); a new figure when None.
+        title: Axes title (default: "Joint tracking errors, <label>").
+
+    Returns:
+        The primary (leg) Axes.
+    """
+    _check_result(result, "result")
+    ax = _new_axes(ax)
+    error = (result.q_desired - result.q) * _MILLI
+    handles: list[Any] = []
+    for j in range(_N_LEGS):
+        handles += ax.plot(result.t, error[:, j], lw=1.0, label=JOINT_NAMES[j])
+    twin = ax.twinx()
+    handles += twin.plot(
+        result.t, error[:, _N_LEGS], color="k", ls="--", lw=1.0, label=f"{JOINT_NAMES[_N_LEGS]} (right)"
+    )
+    if _shade_ga(ax, result):
+        handles.append(Patch(color=_GA_COLOR, alpha=0.2, label="GA gains"))
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("leg error q_d − q (mm)")
+    twin.set_ylabel(f"twist error {JOINT_NAMES[_N_LEGS]}_d − {JOINT_NAMES[_N_LEGS]} (mrad)")
+    ax.set_title(title if title is not None else f"Joint tracking errors, {label_of(result)}")
+    ax.grid(True, alpha=0.3)
+    _legend_above(ax, handles)
+    return ax
+
+
+def comparison_figure(
+    results: SimulationResult | Sequence[SimulationResult],
+    *,
+    labels: Sequence[str] | None = None,
+    title: str | None = None,
+) -> Figure:
+    """One figure comparing runs: 3-D tip paths, tip errors and actuator efforts.
+
+    Top row: the 3-D tip paths (left) and the tip errors of all runs (right). Bottom row: the
+    actuator efforts of each run side by side when there are two runs, else the efforts of the
+    last run across the full width.
+
+    Args:
+        results: one run or a sequence of runs.
+        labels: one legend label per run (default: :func:`label_of`).
+        title: figure title (default: none).
+
+    Returns:
+        The Figure (constrained layout, 14 x 10 in).
+    """
+    runs, names = _runs_and_labels(results, labels)
+    shown = list(zip(runs, names, strict=True)) if len(runs) == 2 else [(runs[-1], names[-1])]
+    fig = Figure(figsize=(14.0, 10.0), layout="constrained")
+    grid = fig.add_gridspec(2, 2, height_ratios=(1.1, 1.0))
+    plot_path_3d(runs, labels=names, ax=fig.add_subplot(grid[0, 0], projection="3d"))
+    plot_tip_error(runs, labels=names, ax=fig.add_subplot(grid[0, 1]))
+    first: Axes | None = None
+    for column, (run, name) in enumerate(shown):
+        cell = grid[1, column] if len(shown) == 2 else grid[1, :]
+        effort_ax = fig.add_subplot(cell, sharex=first, sharey=first)
+        plot_efforts(run, ax=effort_ax, title=f"Actuator efforts, {name}")
+        first = first or effort_ax
+    if title is not None:
+        fig.suptitle(title, fontsize="x-large")
+    return fig
+
+
+def save_figure(fig: Figure, path: str | os.PathLike[str], *, dpi: float = 150) -> Path:
+    """Write ``fig`` to ``path`` atomically; the format (png, pdf, svg, ...) comes from the suffix.
+
+    The figure is saved to a temporary file in the same folder and renamed into place, so
+    ``path`` is either the complete new file or untouched; the temporary file is removed on
+    error. The folder is created if needed.
+
+    Returns:
+        ``path`` as a :class:`~pathlib.Path`.
+    """
+    if not isinstance(fig, Figure):
+        raise InputError(f"fig must be a matplotlib Figure, got {type(fig).__name__}")
+    out = Path(path)
+    fmt = out.suffix.lower().lstrip(".")
+    supported = sorted(fig.canvas.get_supported_filetypes())
+    if fmt not in supported:
+        raise InputError(f"path = {str(out)!r}: unknown image suffix {out.suffix!r}, expected one of {supported}")
+    if not (np.isfinite(dpi) and dpi > 0):
+        raise InputError(f"dpi = {dpi!r}: expected a positive number")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out.stem}.", suffix=out.suffix)
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=dpi, format=fmt)
+        os.replace(tmp, out)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return out
+
+
+def _check_result(result: object, name: str) -> None:
+    if not isinstance(result, SimulationResult):
+        raise InputError(f"{name} must be a SimulationResult, got {type(result).__name__}")
+
+
+def _runs_and_labels(
+    results: SimulationResult | Sequence[SimulationResult], labels: Sequence[str] | None
+) -> tuple[list[SimulationResult], list[str]]:
+    """Validate ``results`` (one run or a non-empty sequence) and ``labels`` (one per run)."""
+    if isinstance(results, SimulationResult):
+        runs = [results]
+    elif isinstance(results, Sequence) and not isinstance(results, str):
+        runs = list(results)
+    else:
+        raise InputError(f"results must be a SimulationResult or a sequence of them, got {type(results).__name__}")
+    if not runs:
+        raise InputError("results is empty: expected at least one SimulationResult")
+    for i, run in enumerate(runs):
+        _check_result(run, f"results[{i}]")
+    if labels is None:
+        return runs, [label_of(run) for run in runs]
+    if isinstance(labels, str) or not isinstance(labels, Sequence):
+        raise InputError(f"labels must be a sequence of strings, got {type(labels).__name__}")
+    if len(labels) != len(runs):
+        raise InputError(f"labels has {len(labels)} entries, expected one per run ({len(runs)})")
+    return runs, [str(label) for label in labels]
+
+
+def _joint_indices(joints: Sequence[str] | None) -> list[int]:
+    if joints is None:
+        return list(range(len(JOINT_NAMES)))
+    if isinstance(joints, str) or not isinstance(joints, Sequence) or not joints:
+        raise InputError(f"joints = {joints!r}: expected a non-empty sequence of names from {list(JOINT_NAMES)}")
+    unknown = [j for j in joints if j not in JOINT_NAMES]
+    if unknown:
+        raise InputError(f"joints = {list(joints)!r}: unknown {unknown}, expected names from {list(JOINT_NAMES)}")
+    return sorted({JOINT_NAMES.index(j) for j in joints})
+
+
+def _new_axes(ax: Axes | None) -> Axes:
+    if ax is None:
+        return Figure(figsize=_PANEL_SIZE, layout="constrained").add_subplot()
+    if not isinstance(ax, Axes):
+        raise InputError(f"ax must be a matplotlib Axes or None, got {type(ax).__name__}")
+    return ax
+
+
+def _as_float(value: object) -> float | None:
+    try:
+        return float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return None
+
+
+def _spans(t: NDArray[np.float64], mask: NDArray[np.bool_]) -> list[tuple[float, float]]:
+    """``(start, width)`` in s of each run of consecutive true samples of ``mask``.
+
+    A sample stands for the interval up to the next sample (the last one for one period).
+    """
+    if len(t) == 0 or not mask.any():
+        return []
+    step = float(t[1] - t[0]) if len(t) > 1 else 0.0
+    edges = np.diff(np.concatenate(([0], mask.astype(np.int8), [0])))
+    starts = np.flatnonzero(edges == 1)
+    stops = np.flatnonzero(edges == -1)
+    ends = [float(t[k]) if k < len(t) else float(t[-1]) + step for k in stops]
+    return [(float(t[a]), e - float(t[a])) for a, e in zip(starts, ends, strict=True)]
+
+
+def _legend_above(ax: Axes, handles: list[Any] | None = None) -> None:
+    """A legend in rows of at most 5 entries between the plot area and the title, clear of the data."""
+    if handles is None:
+        handles, _ = ax.get_legend_handles_labels()
+    if not handles:
+        return
+    rows = -(-len(handles) // 5)
+    legend = ax.legend(
+        handles=handles,
+        loc="lower center",
+        bbox_to_anchor=(0.5, 1.0),
+        ncol=-(-len(handles) // rows),
+        fontsize="small",
+        frameon=False,
+        handlelength=1.6,
+        columnspacing=1.2,
+    )
+    # Lift the title above the legend: rows of 1.5 font sizes, plus the border and a gap.
+    size = float(legend.get_texts()[0].get_fontsize())
+    ax.set_title(ax.get_title(), pad=rows * 1.5 * size + 0.8 * size + 4.0)
+
+
+def _ga_strip(ax: Axes, bars: list[tuple[str, list[tuple[float, float]], str]], log: bool) -> None:
+    """Mark GA spans by bars (one row per run) in a grey strip added below the error axis.
+
+    The strip lies below 0 mm (below the lowest error on a log axis), so the bars never hide
+    an error curve or the threshold line; negative tick labels are dropped.
+    """
+    row = 0.03
+    fraction = len(bars) * row + 0.01
+    lo, hi = ax.get_ylim()
+    if log:
+        lo_t, hi_t = np.log10(lo), np.log10(hi)
+        bottom = 10 ** (lo_t - fraction / (1 - fraction) * (hi_t - lo_t))
+    else:
+        bottom = lo - fraction / (1 - fraction) * (hi - lo)
+        ax.set_yticks([v for v in ax.get_yticks() if lo <= v <= hi])
+    ax.set_ylim(bottom, hi)
+    ax.axhspan(bottom, lo, facecolor="0.92", edgecolor="none", zorder=0)
+    for i, (color, spans, name) in enumerate(bars):
+        ax.broken_barh(
+            spans,
+            (fraction - (i + 1) * row, row - 0.008),
+            transform=ax.get_xaxis_transform(),
+            facecolors=color,
+            edgecolors=color,
+            linewidth=0.8,
+            alpha=0.7,
+            label=f"GA gains, {name}",
+        )
+
+
+def _shade_ga(ax: Axes, result: SimulationResult) -> bool:
+    """Shade the spans of ``result`` in GA mode on ``ax``; whether there were any."""
+    spans = _spans(result.t, result.mode == MODE_GA)
+    for start, width in spans:
+        ax.axvspan(start, start + width, facecolor=_GA_COLOR, edgecolor=_GA_COLOR, alpha=0.2, lw=0.6, zorder=0)
+    return bool(spans)
