@@ -1,8 +1,213 @@
-"""Compiled functions of the ik family (model layer; see functions.py for conventions)."""
+"""Compiled functions of the inverse-kinematics family (model layer; see functions.py for conventions).
+
+Inverse kinematics (paper eq. 12) needs, per sample, the equality constraints ``c(q)`` of the
+task, their Jacobian and the Hessian of ``lam^T c``, all derived from the one kinematic
+definition :func:`vgtarm.symbolic.kinematics` by automatic differentiation:
+
+- the **position** task: ``c(q) = P(q)`` (3 rows; the desired point is subtracted outside);
+- the **pose** task: ``c(q) = [P(q); e(q, R_d)]`` (6 rows) with the orientation residual
+  ``e = 0.5 vee(R_d^T R - R^T R_d)`` of the end-effector orientation ``R = C03`` against ``R_d``
+  (``|e| = sin`` of the angle between them, components in the target frame).
+
+The cost ``Phi`` is a quadratic of the joint limits, which are not part of the parameter vector; it
+is evaluated in NumPy by the callers and contributes nothing to second derivatives beyond its
+constant Hessian.
+
+For the exact reference rates the KKT residual ``F(q, lam, s) = [J_c(q, s)^T lam; c(q, s)]`` is
+differentiated along the path parameter ``s`` (time): ``*_dt`` is ``dF/ds`` at fixed ``(q, lam)``
+and ``*_d2`` is ``d^2/ds^2 F(q + s qd, lam + s lam_d, s)`` at ``s = 0``. A time-varying target
+orientation enters through ``R_d(s) = (I + [w] s + ([a] + [w]^2) s^2 / 2) R_d``, which has the
+exact first and second derivatives of a rotation with angular velocity ``w`` and acceleration ``a``
+(both in F0) at ``s = 0``. The desired point enters linearly and is handled by the callers.
+"""
 
 from __future__ import annotations
 
-from .functions import Builder
+from collections.abc import Callable
+
+import casadi as ca
+
+from .functions import Builder, _function, row_major
+from .parameters import N_PARAMETERS
+from .symbolic import SX, kinematics, vee
+
+#: Number of equality rows of each task.
+TASK_ROWS = {"position": 3, "pose": 6}
+
+
+def rotation_from_row_major(values: SX) -> SX:
+    """The 3x3 matrix whose rows are ``values[0:3]``, ``values[3:6]``, ``values[6:9]``."""
+    return ca.reshape(values, 3, 3).T
+
+
+def skew(w: SX) -> SX:
+    """The skew-symmetric matrix ``[w]`` with ``[w] v = w x v``."""
+    return ca.vertcat(
+        ca.horzcat(0, -w[2], w[1]),
+        ca.horzcat(w[2], 0, -w[0]),
+        ca.horzcat(-w[1], w[0], 0),
+    )
+
+
+def orientation_residual(rotation: SX, target: SX) -> SX:
+    """``0.5 vee(R_d^T R - R^T R_d)`` (3, 1): ``sin(angle) * axis`` in the target frame."""
+    return vee(target.T @ rotation)
+
+
+def pose_constraints(q: SX, target: SX, p: SX) -> SX:
+    """``[P(q); e(q, R_d)]`` (6, 1): tip point (m) and orientation residual of ``C03`` (rad-like)."""
+    k = kinematics(q, p)
+    return ca.vertcat(k.tip, orientation_residual(k.C03, target))
+
+
+def _symbols(m: int) -> tuple[SX, SX, SX, SX, SX]:
+    return SX.sym("q", 7), SX.sym("lam", m), SX.sym("qd", 7), SX.sym("lam_d", m), SX.sym("p", N_PARAMETERS)
+
+
+def _kkt_parts(c: SX, q: SX, lam: SX) -> tuple[SX, SX]:
+    """Jacobian ``J_c`` and Hessian of ``lam^T c`` with respect to ``q``."""
+    J = ca.jacobian(c, q)
+    H = ca.jacobian(J.T @ lam, q)
+    return J, H
+
+
+def position_kkt() -> ca.Function:
+    """``(q, lam, p) -> (P, J_P, H)``: tip (3), its Jacobian (3x7) and ``d^2(lam^T P)/dq^2`` (7x7)."""
+    q, lam, _, _, p = _symbols(3)
+    c = kinematics(q, p).tip
+    J, H = _kkt_parts(c, q, lam)
+    return _function(
+        "vgt_ik_position", [q, lam, p], [c, row_major(J), row_major(H)], ["q", "lam", "p"], ["c", "J", "H"]
+    )
+
+
+def position_d2() -> ca.Function:
+    """``(q, lam, qd, lam_d, p) -> d2`` (10): second derivative of ``[J_P^T lam; P]`` along ``(qd, lam_d)``."""
+    q, lam, qd, lam_d, p = _symbols(3)
+    c = kinematics(q, p).tip
+    J = ca.jacobian(c, q)
+    F = ca.vertcat(J.T @ lam, c)
+    z, dz = ca.vertcat(q, lam), ca.vertcat(qd, lam_d)
+    d2 = ca.jtimes(ca.jtimes(F, z, dz), z, dz)
+    return _function("vgt_ik_position_d2", [q, lam, qd, lam_d, p], [d2], ["q", "lam", "qd", "lam_d", "p"], ["d2"])
+
+
+def pose_kkt() -> ca.Function:
+    """``(q, lam, R_d, p) -> (c, J_c, H)``: ``[P; e]`` (6), Jacobian (6x7), ``d^2(lam^T c)/dq^2`` (7x7).
+
+    ``R_d`` is the target orientation flattened row by row (9).
+    """
+    q, lam, _, _, p = _symbols(6)
+    rd = SX.sym("R_d", 9)
+    c = pose_constraints(q, rotation_from_row_major(rd), p)
+    J, H = _kkt_parts(c, q, lam)
+    return _function(
+        "vgt_ik_pose", [q, lam, rd, p], [c, row_major(J), row_major(H)], ["q", "lam", "R_d", "p"], ["c", "J", "H"]
+    )
+
+
+def _moving_pose_residual() -> tuple[SX, list[SX], SX, SX]:
+    """KKT residual ``F`` of the pose task with the target rotating along ``s`` (module docstring).
+
+    Returns ``F`` (13), the symbols ``[q, lam, qd, lam_d, R_d, w, a, p]``, the direction
+    ``(qd, lam_d, 1)`` of ``(q, lam, s)`` and ``s``.
+    """
+    q, lam, qd, lam_d, p = _symbols(6)
+    rd, w, a, s = SX.sym("R_d", 9), SX.sym("w", 3), SX.sym("a", 3), SX.sym("s")
+    spin = skew(w)
+    moving = (SX.eye(3) + spin * s + (skew(a) + spin @ spin) * (s**2 / 2)) @ rotation_from_row_major(rd)
+    c = pose_constraints(q, moving, p)
+    F = ca.vertcat(ca.jacobian(c, q).T @ lam, c)
+    z = ca.vertcat(q, lam, s)
+    dz = ca.vertcat(qd, lam_d, 1)
+    return F, [q, lam, qd, lam_d, rd, w, a, p], ca.jtimes(F, z, dz), s
+
+
+def pose_dt() -> ca.Function:
+    """``(q, lam, R_d, w, a, p) -> dF/ds`` (13) at fixed ``(q, lam)``, without the desired point's term."""
+    F, (q, lam, _, _, rd, w, a, p), _, s = _moving_pose_residual()
+    dt = ca.substitute(ca.jacobian(F, s), s, 0)
+    return _function("vgt_ik_pose_dt", [q, lam, rd, w, a, p], [dt], ["q", "lam", "R_d", "w", "a", "p"], ["dt"])
+
+
+def pose_d2() -> ca.Function:
+    """``(q, lam, qd, lam_d, R_d, w, a, p) -> d^2/ds^2 F(q + s qd, lam + s lam_d, s)`` (13) at ``s = 0``.
+
+    Without the desired point's term (``-xdd`` in the position rows), which the caller adds.
+    """
+    _, symbols, dF, s = _moving_pose_residual()
+    q, lam, qd, lam_d, _, _, _, _ = symbols
+    z = ca.vertcat(q, lam, s)
+    dz = ca.vertcat(qd, lam_d, 1)
+    d2 = ca.substitute(ca.jtimes(dF, z, dz), s, 0)
+    names = ["q", "lam", "qd", "lam_d", "R_d", "w", "a", "p"]
+    return _function("vgt_ik_pose_d2", symbols, [d2], names, ["d2"])
+
+
+def _rates_through_qr(K: SX, first_rhs: SX, second_rhs_of: Callable[[SX], SX]) -> tuple[SX, SX]:
+    """Solve ``K x1 = first_rhs`` and ``K x2 = second_rhs_of(x1)`` sharing one QR factorisation of ``K``."""
+    Q, R = ca.qr(K)
+    first = ca.solve(R, Q.T @ first_rhs)
+    second = ca.solve(R, Q.T @ second_rhs_of(first))
+    return first, second
+
+
+def position_rates() -> ca.Function:
+    """Model values and exact rates at a solution where no inequality is active (the common case).
+
+    ``(q, lam, w, xd, xdd, p) -> (P, J_P, H, qd, lam_d, qdd, lam_dd)``: ``w`` (7) is the diagonal of
+    the Hessian of ``Phi``; the KKT matrix ``[[diag(w) + H, J^T], [J, 0]]`` is factorised once (QR)
+    for both rate systems. Samples with active limits or triangle rows use the general path.
+    """
+    q, lam, qd_s, lam_d_s, p = _symbols(3)
+    w, xd, xdd = SX.sym("w", 7), SX.sym("xd", 3), SX.sym("xdd", 3)
+    c = kinematics(q, p).tip
+    J, H = _kkt_parts(c, q, lam)
+    K = ca.blockcat([[ca.diag(w) + H, J.T], [J, SX.zeros(3, 3)]])
+    F = ca.vertcat(J.T @ lam, c)
+    z, dz = ca.vertcat(q, lam), ca.vertcat(qd_s, lam_d_s)
+    d2 = ca.jtimes(ca.jtimes(F, z, dz), z, dz)
+
+    def second_rhs(first: SX) -> SX:
+        return ca.vertcat(SX.zeros(7), xdd) - ca.substitute(d2, dz, first)
+
+    first, second = _rates_through_qr(K, ca.vertcat(SX.zeros(7), xd), second_rhs)
+    names = ["q", "lam", "w", "xd", "xdd", "p"]
+    outputs = [c, row_major(J), row_major(H), first[:7], first[7:], second[:7], second[7:]]
+    out_names = ["c", "J", "H", "qd", "lam_d", "qdd", "lam_dd"]
+    return _function("vgt_ik_position_rates", [q, lam, w, xd, xdd, p], outputs, names, out_names)
+
+
+def pose_rates() -> ca.Function:
+    """As :func:`position_rates` for the pose task: ``(q, lam, w, xd, xdd, R_d, w_d, a_d, p) -> (c, J, H, qd,
+    lam_d, qdd, lam_dd)`` with the target orientation ``R_d`` (row-major) turning at ``w_d``, ``a_d``."""
+    F, (q, lam, qd_s, lam_d_s, rd, w_d, a_d, p), dF, s = _moving_pose_residual()
+    w, xd, xdd = SX.sym("w", 7), SX.sym("xd", 3), SX.sym("xdd", 3)
+    at_rest = ca.substitute(F, s, 0)
+    c = at_rest[7:]
+    J, H = _kkt_parts(c, q, lam)
+    K = ca.blockcat([[ca.diag(w) + H, J.T], [J, SX.zeros(6, 6)]])
+    z, dz = ca.vertcat(q, lam, s), ca.vertcat(qd_s, lam_d_s, 1)
+    first_rhs = ca.vertcat(SX.zeros(7), xd, SX.zeros(3)) - ca.substitute(ca.jacobian(F, s), s, 0)
+    d2 = ca.substitute(ca.jtimes(dF, z, dz), s, 0)
+
+    def second_rhs(first: SX) -> SX:
+        return ca.vertcat(SX.zeros(7), xdd, SX.zeros(3)) - ca.substitute(d2, ca.vertcat(qd_s, lam_d_s), first)
+
+    first, second = _rates_through_qr(K, first_rhs, second_rhs)
+    names = ["q", "lam", "w", "xd", "xdd", "R_d", "w_d", "a_d", "p"]
+    outputs = [c, row_major(J), row_major(H), first[:7], first[7:], second[:7], second[7:]]
+    out_names = ["c", "J", "H", "qd", "lam_d", "qdd", "lam_dd"]
+    return _function("vgt_ik_pose_rates", [q, lam, w, xd, xdd, rd, w_d, a_d, p], outputs, names, out_names)
+
 
 #: Functions of this family, by name.
-BUILDERS: dict[str, Builder] = {}
+BUILDERS: dict[str, Builder] = {
+    "ik_position": position_kkt,
+    "ik_position_d2": position_d2,
+    "ik_pose": pose_kkt,
+    "ik_pose_dt": pose_dt,
+    "ik_pose_d2": pose_d2,
+    "ik_position_rates": position_rates,
+    "ik_pose_rates": pose_rates,
+}

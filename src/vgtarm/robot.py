@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -16,7 +17,10 @@ from numpy.typing import ArrayLike, NDArray
 from .assembly import check_assembly, triangle_margins
 from .compiled import CompiledBackend, InterpretedBackend, get_backend
 from .errors import InputError
+from .ik import IKResult
+from .ik import inverse_kinematics as _inverse_kinematics
 from .parameters import RobotParameters, load_parameters
+from .paths import Path as DesiredPath
 
 Array = NDArray[np.float64]
 
@@ -172,6 +176,17 @@ class Robot:
             com=com.reshape(shape + (3, 3)),
             body_angular=body_ang.reshape(shape + (3, 3)),
         )
+
+    def inverse_kinematics(
+        self, path: DesiredPath, *, solver: str = "fast", rates: str = "exact", pose: object = None, **options: Any
+    ) -> IKResult:
+        """Joint reference ``q, qd, qdd`` ``(N, 7)`` of a desired tip path (paper eq. 12).
+
+        Delegates to :func:`vgtarm.ik.inverse_kinematics`, which documents ``solver`` (``"fast"``,
+        ``"slsqp"``/``"reference"``, ``"ipopt"``), ``rates`` (``"exact"``, ``"finite_difference"``),
+        ``pose`` (``None``, ``"hold"``, rotation matrices or an ``OrientationPath``) and the options.
+        """
+        return _inverse_kinematics(self, path, solver=solver, rates=rates, pose=pose, **options)
 
     # -- dynamics ----------------------------------------------------------------------------
 

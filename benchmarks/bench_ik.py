@@ -1,0 +1,77 @@
+"""Inverse-kinematics benchmark: the whole case 1 path at 1 ms with the fast solver against the reference.
+
+Baseline, measured in the same run: the per-sample reference solver (SciPy SLSQP, exact
+gradients from the compiled model, each sample warm-started from the previous one), which is too
+slow to run on all 6,284 samples inside a benchmark. It is timed on ``BLOCKS`` blocks of
+``BLOCK`` consecutive samples spread along the path, each block started from the fast solution of
+the sample before it (as if the reference had solved it), and its time is scaled to the whole
+path. Both runs include the exact rates and the per-sample verification. The worst differences
+between the two solutions are measured on the same blocks.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+import vgtarm
+from vgtarm import paths
+from vgtarm.ik import inverse_kinematics
+
+from .common import Row, best_time, print_table
+
+BLOCKS = 4
+BLOCK = 150
+
+
+def _reference_on_blocks(robot: vgtarm.Robot, path: paths.Path, fast_q: np.ndarray) -> tuple[float, float, float, int]:
+    """Seconds per sample of the reference, worst |Phi_fast - Phi_ref|, worst tip residual, samples timed."""
+    n = len(path)
+    starts = np.linspace(1, n - BLOCK - 1, BLOCKS).astype(int)
+    seconds, dphi, residual, count = 0.0, 0.0, 0.0, 0
+    fast = inverse_kinematics(robot, path)
+    for s in starts:
+        block = paths.Path(
+            "block",
+            path.t[s : s + BLOCK],
+            path.position[s : s + BLOCK],
+            path.velocity[s : s + BLOCK],
+            path.acceleration[s : s + BLOCK],
+        )
+        ref = inverse_kinematics(robot, block, solver="reference", initial_guess=fast_q[s - 1])
+        seconds += ref.wall_time
+        count += BLOCK
+        dphi = max(dphi, float(np.abs(ref.samples.phi - fast.samples.phi[s : s + BLOCK]).max()))
+        residual = max(residual, float(ref.samples.residual.max()))
+    return seconds / count, dphi, residual, count
+
+
+def run() -> list[Row]:
+    robot = vgtarm.load_robot()
+    path = paths.case1(dt=1e-3)
+    n = len(path)
+    fast = inverse_kinematics(robot, path)
+    fast_time = best_time(lambda: inverse_kinematics(robot, path), repeat=7, min_time=0.3)
+    per_sample, dphi, ref_residual, count = _reference_on_blocks(robot, path, fast.q)
+    rows = [
+        Row(
+            "IK case 1 at 1 ms, fast solver + exact rates",
+            fast_time,
+            "sample",
+            n,
+            f"SLSQP reference per sample (timed on {count} samples, scaled)",
+            per_sample * n,
+            "whole path <= 0.2 s, >= 100x",
+        )
+    ]
+    print_table(f"Inverse kinematics (case 1, {n:,} samples)", rows)
+    print(
+        f"\nfast: whole path {fast_time * 1e3:.1f} ms, worst tip residual {fast.samples.residual.max():.2e} m, "
+        f"largest Phi {fast.samples.phi.max():.6f}, {np.count_nonzero(fast.samples.iterations == 0):,} samples "
+        f"needed no Newton step; reference: worst tip residual {ref_residual:.2e} m; "
+        f"worst |Phi_fast - Phi_ref| = {dphi:.2e}"
+    )
+    return rows
+
+
+if __name__ == "__main__":
+    run()

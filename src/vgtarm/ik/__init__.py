@@ -1,0 +1,31 @@
+"""Redundancy-resolving inverse kinematics along desired tip paths (paper Section IV, eq. 12).
+
+For each sample of a desired tip path the joint vector minimises the joint-limit cost ``Phi``
+subject to the tip point (optionally the full pose), the joint limits and assemblability with a
+margin; the joint rates and accelerations of the reference follow exactly from the optimality
+conditions. See ``docs/ik.md``.
+
+Public API: :func:`inverse_kinematics` (also ``Robot.inverse_kinematics``), the records
+:class:`IKResult` and :class:`IKSamples`, :class:`OrientationPath`, :class:`IKOptions`, the
+solver registry (:data:`SOLVERS`, :func:`solver_names`) and :func:`write_csv`.
+"""
+
+from .export import CSV_COLUMNS, write_csv
+from .options import IKOptions
+from .pose import OrientationPath
+from .records import IKResult, IKSamples
+from .registry import ALIASES, SOLVERS, solver_names
+from .solve import inverse_kinematics
+
+__all__ = [
+    "ALIASES",
+    "CSV_COLUMNS",
+    "SOLVERS",
+    "IKOptions",
+    "IKResult",
+    "IKSamples",
+    "OrientationPath",
+    "inverse_kinematics",
+    "solver_names",
+    "write_csv",
+]

@@ -1,0 +1,188 @@
+"""The fast trajectory solver: warm-started along the path, coarse to fine, batched over samples.
+
+1. **Coarse samples, in order.** A few samples (every ``8^J``-th, refined so that consecutive
+   ones are at most ``coarse_step`` apart along the path) are solved as sequential warm-started
+   continuation would (each Newton solve starts from the previous sample's solution; the first
+   is reached from the start pose, home or the user's guess, by continuation along a straight
+   line, and a rotation arc for the pose task). :mod:`vgtarm.ik.continuation` computes that chain
+   with two batched runs and checks it.
+2. **Levels.** Every ``8^(J-1)``-th sample, then every ``8^(J-2)``-th, ..., then all samples:
+   each level starts from the quintic Hermite interpolation of the samples solved so far (with
+   their exact joint rates and accelerations, and those of the multipliers, from
+   :mod:`vgtarm.ik.rates`), and all its new samples go through one batched active-set Newton
+   iteration (:mod:`vgtarm.ik.newton`). At the finest level the interpolation error is usually
+   below the tolerances, so most samples pass the optimality test at the first evaluation and
+   need no Newton step at all.
+3. A sample that does not converge is retried by sequential continuation over the path samples
+   from its nearest solved neighbour; what still fails is left unconverged for the caller (which
+   re-solves it with the reference solver, or reports it unreachable).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation, Slerp
+
+from . import continuation, newton, rates, sampling
+from .newton import NewtonSettings
+from .problem import IKProblem
+from .state import BatchState
+from .tasks import Task
+
+Array = NDArray[np.float64]
+Index = NDArray[np.intp]
+
+METHOD = "newton"
+
+
+@dataclass(frozen=True)
+class FastSettings:
+    """Settings of the fast solver.
+
+    Attributes:
+        newton: Stopping tests and safeguards of the Newton iterations.
+        coarse_step: Largest tip travel between consecutive coarse samples, and step of the
+            continuation from the start pose (m; 0.1 m counts for one radian of rotation).
+        top_count: Smallest number of samples of the coarsest level.
+        retry_pieces: Intermediate path samples of the continuation that retries a failed sample.
+    """
+
+    newton: NewtonSettings = field(default_factory=NewtonSettings)
+    coarse_step: float = 0.02
+    top_count: int = 4
+    retry_pieces: int = 8
+
+
+def _rest_start(q: Array, m: int, n_inequalities: int) -> dict[str, Array]:
+    return {"q": q, "lam": np.zeros(m), "mu": np.zeros(n_inequalities), "active": np.zeros(n_inequalities, bool)}
+
+
+def _sample_start(state: BatchState, i: int) -> dict[str, Array]:
+    return {name: getattr(state, name)[i].copy() for name in ("q", "lam", "mu", "active")}
+
+
+def approach(problem: IKProblem, task: Task, state: BatchState, i: int, q_start: Array, settings: FastSettings) -> bool:
+    """Solve sample ``i`` from ``q_start`` by continuation along a line (and rotation arc) to its target."""
+    tip, rotation = task.forward(q_start[None])
+    target = task.position[i]
+    distance = float(np.linalg.norm(target - tip[0]))
+    angle = 0.0
+    ends = None
+    if task.rotation is not None:
+        ends = Rotation.from_matrix(np.stack([rotation[0].reshape(3, 3), task.rotation[i].reshape(3, 3)]))
+        angle = float((ends[0].inv() * ends[1]).magnitude())
+    pieces = max(1, math.ceil(max(distance, 0.1 * angle) / settings.coarse_step))
+    s = np.arange(1, pieces + 1) / pieces
+    points = tip[0] + s[:, None] * (target - tip[0])
+    points[-1] = target
+    rotations = None
+    if task.rotation is not None and ends is not None:
+        rotations = Slerp([0.0, 1.0], ends)(s).as_matrix().reshape(pieces, 9)
+        rotations[-1] = task.rotation[i]
+    line = task.with_targets(points, rotations)
+    sub = BatchState.empty(pieces, task.m, state.mu.shape[1])
+    start = _rest_start(q_start, task.m, state.mu.shape[1])
+    continuation.solve_in_order(problem, line, sub, np.arange(pieces, dtype=np.intp), start, settings.newton)
+    state.iterations[i] += int(sub.iterations.sum())
+    ok = bool(sub.converged[-1])
+    if ok:
+        for name in ("q", "lam", "mu", "active", "residual", "J", "H"):
+            getattr(state, name)[i] = getattr(sub, name)[-1]
+    state.converged[i] = ok
+    return ok
+
+
+def chain(problem: IKProblem, task: Task, state: BatchState, a: int, b: int, settings: FastSettings) -> bool:
+    """Solve sample ``b`` by sequential continuation over path samples from the solved sample ``a``."""
+    steps = np.unique(np.linspace(a, b, settings.retry_pieces + 1).round().astype(np.intp))
+    steps = steps[steps != a]
+    start = _sample_start(state, a)
+    continuation.solve_in_order(problem, task, state, steps, start, settings.newton, with_rates=True)
+    return bool(state.converged[b])
+
+
+def _start_level(problem: IKProblem, task: Task, state: BatchState, new: Index) -> None:
+    """Initial guesses of the samples ``new`` from the solved samples (quintic Hermite in time).
+
+    Joints and equality multipliers are interpolated with their exact first and second
+    derivatives; inequality multipliers linearly (they are kinked where the active set changes).
+    """
+    known = np.flatnonzero(state.converged & state.rates_ready)
+    if known.size < 2:
+        nearest = known[0] if known.size else 0
+        for name in ("q", "lam", "mu", "active"):
+            getattr(state, name)[new] = getattr(state, name)[nearest]
+        return
+    tk, t = task.t[known], task.t[new]
+    both = sampling.quintic_hermite(
+        tk,
+        np.concatenate([state.q[known], state.lam[known]], axis=1),
+        np.concatenate([state.qd[known], state.lam_d[known]], axis=1),
+        np.concatenate([state.qdd[known], state.lam_dd[known]], axis=1),
+        t,
+    )
+    q = both[:, :7]
+    bad = ~problem.assemblable(q, 0.5 * problem.margin)
+    if bad.any():
+        q[bad] = sampling.linear(tk, state.q[known], t[bad])
+    state.q[new], state.lam[new] = q, both[:, 7:]
+    known_mu = state.mu[known]
+    if known_mu.any():
+        mu = np.maximum(sampling.linear(tk, known_mu, t), 0.0)
+        state.mu[new], state.active[new] = mu, mu > 0
+    else:
+        state.mu[new], state.active[new] = 0.0, False
+
+
+def _rescue(problem: IKProblem, task: Task, state: BatchState, failed: Index, settings: FastSettings) -> None:
+    """Retry failed samples by continuation from their nearest solved neighbour on the left (else right)."""
+    for i in failed.tolist():
+        if state.converged[i]:
+            continue
+        solved = np.flatnonzero(state.converged)
+        if solved.size == 0:
+            return
+        left = solved[solved < i]
+        chain(problem, task, state, int(left[-1]) if left.size else int(solved[0]), i, settings)
+
+
+def solve(problem: IKProblem, task: Task, state: BatchState, q_start: Array, settings: FastSettings) -> None:
+    """Solve every sample of ``task`` into ``state`` (see the module docstring).
+
+    On return, converged samples hold the solution, its multipliers and active set and the model
+    values at it, and most of them their exact rates (computed in the same compiled call as the
+    last model evaluation where no inequality is active; the caller completes the others).
+    """
+    n = len(task)
+    strides = sampling.level_strides(n, settings.top_count)
+    top = sampling.refine_by_distance(sampling.level_indices(n, strides[0]), task.position, settings.coarse_step)
+    if approach(problem, task, state, int(top[0]), q_start, settings):
+        start, rest = _sample_start(state, int(top[0])), top[1:]
+    else:
+        start, rest = _rest_start(q_start, task.m, state.mu.shape[1]), top
+    continuation.solve_in_order(problem, task, state, rest, start, settings.newton, with_rates=True)
+    _rescue(problem, task, state, top[~state.converged[top]], settings)
+    _complete_rates(problem, task, state, top)
+    for stride in strides[1:]:
+        level = sampling.level_indices(n, stride)
+        new = level[~state.converged[level]]
+        if new.size == 0:
+            continue
+        _start_level(problem, task, state, new)
+        converged = newton.iterate(problem, task, state, new, settings.newton, with_rates=True)
+        if not converged.all():
+            _rescue(problem, task, state, new[~converged], settings)
+        if stride != 1:
+            _complete_rates(problem, task, state, level)
+    state.method[state.converged & (state.method == "")] = METHOD
+
+
+def _complete_rates(problem: IKProblem, task: Task, state: BatchState, idx: Index) -> None:
+    """Exact rates of the converged samples ``idx`` that do not have them yet (active inequalities)."""
+    missing = idx[state.converged[idx] & ~state.rates_ready[idx]]
+    if missing.size:
+        rates.exact(problem, task, state, missing)

@@ -1,0 +1,154 @@
+"""Batched active-set (semismooth) Newton iteration on the KKT conditions of many samples at once.
+
+Each iteration evaluates the task (tip, Jacobian, Hessian of ``lam^T c``) for every sample that is
+still working in one compiled call, predicts the active sets (primal-dual active-set rule), solves
+all the fixed-size condensed KKT systems of :mod:`vgtarm.ik.kkt` in one batched solve and updates
+``q`` and the multipliers. A sample stops when its equality residual and its Lagrangian gradient
+are below the tolerances and its active set is consistent (active rows with ``mu >= 0``, inactive
+rows satisfied). Steps are limited in length and cut so that the iterate stays assemblable (every
+triangle margin keeps a tenth of its current value), so the model is never evaluated where the
+truss cannot exist.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from . import kkt
+from .problem import IKProblem, rows_times
+from .state import BatchState
+from .tasks import Task
+
+Array = NDArray[np.float64]
+Index = NDArray[np.intp]
+
+
+@dataclass(frozen=True)
+class NewtonSettings:
+    """Stopping tests and safeguards of the Newton iteration.
+
+    Attributes:
+        tol_primal: Largest equality residual (m; rad-like for the orientation rows).
+        tol_stationarity: Largest entry of the Lagrangian gradient (cost per m).
+        tol_active: Hysteresis of the active-set rule (m / multiplier units).
+        max_iterations: Newton steps per sample before it is declared failed.
+        max_step: Largest change of any joint value in one step (m, rad).
+    """
+
+    tol_primal: float = 1e-12
+    tol_stationarity: float = 1e-10
+    tol_active: float = 1e-12
+    max_iterations: int = 30
+    max_step: float = 0.02
+
+
+def _step_length(problem: IKProblem, q: Array, dq: Array, max_step: float) -> Array:
+    """Step fractions ``(n,)`` in ``(0, 1]``: step length limit and fraction-to-boundary of assemblability."""
+    longest = np.abs(dq).max(axis=1)
+    alpha = np.minimum(1.0, max_step / np.maximum(longest, 1e-300))
+    margins = rows_times(q, problem.G_all) + problem.h_all
+    change = rows_times(dq, problem.G_all)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        limit = np.where(change < 0, -0.9 * margins / change, np.inf)
+    return np.minimum(alpha, limit.min(axis=1))
+
+
+def stopping_test(
+    problem: IKProblem,
+    q: Array,
+    lam: Array,
+    mu: Array,
+    active: NDArray[np.bool_],
+    model: tuple[Array, Array, Array],
+    settings: NewtonSettings,
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_], NDArray[np.bool_]]:
+    """Which samples have converged, the predicted active sets, and which model values are finite.
+
+    ``model`` is ``(residual, J, H)`` at ``(q, lam)``.
+    """
+    residual, J, H = model
+    primal = np.abs(residual).max(axis=1)
+    stationarity = np.abs(kkt.stationarity(problem, q, J, lam, mu)).max(axis=1)
+    # NaN in the model values propagates into these maxima; H comes from the same expressions as J.
+    finite = np.isfinite(primal + stationarity) & np.isfinite(H[:, :, 0]).all(axis=1)
+    predicted = kkt.predict_active(problem, q, mu, active, settings.tol_active)
+    with np.errstate(invalid="ignore"):
+        done = (
+            finite
+            & (primal <= settings.tol_primal)
+            & (stationarity <= settings.tol_stationarity)
+            & (predicted == active).all(axis=1)
+        )
+    return np.asarray(done), predicted, np.asarray(finite)
+
+
+def _store_rates(state: BatchState, working: Index, ready: NDArray[np.bool_], rates: tuple[Array, ...]) -> None:
+    rows = working[ready]
+    qd, lam_d, qdd, lam_dd = (r[ready] for r in rates)
+    state.qd[rows], state.lam_d[rows], state.qdd[rows], state.lam_dd[rows] = qd, lam_d, qdd, lam_dd
+    state.rates_ready[rows] = True
+
+
+def iterate(
+    problem: IKProblem,
+    task: Task,
+    state: BatchState,
+    idx: Index,
+    settings: NewtonSettings,
+    *,
+    with_rates: bool = False,
+) -> NDArray[np.bool_]:
+    """Run Newton on the samples ``idx`` from their current ``state``; returns which converged ``(len(idx),)``.
+
+    Updates ``state`` rows ``idx`` in place, including the model values at the last iterate. With
+    ``with_rates`` every evaluation also computes the exact rates in the same compiled call
+    (:meth:`Task.evaluate_with_rates`); they are kept for samples that converge with no active
+    inequality (``rates_ready``), whose KKT matrix is the one the compiled call assumes.
+    """
+    working = np.asarray(idx, dtype=np.intp)
+    state.converged[working] = False
+    state.rates_ready[working] = False
+    for step in range(settings.max_iterations + 1):
+        if working.size == 0:
+            break
+        q, lam, mu, active = state.q[working], state.lam[working], state.mu[working], state.active[working]
+        if with_rates:
+            residual, J, H, *rates = task.evaluate_with_rates(working, q, lam, problem.weight)
+        else:
+            residual, J, H = task.evaluate(working, q, lam)
+        state.residual[working], state.J[working], state.H[working] = residual, J, H
+        done, predicted, finite = stopping_test(problem, q, lam, mu, active, (residual, J, H), settings)
+        state.converged[working[done]] = True
+        if with_rates:
+            _store_rates(state, working, done & ~active.any(axis=1), tuple(rates))
+        keep = finite & ~done
+        if step == settings.max_iterations:
+            break
+        working = working[keep]
+        if working.size == 0:
+            break
+        q, residual, J, H, active = q[keep], residual[keep], J[keep], H[keep], predicted[keep]
+        W = kkt.hessian(problem, H)
+        K = kkt.kkt_matrix(problem, W, J, active)
+        x, solvable = kkt.solve(K, kkt.newton_rhs(problem, q, residual, active))
+        solvable &= np.isfinite(x).all(axis=1)
+        if not solvable.all():
+            working, q, W, J, x, active = (a[solvable] for a in (working, q, W, J, x, active))  # type: ignore[assignment]
+        m = J.shape[1]
+        dq = x[:, :7]
+        mu_new = kkt.bound_multipliers(problem, q, W, J, x, active)
+        alpha = _step_length(problem, q, dq, settings.max_step)[:, None]
+        q_new = q + alpha * dq
+        full = alpha[:, 0] == 1.0
+        lower, upper = active[:, :7] & full[:, None], active[:, 7:14] & full[:, None]
+        q_new = np.where(lower, problem.lower, np.where(upper, problem.upper, q_new))
+        lam_old, mu_old = state.lam[working], state.mu[working]
+        state.q[working] = q_new
+        state.lam[working] = lam_old + alpha * (x[:, 7 : 7 + m] - lam_old)
+        state.mu[working] = mu_old + alpha * (mu_new - mu_old)
+        state.active[working] = active
+        state.iterations[working] += 1
+    return np.asarray(state.converged[idx])

@@ -1,0 +1,110 @@
+"""Options of an inverse-kinematics solve, validated where they enter (``**options`` of the API)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import InputError
+from .fast import FastSettings
+from .newton import NewtonSettings
+from .problem import DEFAULT_MARGIN
+from .verify import Tolerances
+
+
+@dataclass(frozen=True)
+class IKOptions:
+    """Every tunable of the solvers, with its default.
+
+    Attributes:
+        margin: Assembly margin (m): every triangle inequality holds with at least this slack.
+        initial_guess: ``(7,)`` start pose of the continuation (default: the robot's home pose).
+        tol_primal: Newton stopping test on the equality residual (m; rad-like for orientation).
+        tol_stationarity: Newton stopping test on the Lagrangian gradient.
+        max_iterations: Newton steps per sample before it counts as failed.
+        max_step: Largest joint change in one Newton step (m, rad).
+        coarse_step: Tip travel between consecutive coarse samples of the fast solver (m).
+        fallback: Re-solve samples that the fast solver could not verify with the reference solver.
+        reference_ftol: SLSQP's ``ftol`` (reference solver).
+        reference_maxiter: SLSQP's and IPOPT's iteration limit per sample.
+        accept_primal: Largest equality residual of an accepted sample (m; rad-like).
+        accept_stationarity: Largest Lagrangian gradient of a verified sample.
+    """
+
+    margin: float = DEFAULT_MARGIN
+    initial_guess: NDArray[np.float64] | None = None
+    tol_primal: float = 1e-12
+    tol_stationarity: float = 1e-10
+    max_iterations: int = 30
+    max_step: float = 0.02
+    coarse_step: float = 0.02
+    fallback: bool = True
+    reference_ftol: float = 1e-15
+    reference_maxiter: int = 200
+    accept_primal: float = 1e-10
+    accept_stationarity: float = 1e-6
+
+    @classmethod
+    def from_keywords(cls, options: dict[str, Any]) -> IKOptions:
+        """Build from keyword arguments; unknown names and bad values raise :class:`InputError`."""
+        valid = [f.name for f in fields(cls)]
+        unknown = sorted(set(options) - set(valid))
+        if unknown:
+            raise InputError(f"unknown inverse-kinematics option {unknown[0]!r}; valid options are {', '.join(valid)}")
+        values = dict(options)
+        for name in ("margin", "tol_primal", "tol_stationarity", "max_step", "coarse_step", "reference_ftol"):
+            if name in values:
+                values[name] = _positive(name, values[name])
+        for name in ("accept_primal", "accept_stationarity"):
+            if name in values:
+                values[name] = _positive(name, values[name])
+        for name in ("max_iterations", "reference_maxiter"):
+            if name in values:
+                value = values[name]
+                if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+                    raise InputError(f"{name} must be an integer >= 1, got {value!r}")
+                values[name] = int(value)
+        if "fallback" in values and not isinstance(values["fallback"], bool | np.bool_):
+            raise InputError(f"fallback must be True or False, got {values['fallback']!r}")
+        if values.get("initial_guess") is not None:
+            try:
+                guess = np.array(values["initial_guess"], dtype=float)
+            except (TypeError, ValueError):
+                raise InputError(f"initial_guess must be 7 joint values, got {values['initial_guess']!r}") from None
+            if guess.shape != (7,) or not np.isfinite(guess).all():
+                raise InputError(f"initial_guess must be 7 finite joint values, got {values['initial_guess']!r}")
+            values["initial_guess"] = guess
+        return cls(**values)
+
+    @property
+    def newton(self) -> NewtonSettings:
+        """The Newton settings these options imply."""
+        return NewtonSettings(
+            tol_primal=self.tol_primal,
+            tol_stationarity=self.tol_stationarity,
+            max_iterations=self.max_iterations,
+            max_step=self.max_step,
+        )
+
+    @property
+    def fast(self) -> FastSettings:
+        """The fast solver's settings these options imply."""
+        return FastSettings(newton=self.newton, coarse_step=self.coarse_step)
+
+    @property
+    def tolerances(self) -> Tolerances:
+        """Acceptance thresholds of the per-sample verification."""
+        return Tolerances(primal=self.accept_primal, stationarity=self.accept_stationarity)
+
+
+def _positive(name: str, value: object) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
+        raise InputError(f"{name} must be a positive number, got {value!r}")
+    number = float(value)
+    if not (math.isfinite(number) and number > 0):
+        raise InputError(f"{name} must be a finite number > 0, got {value!r}")
+    return number

@@ -1,0 +1,110 @@
+"""Result records of inverse kinematics: per-sample arrays and the overall result."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..parameters import JOINT_NAMES
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
+class IKSamples:
+    """What happened at every sample; every array has ``N`` rows.
+
+    Attributes:
+        success: ``(N,)`` the sample was solved and its KKT conditions verified.
+        residual: ``(N,)`` distance of the tip from the desired point (m).
+        orientation_error: ``(N,)`` angle between the end-effector and the desired orientation
+            (rad); NaN for the free-orientation task.
+        phi: ``(N,)`` the cost ``Phi(q)`` of eq. 12.
+        active: ``(N, 14 + k)`` active inequalities, labelled by ``constraint_labels``: lower
+            limits, upper limits, then the assembly rows ``G q + h >= margin``.
+        constraint_labels: ``(14 + k,)`` names of the inequalities.
+        multipliers: ``(N, m)`` Lagrange multipliers of the task equations (3 or 6).
+        inequality_multipliers: ``(N, 14 + k)`` multipliers of the inequalities (>= 0 at an optimum).
+        stationarity: ``(N,)`` largest entry of the Lagrangian gradient.
+        curvature: ``(N,)`` certificate of the second-order condition, positive when the Hessian of
+            the Lagrangian is verified positive definite on the null space of the active
+            constraints (see :func:`vgtarm.ik.verify.reduced_curvature`).
+        iterations: ``(N,)`` Newton or solver iterations spent on the sample (0: the interpolated
+            guess already met the tolerances).
+        method: ``(N,)`` method that produced the sample: ``"newton"``, ``"slsqp"``, ``"ipopt"``,
+            or ``"slsqp (fallback)"`` for a sample the fast solver handed to the reference solver.
+    """
+
+    success: NDArray[np.bool_]
+    residual: Array
+    orientation_error: Array
+    phi: Array
+    active: NDArray[np.bool_]
+    constraint_labels: tuple[str, ...]
+    multipliers: Array
+    inequality_multipliers: Array
+    stationarity: Array
+    curvature: Array
+    iterations: NDArray[np.int64]
+    method: NDArray[np.str_]
+
+    @property
+    def active_bounds(self) -> NDArray[np.bool_]:
+        """``(N, 14)``: lower limits of ``JOINT_NAMES`` then upper limits."""
+        return self.active[:, :14]
+
+    @property
+    def active_assembly(self) -> NDArray[np.bool_]:
+        """``(N, k)``: the assembly rows, labelled by ``constraint_labels[14:]``."""
+        return self.active[:, 14:]
+
+
+@dataclass(frozen=True, eq=False)
+class IKResult:
+    """The joint-space reference of a desired tip path.
+
+    Attributes:
+        t: ``(N,)`` sample times (s).
+        q, qd, qdd: ``(N, 7)`` joint values, rates and accelerations (m, rad; per s, per s^2).
+        position, velocity, acceleration: ``(N, 3)`` the desired tip path (SI).
+        orientation: ``(N, 3, 3)`` the desired orientation (pose task) or ``None``.
+        samples: the per-sample record.
+        solver: name of the solver (``"fast"``, ``"slsqp"``, ``"ipopt"``).
+        rates: ``"exact"`` or ``"finite_difference"``.
+        task: ``"position"`` or ``"pose"``.
+        margin: assembly margin used (m).
+        lower, upper: ``(7,)`` joint limits.
+        wall_time: wall-clock time of the solve (s).
+        success: every sample succeeded.
+        message: a one-line summary (which samples failed, if any).
+    """
+
+    t: Array
+    q: Array
+    qd: Array
+    qdd: Array
+    position: Array
+    velocity: Array
+    acceleration: Array
+    orientation: Array | None
+    samples: IKSamples
+    solver: str
+    rates: str
+    task: str
+    margin: float
+    lower: Array
+    upper: Array
+    wall_time: float
+    success: bool
+    message: str
+
+    joint_names: tuple[str, ...] = JOINT_NAMES
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    def limit_clearance(self) -> tuple[Array, Array]:
+        """Smallest distance of each joint to its lower and to its upper limit over the path, ``(7,)`` each."""
+        return (self.q - self.lower).min(axis=0), (self.upper - self.q).min(axis=0)

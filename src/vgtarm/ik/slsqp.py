@@ -1,0 +1,190 @@
+"""The reference solver: SciPy's SLSQP per sample (the open analogue of the paper's ``fmincon``).
+
+Each sample is one small nonlinear program with the exact cost gradient and the exact constraint
+Jacobian from the compiled model: ``min Phi(q)`` subject to ``c(q) = c_d`` (tip point, and the
+orientation residual for the pose task), the joint limits as bounds and the kept triangle rows as
+linear inequalities ``G q + h - margin >= 0``. Samples are solved in order, each warm-started from
+the previous solution (the first from the start pose). The same machinery finds the closest
+reachable point of a target (:func:`closest`), used to report unreachable samples.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import Bounds, OptimizeResult, minimize
+
+from . import multipliers
+from .options import IKOptions
+from .problem import IKProblem
+from .state import BatchState
+from .tasks import Task
+
+Array = NDArray[np.float64]
+METHOD = "slsqp"
+#: Slack below which a reference solution's constraint counts as active (m, rad).
+ACTIVE_TOLERANCE = 1e-9
+#: Scales of the closest-point objective ``scale |r|^2 / 2``, one pass each: SLSQP's ``ftol`` is
+#: absolute, so a large scale resolves small residuals, but from far away it stalls SLSQP's line
+#: search; the second pass starts from the first pass's answer.
+DISTANCE_SCALES = (1e4, 1e8)
+
+
+@dataclass(frozen=True)
+class SampleSolution:
+    """One sample's reference solution: joints, whether it met the tolerances, work done, reason."""
+
+    q: Array
+    success: bool
+    iterations: int
+    message: str
+    residual: float
+
+
+class _Model:
+    """Residual and Jacobian of one sample at the last ``q`` asked for (SLSQP asks twice per point)."""
+
+    def __init__(self, task: Task, i: int) -> None:
+        self.task, self.idx = task, np.array([i], dtype=np.intp)
+        self.zero = np.zeros((1, task.m))
+        self.key = b""
+        self.value: tuple[Array, Array] = (np.zeros(task.m), np.zeros((task.m, 7)))
+
+    def __call__(self, q: Array) -> tuple[Array, Array]:
+        key = q.tobytes()
+        if key != self.key:
+            r, J, _ = self.task.evaluate(self.idx, np.ascontiguousarray(q[None]), self.zero)
+            self.key, self.value = key, (r[0], J[0])
+        return self.value
+
+
+def _minimize(
+    problem: IKProblem,
+    objective: Callable[[Array], tuple[float, Array]],
+    q0: Array,
+    equality: _Model | None,
+    options: IKOptions,
+) -> OptimizeResult:
+    """Run SLSQP in the scaled joints ``u = (q - q*) / (q_max - q_min)`` and return ``q``.
+
+    In ``u`` the cost ``Phi = |u|^2 / 7`` is isotropic (in ``q`` the twist joint's curvature is
+    2000 times smaller than the legs', which slows SLSQP's quasi-Newton updates considerably);
+    bounds become ``[-1/2, 1/2]``. Gradients and Jacobians follow by the chain rule. The
+    result's ``x`` is in ``u``.
+    """
+    width, centre = problem.upper - problem.lower, problem.centre
+
+    def to_q(u: Array) -> Array:
+        return centre + width * u
+
+    constraints: list[dict[str, object]] = []
+    if equality is not None:
+        constraints.append(
+            {
+                "type": "eq",
+                "fun": lambda u: equality(to_q(u))[0],
+                "jac": lambda u: equality(to_q(u))[1] * width,
+            }
+        )
+    if problem.n_triangle:
+        G_u = problem.G * width
+        constraints.append(
+            {"type": "ineq", "fun": lambda u: problem.G @ to_q(u) + problem.h - problem.margin, "jac": lambda u: G_u}
+        )
+
+    def scaled(u: Array) -> tuple[float, Array]:
+        value, gradient = objective(to_q(u))
+        return value, gradient * width
+
+    u0 = np.clip((q0 - centre) / width, -0.5, 0.5)
+    result: OptimizeResult = minimize(
+        scaled,
+        u0,
+        jac=True,
+        method="SLSQP",
+        bounds=Bounds(np.full(7, -0.5), np.full(7, 0.5)),
+        constraints=constraints,
+        options={"ftol": options.reference_ftol, "maxiter": options.reference_maxiter},
+    )
+    return result
+
+
+def solve_sample(problem: IKProblem, task: Task, i: int, q0: Array, options: IKOptions) -> SampleSolution:
+    """Solve sample ``i`` from ``q0``: the optimum of ``Phi`` on the task's constraints."""
+    model = _Model(task, i)
+
+    def objective(q: Array) -> tuple[float, Array]:
+        return float(problem.phi(q)), problem.phi_gradient(q)
+
+    result = _minimize(problem, objective, q0, model, options)
+    q = np.clip(problem.centre + (problem.upper - problem.lower) * result.x, problem.lower, problem.upper)
+    residual = float(np.abs(model(q)[0]).max()) if problem.assemblable(q) else np.inf
+    success = bool(result.success) and residual <= options.accept_primal and bool(problem.feasible(q, 1e-10))
+    return SampleSolution(q, success, int(result.nit), str(result.message), residual)
+
+
+def closest(problem: IKProblem, task: Task, i: int, starts: list[Array], options: IKOptions) -> tuple[Array, Array]:
+    """The feasible ``q`` whose task values come closest to sample ``i``'s target, and its residual ``(m,)``.
+
+    Minimises ``|c(q) - c_d|^2`` over the joint limits and the assembly constraints from each start,
+    then refines the best answer (see :data:`DISTANCE_SCALES`), and keeps the best.
+    """
+    model = _Model(task, i)
+    best_q, best_r = starts[0], np.full(task.m, np.inf)
+    for scale in DISTANCE_SCALES:
+
+        def objective(q: Array, scale: float = scale) -> tuple[float, Array]:
+            r, J = model(q)
+            return 0.5 * scale * float(r @ r), scale * (J.T @ r)
+
+        for q0 in starts if scale == DISTANCE_SCALES[0] else [best_q]:
+            result = _minimize(problem, objective, q0, None, options)
+            q = np.clip(problem.centre + (problem.upper - problem.lower) * result.x, problem.lower, problem.upper)
+            if problem.assemblable(q):
+                r = model(q)[0].copy()
+                if np.linalg.norm(r) < np.linalg.norm(best_r):
+                    best_q, best_r = q, r
+    return best_q, best_r
+
+
+def finish(problem: IKProblem, task: Task, state: BatchState, idx: NDArray[np.intp]) -> None:
+    """Multipliers, active sets and model values of reference solutions at samples ``idx`` (batched)."""
+    if idx.size == 0:
+        return
+    q = state.q[idx]
+    _, J, _ = task.evaluate(idx, q, np.zeros((idx.size, task.m)))
+    lam, mu, active = multipliers.estimate(problem, q, J, ACTIVE_TOLERANCE)
+    residual, J, H = task.evaluate(idx, q, lam)
+    state.lam[idx], state.mu[idx], state.active[idx] = lam, mu, active
+    state.residual[idx], state.J[idx], state.H[idx] = residual, J, H
+
+
+def solve_path(
+    problem: IKProblem,
+    task: Task,
+    state: BatchState,
+    q_start: Array,
+    options: IKOptions,
+    solve_one: Callable[[IKProblem, Task, int, Array, IKOptions], SampleSolution] = solve_sample,
+    method: str = METHOD,
+) -> None:
+    """Solve every sample in order with ``solve_one``, each from the previous solution (solver contract)."""
+    previous = q_start
+    for i in range(len(task)):
+        solution = solve_one(problem, task, i, previous, options)
+        state.q[i] = solution.q
+        state.iterations[i] = solution.iterations
+        state.converged[i] = solution.success
+        state.method[i] = method
+        if solution.success:
+            previous = solution.q
+    done = np.flatnonzero(state.converged)
+    finish(problem, task, state, done)
+
+
+def solve(problem: IKProblem, task: Task, state: BatchState, q_start: Array, options: IKOptions) -> None:
+    """The SLSQP reference solver (solver contract of :mod:`vgtarm.ik.registry`)."""
+    solve_path(problem, task, state, q_start, options)
