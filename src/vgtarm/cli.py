@@ -13,9 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__
-from .errors import VgtarmError
+from . import __version__, paths
+from .errors import InputError, UnreachableError, VgtarmError
+from .ik import CSV_COLUMNS, write_csv
 from .parameters import JOINT_NAMES, JOINT_UNITS
+from .paths import Path as DesiredPath
 from .robot import load_robot
 
 
@@ -66,6 +68,190 @@ def cmd_fk(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_simulate(args: argparse.Namespace) -> int:
+    """Run one case study, print its summary, write its results and figures."""
+    from tqdm import tqdm
+
+    from .cases import run_case
+    from .errors import SimulationError
+    from .plotting import comparison_figure, save_figure
+
+    robot = load_robot(args.config)
+    model = robot.parameters.scaled(mass=args.model_mass, inertia=args.model_inertia, friction=args.model_friction)
+    exact_model = (args.model_mass, args.model_inertia, args.model_friction) == (1.0, 1.0, 1.0)
+    with tqdm(total=100, desc=f"case {args.case} {args.controller}", unit="%", disable=args.quiet, leave=False) as bar:
+
+        def progress(done: int, total: int) -> None:
+            bar.update(round(100 * done / total) - bar.n)
+
+        try:
+            result = run_case(
+                robot,
+                args.case,
+                controller=args.controller,
+                external_force=args.external_force,
+                integrator=args.integrator,
+                substeps=args.substeps,
+                seed=args.seed,
+                rates=args.rates,
+                horizon=args.horizon,
+                controller_model=None if exact_model else model,
+                progress=progress,
+            )
+        except SimulationError as exc:
+            if args.out is not None and exc.result is not None:
+                exc.result.save(args.out)  # type: ignore[attr-defined]
+                print(f"partial results (up to the failure) written to {args.out}", file=sys.stderr)
+            raise
+    summary = result.summary()
+    for key in (
+        "case",
+        "controller",
+        "external_force",
+        "integrator",
+        "reference_rates",
+        "seed",
+        "simulated_time_s",
+        "wall_time_s",
+        "real_time_factor",
+        "max_tip_error_m",
+        "rms_tip_error_m",
+        "max_tip_error_after_transient_m",
+        "peak_force_n",
+        "rms_force_n",
+        "ga_activations",
+        "ga_time_s",
+    ):
+        value = summary[key]
+        text = f"{value:.6g}" if isinstance(value, float) else str(value)
+        print(f"{key:<34} {text}")
+    if args.out is not None:
+        result.save(args.out)
+        save_figure(comparison_figure([result]), args.out / "figure.png")
+        print(f"results written to {args.out}")
+    return 0
+
+
+def cmd_reproduce(args: argparse.Namespace) -> int:
+    """Run every combination the paper reports and write report.md."""
+    from tqdm import tqdm
+
+    from .report import paper_runs, reproduce
+
+    robot = load_robot(args.config)
+    runs = paper_runs()
+    with tqdm(total=len(runs), desc="reproduce", unit="run", disable=args.quiet) as bar:
+
+        def progress(label: str, done: int, total: int) -> None:
+            bar.set_postfix_str(label)
+            bar.update(done - bar.n)
+
+        made = reproduce(
+            robot, args.out, seed=args.seed, integrator=args.integrator, substeps=args.substeps, progress=progress
+        )
+    print(f"{'run':<26} {'max (mm)':>10} {'after 0.2 s (mm)':>17} {'GA':>5} {'wall (s)':>9}")
+    for spec, result in made.results.items():
+        s = result.summary()
+        print(
+            f"{spec.folder:<26} {s['max_tip_error_m'] * 1e3:>10.4f} {s['max_tip_error_after_transient_m'] * 1e3:>17.4f}"
+            f" {s['ga_activations']:>5} {s['wall_time_s']:>9.3f}"
+        )
+    print(f"report written to {made.report} ({made.wall_time_s:.1f} s)")
+    return 0
+
+
+def _add_run_options(parser: argparse.ArgumentParser) -> None:
+    from .simulation import INTEGRATORS
+
+    parser.add_argument(
+        "--integrator",
+        choices=sorted(INTEGRATORS),
+        default="euler",
+        help="plant integrator (default: euler, the paper's)",
+    )
+    parser.add_argument("--substeps", type=_positive_int, default=1, help="integration steps per control period")
+    parser.add_argument(
+        "--seed", type=_non_negative_int, default=0, help="seed of the disturbance and the GA (default 0)"
+    )
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text}")
+    return value
+
+
+def _non_negative_int(text: str) -> int:
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text}")
+    return value
+
+
+def _positive_float(text: str) -> float:
+    value = float(text)
+    if not (np.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text}")
+    return value
+
+
+def _ik_path(args: argparse.Namespace) -> DesiredPath:
+    """The desired path of ``vgtarm ik``: ``--case 1|2`` or ``--path FILE``, sampled at ``--dt``."""
+    dt = None
+    if args.dt is not None:
+        try:
+            dt = float(args.dt)
+        except ValueError:
+            raise InputError(f"--dt must be a sampling period in seconds, got {args.dt!r}") from None
+        if not (np.isfinite(dt) and dt > 0):
+            raise InputError(f"--dt must be a finite period > 0 s, got {args.dt!r}")
+    if (args.case is None) == (args.path is None):
+        raise InputError("give exactly one of --case 1|2 and --path FILE")
+    if args.path is not None:
+        return paths.from_csv(args.path, dt)
+    if args.case not in ("1", "2"):
+        raise InputError(f"--case must be 1 or 2, got {args.case!r}")
+    period = 1e-3 if dt is None else dt
+    return paths.case1(period) if args.case == "1" else paths.case2(period)
+
+
+def cmd_ik(args: argparse.Namespace) -> int:
+    """Inverse kinematics of a desired path: write the joint reference as CSV and print a summary."""
+    path = _ik_path(args)
+    robot = load_robot(args.config)
+    result = robot.inverse_kinematics(path, solver=args.solver, rates=args.rates, pose="hold" if args.pose else None)
+    if not result.success:
+        raise UnreachableError(f"inverse kinematics did not verify every sample: {result.message}; nothing written")
+    if args.output is not None:
+        write_csv(result, args.output)
+    samples = result.samples
+    worst = int(np.argmax(samples.residual))
+    largest = int(np.argmax(samples.phi))
+    task = "tip position and orientation held from the first sample" if args.pose else "tip position, orientation free"
+    print(f"path       {path.name}: {len(result)} samples, dt = {path.dt:g} s, t = {path.t[0]:g} .. {path.t[-1]:g} s")
+    print(f"task       {task}")
+    print(f"solver     {result.solver}, rates {result.rates}, {result.wall_time * 1e3:.1f} ms")
+    fallbacks = int(np.count_nonzero(np.char.find(samples.method.astype(str), "fallback") >= 0))
+    print(f"result     {result.message}; {fallbacks} samples re-solved by the reference solver")
+    print(f"residual   worst {samples.residual[worst]:.3g} m at t = {result.t[worst]:.6g} s")
+    if args.pose:
+        print(f"           worst orientation error {np.nanmax(samples.orientation_error):.3g} rad")
+    print(f"Phi        largest {samples.phi[largest]:.6g} at t = {result.t[largest]:.6g} s")
+    print("limits     closest approach to each joint limit over the path")
+    below, above = result.limit_clearance()
+    for i, name in enumerate(JOINT_NAMES):
+        side, gap = ("min", below[i]) if below[i] <= above[i] else ("max", above[i])
+        column = result.q[:, i] - result.lower[i] if side == "min" else result.upper[i] - result.q[:, i]
+        when = result.t[int(np.argmin(column))]
+        print(f"           {name:<5} {gap:.6g} {JOINT_UNITS[i]} from its {side} at t = {when:.6g} s")
+    if args.output is not None:
+        columns = f"{', '.join(CSV_COLUMNS[:4])}, joints, rates, accelerations"
+        print(f"output     {args.output} ({len(result)} rows: {columns})")
+    return 0
+
+
 def _add_config(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--config",
@@ -95,6 +281,63 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_config(fk)
     fk.set_defaults(run=cmd_fk)
+
+    simulate = sub.add_parser("simulate", help="run one of the paper's case studies")
+    simulate.add_argument("--case", type=int, choices=(1, 2), required=True)
+    simulate.add_argument(
+        "--controller", choices=("cfc", "scm"), default="cfc", help="computed force control or the GA switching method"
+    )
+    simulate.add_argument(
+        "--external-force", action="store_true", help="cutting force (20 N) and disturbance (5 N) on the tool"
+    )
+    simulate.add_argument(
+        "--rates",
+        choices=("exact", "finite_difference"),
+        default="exact",
+        help="how the reference rates are computed (default: exact)",
+    )
+    simulate.add_argument(
+        "--horizon",
+        type=_positive_int,
+        default=20,
+        help="GA fitness prediction horizon in control periods (default 20)",
+    )
+    for name in ("mass", "inertia", "friction"):
+        simulate.add_argument(
+            f"--model-{name}",
+            type=_positive_float,
+            default=1.0,
+            metavar="FACTOR",
+            help=f"scale the controller model's {name} (a wrong model; default 1)",
+        )
+    simulate.add_argument(
+        "--out", type=Path, default=None, metavar="DIR", help="write summary.json, the time series and a figure here"
+    )
+    _add_run_options(simulate)
+    _add_config(simulate)
+    simulate.set_defaults(run=cmd_simulate)
+
+    again = sub.add_parser("reproduce", help="run every case the paper reports and write report.md")
+    again.add_argument(
+        "--out", type=Path, default=Path("results"), metavar="DIR", help="output folder (default: results)"
+    )
+    _add_run_options(again)
+    _add_config(again)
+    again.set_defaults(run=cmd_reproduce)
+    ik = sub.add_parser("ik", help="joint reference of a desired tip path (inverse kinematics, paper eq. 12)")
+    ik.add_argument("--case", default=None, metavar="1|2", help="the paper's case study path 1 or 2")
+    ik.add_argument("--path", type=Path, default=None, metavar="FILE", help="CSV file of t,x,y,z rows (s, m)")
+    ik.add_argument(
+        "--pose",
+        action="store_true",
+        help="also hold the end-effector orientation: the free-orientation optimum of the first sample",
+    )
+    ik.add_argument("--solver", default="fast", metavar="NAME", help="fast (default), reference, slsqp or ipopt")
+    ik.add_argument("--rates", default="exact", metavar="MODE", help="exact (default) or finite_difference")
+    ik.add_argument("--dt", default=None, metavar="DT", help="sampling period in s (case: 0.001; file: its own)")
+    ik.add_argument("-o", "--output", type=Path, default=None, metavar="FILE", help="CSV file to write")
+    _add_config(ik)
+    ik.set_defaults(run=cmd_ik)
 
     return parser
 

@@ -271,23 +271,14 @@ int vgt_ga_fitness(const vgt_model *m, const double *p_ctrl, double dt, long hor
                    const double *qdd_d, const double *tip_d, long n_cand, const double *Kp,
                    const double *Kv, double *fitness)
 {
-    int status = VGT_DONE;
-#ifdef _OPENMP
-#pragma omp parallel if (n_cand * horizon >= 200) reduction(| : status)
-#endif
-    {
-        vgt_work wk;
-        int ok = work_alloc(&wk, m);
-        if (!ok) status |= 1;
-        /* every thread reaches the loop (a worksharing construct must not be skipped) */
-#ifdef _OPENMP
-#pragma omp for schedule(static)
-#endif
-        for (long c = 0; c < n_cand; ++c)
-            fitness[c] = ok ? predict_one(m, &wk, p_ctrl, dt, horizon, q0, qd0, q_d, qd_d, qdd_d, tip_d,
-                                          Kp + 49 * c, Kv + 49 * c)
-                            : INFINITY;
-        work_free(&wk);
-    }
-    return status ? VGT_NO_MEMORY : VGT_DONE;
+    /* Serial on purpose: a candidate costs a few microseconds, and threads that spin-wait for
+     * the next generation lose far more than they gain when the other core is busy. */
+    vgt_work wk;
+    int ok = work_alloc(&wk, m);
+    for (long c = 0; c < n_cand; ++c)
+        fitness[c] = ok ? predict_one(m, &wk, p_ctrl, dt, horizon, q0, qd0, q_d, qd_d, qdd_d, tip_d, Kp + 49 * c,
+                                      Kv + 49 * c)
+                        : INFINITY;
+    work_free(&wk);
+    return ok ? VGT_DONE : VGT_NO_MEMORY;
 }

@@ -16,10 +16,17 @@ Array = NDArray[np.float64]
 class HasJointReference(Protocol):
     """Anything with ``t`` (N,) and ``q``, ``qd``, ``qdd`` (N, 7), such as an IK result."""
 
-    t: Array
-    q: Array
-    qd: Array
-    qdd: Array
+    @property
+    def t(self) -> Array: ...
+
+    @property
+    def q(self) -> Array: ...
+
+    @property
+    def qd(self) -> Array: ...
+
+    @property
+    def qdd(self) -> Array: ...
 
 
 @dataclass(frozen=True, eq=False)
