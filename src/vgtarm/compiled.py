@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import functions
+from .fileio import atomic_write_text
 
 logger = logging.getLogger("vgtarm")
 
@@ -247,9 +248,7 @@ def _compile(built: dict[str, ca.Function], compiler: str, target: Path) -> None
 
 def _save_signatures(path: Path, signatures: dict[str, Signature]) -> None:
     payload = {key: sig.__dict__ for key, sig in signatures.items()}
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(payload, indent=1))
-    os.replace(tmp, path)
+    atomic_write_text(path, json.dumps(payload, indent=1))
 
 
 def _load_signatures(path: Path) -> dict[str, Signature]:

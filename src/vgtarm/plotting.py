@@ -16,7 +16,6 @@ angles in mrad, forces in N and torques in N m; the result records stay in SI un
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -31,6 +30,7 @@ from mpl_toolkits.mplot3d.axes3d import Axes3D
 from numpy.typing import NDArray
 
 from .errors import InputError
+from .fileio import atomic_path
 from .parameters import JOINT_NAMES
 from .simulation.result import MODE_GA, SimulationResult
 
@@ -322,14 +322,8 @@ def save_figure(fig: Figure, path: str | os.PathLike[str], *, dpi: float = 150) 
     if not (np.isfinite(dpi) and dpi > 0):
         raise InputError(f"dpi = {dpi!r}: expected a positive number")
     out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out.stem}.", suffix=out.suffix)
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=dpi, format=fmt)
-        os.replace(tmp, out)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_path(out) as temporary:
+        fig.savefig(temporary, dpi=dpi, format=fmt)
     return out
 
 

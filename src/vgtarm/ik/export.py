@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import os
-import secrets
-from pathlib import Path
 
 import numpy as np
 
+from ..fileio import atomic_open
 from ..parameters import JOINT_NAMES
 from .records import IKResult
 
@@ -23,18 +22,10 @@ CSV_COLUMNS: tuple[str, ...] = (
 def write_csv(result: IKResult, file: str | os.PathLike[str]) -> None:
     """Write one row per sample with the columns :data:`CSV_COLUMNS` (full double precision).
 
-    The file is written to a temporary file in the same folder (created with the usual
-    permissions) and moved into place, so a reader never sees a partial file and nothing is left
-    behind when writing fails.
+    The file is written atomically (:func:`vgtarm.fileio.atomic_open`): a reader never sees a
+    partial file and nothing is left behind when writing fails.
     """
-    target = Path(file)
     table = np.column_stack([result.t, result.position, result.q, result.qd, result.qdd])
-    temporary = target.with_name(f".{target.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
-    try:
-        with open(temporary, "x", encoding="utf-8", newline="") as stream:
-            stream.write(",".join(CSV_COLUMNS) + "\n")
-            np.savetxt(stream, table, delimiter=",", fmt="%.17g")
-        os.replace(temporary, target)
-    except BaseException:
-        temporary.unlink(missing_ok=True)
-        raise
+    with atomic_open(file) as stream:
+        stream.write(",".join(CSV_COLUMNS) + "\n")
+        np.savetxt(stream, table, delimiter=",", fmt="%.17g")
