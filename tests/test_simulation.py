@@ -151,9 +151,9 @@ def test_compiled_fitness_matches_numpy_and_a_full_model_prediction(robot):
     qd0 = ref.qd[0] + rng.normal(scale=1e-2, size=7)
     window = slice(0, H + 1)
     tip_d = robot.tip_position(ref.q[window])
-    args = (robot.parameter_vector, ref.dt, q0, qd0, ref.q[window], ref.qd[window], ref.qdd[window], tip_d, Kp, Kv)
-    compiled = ClosedLoopDriver(robot.backend).ga_fitness(*args)
-    numpy_version = predict_tip_error(robot, *args[1:])
+    args = (robot.parameter_vector, ref.dt, q0, qd0, ref.q[window], ref.qd[window], ref.qdd[window], tip_d)
+    compiled = ClosedLoopDriver(robot.backend).ga_predictor(*args)(Kp, Kv)
+    numpy_version = predict_tip_error(robot, *args[1:], Kp, Kv)
     assert_close(compiled, numpy_version, rtol=1e-12, atol=1e-15)
     # The same prediction through the controller's full model (M^, C^ and forward dynamics).
     cfc = ComputedForceControl.with_gains(5000, 300)

@@ -237,19 +237,3 @@ class ClosedLoopDriver:
             return fitness
 
         return predict
-
-    def ga_fitness(
-        self,
-        p_ctrl: Array,
-        dt: float,
-        q0: Array,
-        qd0: Array,
-        q_d: Array,
-        qd_d: Array,
-        qdd_d: Array,
-        tip_d: Array,
-        Kp: Array,
-        Kv: Array,
-    ) -> Array:
-        """Predicted tip-error norm of each candidate (see :meth:`ga_predictor`), (n,)."""
-        return self.ga_predictor(p_ctrl, dt, q0, qd0, q_d, qd_d, qdd_d, tip_d)(Kp, Kv)

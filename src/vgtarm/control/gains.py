@@ -42,9 +42,3 @@ class Gains:
     def of(cls, Kp: ArrayLike, Kv: ArrayLike) -> Gains:
         """Gains from scalars, diagonals or full matrices."""
         return cls(gain_matrix(Kp, "Kp"), gain_matrix(Kv, "Kv"))
-
-    def is_diagonal(self) -> bool:
-        """Whether both matrices are diagonal."""
-        return bool(np.count_nonzero(self.Kp - np.diag(np.diag(self.Kp))) == 0) and bool(
-            np.count_nonzero(self.Kv - np.diag(np.diag(self.Kv))) == 0
-        )

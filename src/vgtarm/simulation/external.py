@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from ..errors import InputError
 
@@ -56,11 +56,3 @@ class ExternalForce:
         if not self.disturbance:
             return np.zeros((n, 3))
         return rng.uniform(-1.0, 1.0, size=(n, 3)) * np.asarray(self.eta)
-
-    def cutting_at(self, velocity: ArrayLike) -> Array:
-        """Cutting force for tip velocities ``(..., 3)``."""
-        v = np.asarray(velocity, dtype=float)
-        speed = np.linalg.norm(v, axis=-1, keepdims=True)
-        if not self.cutting:
-            return np.zeros_like(v)
-        return np.where(speed > self.cutting_speed, -self.cutting_force * v / np.maximum(speed, 1e-300), 0.0)
