@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 import vgtarm
-from vgtarm.compiled import InterpretedBackend, build_functions
+from vgtarm.model.compiled import InterpretedBackend, build_functions
 
 from .common import Row, best_time, print_table
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import vgtarm
-from vgtarm.assembly import triangle_margins
+from vgtarm.model.assembly import triangle_margins
 
 #: Step of central finite differences: about eps**(1/3), the best balance of truncation and
 #: round-off for first derivatives.

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vgtarm.cases import PAPER_RESULTS, case_study, joint_reference, run_case
-from vgtarm.report import paper_runs, reproduce
+from vgtarm.app.cases import PAPER_RESULTS, case_study, joint_reference, run_case
+from vgtarm.app.report import paper_runs, reproduce
 
 
 @pytest.fixture(scope="module")
@@ -20,7 +20,10 @@ def runs(robot, references):
     out = {}
     for spec in paper_runs(rates=("exact",)):
         out[(spec.case, spec.controller, spec.external_force)] = run_case(
-            robot, spec.case, controller=spec.controller, external_force=spec.external_force,
+            robot,
+            spec.case,
+            controller=spec.controller,
+            external_force=spec.external_force,
             reference=references[spec.case],
         )
     return out

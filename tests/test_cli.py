@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from vgtarm.cli import main
+from vgtarm.app.cli import main
 
 
 def run(capsys, *argv):
@@ -23,8 +23,17 @@ def test_describe(capsys):
 
 
 def test_fk_prints_the_tip(capsys):
-    status, out, _ = run(capsys, "fk", "0.2844292531", "0.2844292531", "0.3753664876", "0.2844292531",
-                         "0.2844292531", "0.3753664876", "0")
+    status, out, _ = run(
+        capsys,
+        "fk",
+        "0.2844292531",
+        "0.2844292531",
+        "0.3753664876",
+        "0.2844292531",
+        "0.2844292531",
+        "0.3753664876",
+        "0",
+    )
     assert status == 0
     assert "tip        [" in out and "0.66" in out
 
@@ -51,8 +60,20 @@ def test_bad_usage_exits_2(capsys):
 
 def test_simulate_writes_summary_timeseries_and_figure(capsys, tmp_path):
     out_dir = tmp_path / "run"
-    status, out, _ = run(capsys, "simulate", "--case", "2", "--controller", "cfc", "--external-force", "--seed", "4",
-                         "--quiet", "--out", str(out_dir))
+    status, out, _ = run(
+        capsys,
+        "simulate",
+        "--case",
+        "2",
+        "--controller",
+        "cfc",
+        "--external-force",
+        "--seed",
+        "4",
+        "--quiet",
+        "--out",
+        str(out_dir),
+    )
     assert status == 0
     assert "max_tip_error_m" in out
     summary = json.loads((out_dir / "summary.json").read_text())

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import vgtarm
-from vgtarm import compiled
+from vgtarm.model import compiled
 
 
 def test_cache_is_reused_and_keyed_by_the_sources(robot):

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vgtarm.compiled import InterpretedBackend, build_functions
-from vgtarm.robot import Robot
+from vgtarm.model.compiled import InterpretedBackend, build_functions
+from vgtarm.model.robot import Robot
 
 from .conftest import assert_close, central_difference, random_configurations
 from .test_jacobians import angular_jacobian_fd, body_poses

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import vgtarm
-from vgtarm.assembly import triangle_margins
+from vgtarm.model.assembly import triangle_margins
 
 from .conftest import assert_close, random_configurations
 

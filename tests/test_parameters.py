@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 import vgtarm
-from vgtarm.parameters import load_parameters, parameters_from_dict
+from vgtarm.model.parameters import load_parameters, parameters_from_dict
 
-REFERENCE = tomllib.loads(resources.files("vgtarm.data").joinpath("reference_robot.toml").read_text())
+REFERENCE = tomllib.loads(resources.files("vgtarm.model.data").joinpath("reference_robot.toml").read_text())
 
 
 def write_toml(path, data) -> None:

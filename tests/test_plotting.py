@@ -10,9 +10,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from mpl_toolkits.mplot3d.axes3d import Axes3D
 
-from vgtarm.errors import InputError
-from vgtarm.parameters import JOINT_NAMES
-from vgtarm.plotting import (
+from vgtarm.app.plotting import (
     comparison_figure,
     label_of,
     plot_efforts,
@@ -21,6 +19,8 @@ from vgtarm.plotting import (
     plot_tip_error,
     save_figure,
 )
+from vgtarm.errors import InputError
+from vgtarm.model.parameters import JOINT_NAMES
 from vgtarm.simulation.result import MODE_FIXED, MODE_GA, MODE_NOT_RUN, GAActivation, SimulationResult
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"

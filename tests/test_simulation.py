@@ -10,9 +10,9 @@ import pytest
 from scipy.linalg import expm
 
 import vgtarm
-from vgtarm.compiled import InterpretedBackend, build_functions
 from vgtarm.control import ComputedForceControl, SwitchingControl
 from vgtarm.ga import GAOptions
+from vgtarm.model.compiled import InterpretedBackend, build_functions
 from vgtarm.simulation import ExternalForce, JointReference, simulate
 from vgtarm.simulation.result import MODE_FIXED, MODE_GA, MODE_NOT_RUN
 
@@ -91,8 +91,13 @@ def test_joint_error_approaches_the_continuous_linear_solution(robot):
 def test_compiled_loop_matches_its_numpy_twin(robot, integrator):
     slow = vgtarm.Robot(robot.parameters, InterpretedBackend(build_functions()))
     ref = smooth_reference(robot, duration=0.06)
-    kwargs = dict(external_force=ExternalForce(), integrator=integrator, substeps=2, seed=3,
-                  controller_model=robot.parameters.scaled(mass=1.1, friction=0.9))
+    kwargs = dict(
+        external_force=ExternalForce(),
+        integrator=integrator,
+        substeps=2,
+        seed=3,
+        controller_model=robot.parameters.scaled(mass=1.1, friction=0.9),
+    )
     fast = simulate(robot, ref, CFC, **kwargs)
     twin = simulate(slow, ref, CFC, **kwargs)
     assert twin.metadata["backend"] == "interpreted"
@@ -139,8 +144,8 @@ def test_fitness_prediction_horizon_decides_whether_gains_matter(robot):
 
 
 def test_compiled_fitness_matches_numpy_and_a_full_model_prediction(robot):
-    from vgtarm.closedloop import ClosedLoopDriver
     from vgtarm.control import predict_tip_error
+    from vgtarm.model.closedloop import ClosedLoopDriver
 
     ref = smooth_reference(robot, duration=0.05)
     H = 15
@@ -224,9 +229,22 @@ def test_results_are_saved_atomically_with_the_summary_keys(robot, tmp_path):
     run = simulate(robot, ref, scm, metadata={"case": "smooth"})
     out = run.save(tmp_path / "run")
     summary = json.loads((out / "summary.json").read_text())
-    for key in ("case", "controller", "external_force", "seed", "dt_s", "simulated_time_s", "wall_time_s",
-                "max_tip_error_m", "rms_tip_error_m", "max_tip_error_after_transient_m", "peak_force_n",
-                "ga_activations", "ga_time_s", "reference_rates"):
+    for key in (
+        "case",
+        "controller",
+        "external_force",
+        "seed",
+        "dt_s",
+        "simulated_time_s",
+        "wall_time_s",
+        "max_tip_error_m",
+        "rms_tip_error_m",
+        "max_tip_error_after_transient_m",
+        "peak_force_n",
+        "ga_activations",
+        "ga_time_s",
+        "reference_rates",
+    ):
         assert key in summary, key
     assert summary["ga_activations"] == len(run.activations) > 0
     header = (out / "timeseries.csv").read_text().splitlines()[0].split(",")

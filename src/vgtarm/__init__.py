@@ -17,8 +17,15 @@ from .errors import (
     UnreachableError,
     VgtarmError,
 )
-from .parameters import JOINT_NAMES, RobotParameters, load_parameters
-from .robot import BiasAccelerations, ForwardKinematics, Robot, load_robot
+from .model import (
+    JOINT_NAMES,
+    BiasAccelerations,
+    ForwardKinematics,
+    Robot,
+    RobotParameters,
+    load_parameters,
+    load_robot,
+)
 
 __version__ = "0.1.0"
 

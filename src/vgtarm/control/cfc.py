@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..robot import Robot
+from ..model.robot import Robot
 from .gains import Gains
 
 Array = NDArray[np.float64]

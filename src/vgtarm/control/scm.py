@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError
 from ..ga import GAOptions, GAResult, minimize
-from ..robot import Robot
+from ..model.robot import Robot
 from .gains import Gains
 
 Array = NDArray[np.float64]

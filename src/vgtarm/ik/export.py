@@ -7,7 +7,7 @@ import os
 import numpy as np
 
 from ..fileio import atomic_open
-from ..parameters import JOINT_NAMES
+from ..model.parameters import JOINT_NAMES
 from .records import IKResult
 
 #: Columns of the CSV file: time, desired tip point, joints, rates, accelerations (SI units).

@@ -13,9 +13,9 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-from ..functions_ik import pose_constraints, rotation_from_row_major
-from ..parameters import N_PARAMETERS
-from ..symbolic import kinematics
+from ..model.codegen.ik import pose_constraints, rotation_from_row_major
+from ..model.parameters import N_PARAMETERS
+from ..model.symbolic import kinematics
 from . import slsqp
 from .options import IKOptions
 from .problem import IKProblem

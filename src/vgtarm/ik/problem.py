@@ -19,9 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..assembly import TRIANGLE_INEQUALITIES, linear_form
 from ..errors import InputError
-from ..parameters import JOINT_NAMES, RobotParameters
+from ..model.assembly import TRIANGLE_INEQUALITIES, linear_form
+from ..model.parameters import JOINT_NAMES, RobotParameters
 
 Array = NDArray[np.float64]
 

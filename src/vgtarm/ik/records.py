@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..parameters import JOINT_NAMES
+from ..model.parameters import JOINT_NAMES
 
 Array = NDArray[np.float64]
 

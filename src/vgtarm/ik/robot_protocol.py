@@ -7,8 +7,8 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..compiled import Backend
-from ..parameters import RobotParameters
+from ..model.compiled import Backend
+from ..model.parameters import RobotParameters
 
 
 class HasRotation(Protocol):

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..compiled import Backend
+from ..model.compiled import Backend
 
 Array = NDArray[np.float64]
 Index = NDArray[np.intp]

@@ -11,7 +11,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from ..closedloop import (
+from ..model.closedloop import (
     ABOVE_THRESHOLD,
     DONE,
     NOT_ASSEMBLABLE,
@@ -21,7 +21,7 @@ from ..closedloop import (
     LoopSettings,
 )
 from ..control.scm import predict_tip_error
-from ..robot import Robot
+from ..model.robot import Robot
 
 Array = NDArray[np.float64]
 

@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..fileio import atomic_write_text
-from ..parameters import JOINT_NAMES
+from ..model.parameters import JOINT_NAMES
 
 Array = NDArray[np.float64]
 

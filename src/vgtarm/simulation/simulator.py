@@ -21,8 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from ..assembly import linear_form
-from ..closedloop import (
+from ..model.closedloop import (
     ABOVE_THRESHOLD,
     DONE,
     FUNCTION_FAILED,
@@ -34,12 +33,13 @@ from ..closedloop import (
     LoopArrays,
     LoopSettings,
 )
-from ..compiled import CompiledBackend
 from ..control.cfc import ComputedForceControl
 from ..control.scm import SwitchingControl
 from ..errors import InputError, SimulationError
-from ..parameters import JOINT_NAMES, RobotParameters
-from ..robot import Robot
+from ..model.assembly import linear_form
+from ..model.compiled import CompiledBackend
+from ..model.parameters import JOINT_NAMES, RobotParameters
+from ..model.robot import Robot
 from .external import ExternalForce
 from .python_loop import PythonLoop
 from .reference import HasJointReference, JointReference

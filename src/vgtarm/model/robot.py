@@ -14,13 +14,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..errors import InputError
 from .assembly import check_assembly, triangle_margins
 from .compiled import CompiledBackend, InterpretedBackend, get_backend
-from .errors import InputError
-from .ik import IKResult
-from .ik import inverse_kinematics as _inverse_kinematics
 from .parameters import RobotParameters, load_parameters
-from .paths import Path as DesiredPath
 
 Array = NDArray[np.float64]
 
@@ -177,16 +174,15 @@ class Robot:
             body_angular=body_ang.reshape(shape + (3, 3)),
         )
 
-    def inverse_kinematics(
-        self, path: DesiredPath, *, solver: str = "fast", rates: str = "exact", pose: object = None, **options: Any
-    ) -> IKResult:
-        """Joint reference ``q, qd, qdd`` ``(N, 7)`` of a desired tip path (paper eq. 12).
+    def inverse_kinematics(self, path: Any, **options: Any) -> Any:
+        """Convenience for :func:`vgtarm.ik.inverse_kinematics` ``(self, path, **options)``.
 
-        Delegates to :func:`vgtarm.ik.inverse_kinematics`, which documents ``solver`` (``"fast"``,
-        ``"slsqp"``/``"reference"``, ``"ipopt"``), ``rates`` (``"exact"``, ``"finite_difference"``),
-        ``pose`` (``None``, ``"hold"``, rotation matrices or an ``OrientationPath``) and the options.
+        The model layer does not depend on inverse kinematics: the ``ik`` package is imported
+        only when this method is called (``import vgtarm.model`` never loads it).
         """
-        return _inverse_kinematics(self, path, solver=solver, rates=rates, pose=pose, **options)
+        from ..ik import inverse_kinematics  # the one upward reference, resolved at call time
+
+        return inverse_kinematics(self, path, **options)
 
     # -- dynamics ----------------------------------------------------------------------------
 

@@ -22,11 +22,13 @@ from typing import Any, NoReturn
 import numpy as np
 from numpy.typing import NDArray
 
+from ..errors import ConfigError
 from .assembly import TRIANGLE_INEQUALITIES, triangle_margins
-from .errors import ConfigError
 
 #: Joint names, in the order of the joint vector ``q``.
 JOINT_NAMES: tuple[str, ...] = ("s1", "v1", "p1", "s2", "v2", "p2", "psi3")
+#: Number of joints (actuated coordinates) of the model.
+N_JOINTS = len(JOINT_NAMES)
 #: Units of each joint coordinate.
 JOINT_UNITS: tuple[str, ...] = ("m", "m", "m", "m", "m", "m", "rad")
 #: Units of each actuator effort.
@@ -159,7 +161,7 @@ def load_parameters(path: str | Path | None = None) -> RobotParameters:
     error, an unknown or missing key, or any invalid value.
     """
     if path is None:
-        text = resources.files("vgtarm.data").joinpath(_REFERENCE_FILE).read_text("utf-8")
+        text = resources.files("vgtarm.model.data").joinpath(_REFERENCE_FILE).read_text("utf-8")
         source = f"<reference robot {_REFERENCE_FILE}>"
     else:
         file = Path(path)

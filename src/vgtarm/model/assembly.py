@@ -15,7 +15,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import AssemblyError
+from ..errors import AssemblyError
 
 #: Names of the six triangle inequalities of one module, in the order of the margins.
 TRIANGLE_INEQUALITIES: tuple[str, ...] = (

@@ -3,60 +3,14 @@
  * vgt_simulate runs computed force control on the plant for a range of samples in one call;
  * vgt_ga_fitness predicts, for a batch of gain candidates, the tip tracking error over a horizon
  * under the controller's model. Both call the generated functions through pointers filled in by
- * vgtarm/closedloop.py; the Python reference loop in vgtarm/simulation/python_loop.py does the
+ * vgtarm/model/closedloop.py (the structures are declared once, in vgtarm.h); the Python reference loop in vgtarm/simulation/python_loop.py does the
  * same computation and the tests hold the two to each other.
  */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
-typedef long long int vgt_int;
-typedef int (*vgt_fn)(const double **arg, double **res, vgt_int *iw, double *w, int mem);
-
-typedef struct {
-    vgt_fn f;
-    vgt_int sz_arg, sz_res, sz_iw, sz_w;
-} vgt_call;
-
-typedef struct {
-    vgt_call cfc;       /* q, qd, q_d, qd_d, qdd_d, Kp, Kv, p -> F          */
-    vgt_call fd;        /* q, qd, F, f, p -> qdd                            */
-    vgt_call tip_state; /* q, qd, p -> tip, tip velocity                    */
-    vgt_call tip;       /* q, p -> tip                                      */
-} vgt_model;
-
-typedef struct {
-    double dt;              /* control period (s)                                         */
-    int integrator;         /* 0 explicit Euler, 1 semi-implicit Euler, 2 classical RK4   */
-    int substeps;           /* integration steps per control period                       */
-    int cutting;            /* 1: cutting force -F0 V/|V| on the tool                      */
-    double cutting_force;   /* F0 (N)                                                     */
-    double cutting_speed;   /* |V| below which the cutting force is zero (m/s)            */
-    double threshold;       /* stop before controlling a sample whose tip error exceeds it */
-    double limit_tolerance; /* distance outside a joint limit that counts as divergence   */
-} vgt_settings;
-
-typedef struct {
-    long n;                                 /* number of samples                          */
-    const double *q_d, *qd_d, *qdd_d;       /* (n, 7) joint reference                      */
-    const double *tip_d;                    /* (n, 3) desired tip P(q_d)                    */
-    const double *disturbance;              /* (n, 3) random tool force, held per sample   */
-    const double *p_plant, *p_ctrl;         /* (45) parameter vectors                      */
-    const double *G, *h;                    /* (12, 7), (12) assembly margins G q + h      */
-    const double *q_min, *q_max;            /* (7) joint limits                            */
-    double *q, *qd;                         /* (n, 7) state; row 0 is the initial state    */
-    double *F, *f_ext, *tip, *error;        /* (n, 7), (n, 3), (n, 3), (n)                 */
-} vgt_run;
-
-enum {
-    VGT_DONE = 0,
-    VGT_ABOVE_THRESHOLD = 1,
-    VGT_NOT_FINITE = -1,
-    VGT_NOT_ASSEMBLABLE = -2,
-    VGT_OUTSIDE_LIMITS = -3,
-    VGT_FUNCTION_FAILED = -4,
-    VGT_NO_MEMORY = -5
-};
+#include "vgtarm.h"
 
 typedef struct {
     const double **arg;
@@ -130,16 +84,17 @@ static int integrate(const vgt_model *m, const vgt_settings *s, const vgt_run *r
 {
     int steps = s->substeps > 0 ? s->substeps : 1;
     double h = s->dt / steps;
-    double q[7], qd[7], a[7];
+    const int nj = s->n_joints;
+    double q[nj], qd[nj], a[nj];
     memcpy(q, q0, sizeof q);
     memcpy(qd, qd0, sizeof qd);
     for (int step = 0; step < steps; ++step) {
         int status;
-        if (s->integrator == 2) {
-            double kq[4][7], kv[4][7], qs[7], vs[7];
+        if (s->integrator == VGT_RK4) {
+            double kq[4][nj], kv[4][nj], qs[nj], vs[nj];
             const double c[4] = {0.0, 0.5, 0.5, 1.0};
             for (int stage = 0; stage < 4; ++stage) {
-                for (int i = 0; i < 7; ++i) {
+                for (int i = 0; i < nj; ++i) {
                     qs[i] = stage ? q[i] + c[stage] * h * kq[stage - 1][i] : q[i];
                     vs[i] = stage ? qd[i] + c[stage] * h * kv[stage - 1][i] : qd[i];
                 }
@@ -147,15 +102,15 @@ static int integrate(const vgt_model *m, const vgt_settings *s, const vgt_run *r
                 if (status) return status;
                 memcpy(kq[stage], vs, sizeof vs);
             }
-            for (int i = 0; i < 7; ++i) {
+            for (int i = 0; i < nj; ++i) {
                 q[i] += h / 6.0 * (kq[0][i] + 2.0 * kq[1][i] + 2.0 * kq[2][i] + kq[3][i]);
                 qd[i] += h / 6.0 * (kv[0][i] + 2.0 * kv[1][i] + 2.0 * kv[2][i] + kv[3][i]);
             }
         } else {
             status = acceleration(m, s, r, wk, q, qd, F, dist, a, NULL);
             if (status) return status;
-            for (int i = 0; i < 7; ++i) {
-                if (s->integrator == 1) {
+            for (int i = 0; i < nj; ++i) {
+                if (s->integrator == VGT_SEMI_IMPLICIT_EULER) {
                     qd[i] += h * a[i];
                     q[i] += h * qd[i];
                 } else {
@@ -172,26 +127,28 @@ static int integrate(const vgt_model *m, const vgt_settings *s, const vgt_run *r
 
 static int check_state(const vgt_settings *s, const vgt_run *r, const double *q, const double *qd)
 {
-    for (int i = 0; i < 7; ++i)
+    const int nj = s->n_joints;
+    for (int i = 0; i < nj; ++i)
         if (!isfinite(q[i]) || !isfinite(qd[i])) return VGT_NOT_FINITE;
-    for (int row = 0; row < 12; ++row) {
+    for (int row = 0; row < s->n_margins; ++row) {
         double margin = r->h[row];
-        for (int i = 0; i < 7; ++i) margin += r->G[7 * row + i] * q[i];
+        for (int i = 0; i < nj; ++i) margin += r->G[nj * row + i] * q[i];
         if (!(margin > 0.0)) return VGT_NOT_ASSEMBLABLE;
     }
-    for (int i = 0; i < 7; ++i)
+    for (int i = 0; i < nj; ++i)
         if (q[i] < r->q_min[i] - s->limit_tolerance || q[i] > r->q_max[i] + s->limit_tolerance)
             return VGT_OUTSIDE_LIMITS;
     return VGT_DONE;
 }
 
-/* Run samples k0 .. k1-1 with the gains Kp, Kv (row-major 7x7). Sample k: measure the tip and
+/* Run samples k0 .. k1-1 with the gains Kp, Kv (row-major nj x nj). Sample k: measure the tip and
  * its error, stop if it exceeds the threshold (*stop = k, before any control), compute the
  * effort and the tool force, and integrate to sample k+1 (unless k is the last sample).
  * On any other stop, *stop is the sample whose state failed. */
 int vgt_simulate(const vgt_model *m, const vgt_settings *s, const vgt_run *r,
                  const double *Kp, const double *Kv, long k0, long k1, long *stop)
 {
+    const int nj = s->n_joints;
     vgt_work wk;
     int status = VGT_DONE;
     *stop = k1;
@@ -200,7 +157,7 @@ int vgt_simulate(const vgt_model *m, const vgt_settings *s, const vgt_run *r,
         return VGT_NO_MEMORY;
     }
     for (long k = k0; k < k1; ++k) {
-        const double *q = r->q + 7 * k, *qd = r->qd + 7 * k;
+        const double *q = r->q + nj * k, *qd = r->qd + nj * k;
         double V[3];
         double *tip = r->tip + 3 * k;
         const double *in_ts[3] = {q, qd, r->p_plant};
@@ -210,14 +167,14 @@ int vgt_simulate(const vgt_model *m, const vgt_settings *s, const vgt_run *r,
         double e0 = td[0] - tip[0], e1 = td[1] - tip[1], e2 = td[2] - tip[2];
         r->error[k] = sqrt(e0 * e0 + e1 * e1 + e2 * e2);
         if (s->threshold > 0.0 && r->error[k] > s->threshold) { status = VGT_ABOVE_THRESHOLD; *stop = k; break; }
-        double *F = r->F + 7 * k;
-        const double *in_c[8] = {q, qd, r->q_d + 7 * k, r->qd_d + 7 * k, r->qdd_d + 7 * k, Kp, Kv, r->p_ctrl};
+        double *F = r->F + nj * k;
+        const double *in_c[8] = {q, qd, r->q_d + nj * k, r->qd_d + nj * k, r->qdd_d + nj * k, Kp, Kv, r->p_ctrl};
         double *out_c[1] = {F};
         if (call(&m->cfc, &wk, 8, in_c, 1, out_c)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
         const double *dist = r->disturbance + 3 * k;
         tool_force(s, V, dist, r->f_ext + 3 * k);
         if (k + 1 >= r->n) continue;
-        double *q1 = r->q + 7 * (k + 1), *qd1 = r->qd + 7 * (k + 1);
+        double *q1 = r->q + nj * (k + 1), *qd1 = r->qd + nj * (k + 1);
         status = integrate(m, s, r, &wk, q, qd, F, dist, q1, qd1);
         if (status == VGT_DONE) status = check_state(s, r, q1, qd1);
         if (status != VGT_DONE) { *stop = k + 1; break; }
@@ -227,25 +184,27 @@ int vgt_simulate(const vgt_model *m, const vgt_settings *s, const vgt_run *r,
 }
 
 /* Predicted tip-error norm of one candidate (see vgt_ga_fitness). */
-static double predict_one(const vgt_model *m, vgt_work *wk, const double *p_ctrl, double dt, long horizon,
+static double predict_one(const vgt_model *m, const vgt_settings *s, vgt_work *wk, const double *p_ctrl, long horizon,
                           const double *q0, const double *qd0, const double *q_d, const double *qd_d,
                           const double *qdd_d, const double *tip_d, const double *kp, const double *kv)
 {
-    double q[7], qd[7], a[7], tip[3], sum = 0.0;
+    const int nj = s->n_joints;
+    const double dt = s->dt;
+    double q[nj], qd[nj], a[nj], tip[3], sum = 0.0;
     memcpy(q, q0, sizeof q);
     memcpy(qd, qd0, sizeof qd);
     for (long j = 0; j < horizon; ++j) {
-        double e[7], ed[7];
-        for (int i = 0; i < 7; ++i) {
-            e[i] = q_d[7 * j + i] - q[i];
-            ed[i] = qd_d[7 * j + i] - qd[i];
+        double e[nj], ed[nj];
+        for (int i = 0; i < nj; ++i) {
+            e[i] = q_d[nj * j + i] - q[i];
+            ed[i] = qd_d[nj * j + i] - qd[i];
         }
-        for (int i = 0; i < 7; ++i) {
-            double acc = qdd_d[7 * j + i];
-            for (int l = 0; l < 7; ++l) acc += kp[7 * i + l] * e[l] + kv[7 * i + l] * ed[l];
+        for (int i = 0; i < nj; ++i) {
+            double acc = qdd_d[nj * j + i];
+            for (int l = 0; l < nj; ++l) acc += kp[nj * i + l] * e[l] + kv[nj * i + l] * ed[l];
             a[i] = acc;
         }
-        for (int i = 0; i < 7; ++i) {
+        for (int i = 0; i < nj; ++i) {
             q[i] += dt * qd[i];
             qd[i] += dt * a[i];
         }
@@ -266,18 +225,19 @@ static double predict_one(const vgt_model *m, vgt_work *wk, const double *p_ctrl
  * they are advanced by explicit Euler (the paper's integrator) and mapped to the tip with the
  * forward kinematics. fitness = sqrt(sum_j |tip_d[j] - P(q_j)|^2), j = 1..horizon; a candidate
  * whose prediction leaves the assemblable set gets +inf. */
-int vgt_ga_fitness(const vgt_model *m, const double *p_ctrl, double dt, long horizon,
+int vgt_ga_fitness(const vgt_model *m, const vgt_settings *s, const double *p_ctrl, long horizon,
                    const double *q0, const double *qd0, const double *q_d, const double *qd_d,
                    const double *qdd_d, const double *tip_d, long n_cand, const double *Kp,
                    const double *Kv, double *fitness)
 {
     /* Serial on purpose: a candidate costs a few microseconds, and threads that spin-wait for
      * the next generation lose far more than they gain when the other core is busy. */
+    const int nj = s->n_joints;
     vgt_work wk;
     int ok = work_alloc(&wk, m);
     for (long c = 0; c < n_cand; ++c)
-        fitness[c] = ok ? predict_one(m, &wk, p_ctrl, dt, horizon, q0, qd0, q_d, qd_d, qdd_d, tip_d, Kp + 49 * c,
-                                      Kv + 49 * c)
+        fitness[c] = ok ? predict_one(m, s, &wk, p_ctrl, horizon, q0, qd0, q_d, qd_d, qdd_d, tip_d,
+                                      Kp + (long)nj * nj * c, Kv + (long)nj * nj * c)
                         : INFINITY;
     work_free(&wk);
     return ok ? VGT_DONE : VGT_NO_MEMORY;

@@ -1,9 +1,10 @@
 """Evaluation of the model's CasADi functions through compiled code.
 
-On first use the functions of :mod:`vgtarm.functions` are generated as C by CasADi, compiled
-together with a small batch driver (``csrc/batch.c``, and the closed-loop drivers) into one shared
-library, and cached on disk. The cache key hashes the sources that define the model and the
-drivers, the CasADi version and the compiler command; the robot's parameters are a runtime input
+On first use the functions of :mod:`vgtarm.model.codegen` are generated as C by CasADi, compiled
+together with the drivers of ``csrc/`` (batch evaluation, the closed loop; their interface is the
+one header ``csrc/vgtarm.h``, read by :mod:`.interface`) into one shared library, and cached on
+disk. The cache key hashes every source file of the ``vgtarm.model`` package (so no list is kept
+by hand), the CasADi and cffi versions and the compiler command; the robot's parameters are a runtime input
 of every function, so changing the robot never recompiles. When no C compiler is present the
 same functions run in CasADi's interpreter, after a one-line warning.
 
@@ -13,7 +14,6 @@ Backend choice: ``$VGTARM_BACKEND`` = ``auto`` (default), ``compiled`` or ``inte
 
 from __future__ import annotations
 
-import ctypes
 import functools
 import hashlib
 import json
@@ -28,25 +28,20 @@ from pathlib import Path
 from typing import Any, Protocol
 
 import casadi as ca
+import cffi
 import numpy as np
+from cffi import FFI
 from numpy.typing import NDArray
 
-from . import functions
-from .fileio import atomic_write_text
+from ..fileio import atomic_write_text
+from . import codegen, interface
 
 logger = logging.getLogger("vgtarm")
 
 _PACKAGE_DIR = Path(__file__).resolve().parent
-#: Sources whose text defines the compiled library (any change gives a new cache key).
-_MODEL_SOURCES = (
-    "symbolic.py",
-    "functions.py",
-    "functions_ik.py",
-    "functions_control.py",
-    "parameters.py",
-    "compiled.py",
-)
-_DRIVER_SOURCES = ("csrc/batch.c", "csrc/closed_loop.c")
+#: Suffixes of the model package's source files that the cache key hashes.
+_SOURCE_SUFFIXES = (".py", ".c", ".h", ".toml")
+_CSRC = _PACKAGE_DIR / "csrc"
 _CFLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off")
 _GENERATED_NAME = "vgtarm_model"
 
@@ -109,22 +104,39 @@ class CompiledBackend:
 
     def __init__(self, library_path: Path, signatures: dict[str, Signature]) -> None:
         self.library_path = library_path
-        self.library = ctypes.CDLL(str(library_path))
+        self.ffi = interface.ffi()
+        self.library = interface.open_library(library_path)
         self._signatures = signatures
-        self._batch = self.library.vgt_batch
-        self._batch.restype = ctypes.c_int
-        self._pointers = {
-            key: ctypes.cast(getattr(self.library, sig.name), ctypes.c_void_p).value for key, sig in signatures.items()
-        }
+        # the generated functions share one C type; declare them by name to find their addresses
+        generated = FFI()
+        generated.include(self.ffi)
+        generated.cdef(
+            "".join(
+                f"int {sig.name}(const double **, double **, vgt_int *, double *, int);\n"
+                for sig in signatures.values()
+            )
+        )
+        symbols = generated.dlopen(str(library_path))
+        self._pointers = {key: self.ffi.cast("vgt_fn", getattr(symbols, sig.name)) for key, sig in signatures.items()}
+        self._keep = (generated, symbols)
 
     def signature(self, name: str) -> Signature:
         return self._signatures[name]
 
-    def function_pointer(self, name: str) -> int:
-        """Address of the generated C function ``name`` (for the closed-loop drivers)."""
-        pointer = self._pointers[name]
-        assert pointer is not None
-        return pointer
+    def function_pointer(self, name: str) -> Any:
+        """The generated C function ``name`` as a ``vgt_fn`` (for the closed-loop drivers)."""
+        return self._pointers[name]
+
+    def call(self, name: str) -> Any:
+        """A ``vgt_call`` structure (function and work sizes) of the generated function ``name``."""
+        sig = self._signatures[name]
+        return self.ffi.new("vgt_call *", [self._pointers[name], sig.sz_arg, sig.sz_res, sig.sz_iw, sig.sz_w])[0]
+
+    def layout(self) -> list[int]:
+        """Sizes and field offsets of the interface's structures as the compiler laid them out."""
+        out = self.ffi.new("long[]", len(interface.layout_fields()))
+        self.library.vgt_layout(out)
+        return list(out)
 
     def evaluate(self, name: str, inputs: Sequence[NDArray[np.float64]], n: int) -> list[NDArray[np.float64]]:
         sig = self._signatures[name]
@@ -133,24 +145,23 @@ class CompiledBackend:
         outputs = [np.empty((n, nnz)) for nnz in sig.nnz_out]
         if n == 0:
             return outputs
-        n_in, n_out = len(arrays), len(outputs)
-        in_ptrs = (ctypes.c_void_p * n_in)(*[x.ctypes.data for x in arrays])
-        in_strides = (ctypes.c_long * n_in)(*[0 if x.ndim == 1 else x.shape[1] for x in arrays])
-        out_ptrs = (ctypes.c_void_p * n_out)(*[y.ctypes.data for y in outputs])
-        out_strides = (ctypes.c_long * n_out)(*sig.nnz_out)
-        status = self._batch(
-            ctypes.c_void_p(self._pointers[name]),
-            ctypes.c_longlong(sig.sz_arg),
-            ctypes.c_longlong(sig.sz_res),
-            ctypes.c_longlong(sig.sz_iw),
-            ctypes.c_longlong(sig.sz_w),
-            ctypes.c_int(n_in),
-            ctypes.c_int(n_out),
-            ctypes.c_long(n),
+        ffi = self.ffi
+        in_ptrs = [ffi.cast("double *", x.ctypes.data) for x in arrays]
+        in_strides = [0 if x.ndim == 1 else x.shape[1] for x in arrays]
+        out_ptrs = [ffi.cast("double *", y.ctypes.data) for y in outputs]
+        status = self.library.vgt_batch(
+            self._pointers[name],
+            sig.sz_arg,
+            sig.sz_res,
+            sig.sz_iw,
+            sig.sz_w,
+            len(arrays),
+            len(outputs),
+            n,
             in_ptrs,
             in_strides,
             out_ptrs,
-            out_strides,
+            list(sig.nnz_out),
         )
         if status != 0:
             raise RuntimeError(f"compiled function {sig.name} failed (status {status})")
@@ -191,7 +202,7 @@ class InterpretedBackend:
 
 def build_functions() -> dict[str, ca.Function]:
     """Build every CasADi function of the model (a second or so)."""
-    return {key: builder() for key, builder in functions.all_builders().items()}
+    return {key: builder() for key, builder in codegen.all_builders().items()}
 
 
 def cache_dir() -> Path:
@@ -212,12 +223,22 @@ def find_compiler() -> str | None:
     return None
 
 
+def model_sources() -> list[Path]:
+    """Every source file of the ``vgtarm.model`` package, in a fixed order."""
+    return sorted(
+        path
+        for path in _PACKAGE_DIR.rglob("*")
+        if path.is_file() and path.suffix in _SOURCE_SUFFIXES and "__pycache__" not in path.parts
+    )
+
+
 def _cache_key(compiler: str) -> str:
     digest = hashlib.sha256()
-    for relative in _MODEL_SOURCES + _DRIVER_SOURCES:
-        digest.update(relative.encode())
-        digest.update((_PACKAGE_DIR / relative).read_bytes())
+    for path in model_sources():
+        digest.update(path.relative_to(_PACKAGE_DIR).as_posix().encode())
+        digest.update(path.read_bytes())
     digest.update(str(getattr(ca, "__version__", "unknown")).encode())
+    digest.update(str(cffi.__version__).encode())
     digest.update(" ".join((compiler, *_CFLAGS)).encode())
     return digest.hexdigest()[:20]
 
@@ -231,10 +252,11 @@ def _compile(built: dict[str, ca.Function], compiler: str, target: Path) -> None
         for f in built.values():
             generator.add(f)
         generator.generate(str(workdir) + os.sep)
-        sources = [str(workdir / f"{_GENERATED_NAME}.c")]
-        sources += [str(_PACKAGE_DIR / s) for s in _DRIVER_SOURCES]
+        (workdir / "layout.c").write_text(interface.layout_source())
+        sources = [str(workdir / f"{_GENERATED_NAME}.c"), str(workdir / "layout.c")]
+        sources += [str(path) for path in sorted(_CSRC.glob("*.c"))]
         library = workdir / target.name
-        base = [compiler, *_CFLAGS, "-o", str(library), *sources, "-lm"]
+        base = [compiler, *_CFLAGS, "-I", str(_CSRC), "-o", str(library), *sources, "-lm"]
         attempts = [base[:1] + ["-fopenmp"] + base[1:], base]
         errors = ""
         for command in attempts:
@@ -274,7 +296,7 @@ def _compiled_backend(compiler: str) -> CompiledBackend:
     meta = folder / f"vgtarm_{key}.json"
     if library.exists() and meta.exists():
         signatures = _load_signatures(meta)
-        if set(signatures) == set(functions.all_builders()):
+        if set(signatures) == set(codegen.all_builders()):
             return CompiledBackend(library, signatures)
     built = build_functions()
     logger.info("compiling the vgtarm model into %s (once per model version)", library)

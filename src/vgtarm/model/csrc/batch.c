@@ -8,8 +8,7 @@
  */
 #include <stdlib.h>
 
-typedef long long int vgt_int;
-typedef int (*vgt_fn)(const double **arg, double **res, vgt_int *iw, double *w, int mem);
+#include "vgtarm.h"
 
 int vgt_batch(vgt_fn f, vgt_int sz_arg, vgt_int sz_res, vgt_int sz_iw, vgt_int sz_w,
               int n_in, int n_out, long n,

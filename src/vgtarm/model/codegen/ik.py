@@ -1,4 +1,4 @@
-"""Compiled functions of the inverse-kinematics family (model layer; see functions.py for conventions).
+"""Compiled functions of the inverse-kinematics family (model layer; see core.py for conventions).
 
 Inverse kinematics (paper eq. 12) needs, per sample, the equality constraints ``c(q)`` of the
 task, their Jacobian and the Hessian of ``lam^T c``, all derived from the one kinematic
@@ -27,9 +27,9 @@ from collections.abc import Callable
 
 import casadi as ca
 
-from .functions import Builder, _function, row_major
-from .parameters import N_PARAMETERS
-from .symbolic import SX, kinematics, vee
+from ..parameters import N_JOINTS, N_PARAMETERS
+from ..symbolic import SX, kinematics, vee
+from .core import Builder, function, row_major
 
 #: Number of equality rows of each task.
 TASK_ROWS = {"position": 3, "pose": 6}
@@ -61,7 +61,13 @@ def pose_constraints(q: SX, target: SX, p: SX) -> SX:
 
 
 def _symbols(m: int) -> tuple[SX, SX, SX, SX, SX]:
-    return SX.sym("q", 7), SX.sym("lam", m), SX.sym("qd", 7), SX.sym("lam_d", m), SX.sym("p", N_PARAMETERS)
+    return (
+        SX.sym("q", N_JOINTS),
+        SX.sym("lam", m),
+        SX.sym("qd", N_JOINTS),
+        SX.sym("lam_d", m),
+        SX.sym("p", N_PARAMETERS),
+    )
 
 
 def _kkt_parts(c: SX, q: SX, lam: SX) -> tuple[SX, SX]:
@@ -76,9 +82,7 @@ def position_kkt() -> ca.Function:
     q, lam, _, _, p = _symbols(3)
     c = kinematics(q, p).tip
     J, H = _kkt_parts(c, q, lam)
-    return _function(
-        "vgt_ik_position", [q, lam, p], [c, row_major(J), row_major(H)], ["q", "lam", "p"], ["c", "J", "H"]
-    )
+    return function("vgt_ik_position", [q, lam, p], [c, row_major(J), row_major(H)], ["q", "lam", "p"], ["c", "J", "H"])
 
 
 def position_d2() -> ca.Function:
@@ -89,7 +93,7 @@ def position_d2() -> ca.Function:
     F = ca.vertcat(J.T @ lam, c)
     z, dz = ca.vertcat(q, lam), ca.vertcat(qd, lam_d)
     d2 = ca.jtimes(ca.jtimes(F, z, dz), z, dz)
-    return _function("vgt_ik_position_d2", [q, lam, qd, lam_d, p], [d2], ["q", "lam", "qd", "lam_d", "p"], ["d2"])
+    return function("vgt_ik_position_d2", [q, lam, qd, lam_d, p], [d2], ["q", "lam", "qd", "lam_d", "p"], ["d2"])
 
 
 def pose_kkt() -> ca.Function:
@@ -101,7 +105,7 @@ def pose_kkt() -> ca.Function:
     rd = SX.sym("R_d", 9)
     c = pose_constraints(q, rotation_from_row_major(rd), p)
     J, H = _kkt_parts(c, q, lam)
-    return _function(
+    return function(
         "vgt_ik_pose", [q, lam, rd, p], [c, row_major(J), row_major(H)], ["q", "lam", "R_d", "p"], ["c", "J", "H"]
     )
 
@@ -127,7 +131,7 @@ def pose_dt() -> ca.Function:
     """``(q, lam, R_d, w, a, p) -> dF/ds`` (13) at fixed ``(q, lam)``, without the desired point's term."""
     F, (q, lam, _, _, rd, w, a, p), _, s = _moving_pose_residual()
     dt = ca.substitute(ca.jacobian(F, s), s, 0)
-    return _function("vgt_ik_pose_dt", [q, lam, rd, w, a, p], [dt], ["q", "lam", "R_d", "w", "a", "p"], ["dt"])
+    return function("vgt_ik_pose_dt", [q, lam, rd, w, a, p], [dt], ["q", "lam", "R_d", "w", "a", "p"], ["dt"])
 
 
 def pose_d2() -> ca.Function:
@@ -141,7 +145,7 @@ def pose_d2() -> ca.Function:
     dz = ca.vertcat(qd, lam_d, 1)
     d2 = ca.substitute(ca.jtimes(dF, z, dz), s, 0)
     names = ["q", "lam", "qd", "lam_d", "R_d", "w", "a", "p"]
-    return _function("vgt_ik_pose_d2", symbols, [d2], names, ["d2"])
+    return function("vgt_ik_pose_d2", symbols, [d2], names, ["d2"])
 
 
 def _rates_through_qr(K: SX, first_rhs: SX, second_rhs_of: Callable[[SX], SX]) -> tuple[SX, SX]:
@@ -160,7 +164,7 @@ def position_rates() -> ca.Function:
     for both rate systems. Samples with active limits or triangle rows use the general path.
     """
     q, lam, qd_s, lam_d_s, p = _symbols(3)
-    w, xd, xdd = SX.sym("w", 7), SX.sym("xd", 3), SX.sym("xdd", 3)
+    w, xd, xdd = SX.sym("w", N_JOINTS), SX.sym("xd", 3), SX.sym("xdd", 3)
     c = kinematics(q, p).tip
     J, H = _kkt_parts(c, q, lam)
     K = ca.blockcat([[ca.diag(w) + H, J.T], [J, SX.zeros(3, 3)]])
@@ -169,36 +173,36 @@ def position_rates() -> ca.Function:
     d2 = ca.jtimes(ca.jtimes(F, z, dz), z, dz)
 
     def second_rhs(first: SX) -> SX:
-        return ca.vertcat(SX.zeros(7), xdd) - ca.substitute(d2, dz, first)
+        return ca.vertcat(SX.zeros(N_JOINTS), xdd) - ca.substitute(d2, dz, first)
 
-    first, second = _rates_through_qr(K, ca.vertcat(SX.zeros(7), xd), second_rhs)
+    first, second = _rates_through_qr(K, ca.vertcat(SX.zeros(N_JOINTS), xd), second_rhs)
     names = ["q", "lam", "w", "xd", "xdd", "p"]
-    outputs = [c, row_major(J), row_major(H), first[:7], first[7:], second[:7], second[7:]]
+    outputs = [c, row_major(J), row_major(H), first[:N_JOINTS], first[N_JOINTS:], second[:N_JOINTS], second[N_JOINTS:]]
     out_names = ["c", "J", "H", "qd", "lam_d", "qdd", "lam_dd"]
-    return _function("vgt_ik_position_rates", [q, lam, w, xd, xdd, p], outputs, names, out_names)
+    return function("vgt_ik_position_rates", [q, lam, w, xd, xdd, p], outputs, names, out_names)
 
 
 def pose_rates() -> ca.Function:
     """As :func:`position_rates` for the pose task: ``(q, lam, w, xd, xdd, R_d, w_d, a_d, p) -> (c, J, H, qd,
     lam_d, qdd, lam_dd)`` with the target orientation ``R_d`` (row-major) turning at ``w_d``, ``a_d``."""
     F, (q, lam, qd_s, lam_d_s, rd, w_d, a_d, p), dF, s = _moving_pose_residual()
-    w, xd, xdd = SX.sym("w", 7), SX.sym("xd", 3), SX.sym("xdd", 3)
+    w, xd, xdd = SX.sym("w", N_JOINTS), SX.sym("xd", 3), SX.sym("xdd", 3)
     at_rest = ca.substitute(F, s, 0)
-    c = at_rest[7:]
+    c = at_rest[N_JOINTS:]
     J, H = _kkt_parts(c, q, lam)
     K = ca.blockcat([[ca.diag(w) + H, J.T], [J, SX.zeros(6, 6)]])
     z, dz = ca.vertcat(q, lam, s), ca.vertcat(qd_s, lam_d_s, 1)
-    first_rhs = ca.vertcat(SX.zeros(7), xd, SX.zeros(3)) - ca.substitute(ca.jacobian(F, s), s, 0)
+    first_rhs = ca.vertcat(SX.zeros(N_JOINTS), xd, SX.zeros(3)) - ca.substitute(ca.jacobian(F, s), s, 0)
     d2 = ca.substitute(ca.jtimes(dF, z, dz), s, 0)
 
     def second_rhs(first: SX) -> SX:
-        return ca.vertcat(SX.zeros(7), xdd, SX.zeros(3)) - ca.substitute(d2, ca.vertcat(qd_s, lam_d_s), first)
+        return ca.vertcat(SX.zeros(N_JOINTS), xdd, SX.zeros(3)) - ca.substitute(d2, ca.vertcat(qd_s, lam_d_s), first)
 
     first, second = _rates_through_qr(K, first_rhs, second_rhs)
     names = ["q", "lam", "w", "xd", "xdd", "R_d", "w_d", "a_d", "p"]
-    outputs = [c, row_major(J), row_major(H), first[:7], first[7:], second[:7], second[7:]]
+    outputs = [c, row_major(J), row_major(H), first[:N_JOINTS], first[N_JOINTS:], second[:N_JOINTS], second[N_JOINTS:]]
     out_names = ["c", "J", "H", "qd", "lam_d", "qdd", "lam_dd"]
-    return _function("vgt_ik_pose_rates", [q, lam, w, xd, xdd, rd, w_d, a_d, p], outputs, names, out_names)
+    return function("vgt_ik_pose_rates", [q, lam, w, xd, xdd, rd, w_d, a_d, p], outputs, names, out_names)
 
 
 #: Functions of this family, by name.

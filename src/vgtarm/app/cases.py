@@ -10,13 +10,13 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from . import paths
-from .control import ComputedForceControl, SwitchingControl
-from .errors import InputError
-from .ga import GAOptions
-from .parameters import RobotParameters
-from .robot import Robot
-from .simulation import ExternalForce, JointReference, SimulationResult, simulate
+from .. import paths
+from ..control import ComputedForceControl, SwitchingControl
+from ..errors import InputError
+from ..ga import GAOptions
+from ..model.parameters import RobotParameters
+from ..model.robot import Robot
+from ..simulation import ExternalForce, JointReference, SimulationResult, simulate
 
 CONTROLLERS = ("cfc", "scm")
 

@@ -16,11 +16,11 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
+from ..fileio import atomic_write_text
+from ..model.robot import Robot
+from ..simulation import JointReference, SimulationResult
 from .cases import PAPER_RESULTS, case_study, joint_reference, run_case
-from .fileio import atomic_write_text
 from .plotting import plot_efforts, plot_path_3d, plot_tip_error, save_figure
-from .robot import Robot
-from .simulation import JointReference, SimulationResult
 
 
 @dataclass(frozen=True)

@@ -13,12 +13,12 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__, paths
-from .errors import InputError, UnreachableError, VgtarmError
-from .ik import CSV_COLUMNS, write_csv
-from .parameters import JOINT_NAMES, JOINT_UNITS
-from .paths import Path as DesiredPath
-from .robot import load_robot
+from .. import __version__, paths
+from ..errors import InputError, UnreachableError, VgtarmError
+from ..ik import CSV_COLUMNS, write_csv
+from ..model.parameters import JOINT_NAMES, JOINT_UNITS
+from ..model.robot import load_robot
+from ..paths import Path as DesiredPath
 
 
 def _format_vector(values: Sequence[float] | np.ndarray, digits: int = 6) -> str:
@@ -73,7 +73,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from .cases import run_case
-    from .errors import SimulationError
+    from ..errors import SimulationError
     from .plotting import comparison_figure, save_figure
 
     robot = load_robot(args.config)
@@ -161,7 +161,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 
 
 def _add_run_options(parser: argparse.ArgumentParser) -> None:
-    from .simulation import INTEGRATORS
+    from ..simulation import INTEGRATORS
 
     parser.add_argument(
         "--integrator",

@@ -1,0 +1,32 @@
+"""Shared helpers of code generation: every function family imports only this module.
+
+Every function takes and returns dense column vectors; matrices are flattened row by row
+(``vec(A.T)``), so a batch output of shape ``(n, r*c)`` reshapes to ``(n, r, c)`` directly.
+The parameter vector ``p`` is always the last input.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import casadi as ca
+
+from ..parameters import N_JOINTS, N_PARAMETERS
+from ..symbolic import SX
+
+Builder = Callable[[], ca.Function]
+
+
+def row_major(matrix: SX) -> SX:
+    """Flatten a matrix row by row into a column vector."""
+    return ca.vec(matrix.T)
+
+
+def function(name: str, inputs: list[SX], outputs: list[SX], in_names: list[str], out_names: list[str]) -> ca.Function:
+    """A CasADi function whose outputs are dense (structural zeros stored), as the drivers expect."""
+    return ca.Function(name, inputs, [ca.densify(o) for o in outputs], in_names, out_names)
+
+
+def symbols() -> tuple[SX, SX, SX]:
+    """Joint positions, joint velocities and the parameter vector, sized from the model."""
+    return SX.sym("q", N_JOINTS), SX.sym("qd", N_JOINTS), SX.sym("p", N_PARAMETERS)
