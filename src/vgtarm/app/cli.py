@@ -72,8 +72,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     """Run one case study, print its summary, write its results and figures."""
     from tqdm import tqdm
 
-    from .cases import run_case
     from ..errors import SimulationError
+    from .cases import run_case
     from .plotting import comparison_figure, save_figure
 
     robot = load_robot(args.config)

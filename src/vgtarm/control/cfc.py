@@ -9,6 +9,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..model.robot import Robot
 from .gains import Gains
+from .law import computed_force
 
 Array = NDArray[np.float64]
 
@@ -43,6 +44,4 @@ class ComputedForceControl:
         g = gains or self.gains
         e = np.asarray(q_d, dtype=float) - np.asarray(q, dtype=float)
         e_dot = np.asarray(qd_d, dtype=float) - np.asarray(qd, dtype=float)
-        qdd_ref = np.asarray(qdd_d, dtype=float) + e @ g.Kp.T + e_dot @ g.Kv.T
-        M = model.mass_matrix(q)
-        return (M @ qdd_ref[..., None])[..., 0] + model.bias_forces(q, qd)
+        return computed_force(model.mass_matrix(q), model.bias_forces(q, qd), qdd_d, e, e_dot, g.Kp, g.Kv)

@@ -31,6 +31,7 @@ from ..errors import InputError
 from ..ga import GAOptions, GAResult, minimize
 from ..model.robot import Robot
 from .gains import Gains
+from .law import commanded_acceleration
 
 Array = NDArray[np.float64]
 
@@ -142,7 +143,7 @@ def predict_tip_error(
     for j in range(len(refs[0]) - 1):
         e = refs[0][j] - q
         e_dot = refs[1][j] - qd
-        a = refs[2][j] + np.einsum("pil,pl->pi", Kp_a, e) + np.einsum("pil,pl->pi", Kv_a, e_dot)
+        a = commanded_acceleration(refs[2][j], e, e_dot, Kp_a, Kv_a)
         q = q + dt * qd
         qd = qd + dt * a
         alive &= np.isfinite(q).all(axis=1) & model.is_assemblable(np.where(np.isfinite(q), q, 0.0))

@@ -11,6 +11,8 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
+from ..control.law import computed_force
+from ..control.scm import predict_tip_error
 from ..model.closedloop import (
     ABOVE_THRESHOLD,
     DONE,
@@ -20,7 +22,6 @@ from ..model.closedloop import (
     LoopArrays,
     LoopSettings,
 )
-from ..control.scm import predict_tip_error
 from ..model.robot import Robot
 
 Array = NDArray[np.float64]
@@ -90,8 +91,8 @@ class PythonLoop:
             if settings.threshold > 0 and arrays.error[k] > settings.threshold:
                 return ABOVE_THRESHOLD, k
             e, e_dot = inp["q_d"][k] - q, inp["qd_d"][k] - qd
-            qdd_ref = inp["qdd_d"][k] + Kp @ e + Kv @ e_dot
-            arrays.F[k] = self.model.mass_matrix(q) @ qdd_ref + self.model.bias_forces(q, qd)
+            M, C = self.model.mass_matrix(q), self.model.bias_forces(q, qd)
+            arrays.F[k] = computed_force(M, C, inp["qdd_d"][k], e, e_dot, Kp, Kv)
             dist = inp["disturbance"][k]
             arrays.f_ext[k] = self._tool_force(settings, velocity, dist)
             if k + 1 >= arrays.n:

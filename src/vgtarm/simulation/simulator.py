@@ -21,6 +21,10 @@ from typing import Any
 
 import numpy as np
 
+from ..control.cfc import ComputedForceControl
+from ..control.scm import SwitchingControl
+from ..errors import InputError, SimulationError
+from ..model.assembly import linear_form
 from ..model.closedloop import (
     ABOVE_THRESHOLD,
     DONE,
@@ -33,10 +37,6 @@ from ..model.closedloop import (
     LoopArrays,
     LoopSettings,
 )
-from ..control.cfc import ComputedForceControl
-from ..control.scm import SwitchingControl
-from ..errors import InputError, SimulationError
-from ..model.assembly import linear_form
 from ..model.compiled import CompiledBackend
 from ..model.parameters import JOINT_NAMES, RobotParameters
 from ..model.robot import Robot
