@@ -1,0 +1,191 @@
+"""The layers of the package point only down, there is no import cycle, the model layer is light,
+and the C interface as cffi reads it matches the compiler's layout."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import vgtarm
+
+PACKAGE = Path(vgtarm.__file__).resolve().parent
+
+#: The package's own ``__init__`` (its public names: the errors and the model).
+ROOT = "__root__"
+#: Layers from the bottom up; a module may import its own layer and the layers below.
+LAYERS: tuple[frozenset[str], ...] = (
+    frozenset({"errors", "fileio"}),
+    frozenset({"model", ROOT}),
+    frozenset({"paths", "ga"}),
+    frozenset({"ik"}),
+    frozenset({"control"}),
+    frozenset({"simulation"}),
+    frozenset({"mujoco_bridge"}),
+    frozenset({"study"}),
+    frozenset({"app"}),
+)
+#: Imports a lower layer may make inside a function body, resolved at call time (documented).
+ALLOWED_UPWARD = {("model.robot", "ik")}  # Robot.inverse_kinematics, a thin convenience
+
+
+def _top(module: str) -> str:
+    return module.split(".")[0]
+
+
+def _layer(top: str) -> int:
+    for level, names in enumerate(LAYERS):
+        if top in names:
+            return level
+    raise AssertionError(f"vgtarm.{top} belongs to no layer: add it to LAYERS in {__file__}")
+
+
+def _modules() -> dict[str, Path]:
+    found = {}
+    for path in PACKAGE.rglob("*.py"):
+        parts = path.relative_to(PACKAGE).with_suffix("").parts
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        if parts:
+            found[".".join(parts)] = path
+    return found
+
+
+def _imports(module: str, path: Path) -> list[tuple[str, bool]]:
+    """``(imported vgtarm module, at module level)`` for every import of ``module``."""
+    tree = ast.parse(path.read_text())
+    package = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
+    top_level = {id(node) for node in tree.body}
+    for node in tree.body:  # imports under `if TYPE_CHECKING:` or try at module level count too
+        for child in ast.walk(node):
+            if isinstance(child, ast.Import | ast.ImportFrom) and not isinstance(node, ast.FunctionDef | ast.ClassDef):
+                top_level.add(id(child))
+    found: list[tuple[str, bool]] = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package[: len(package) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            elif node.module and node.module.startswith("vgtarm."):
+                target = node.module.removeprefix("vgtarm.")
+            else:
+                continue
+            if node.module is None:  # `from .. import x`: x is a module or a name of the package
+                prefix = f"{target}." if target else ""
+                targets = [
+                    f"{prefix}{alias.name}" if f"{prefix}{alias.name}" in MODULES else (target or ROOT)
+                    for alias in node.names
+                ]
+            else:
+                targets = [target]
+            found += [(t, id(node) in top_level) for t in targets]
+        elif isinstance(node, ast.Import):
+            found += [
+                (alias.name.removeprefix("vgtarm."), id(node) in top_level)
+                for alias in node.names
+                if alias.name.startswith("vgtarm.")
+            ]
+    return found
+
+
+MODULES = _modules()
+
+
+@pytest.mark.parametrize("module", sorted(m for m in MODULES if "." in m or m in {"errors", "fileio", "paths", "ga"}))
+def test_no_module_imports_a_layer_above_it(module):
+    own = _layer(_top(module))
+    for target, _ in _imports(module, MODULES[module]):
+        if (module, _top(target)) in ALLOWED_UPWARD:
+            continue
+        assert _layer(_top(target)) <= own, f"vgtarm.{module} (layer {own}) imports vgtarm.{target} from a layer above"
+
+
+def test_the_allowed_upward_import_is_only_inside_a_function():
+    for module, target in ALLOWED_UPWARD:
+        for imported, at_module_level in _imports(module, MODULES[module]):
+            if _top(imported) == target:
+                assert not at_module_level, f"vgtarm.{module} imports vgtarm.{imported} at module load"
+
+
+def test_no_import_cycle_among_modules():
+    graph = {
+        m: {t for t, top in _imports(m, p) if top and t in MODULES and t != m and not m.startswith(t + ".")}
+        for m, p in MODULES.items()
+    }
+    # a package's __init__ importing its own submodules is not a cycle for the submodules
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(node: str) -> None:
+        state[node] = 1
+        stack.append(node)
+        for nxt in sorted(graph[node]):
+            if state.get(nxt) == 1:
+                cycle = stack[stack.index(nxt) :] + [nxt]
+                raise AssertionError("import cycle: " + " -> ".join(cycle))
+            if nxt not in state:
+                visit(nxt)
+        stack.pop()
+        state[node] = 2
+
+    for node in sorted(graph):
+        if node not in state:
+            visit(node)
+
+
+def test_importing_the_model_loads_neither_ik_nor_scipy_optimize():
+    code = (
+        "import sys, vgtarm.model; "
+        "bad = [m for m in sys.modules if m.startswith(('vgtarm.ik', 'vgtarm.control', 'vgtarm.simulation', "
+        "'vgtarm.app', 'vgtarm.paths', 'scipy.optimize'))]; print(bad)"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "[]", done.stdout
+
+
+def test_codegen_refuses_a_duplicate_function_name(monkeypatch):
+    from vgtarm.model import codegen
+
+    clash = {next(iter(codegen.model.BUILDERS)): codegen.model.BUILDERS[next(iter(codegen.model.BUILDERS))]}
+    monkeypatch.setattr(codegen.control, "BUILDERS", {**codegen.control.BUILDERS, **clash})
+    with pytest.raises(RuntimeError, match="duplicate compiled function names"):
+        codegen.all_builders()
+
+
+def test_cache_key_covers_every_model_source():
+    from vgtarm.model import compiled
+
+    sources = {p.relative_to(PACKAGE / "model").as_posix() for p in compiled.model_sources()}
+    on_disk = {
+        p.relative_to(PACKAGE / "model").as_posix()
+        for p in (PACKAGE / "model").rglob("*")
+        if p.suffix in (".py", ".c", ".h") and "__pycache__" not in p.parts
+    }
+    assert on_disk <= sources
+
+
+def test_c_interface_layout_matches_the_compiler(robot):
+    from vgtarm.model import interface
+    from vgtarm.model.compiled import CompiledBackend
+
+    if not isinstance(robot.backend, CompiledBackend):
+        pytest.skip("no C compiler: the interpreted backend has no C interface")
+    compiled = robot.backend.layout()
+    python = interface.python_layout()
+    fields = interface.layout_fields()
+    assert len(compiled) == len(python) == len(fields)
+    mismatch = [(f, c, p) for f, c, p in zip(fields, compiled, python, strict=True) if c != p]
+    assert not mismatch, f"(structure, field), compiler, cffi: {mismatch}"
+    assert compiled[0] > 0
+
+
+def test_status_and_integrator_codes_come_from_the_header():
+    from vgtarm.model import closedloop, interface
+
+    header = interface.HEADER.read_text()
+    for name, code in interface.enum("vgt_status").items():
+        assert f"{name} = {code}" in header.replace("  ", " ")
+    assert closedloop.INTEGRATOR_CODES == {"euler": 0, "semi_implicit_euler": 1, "rk4": 2}
