@@ -28,7 +28,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError
-from ..ga import GAOptions, GAResult, minimize
+from ..ga import GAOptions, GAResult, encode, minimize
+from ..model.closedloop import PREDICTIONS
 from ..model.robot import Robot
 from .gains import Gains
 from .law import commanded_acceleration
@@ -51,6 +52,12 @@ class SwitchingControl:
         ga: the genetic algorithm's options (paper Appendix B by default).
         horizon: prediction horizon of the fitness, in control periods (>= 1).
         seed_fixed_gains: put the fixed gains into the first population.
+        prediction: how the compiled GA maps the predicted joint errors to the tip:
+            ``"quadratic"`` (default: tip Jacobian and Hessian at the reference), ``"linear"``
+            (Jacobian only) or ``"exact"`` (forward kinematics of every predicted step, as the
+            NumPy GA always does). See ``docs/control.md`` for how far apart they are.
+        exact_above: with ``"linear"``/``"quadratic"``, a candidate whose predicted joint-error
+            norm exceeds this (m, rad) is predicted exactly instead (0: never).
 
     The GA runs at every control period whose error exceeds the threshold, as in the paper.
     Reusing its gains for several periods is not offered: gains tuned over a short horizon can
@@ -65,6 +72,8 @@ class SwitchingControl:
     ga: GAOptions = field(default_factory=GAOptions)
     horizon: int = 20
     seed_fixed_gains: bool = True
+    prediction: str = "quadratic"
+    exact_above: float = 3e-3
     name: str = "scm"
 
     def __post_init__(self) -> None:
@@ -75,6 +84,10 @@ class SwitchingControl:
                 raise InputError(f"{label} = {(lo, hi)!r}: expected finite (min, max) with min < max")
         if not (isinstance(self.horizon, int | np.integer) and self.horizon >= 1):
             raise InputError(f"horizon = {self.horizon!r}: expected a whole number of control periods >= 1")
+        if not (np.isfinite(self.exact_above) and self.exact_above >= 0):
+            raise InputError(f"exact_above = {self.exact_above!r}: expected a joint-error norm >= 0 (m, rad; 0 = never)")
+        if self.prediction not in PREDICTIONS:
+            raise InputError(f"prediction = {self.prediction!r}: expected one of {list(PREDICTIONS)}")
 
     @classmethod
     def with_gains(cls, Kp: ArrayLike, Kv: ArrayLike, **options: object) -> SwitchingControl:
@@ -87,16 +100,28 @@ class SwitchingControl:
         return self.fixed
 
     def bounds(self) -> tuple[Array, Array]:
-        """Lower and upper bounds of the 98 genes: ``Kp`` row by row, then ``Kv``."""
-        lower = np.concatenate([np.full(49, self.kp_bounds[0]), np.full(49, self.kv_bounds[0])])
-        upper = np.concatenate([np.full(49, self.kp_bounds[1]), np.full(49, self.kv_bounds[1])])
+        """Lower and upper bounds of the ``2 n^2`` genes: ``Kp`` row by row, then ``Kv``."""
+        nn = self.fixed.Kp.size
+        lower = np.concatenate([np.full(nn, self.kp_bounds[0]), np.full(nn, self.kv_bounds[0])])
+        upper = np.concatenate([np.full(nn, self.kp_bounds[1]), np.full(nn, self.kv_bounds[1])])
         return lower, upper
 
     @staticmethod
     def split(genes: Array) -> tuple[Array, Array]:
-        """Genes ``(P, 98)`` to ``Kp`` and ``Kv`` ``(P, 7, 7)``."""
+        """Genes ``(P, 2 n^2)`` to ``Kp`` and ``Kv`` ``(P, n, n)``."""
         genes = np.asarray(genes, dtype=float)
-        return genes[..., :49].reshape(genes.shape[:-1] + (7, 7)), genes[..., 49:].reshape(genes.shape[:-1] + (7, 7))
+        nn = genes.shape[-1] // 2
+        n = int(round(nn**0.5))
+        shape = genes.shape[:-1] + (n, n)
+        return genes[..., :nn].reshape(shape), genes[..., nn:].reshape(shape)
+
+    def initial_bits(self) -> NDArray[np.uint8]:
+        """``(k, n_genes * n_bits)`` codes of the individuals that seed the first population."""
+        lower, upper = self.bounds()
+        if not self.seed_fixed_gains:
+            return np.zeros((0, len(lower) * self.ga.n_bits), dtype=np.uint8)
+        fixed = np.concatenate([self.fixed.Kp.ravel(), self.fixed.Kv.ravel()])[None, :]
+        return encode(fixed, lower, upper, self.ga.n_bits)
 
     def tune(self, predict: Predictor, rng: np.random.Generator) -> tuple[Gains, GAResult]:
         """Run the GA on the predicted tip error; returns the chosen gains and the GA's record."""

@@ -142,6 +142,11 @@ class ClosedLoopDriver:
         self._model = ffi().new("vgt_model *", {field: backend.call(field) for field in _MODEL_FIELDS})
         self._lib = backend.library
 
+    @property
+    def model(self) -> Any:
+        """The ``vgt_model`` structure (generated functions the drivers call)."""
+        return self._model
+
     def simulate(
         self, settings: LoopSettings, arrays: LoopArrays, Kp: Array, Kv: Array, k0: int, k1: int
     ) -> tuple[int, int]:
@@ -178,3 +183,177 @@ class ClosedLoopDriver:
             return fitness
 
         return predict
+
+
+#: GA prediction modes by name (enum ``vgt_prediction`` of the header, ``VGT_PREDICT_LINEAR`` -> ``"linear"``).
+PREDICTIONS = {name.removeprefix("VGT_PREDICT_").lower(): code for name, code in enum("vgt_prediction").items()}
+
+
+def bit_words(n_bits_total: int) -> int:
+    """64-bit words per packed individual of ``n_bits_total`` bits (one spare word, always zero)."""
+    return -(-n_bits_total // 64) + 1
+
+
+def pack_bits(bits: NDArray[np.uint8], words: int) -> NDArray[np.uint64]:
+    """Rows of 0/1 bits ``(..., L)`` packed most significant bit first into ``(..., words)`` words."""
+    packed = np.packbits(np.asarray(bits, dtype=np.uint8), axis=-1)
+    padded = np.zeros(packed.shape[:-1] + (words * 8,), dtype=np.uint8)
+    padded[..., : packed.shape[-1]] = packed
+    return np.ascontiguousarray(padded.view(">u8").astype(np.uint64))
+
+
+def unpack_bits(words: NDArray[np.uint64], n_bits_total: int) -> NDArray[np.uint8]:
+    """Inverse of :func:`pack_bits`."""
+    as_bytes = np.ascontiguousarray(np.asarray(words, dtype=np.uint64).astype(">u8")).view(np.uint8)
+    return np.unpackbits(as_bytes, axis=-1, count=n_bits_total)
+
+
+@dataclass(frozen=True)
+class GAActivationResult:
+    """What one compiled GA activation returns."""
+
+    genes: Array
+    best_cost: float
+    seeded_cost: float
+    generations: int
+    evaluations: int
+
+
+class CompiledGA:
+    """The switching method's genetic algorithm in C (``csrc/ga.c``), bound to one run.
+
+    Args:
+        driver: the compiled loop of the backend.
+        dt: control period (s).
+        lower, upper: ``(n_genes,)`` gene bounds (``Kp`` then ``Kv``, row by row).
+        initial_bits: ``(k, n_genes * n_bits)`` 0/1 rows that start the first population.
+        n_bits, population, generations, elite, p_crossover, p_mutation: the GA's settings.
+        horizon: prediction horizon (control periods).
+        prediction: ``"exact"``, ``"linear"`` or ``"quadratic"`` (see ``csrc/ga.c``).
+        exact_above: joint-error norm above which a candidate is predicted exactly (0: never).
+        p_ctrl: the controller's parameter vector.
+        q_d, qd_d, qdd_d: ``(N, n)`` joint reference; ``tip_d`` ``(N, 3)`` desired tip.
+        tip_offset: ``(N, 3)`` ``tip_d - P^(q_d)``; ``J_d`` ``(N, 3, n)`` and ``H_d``
+            ``(N, 3, n, n)`` (quadratic only) the model's tip Jacobian and Hessian at ``q_d``.
+    """
+
+    def __init__(
+        self,
+        driver: ClosedLoopDriver,
+        *,
+        dt: float,
+        lower: Array,
+        upper: Array,
+        initial_bits: NDArray[np.uint8],
+        n_bits: int,
+        population: int,
+        generations: int,
+        elite: int,
+        p_crossover: float,
+        p_mutation: float,
+        horizon: int,
+        prediction: str,
+        exact_above: float,
+        p_ctrl: Array,
+        q_d: Array,
+        qd_d: Array,
+        qdd_d: Array,
+        tip_d: Array,
+        tip_offset: Array,
+        J_d: Array,
+        H_d: Array | None = None,
+    ) -> None:
+        if prediction not in PREDICTIONS:
+            raise ValueError(f"prediction = {prediction!r}: expected one of {sorted(PREDICTIONS)}")
+        self.driver = driver
+        n, n_joints = np.shape(q_d)
+        n_genes = len(lower)
+        self.n_joints, self.n_genes, self.n = n_joints, n_genes, n
+        self.horizon = horizon
+        words = bit_words(n_genes * n_bits)
+        self._arrays = {
+            name: np.ascontiguousarray(value, dtype=np.float64)
+            for name, value in dict(
+                lower=lower,
+                upper=upper,
+                p_ctrl=p_ctrl,
+                q_d=q_d,
+                qd_d=qd_d,
+                qdd_d=qdd_d,
+                tip_d=tip_d,
+                tip_offset=tip_offset,
+                J_d=J_d,
+                H_d=H_d if H_d is not None else np.zeros(1),
+            ).items()
+        }
+        self._initial = pack_bits(np.atleast_2d(initial_bits), words)
+        self._settings = ffi().new("vgt_settings *", {"n_joints": n_joints, "dt": dt})
+        self._ga = ffi().new(
+            "vgt_ga_settings *",
+            {
+                "n_genes": n_genes,
+                "n_bits": n_bits,
+                "words": words,
+                "population": population,
+                "generations": generations,
+                "elite": elite,
+                "n_seeded": len(self._initial),
+                "prediction": PREDICTIONS[prediction],
+                "p_crossover": p_crossover,
+                "p_mutation": p_mutation,
+                "horizon": horizon,
+                "exact_above": exact_above,
+            },
+        )
+        self._best = np.empty(n_genes)
+        self._state = np.empty((2, n_joints))
+        self._result = ffi().new("vgt_ga_result *", {"best": _ptr(self._best)})
+        self._problem = ffi().new("vgt_ga_problem *")
+        self._problem.lower = _ptr(self._arrays["lower"])
+        self._problem.upper = _ptr(self._arrays["upper"])
+        self._problem.initial_bits = ffi().cast("uint64_t *", self._initial.ctypes.data)
+        self._problem.p_ctrl = _ptr(self._arrays["p_ctrl"])
+        self._problem.q0 = _ptr(self._state[0:1])
+        self._problem.qd0 = ffi().cast("double *", self._state[1:2].ctypes.data)
+        self._base = {name: _ptr(self._arrays[name]) for name in ("q_d", "qd_d", "qdd_d", "tip_d", "tip_offset", "J_d")}
+        self._base["H_d"] = _ptr(self._arrays["H_d"])
+        self._row = {"q_d": n_joints, "qd_d": n_joints, "qdd_d": n_joints, "tip_d": 3, "tip_offset": 3}
+        self._row["J_d"] = 3 * n_joints
+        self._row["H_d"] = 3 * n_joints * n_joints if H_d is not None else 0
+
+    def _window(self, k: int, q0: Array, qd0: Array) -> int:
+        """Point the problem at samples ``k .. k+h``; returns the horizon ``h`` left."""
+        horizon = min(self.horizon, self.n - 1 - k)
+        self._state[0], self._state[1] = q0, qd0
+        for name, base in self._base.items():
+            setattr(self._problem, name, base + k * self._row[name])
+        self._ga.horizon = horizon
+        return horizon
+
+    def activate(self, k: int, q0: Array, qd0: Array, seed: int) -> GAActivationResult:
+        """Run one activation at sample ``k`` from the state ``(q0, qd0)`` with the generator's ``seed``."""
+        self._window(k, q0, qd0)
+        status = self.driver.backend.library.vgt_ga_activation(
+            self.driver.model, self._settings, self._ga, self._problem, seed, self._result
+        )
+        if status != DONE:
+            raise MemoryError("the compiled genetic algorithm could not allocate its work arrays")
+        return GAActivationResult(
+            genes=self._best.copy(),
+            best_cost=float(self._result.best_cost),
+            seeded_cost=float(self._result.seeded_cost),
+            generations=int(self._result.generations),
+            evaluations=int(self._result.evaluations),
+        )
+
+    def predict(self, k: int, q0: Array, qd0: Array, genes: Array) -> Array:
+        """The GA's predicted tip error of decoded candidates ``genes`` ``(P, n_genes)`` at sample ``k``."""
+        self._window(k, q0, qd0)
+        g = np.ascontiguousarray(np.atleast_2d(genes), dtype=np.float64)
+        cost = np.empty(len(g))
+        status = self.driver.backend.library.vgt_ga_predict(
+            self.driver.model, self._settings, self._ga, self._problem, len(g), _ptr(g), _ptr(cost)
+        )
+        if status != DONE:
+            raise MemoryError("the compiled GA prediction could not allocate its work arrays")
+        return cost

@@ -15,8 +15,6 @@ from typing import Any
 from cffi import FFI
 
 HEADER = Path(__file__).resolve().parent / "csrc" / "vgtarm.h"
-#: Structures whose layout the compiled library reports (``vgt_layout``).
-STRUCTURES = ("vgt_call", "vgt_model", "vgt_settings", "vgt_run")
 
 
 @functools.cache
@@ -32,10 +30,16 @@ def enum(name: str) -> dict[str, int]:
     return dict(ffi().typeof(f"enum {name}").relements)
 
 
+def structures() -> list[str]:
+    """Every structure type the header defines (by its typedef name), in a fixed order."""
+    typedefs, _, _ = ffi().list_types()
+    return sorted(name for name in typedefs if ffi().typeof(name).kind == "struct")
+
+
 def layout_fields() -> list[tuple[str, str | None]]:
     """``(structure, field)`` pairs in the order ``vgt_layout`` writes them; field None = size."""
     items: list[tuple[str, str | None]] = []
-    for name in STRUCTURES:
+    for name in structures():
         items.append((name, None))
         items.extend((name, field) for field, _ in ffi().typeof(name).fields)
     return items
@@ -43,7 +47,7 @@ def layout_fields() -> list[tuple[str, str | None]]:
 
 def layout_source() -> str:
     """C source of ``vgt_layout``, generated from the parsed header."""
-    lines = ["#include <stddef.h>", '#include "vgtarm.h"', "", "void vgt_layout(long *out)", "{"]
+    lines = ["#include <stddef.h>", "#include <stdint.h>", '#include "vgtarm.h"', "", "void vgt_layout(long *out)", "{"]
     for i, (struct, field) in enumerate(layout_fields()):
         value = f"sizeof({struct})" if field is None else f"offsetof({struct}, {field})"
         lines.append(f"    out[{i}] = (long){value};")

@@ -146,6 +146,12 @@ class Robot:
         shape, (jp, _) = self._evaluate("jac", [("q", q, 7)])
         return jp.reshape(shape + (3, 7))
 
+    def tip_hessian(self, q: ArrayLike) -> Array:
+        """Second derivatives of the tip point ``d^2 P_k / dq_l dq_m``, ``(..., 3, n, n)``."""
+        n = self.parameters.home.shape[-1]
+        shape, (h,) = self._evaluate("tip_hessian", [("q", q, n)])
+        return h.reshape(shape + (3, n, n))
+
     def angular_jacobian(self, q: ArrayLike) -> Array:
         """Angular Jacobian of the end-effector (F0 components), ``(..., 3, 7)``."""
         shape, (_, jw) = self._evaluate("jac", [("q", q, 7)])

@@ -104,6 +104,8 @@ class SimulationResult:
             ga_activations=len(self.activations),
             ga_time_s=self.ga_time_s,
             ga_time_per_activation_s=self.ga_time_s / len(self.activations) if self.activations else None,
+            ga_activation_time_median_s=_percentile(self.activations, 50.0),
+            ga_activation_time_p99_s=_percentile(self.activations, 99.0),
             time_in_ga_mode_s=float(np.count_nonzero(self.mode == MODE_GA) * self.dt),
         )
         return summary
@@ -148,6 +150,13 @@ class SimulationResult:
             ]
         )
         return columns, table
+
+
+def _percentile(activations: tuple[GAActivation, ...], q: float) -> float | None:
+    """Percentile ``q`` of the activations' wall times (s), or None without activations."""
+    if not activations:
+        return None
+    return float(np.percentile([a.wall_time_s for a in activations], q))
 
 
 def _max(values: Array) -> float | None:

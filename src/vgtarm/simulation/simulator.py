@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..control.cfc import ComputedForceControl
+from ..control.gains import Gains
 from ..control.scm import SwitchingControl
 from ..errors import InputError, SimulationError
 from ..model.assembly import linear_form
@@ -34,6 +35,7 @@ from ..model.closedloop import (
     NOT_FINITE,
     OUTSIDE_LIMITS,
     ClosedLoopDriver,
+    CompiledGA,
     LoopArrays,
     LoopSettings,
 )
@@ -157,6 +159,7 @@ def simulate(
     unswitched = LoopSettings(**{**settings.__dict__, "threshold": 0.0})
     start = time.perf_counter()
     ga_time = 0.0
+    compiled_ga: dict[str, CompiledGA] = {}
     k = 0
     status = DONE
     chunk = max(n // 100, 1) if progress else n
@@ -174,7 +177,7 @@ def simulate(
         assert isinstance(controller, SwitchingControl)
         k = stop
         ga_start = time.perf_counter()
-        gains, activation = _tune(controller, loop, model, arrays, k, dt, ga_rng)
+        gains, activation = _tune(controller, loop, model, arrays, k, dt, ga_rng, compiled_ga)
         sample = k
         status, stop = loop.simulate(unswitched, arrays, gains.Kp, gains.Kv, k, k + 1)
         mode[k] = MODE_GA
@@ -263,11 +266,24 @@ def _tune(
     k: int,
     dt: float,
     rng: np.random.Generator,
+    compiled: dict[str, CompiledGA],
 ) -> tuple[Any, tuple[int, int, float, float]]:
-    """Run the GA at sample ``k``; returns the gains and (generations, evaluations, best, fixed)."""
+    """Run the GA at sample ``k``; returns the gains and (generations, evaluations, best, fixed).
+
+    With the compiled loop the whole activation runs in C (``csrc/ga.c``, bound once per run in
+    ``compiled``); otherwise the NumPy GA (:func:`vgtarm.ga.minimize`) runs on the NumPy
+    prediction. Each activation draws one 64-bit seed from ``rng``, so a seed gives the same run.
+    """
     end = min(k + controller.horizon, arrays.n - 1)
     if end == k:  # the last sample: nothing left to predict, keep the fixed gains
         return controller.gains, (0, 0, 0.0, 0.0)
+    if isinstance(loop, ClosedLoopDriver) and controller.ga.stall_generations is None:
+        if "ga" not in compiled:
+            compiled["ga"] = _compiled_ga(controller, loop, model, arrays, dt)
+        seed = int(rng.integers(0, 2**63, dtype=np.int64))
+        out = compiled["ga"].activate(k, arrays.q[k], arrays.qd[k], seed)
+        Kp, Kv = controller.split(out.genes)
+        return Gains.of(Kp, Kv), (out.generations, out.evaluations, out.best_cost, out.seeded_cost)
     window = slice(k, end + 1)
     inp = arrays.inputs
 
@@ -284,6 +300,41 @@ def _tune(
     fixed_fitness = float(predict(controller.gains.Kp[None], controller.gains.Kv[None])[0])
     gains, result = controller.tune(predict, rng)
     return gains, (result.generations, result.n_evaluations, float(result.cost), fixed_fitness)
+
+
+def _compiled_ga(
+    controller: SwitchingControl, loop: ClosedLoopDriver, model: Robot, arrays: LoopArrays, dt: float
+) -> CompiledGA:
+    """The compiled GA of one run: the reference and the model's tip derivatives along it."""
+    inp = arrays.inputs
+    q_d = inp["q_d"]
+    lower, upper = controller.bounds()
+    options = controller.ga
+    quadratic = controller.prediction == "quadratic"
+    return CompiledGA(
+        loop,
+        dt=dt,
+        lower=lower,
+        upper=upper,
+        initial_bits=controller.initial_bits(),
+        n_bits=options.n_bits,
+        population=options.population_size,
+        generations=options.max_generations,
+        elite=options.elite_count,
+        p_crossover=options.crossover_probability,
+        p_mutation=options.mutation_probability,
+        horizon=controller.horizon,
+        prediction=controller.prediction,
+        exact_above=controller.exact_above,
+        p_ctrl=model.parameter_vector,
+        q_d=q_d,
+        qd_d=inp["qd_d"],
+        qdd_d=inp["qdd_d"],
+        tip_d=inp["tip_d"],
+        tip_offset=inp["tip_d"] - model.tip_position(q_d),
+        J_d=model.tip_jacobian(q_d),
+        H_d=model.tip_hessian(q_d) if quadratic else None,
+    )
 
 
 def _tip_error(plant: Robot, arrays: LoopArrays, k: int) -> float:

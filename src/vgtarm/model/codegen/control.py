@@ -10,7 +10,7 @@ import casadi as ca
 
 from ..parameters import N_JOINTS
 from ..symbolic import SX, body_motion, dynamics, kinematics
-from .core import Builder, function, symbols
+from .core import Builder, function, row_major, symbols
 
 
 def computed_force() -> ca.Function:
@@ -44,8 +44,21 @@ def tip_state() -> ca.Function:
     return function("vgt_tip_state", [q, qd, p], [k.tip, motion.velocity], ["q", "qd", "p"], ["tip", "velocity"])
 
 
+def tip_hessian() -> ca.Function:
+    """Second derivatives of the tip point, ``H[k, l, m] = d^2 P_k / dq_l dq_m`` (3 x n x n, row-major).
+
+    The switching method's GA maps predicted joint errors to the tip through the first and second
+    derivatives of the forward kinematics at the reference (``csrc/ga.c``).
+    """
+    q, _, p = symbols()
+    tip = kinematics(q, p).tip
+    rows = [ca.hessian(tip[k], q)[0] for k in range(3)]
+    return function("vgt_tip_hessian", [q, p], [ca.vertcat(*[row_major(h) for h in rows])], ["q", "p"], ["H"])
+
+
 #: Functions of this family, by name.
 BUILDERS: dict[str, Builder] = {
     "cfc": computed_force,
     "tip_state": tip_state,
+    "tip_hessian": tip_hessian,
 }

@@ -6,6 +6,7 @@
  * OpenMP threads when the library was built with OpenMP; every sample is independent, so the
  * result does not depend on the number of threads.
  */
+#include <stdint.h>
 #include <stdlib.h>
 
 #include "vgtarm.h"

@@ -7,6 +7,7 @@
  * same computation and the tests hold the two to each other.
  */
 #include <math.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 

@@ -88,3 +88,72 @@ int vgt_ga_fitness(const vgt_model *m, const vgt_settings *s, const double *p_ct
 /* Size and field offsets of the interface's structures as this compiler lays them out,
  * written into out in the order interface.py asks (generated at build time: layout.c). */
 void vgt_layout(long *out);
+
+/* ---- The compiled genetic algorithm of the switching control method (ga.c) ---------------- */
+
+/* How the GA predicts the tip error of a gain candidate over the horizon. */
+enum vgt_prediction {
+    VGT_PREDICT_EXACT = 0,    /* Euler steps of the joints, exact forward kinematics of each step */
+    VGT_PREDICT_LINEAR = 1,   /* the same joint errors by their linear recursion, mapped to the   */
+                              /* tip through the tip Jacobian at the reference                    */
+    VGT_PREDICT_QUADRATIC = 2 /* as LINEAR plus the second-order term of the forward kinematics   */
+};
+
+typedef struct {
+    int n_genes;            /* genes per individual (2 nj^2: Kp then Kv, row by row)           */
+    int n_bits;             /* bits per gene, 1..32, most significant first                    */
+    int words;              /* 64-bit words per individual (>= ceil(n_genes n_bits / 64) + 1)  */
+    int population;         /* individuals per generation                                      */
+    int generations;        /* generations after the initial population                        */
+    int elite;              /* best individuals copied unchanged into the next generation      */
+    int n_seeded;           /* rows of initial_bits that start the first population            */
+    int prediction;         /* an enum vgt_prediction                                          */
+    double p_crossover;     /* probability that a pair of parents is crossed                    */
+    double p_mutation;      /* probability that a child's bit flips                             */
+    long horizon;           /* prediction horizon H in control periods                          */
+    double exact_above;     /* LINEAR/QUADRATIC: a candidate whose predicted joint error norm  */
+                            /* exceeds this (m, rad) is predicted exactly instead (0: never)    */
+} vgt_ga_settings;
+
+/* One activation: the state at sample k and the reference rows k .. k+H. */
+typedef struct {
+    const double *lower, *upper;            /* (n_genes) gene bounds                           */
+    const uint64_t *initial_bits;           /* (n_seeded, words) seeded individuals            */
+    const double *p_ctrl;                   /* controller's parameter vector                   */
+    const double *q0, *qd0;                 /* (nj) state at sample k                          */
+    const double *q_d, *qd_d, *qdd_d;       /* (H+1, nj) reference                             */
+    const double *tip_d;                    /* (H+1, 3) desired tip                            */
+    const double *tip_offset;               /* (H+1, 3) tip_d - P^(q_d) (zero for exact kinematics) */
+    const double *J_d;                      /* (H+1, 3, nj) tip Jacobian of the model at q_d   */
+    const double *H_d;                      /* (H+1, 3, nj, nj) tip Hessian at q_d (QUADRATIC) */
+} vgt_ga_problem;
+
+typedef struct {
+    double *best;           /* (n_genes) decoded genes of the best individual                    */
+    double best_cost;       /* its predicted tip error                                           */
+    double seeded_cost;     /* predicted tip error of the first seeded individual (or NaN)       */
+    long generations;       /* generations run                                                   */
+    long evaluations;       /* candidates whose prediction was computed                          */
+} vgt_ga_result;
+
+/* One GA activation: evolve the gains from a seeded first population, all in C. */
+int vgt_ga_activation(const vgt_model *m, const vgt_settings *s, const vgt_ga_settings *g,
+                      const vgt_ga_problem *pb, uint64_t seed, vgt_ga_result *out);
+
+/* Predicted tip error of n_cand decoded candidates (genes, row by row), as the GA computes it. */
+int vgt_ga_predict(const vgt_model *m, const vgt_settings *s, const vgt_ga_settings *g,
+                   const vgt_ga_problem *pb, long n_cand, const double *genes, double *cost);
+
+/* The GA's operators, exported for the tests (each given its random draws explicitly). */
+void vgt_ga_decode(const vgt_ga_settings *g, long rows, const uint64_t *bits, const double *lower,
+                   const double *upper, double *genes);
+void vgt_ga_rank_expectations(long n, const double *cost, long n_parents, double *expectation);
+void vgt_ga_sus(long n, const double *expectation, long n_select, double u, long *selected);
+void vgt_ga_crossover(int words, long rows, uint64_t *bits, const unsigned char *crossed,
+                      const uint64_t *masks);
+void vgt_ga_flip(int words, uint64_t *bits, long n_flips, const long *positions);
+
+/* The GA's generator (xoshiro256**, seeded through splitmix64), exported for the tests. */
+void vgt_rng_uniform(uint64_t seed, long n, double *out);
+void vgt_rng_mutation_positions(uint64_t seed, long total, double p, long max_flips, long *positions,
+                                long *n_flips);

@@ -1,0 +1,808 @@
+/* The genetic algorithm of the switching control method, compiled (part of vgtarm).
+ *
+ * One call runs a whole GA activation: the paper's binary-coded algorithm (Appendix B) with the
+ * same operators, in the same order, as the readable NumPy reference vgtarm/ga.py:
+ *
+ *   rank scaling (MATLAB's fitscalingrank, ties share their mean weight) -> stochastic universal
+ *   sampling -> shuffle -> uniform crossover of consecutive pairs -> bit-flip mutation -> children
+ *   equal to a parent keep its cost, the others are predicted -> elitism.
+ *
+ * Individuals are bit strings packed most significant bit first into 64-bit words (one spare
+ * word at the end, always zero, so a gene can be read with two shifts). Randomness comes from
+ * xoshiro256** seeded through splitmix64: a seed gives the same activation bit for bit.
+ *
+ * The fitness is the predicted tip error of a gain candidate over H control periods under the
+ * controller's model (see vgtarm/control/scm.py). Under its own model computed force control
+ * leaves the joint errors E = q_d - q, Ed = qd_d - qd on a linear recursion in the gains
+ * (explicit Euler, as the exact prediction):
+ *
+ *   E_{j+1}  = E_j + dt Ed_j + r_j,            r_j = q_d[j+1] - q_d[j] - dt qd_d[j]
+ *   Ed_{j+1} = Ed_j - dt (Kp E_j + Kv Ed_j) + s_j,  s_j = qd_d[j+1] - qd_d[j] - dt qdd_d[j]
+ *
+ * and the tip error tip_d - P(q_d - E) = offset + J E - E^T H E / 2 + O(|E|^3) with J, H the tip
+ * Jacobian and Hessian at the reference. The candidates are evaluated in blocks laid out
+ * candidate-last, so the compiler vectorises across candidates.
+ */
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "vgtarm.h"
+
+/* ---- generator ------------------------------------------------------------------------------ */
+
+typedef struct {
+    uint64_t s[4];
+} rng_t;
+
+static uint64_t splitmix64(uint64_t *x)
+{
+    uint64_t z = (*x += 0x9E3779B97F4A7C15ULL);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    return z ^ (z >> 31);
+}
+
+static void rng_seed(rng_t *r, uint64_t seed)
+{
+    for (int i = 0; i < 4; ++i) r->s[i] = splitmix64(&seed);
+}
+
+static inline uint64_t rotl(uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
+
+static uint64_t rng_next(rng_t *r)
+{
+    uint64_t *s = r->s;
+    const uint64_t result = rotl(s[1] * 5, 7) * 9;
+    const uint64_t t = s[1] << 17;
+    s[2] ^= s[0];
+    s[3] ^= s[1];
+    s[1] ^= s[2];
+    s[0] ^= s[3];
+    s[2] ^= t;
+    s[3] = rotl(s[3], 45);
+    return result;
+}
+
+/* Uniform on [0, 1) with 53 random bits. */
+static double rng_uniform(rng_t *r) { return (double)(rng_next(r) >> 11) * 0x1.0p-53; }
+
+/* Uniform integer in [0, n) (Lemire's multiply-shift with rejection: exactly uniform). */
+static long rng_below(rng_t *r, long n)
+{
+    uint64_t bound = (uint64_t)n;
+    __uint128_t product = (__uint128_t)rng_next(r) * bound;
+    uint64_t low = (uint64_t)product;
+    if (low < bound) {
+        uint64_t threshold = -bound % bound;
+        while (low < threshold) {
+            product = (__uint128_t)rng_next(r) * bound;
+            low = (uint64_t)product;
+        }
+    }
+    return (long)(product >> 64);
+}
+
+/* Positions of the flipped bits among `total` bits flipped independently with probability p:
+ * geometric gaps between flips, the same distribution as a draw per bit at a cost per flip. */
+static long mutation_positions(rng_t *r, long total, double p, long max_flips, long *positions)
+{
+    long n = 0;
+    if (!(p > 0.0) || total <= 0) return 0;
+    if (p >= 1.0) {
+        for (long i = 0; i < total && n < max_flips; ++i) positions[n++] = i;
+        return n;
+    }
+    const double log_q = log1p(-p);
+    long position = -1;
+    while (n < max_flips) {
+        double u = 1.0 - rng_uniform(r); /* (0, 1] */
+        double gap = floor(log(u) / log_q);
+        if (gap >= (double)(total - position - 1)) break;
+        position += (long)gap + 1;
+        positions[n++] = position;
+    }
+    return n;
+}
+
+void vgt_rng_uniform(uint64_t seed, long n, double *out)
+{
+    rng_t r;
+    rng_seed(&r, seed);
+    for (long i = 0; i < n; ++i) out[i] = rng_uniform(&r);
+}
+
+void vgt_rng_mutation_positions(uint64_t seed, long total, double p, long max_flips, long *positions,
+                                long *n_flips)
+{
+    rng_t r;
+    rng_seed(&r, seed);
+    *n_flips = mutation_positions(&r, total, p, max_flips, positions);
+}
+
+/* ---- coding --------------------------------------------------------------------------------- */
+
+static inline uint64_t gene_code(const uint64_t *w, long start, int n_bits)
+{
+    long i = start >> 6;
+    int offset = (int)(start & 63);
+    uint64_t x = w[i] << offset;
+    if (offset) x |= w[i + 1] >> (64 - offset);
+    return x >> (64 - n_bits);
+}
+
+/* decode_with for 8-bit genes, four genes per vector (the same arithmetic, element by element). */
+typedef double v4 __attribute__((vector_size(32)));
+typedef long long m4 __attribute__((vector_size(32)));
+
+static inline __attribute__((always_inline)) v4 select4(m4 mask, v4 yes, v4 no) { return (v4)(((m4)yes & mask) | ((m4)no & ~mask)); }
+
+__attribute__((target_clones("arch=x86-64-v3", "default"))) static void decode_bytes(int n_genes,
+                                                                                   const uint64_t *restrict bits,
+                                                                                   const double *restrict lower,
+                                                                                   const double *restrict upper,
+                                                                                   double *restrict genes)
+{
+    int i = 0;
+    for (; i + 4 <= n_genes; i += 4) {
+        uint64_t word = bits[i >> 3];
+        int shift = 56 - 8 * (i & 7);
+        v4 code = {(double)((word >> shift) & 0xFFu), (double)((word >> (shift - 8)) & 0xFFu),
+                   (double)((word >> (shift - 16)) & 0xFFu), (double)((word >> (shift - 24)) & 0xFFu)};
+        v4 lo, hi;
+        memcpy(&lo, lower + i, sizeof lo);
+        memcpy(&hi, upper + i, sizeof hi);
+        v4 value = lo + code / 255.0 * (hi - lo);
+        value = select4((m4)(value < hi), value, hi);
+        value = select4((m4)(code == 255.0), hi, value);
+        memcpy(genes + i, &value, sizeof value);
+    }
+    for (; i < n_genes; ++i) {
+        double code = (double)((bits[i >> 3] >> (56 - 8 * (i & 7))) & 0xFFu);
+        double value = lower[i] + code / 255.0 * (upper[i] - lower[i]);
+        value = value < upper[i] ? value : upper[i];
+        genes[i] = code == 255.0 ? upper[i] : value;
+    }
+}
+
+/* The same arithmetic as ga._decode: lower + code / (2^b - 1) * (upper - lower), capped. With
+ * `fractions` (code / (2^b - 1) for every code, b <= 16) the division is a table look-up. */
+static void decode_with(const vgt_ga_settings *g, const uint64_t *bits, const double *lower, const double *upper,
+                        const double *fractions, double *genes)
+{
+    const double top = (double)((1ULL << g->n_bits) - 1ULL);
+    if (g->n_bits == 8 && fractions) { /* the paper's coding: one byte per gene, vectorised */
+        decode_bytes(g->n_genes, bits, lower, upper, genes);
+        return;
+    }
+    for (int i = 0; i < g->n_genes; ++i) {
+        uint64_t code = gene_code(bits, (long)i * g->n_bits, g->n_bits);
+        double fraction = fractions ? fractions[code] : (double)code / top;
+        double value = lower[i] + fraction * (upper[i] - lower[i]);
+        if (!(value < upper[i])) value = upper[i];
+        if (fraction == 1.0) value = upper[i];
+        genes[i] = value;
+    }
+}
+
+static void decode_one(const vgt_ga_settings *g, const uint64_t *bits, const double *lower, const double *upper,
+                       double *genes)
+{
+    decode_with(g, bits, lower, upper, NULL, genes);
+}
+
+void vgt_ga_decode(const vgt_ga_settings *g, long rows, const uint64_t *bits, const double *lower,
+                   const double *upper, double *genes)
+{
+    for (long k = 0; k < rows; ++k) decode_one(g, bits + k * g->words, lower, upper, genes + k * g->n_genes);
+}
+
+static inline void flip_bit(uint64_t *w, long bit) { w[bit >> 6] ^= 1ULL << (63 - (bit & 63)); }
+
+void vgt_ga_flip(int words, uint64_t *bits, long n_flips, const long *positions)
+{
+    (void)words;
+    for (long i = 0; i < n_flips; ++i) flip_bit(bits, positions[i]);
+}
+
+/* ---- selection ------------------------------------------------------------------------------ */
+
+/* NumPy's pairwise summation (numpy/core/src/umath/loops_utils.h), so sums agree bit for bit. */
+static double pairwise_sum(const double *a, long n)
+{
+    if (n < 8) {
+        double res = 0.0;
+        for (long i = 0; i < n; ++i) res += a[i];
+        return res;
+    }
+    if (n <= 128) {
+        double r[8];
+        for (int j = 0; j < 8; ++j) r[j] = a[j];
+        long i;
+        for (i = 8; i < n - (n % 8); i += 8)
+            for (int j = 0; j < 8; ++j) r[j] += a[i + j];
+        double res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));
+        for (; i < n; ++i) res += a[i];
+        return res;
+    }
+    long n2 = n / 2;
+    n2 -= n2 % 8;
+    return pairwise_sum(a, n2) + pairwise_sum(a + n2, n - n2);
+}
+
+static inline double clean_cost(double c) { return isfinite(c) ? c : INFINITY; }
+
+/* Indices of cost in ascending order, ties in index order (a stable insertion sort). */
+static void stable_order(long n, const double *cost, long *order)
+{
+    for (long i = 0; i < n; ++i) {
+        long j = i;
+        double c = clean_cost(cost[i]);
+        while (j > 0 && clean_cost(cost[order[j - 1]]) > c) {
+            order[j] = order[j - 1];
+            --j;
+        }
+        order[j] = i;
+    }
+}
+
+/* Rank weights 1/sqrt(r), r = 1..n. */
+static void rank_weights(long n, double *weights)
+{
+    for (long r = 0; r < n; ++r) weights[r] = 1.0 / sqrt((double)(r + 1));
+}
+
+static void rank_expectations(long n, const double *cost, long n_parents, double *expectation, long *order,
+                              const double *weights, double *shared)
+{
+    stable_order(n, cost, order);
+    long start = 0;
+    while (start < n) {
+        long end = start + 1;
+        while (end < n && clean_cost(cost[order[end]]) == clean_cost(cost[order[start]])) ++end;
+        double mean = pairwise_sum(weights + start, end - start) / (double)(end - start);
+        for (long r = start; r < end; ++r) shared[r] = mean;
+        start = end;
+    }
+    for (long r = 0; r < n; ++r) expectation[order[r]] = shared[r];
+    double scale = (double)n_parents / pairwise_sum(expectation, n);
+    for (long i = 0; i < n; ++i) expectation[i] *= scale;
+}
+
+void vgt_ga_rank_expectations(long n, const double *cost, long n_parents, double *expectation)
+{
+    long *order = malloc(sizeof(long) * (size_t)n);
+    double *work = malloc(sizeof(double) * 2 * (size_t)n);
+    if (order && work) {
+        rank_weights(n, work);
+        rank_expectations(n, cost, n_parents, expectation, order, work, work + n);
+    }
+    free(order);
+    free(work);
+}
+
+/* Stochastic universal sampling with the pointer offset u in [0, 1): the same edges and
+ * pointers as ga._sus (cumulative sum, rescaled, last edge pinned, searchsorted right). */
+static void sus(long n, const double *expectation, long n_select, double u, long *selected, double *edges)
+{
+    double total = 0.0;
+    for (long i = 0; i < n; ++i) {
+        total = i ? edges[i - 1] + expectation[i] : expectation[i];
+        edges[i] = total;
+    }
+    double scale = (double)n_select / edges[n - 1];
+    for (long i = 0; i < n; ++i) edges[i] *= scale;
+    edges[n - 1] = (double)n_select;
+    long index = 0;
+    for (long k = 0; k < n_select; ++k) {
+        double pointer = u + (double)k;
+        while (index < n && edges[index] <= pointer) ++index;
+        selected[k] = index;
+    }
+}
+
+void vgt_ga_sus(long n, const double *expectation, long n_select, double u, long *selected)
+{
+    double *edges = malloc(sizeof(double) * (size_t)n);
+    if (edges) sus(n, expectation, n_select, u, selected, edges);
+    free(edges);
+}
+
+void vgt_ga_crossover(int words, long rows, uint64_t *bits, const unsigned char *crossed, const uint64_t *masks)
+{
+    long pairs = rows / 2, used = 0;
+    for (long k = 0; k < pairs; ++k) {
+        if (!crossed[k]) continue;
+        uint64_t *a = bits + 2 * k * words, *b = a + words;
+        const uint64_t *mask = masks + used * words;
+        for (int w = 0; w < words; ++w) {
+            uint64_t swap = (a[w] ^ b[w]) & mask[w];
+            a[w] ^= swap;
+            b[w] ^= swap;
+        }
+        ++used;
+    }
+}
+
+/* ---- prediction ----------------------------------------------------------------------------- */
+
+enum { BLOCK = 8 }; /* candidates per vectorised block (two AVX2 registers) */
+
+typedef struct {
+    int nj;
+    long horizon;
+    double dt;
+    int quadratic;
+    double exact_above2;   /* squared joint-error norm above which the exact prediction is used */
+    const vgt_ga_problem *pb;
+    float *r, *s;        /* (H, nj) reference residuals of the Euler steps                        */
+    float *jac_f;        /* (H+1, 3, nj) tip Jacobian of the window                               */
+    float *off_f;        /* (H+1, 3) tip offsets of the window                                    */
+    int n_jac[3];        /* joints l with a nonzero J[k][l] anywhere in the window, per tip axis k  */
+    int *jac;            /* (3, nj) their indices                                                  */
+    int n_pairs;         /* pairs l <= m with a nonzero H[k][l][m] for some k in the window         */
+    int *pair;           /* (n_pairs, 2) the pairs                                                 */
+    int n_hes[3];        /* per axis k, the pairs (index into pair) with a nonzero H[k]             */
+    int *hes;            /* (3, n_pairs) their indices                                             */
+    float *coef;         /* (H, 3, n_pairs) -H[k][l][m] (-H/2 on the diagonal) per step and axis    */
+} predictor;
+
+/* Predicted tip error of up to BLOCK candidates by the linear recursion (see the top). Every
+ * quantity is a vector across the block's candidates (GCC/Clang vector extensions, so the
+ * accumulators live in registers). The recursion runs in single precision, 8 candidates per
+ * AVX2 register: the errors are about 1e-4 m and the gains at most about 1e4, so rounding moves
+ * the fitness by about 1e-7 relative (measured in docs/control.md), far below what the GA's
+ * ranking resolves; the sums of squares are completed in double. */
+typedef float vf __attribute__((vector_size(32))); /* BLOCK = 8 candidates */
+
+static inline __attribute__((always_inline)) void block_kernel(const predictor *restrict x, const int nj, int count,
+                                                               const double *restrict genes, double *restrict cost,
+                                                               double *restrict peak)
+{
+    const int nn = nj * nj;
+    const float dt = (float)x->dt;
+    const vgt_ga_problem *pb = x->pb;
+    vf K[2 * nn], E[nj], Ed[nj], a[nj];
+    const vf zero = {0.0f};
+    double sum[BLOCK] = {0.0}, big[BLOCK] = {0.0};
+    for (int gi = 0; gi < 2 * nn; ++gi)
+        for (int c = 0; c < BLOCK; ++c) K[gi][c] = c < count ? (float)genes[(long)c * 2 * nn + gi] : 0.0f;
+    for (int i = 0; i < nj; ++i) {
+        E[i] = zero + (float)(pb->q_d[i] - pb->q0[i]);
+        Ed[i] = zero + (float)(pb->qd_d[i] - pb->qd0[i]);
+    }
+    for (long j = 0; j < x->horizon; ++j) {
+        for (int i = 0; i < nj; ++i) {
+            const vf *kp = K + i * nj, *kv = K + nn + i * nj;
+            vf acc = kp[0] * E[0] + kv[0] * Ed[0];
+            for (int l = 1; l < nj; ++l) acc += kp[l] * E[l] + kv[l] * Ed[l];
+            a[i] = acc;
+        }
+        const float *r = x->r + j * nj, *s = x->s + j * nj;
+        vf norm2 = zero;
+        for (int i = 0; i < nj; ++i) {
+            E[i] = E[i] + dt * Ed[i] + r[i];
+            Ed[i] = Ed[i] - dt * a[i] + s[i];
+            norm2 += E[i] * E[i];
+        }
+        const float *J = x->jac_f + (j + 1) * 3 * nj, *off = x->off_f + (j + 1) * 3;
+        vf t0 = zero + off[0], t1 = zero + off[1], t2 = zero + off[2];
+        /* first order: t_k += J[k][l] E_l over the structurally nonzero entries */
+        for (int e = 0; e < x->n_jac[0]; ++e) t0 += J[x->jac[e]] * E[x->jac[e]];
+        for (int e = 0; e < x->n_jac[1]; ++e) t1 += J[nj + x->jac[nj + e]] * E[x->jac[nj + e]];
+        for (int e = 0; e < x->n_jac[2]; ++e) t2 += J[2 * nj + x->jac[2 * nj + e]] * E[x->jac[2 * nj + e]];
+        if (x->quadratic) {
+            /* second order: t_k -= E^T H_k E / 2, over the nonzero pairs l <= m (H symmetric) */
+            const int np = x->n_pairs;
+            vf P[np > 0 ? np : 1];
+            for (int e = 0; e < np; ++e) P[e] = E[x->pair[2 * e]] * E[x->pair[2 * e + 1]];
+            const float *coef = x->coef + j * 3 * np;
+            for (int e = 0; e < x->n_hes[0]; ++e) t0 += coef[x->hes[e]] * P[x->hes[e]];
+            for (int e = 0; e < x->n_hes[1]; ++e) t1 += coef[np + x->hes[np + e]] * P[x->hes[np + e]];
+            for (int e = 0; e < x->n_hes[2]; ++e) t2 += coef[2 * np + x->hes[2 * np + e]] * P[x->hes[2 * np + e]];
+        }
+        for (int c = 0; c < BLOCK; ++c) {
+            sum[c] += (double)t0[c] * t0[c] + (double)t1[c] * t1[c] + (double)t2[c] * t2[c];
+            big[c] = norm2[c] > big[c] ? norm2[c] : big[c];
+        }
+    }
+    for (int c = 0; c < count; ++c) {
+        cost[c] = isfinite(sum[c]) ? sqrt(sum[c]) : INFINITY;
+        peak[c] = big[c];
+    }
+}
+
+/* The kernel with the joint count known at compile time for the common sizes (the loops unroll
+ * and the gains stay in registers), and for any other count at run time. */
+__attribute__((target_clones("arch=x86-64-v3", "default"), optimize("fp-contract=fast"))) static void predict_block(
+    const predictor *restrict x, int count, const double *restrict genes, double *restrict cost,
+    double *restrict peak)
+{
+    switch (x->nj) {
+    case 3: block_kernel(x, 3, count, genes, cost, peak); break;
+    case 6: block_kernel(x, 6, count, genes, cost, peak); break;
+    case 7: block_kernel(x, 7, count, genes, cost, peak); break;
+    default: block_kernel(x, x->nj, count, genes, cost, peak); break;
+    }
+}
+
+/* Exact prediction of the candidates listed in `which` (all when which is NULL). */
+static int predict_exact(const vgt_model *m, const vgt_settings *s, const predictor *x, long n, const long *which,
+                         const double *genes, double *cost)
+{
+    const int nn = x->nj * x->nj;
+    double *kp = malloc(sizeof(double) * (size_t)(n * nn + 1)), *kv = malloc(sizeof(double) * (size_t)(n * nn + 1));
+    double *out = malloc(sizeof(double) * (size_t)(n + 1));
+    int status = VGT_NO_MEMORY;
+    if (kp && kv && out) {
+        for (long c = 0; c < n; ++c) {
+            long row = which ? which[c] : c;
+            memcpy(kp + c * nn, genes + row * 2 * nn, sizeof(double) * (size_t)nn);
+            memcpy(kv + c * nn, genes + row * 2 * nn + nn, sizeof(double) * (size_t)nn);
+        }
+        const vgt_ga_problem *pb = x->pb;
+        status = vgt_ga_fitness(m, s, pb->p_ctrl, x->horizon, pb->q0, pb->qd0, pb->q_d, pb->qd_d, pb->qdd_d,
+                                pb->tip_d, n, kp, kv, out);
+        for (long c = 0; c < n && status == VGT_DONE; ++c) cost[which ? which[c] : c] = out[c];
+    }
+    free(kp);
+    free(kv);
+    free(out);
+    return status;
+}
+
+/* The candidates listed in `which` whose predicted joint error left the trust region, in double
+ * precision and in the exact prediction's own arithmetic (q, qd advanced by explicit Euler): a
+ * step whose joint error is within the region is mapped to the tip by the Taylor expansion, a
+ * step outside it by the exact forward kinematics, as the exact prediction does. */
+static int predict_mixed(const vgt_model *m, const predictor *x, long n, const long *which, const double *genes,
+                         double *cost)
+{
+    const int nj = x->nj, nn = nj * nj;
+    const vgt_ga_problem *pb = x->pb;
+    const double dt = x->dt;
+    const vgt_call *c = &m->tip;
+    const double **arg = malloc(sizeof(double *) * (size_t)(c->sz_arg > 2 ? c->sz_arg : 2));
+    double **res = malloc(sizeof(double *) * (size_t)(c->sz_res > 1 ? c->sz_res : 1));
+    vgt_int *iw = malloc(sizeof(vgt_int) * (size_t)(c->sz_iw + 1));
+    double *w = malloc(sizeof(double) * (size_t)(c->sz_w + 1));
+    int status = arg && res && iw && w ? VGT_DONE : VGT_NO_MEMORY;
+    for (long k = 0; k < n && status == VGT_DONE; ++k) {
+        const long row = which[k];
+        const double *kp = genes + row * 2 * nn, *kv = kp + nn;
+        double q[nj], qd[nj], e[nj], ed[nj], a[nj], E[nj], tip[3], sum = 0.0;
+        memcpy(q, pb->q0, sizeof q);
+        memcpy(qd, pb->qd0, sizeof qd);
+        for (long j = 0; j < x->horizon; ++j) {
+            const double *q_d = pb->q_d + j * nj, *qd_d = pb->qd_d + j * nj, *qdd_d = pb->qdd_d + j * nj;
+            for (int i = 0; i < nj; ++i) {
+                e[i] = q_d[i] - q[i];
+                ed[i] = qd_d[i] - qd[i];
+            }
+            for (int i = 0; i < nj; ++i) {
+                double acc = qdd_d[i];
+                for (int l = 0; l < nj; ++l) acc += kp[nj * i + l] * e[l] + kv[nj * i + l] * ed[l];
+                a[i] = acc;
+            }
+            double norm2 = 0.0;
+            for (int i = 0; i < nj; ++i) {
+                q[i] += dt * qd[i];
+                qd[i] += dt * a[i];
+                E[i] = pb->q_d[(j + 1) * nj + i] - q[i];
+                norm2 += E[i] * E[i];
+            }
+            double t[3];
+            if (norm2 <= x->exact_above2) {
+                const double *J = pb->J_d + (j + 1) * 3 * nj, *H = pb->H_d + (j + 1) * 3 * nn;
+                for (int d = 0; d < 3; ++d) {
+                    t[d] = pb->tip_offset[(j + 1) * 3 + d];
+                    for (int q1 = 0; q1 < x->n_jac[d]; ++q1) {
+                        int l = x->jac[d * nj + q1];
+                        t[d] += J[d * nj + l] * E[l];
+                    }
+                    for (int q1 = 0; q1 < x->n_hes[d] && x->quadratic; ++q1) {
+                        int pair = x->hes[d * x->n_pairs + q1], l = x->pair[2 * pair], mm = x->pair[2 * pair + 1];
+                        t[d] -= (l == mm ? 0.5 : 1.0) * H[(d * nj + l) * nj + mm] * E[l] * E[mm];
+                    }
+                }
+            } else {
+                arg[0] = q;
+                arg[1] = pb->p_ctrl;
+                res[0] = tip;
+                if (c->f(arg, res, iw, w, 0)) {
+                    sum = INFINITY;
+                    break;
+                }
+                const double *td = pb->tip_d + 3 * (j + 1);
+                for (int d = 0; d < 3; ++d) t[d] = td[d] - tip[d];
+            }
+            sum += t[0] * t[0] + t[1] * t[1] + t[2] * t[2];
+            if (!isfinite(sum)) break;
+        }
+        cost[row] = isfinite(sum) ? sqrt(sum) : INFINITY;
+    }
+    free(arg);
+    free(res);
+    free(iw);
+    free(w);
+    return status;
+}
+
+static int predict(const vgt_model *m, const vgt_settings *s, const vgt_ga_settings *g, const predictor *x, long n,
+                   const double *genes, double *cost)
+{
+    if (g->prediction == VGT_PREDICT_EXACT) return predict_exact(m, s, x, n, NULL, genes, cost);
+    double peak[BLOCK];
+    long *far = malloc(sizeof(long) * (size_t)(n + 1)), n_far = 0;
+    if (!far) return VGT_NO_MEMORY;
+    for (long c = 0; c < n; c += BLOCK) {
+        int count = n - c < BLOCK ? (int)(n - c) : BLOCK;
+        predict_block(x, count, genes + c * g->n_genes, cost + c, peak);
+        for (int k = 0; k < count; ++k)
+            if (x->exact_above2 > 0.0 && !(peak[k] <= x->exact_above2)) far[n_far++] = c + k;
+    }
+    int status = n_far ? predict_mixed(m, x, n_far, far, genes, cost) : VGT_DONE;
+    free(far);
+    return status;
+}
+
+static int predictor_init(predictor *x, const vgt_settings *s, const vgt_ga_settings *g, const vgt_ga_problem *pb)
+{
+    x->nj = s->n_joints;
+    x->horizon = g->horizon;
+    x->dt = s->dt;
+    x->quadratic = g->prediction == VGT_PREDICT_QUADRATIC;
+    x->exact_above2 = g->exact_above * g->exact_above;
+    x->pb = pb;
+    const int nj = x->nj;
+    x->r = malloc(sizeof(float) * (size_t)(g->horizon * nj + 1));
+    x->s = malloc(sizeof(float) * (size_t)(g->horizon * nj + 1));
+    x->jac_f = malloc(sizeof(float) * (size_t)((g->horizon + 1) * 3 * nj));
+    x->off_f = malloc(sizeof(float) * (size_t)((g->horizon + 1) * 3));
+    x->jac = malloc(sizeof(int) * (size_t)(3 * nj));
+    x->pair = malloc(sizeof(int) * (size_t)(nj * (nj + 1) + 2));
+    x->hes = malloc(sizeof(int) * (size_t)(3 * nj * (nj + 1) / 2 + 3));
+    x->coef = NULL;
+    if (!x->r || !x->s || !x->jac_f || !x->off_f || !x->jac || !x->pair || !x->hes) return VGT_NO_MEMORY;
+    if (g->prediction != VGT_PREDICT_EXACT) {
+        for (long i = 0; i < (g->horizon + 1) * 3 * nj; ++i) x->jac_f[i] = (float)pb->J_d[i];
+        for (long i = 0; i < (g->horizon + 1) * 3; ++i) x->off_f[i] = (float)pb->tip_offset[i];
+        /* structural sparsity of J and H over the window (e.g. the twist does not move the tip) */
+        const int nn = nj * nj;
+        for (int k = 0; k < 3; ++k) {
+            x->n_jac[k] = 0;
+            for (int l = 0; l < nj; ++l) {
+                int used = 0;
+                for (long j = 1; j <= g->horizon && !used; ++j) used = pb->J_d[(j * 3 + k) * nj + l] != 0.0;
+                if (used) x->jac[k * nj + x->n_jac[k]++] = l;
+            }
+        }
+        x->n_pairs = 0;
+        if (x->quadratic) {
+            for (int l = 0; l < nj; ++l)
+                for (int m = l; m < nj; ++m) {
+                    int used = 0;
+                    for (long j = 1; j <= g->horizon && !used; ++j)
+                        for (int k = 0; k < 3 && !used; ++k) used = pb->H_d[(j * 3 + k) * nn + l * nj + m] != 0.0;
+                    if (used) {
+                        x->pair[2 * x->n_pairs] = l;
+                        x->pair[2 * x->n_pairs + 1] = m;
+                        ++x->n_pairs;
+                    }
+                }
+            const int np = x->n_pairs;
+            x->coef = malloc(sizeof(float) * (size_t)(g->horizon * 3 * np + 1));
+            if (!x->coef) return VGT_NO_MEMORY;
+            for (int k = 0; k < 3; ++k) {
+                x->n_hes[k] = 0;
+                for (int e = 0; e < np; ++e) {
+                    int l = x->pair[2 * e], m = x->pair[2 * e + 1], used = 0;
+                    for (long j = 1; j <= g->horizon; ++j) {
+                        double h = pb->H_d[(j * 3 + k) * nn + l * nj + m];
+                        x->coef[((j - 1) * 3 + k) * np + e] = (float)((l == m ? -0.5 : -1.0) * h);
+                        used |= h != 0.0;
+                    }
+                    if (used) x->hes[k * np + x->n_hes[k]++] = e;
+                }
+            }
+        }
+    }
+    for (long j = 0; j < g->horizon; ++j)
+        for (int i = 0; i < nj; ++i) {
+            long now = j * nj + i, next = (j + 1) * nj + i;
+            x->r[now] = (float)(pb->q_d[next] - pb->q_d[now] - s->dt * pb->qd_d[now]);
+            x->s[now] = (float)(pb->qd_d[next] - pb->qd_d[now] - s->dt * pb->qdd_d[now]);
+        }
+    return VGT_DONE;
+}
+
+static void predictor_free(predictor *x)
+{
+    free(x->r);
+    free(x->s);
+    free(x->jac_f);
+    free(x->off_f);
+    free(x->jac);
+    free(x->pair);
+    free(x->hes);
+    free(x->coef);
+}
+
+int vgt_ga_predict(const vgt_model *m, const vgt_settings *s, const vgt_ga_settings *g, const vgt_ga_problem *pb,
+                   long n_cand, const double *genes, double *cost)
+{
+    predictor x;
+    int status = predictor_init(&x, s, g, pb);
+    if (status == VGT_DONE) status = predict(m, s, g, &x, n_cand, genes, cost);
+    predictor_free(&x);
+    return status;
+}
+
+/* ---- the activation ------------------------------------------------------------------------- */
+
+static int same_bits(int words, const uint64_t *a, const uint64_t *b)
+{
+    for (int w = 0; w < words; ++w)
+        if (a[w] != b[w]) return 0;
+    return 1;
+}
+
+static long argmin_first(long n, const double *cost)
+{
+    long best = 0;
+    for (long i = 1; i < n; ++i)
+        if (clean_cost(cost[i]) < clean_cost(cost[best])) best = i;
+    return best;
+}
+
+int vgt_ga_activation(const vgt_model *m, const vgt_settings *s, const vgt_ga_settings *g,
+                      const vgt_ga_problem *pb, uint64_t seed, vgt_ga_result *out)
+{
+    const int W = g->words, P = g->population, E = g->elite, C = P - E;
+    const long L = (long)g->n_genes * g->n_bits;
+    rng_t rng;
+    rng_seed(&rng, seed);
+    predictor x;
+    int status = predictor_init(&x, s, g, pb);
+
+    uint64_t *pop = calloc((size_t)P * W, sizeof(uint64_t)), *next = calloc((size_t)P * W, sizeof(uint64_t));
+    uint64_t *best_bits = calloc((size_t)W, sizeof(uint64_t)), *valid = calloc((size_t)W, sizeof(uint64_t));
+    double *cost = malloc(sizeof(double) * (size_t)P), *next_cost = malloc(sizeof(double) * (size_t)P);
+    double *genes = malloc(sizeof(double) * (size_t)P * g->n_genes), *new_cost = malloc(sizeof(double) * (size_t)P);
+    double *expectation = malloc(sizeof(double) * (size_t)P), *work = malloc(sizeof(double) * 2 * (size_t)P);
+    double *parent_cost = malloc(sizeof(double) * (size_t)P), *weights = malloc(sizeof(double) * (size_t)P);
+    long *order = malloc(sizeof(long) * (size_t)P), *pool = malloc(sizeof(long) * (size_t)P);
+    long *fresh = malloc(sizeof(long) * (size_t)P);
+    long max_flips = 64 + (long)(4.0 * g->p_mutation * (double)(C * L)) + 8 * (long)sqrt((double)C * L + 1.0);
+    if (max_flips > C * L) max_flips = C * L;
+    long *flips = malloc(sizeof(long) * (size_t)(max_flips + 1));
+    double *fractions = NULL;
+    if (g->n_bits <= 16) {
+        const long codes = 1L << g->n_bits;
+        const double top = (double)(codes - 1);
+        fractions = malloc(sizeof(double) * (size_t)codes);
+        if (fractions)
+            for (long c = 0; c < codes; ++c) fractions[c] = (double)c / top;
+    }
+    if (status == VGT_DONE && !(pop && next && best_bits && valid && cost && next_cost && genes && new_cost &&
+                                expectation && work && parent_cost && weights && order && pool && fresh && flips))
+        status = VGT_NO_MEMORY;
+    if (status != VGT_DONE) goto done;
+
+    for (long bit = 0; bit < L; ++bit) valid[bit >> 6] |= 1ULL << (63 - (bit & 63));
+    rank_weights(P, weights);
+
+    /* first population: the seeded rows, then random bits */
+    for (int k = 0; k < P; ++k) {
+        uint64_t *row = pop + (long)k * W;
+        if (k < g->n_seeded) {
+            memcpy(row, pb->initial_bits + (long)k * W, sizeof(uint64_t) * (size_t)W);
+            for (int w = 0; w < W; ++w) row[w] &= valid[w];
+        } else {
+            for (int w = 0; w < W; ++w) row[w] = valid[w] ? rng_next(&rng) & valid[w] : 0;
+        }
+    }
+    vgt_ga_decode(g, P, pop, pb->lower, pb->upper, genes);
+    status = predict(m, s, g, &x, P, genes, cost);
+    if (status != VGT_DONE) goto done;
+    for (int k = 0; k < P; ++k) cost[k] = clean_cost(cost[k]);
+    out->evaluations = P;
+    out->seeded_cost = g->n_seeded > 0 ? cost[0] : NAN;
+    long best = argmin_first(P, cost);
+    double best_cost = cost[best];
+    memcpy(best_bits, pop + best * W, sizeof(uint64_t) * (size_t)W);
+
+    int generation = 0;
+    for (generation = 1; generation <= g->generations; ++generation) {
+        /* selection: rank scaling, SUS, shuffled pool */
+        rank_expectations(P, cost, C, expectation, order, weights, work);
+        sus(P, expectation, C, rng_uniform(&rng), pool, work);
+        for (long i = C - 1; i > 0; --i) {
+            long j = rng_below(&rng, i + 1);
+            long tmp = pool[i];
+            pool[i] = pool[j];
+            pool[j] = tmp;
+        }
+        uint64_t *children = next + (long)E * W;
+        for (int i = 0; i < C; ++i) {
+            memcpy(children + (long)i * W, pop + pool[i] * W, sizeof(uint64_t) * (size_t)W);
+            parent_cost[i] = cost[pool[i]];
+        }
+        /* uniform crossover of consecutive pairs */
+        for (int k = 0; k + 1 < C; k += 2) {
+            if (!(rng_uniform(&rng) < g->p_crossover)) continue;
+            uint64_t *a = children + (long)k * W, *b = a + W;
+            for (int w = 0; w < W; ++w) {
+                uint64_t swap = (a[w] ^ b[w]) & rng_next(&rng) & valid[w];
+                a[w] ^= swap;
+                b[w] ^= swap;
+            }
+        }
+        /* bit-flip mutation over every child's bits */
+        long n_flips = mutation_positions(&rng, (long)C * L, g->p_mutation, max_flips, flips);
+        for (long f = 0; f < n_flips; ++f) flip_bit(children + (flips[f] / L) * W, flips[f] % L);
+        /* children equal to a parent keep its cost; the others are predicted */
+        long n_fresh = 0;
+        for (int i = 0; i < C; ++i) {
+            int mate = (i ^ 1) < C ? (i ^ 1) : i;
+            const uint64_t *child = children + (long)i * W;
+            if (same_bits(W, child, pop + pool[i] * W))
+                new_cost[i] = parent_cost[i];
+            else if (same_bits(W, child, pop + pool[mate] * W))
+                new_cost[i] = parent_cost[mate];
+            else
+                fresh[n_fresh++] = i;
+        }
+        for (long f = 0; f < n_fresh; ++f)
+            decode_with(g, children + fresh[f] * W, pb->lower, pb->upper, fractions, genes + f * g->n_genes);
+        if (n_fresh) {
+            status = predict(m, s, g, &x, n_fresh, genes, work);
+            if (status != VGT_DONE) goto done;
+            for (long f = 0; f < n_fresh; ++f) new_cost[fresh[f]] = clean_cost(work[f]);
+            out->evaluations += n_fresh;
+        }
+        /* elitism: the best of the old population (`order` still sorts the old costs), then the
+         * children */
+        for (int e = 0; e < E; ++e) {
+            memcpy(next + (long)e * W, pop + order[e] * W, sizeof(uint64_t) * (size_t)W);
+            next_cost[e] = cost[order[e]];
+        }
+        for (int i = 0; i < C; ++i) next_cost[E + i] = new_cost[i];
+        uint64_t *swap_bits = pop;
+        pop = next;
+        next = swap_bits;
+        double *swap_cost = cost;
+        cost = next_cost;
+        next_cost = swap_cost;
+        long index = argmin_first(P, cost);
+        if (cost[index] < best_cost) {
+            best_cost = cost[index];
+            memcpy(best_bits, pop + index * W, sizeof(uint64_t) * (size_t)W);
+        }
+    }
+    out->generations = generation - 1;
+    out->best_cost = best_cost;
+    decode_one(g, best_bits, pb->lower, pb->upper, out->best);
+
+done:
+    predictor_free(&x);
+    free(pop);
+    free(next);
+    free(best_bits);
+    free(valid);
+    free(cost);
+    free(next_cost);
+    free(genes);
+    free(new_cost);
+    free(expectation);
+    free(work);
+    free(parent_cost);
+    free(weights);
+    free(order);
+    free(pool);
+    free(fresh);
+    free(flips);
+    free(fractions);
+    return status;
+}

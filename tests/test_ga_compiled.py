@@ -1,0 +1,394 @@
+"""The compiled genetic algorithm of switching control (``model/csrc/ga.c``).
+
+Each operator is held to the readable NumPy reference (:mod:`vgtarm.ga`) given the same random
+draws; the compiled generator and operators are checked for the distributions they promise; the
+GA's cheaper predictions are held to the exact one; and whole runs are reproducible per seed.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+import vgtarm
+from vgtarm import ga
+from vgtarm.control import ComputedForceControl, SwitchingControl
+from vgtarm.ga import GAOptions
+from vgtarm.model.closedloop import PREDICTIONS, ClosedLoopDriver, bit_words, pack_bits, unpack_bits
+from vgtarm.model.compiled import CompiledBackend, InterpretedBackend, build_functions
+from vgtarm.model.interface import ffi
+from vgtarm.simulation import ExternalForce, JointReference, simulate
+from vgtarm.simulation.simulator import _compiled_ga
+
+from .conftest import assert_close
+from .test_ga import SIGMAS, binomial_bound
+
+AMPLITUDE = np.array([0.01, 0.008, -0.006, 0.007, -0.009, 0.005, 0.3])
+
+
+@pytest.fixture(scope="module")
+def lib(robot):
+    if not isinstance(robot.backend, CompiledBackend):
+        pytest.skip("no C compiler: the compiled GA is not built")
+    return robot.backend.library
+
+
+def _d(a):
+    return ffi().cast("double *", a.ctypes.data)
+
+
+def _u(a):
+    return ffi().cast("uint64_t *", a.ctypes.data)
+
+
+def _l(a):
+    return ffi().cast("long *", a.ctypes.data)
+
+
+def reference(robot, duration=0.3, dt=1e-3) -> JointReference:
+    t = np.arange(0.0, duration + 1e-9, dt)
+    wt = 6.0 * t[:, None]
+    return JointReference(
+        t, robot.parameters.home + AMPLITUDE * np.sin(wt), AMPLITUDE * 6 * np.cos(wt), -AMPLITUDE * 36 * np.sin(wt)
+    )
+
+
+class DrawsRng:
+    """A stand-in for numpy's Generator that hands the NumPy operators given draws."""
+
+    def __init__(self, uniforms=(), integers=None, binomial=None, choice=None):
+        self.uniforms = list(uniforms)
+        self.integers_value, self.binomial_value, self.choice_value = integers, binomial, choice
+
+    def random(self, size=None):
+        if size is None:
+            return self.uniforms.pop(0)
+        out, self.uniforms = np.array(self.uniforms[:size]), self.uniforms[size:]
+        return out
+
+    def integers(self, low, high, size, dtype):
+        return self.integers_value
+
+    def binomial(self, n, p):
+        return self.binomial_value
+
+    def choice(self, n, size, replace):
+        return self.choice_value
+
+
+# ---------------------------------------------------------------------------------------------
+# Operators against the NumPy reference, given the same draws
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("n_bits", [1, 5, 8, 12, 16])
+def test_decode_matches_numpy_bit_for_bit(lib, n_bits):
+    rng = np.random.default_rng(n_bits)
+    n_genes, rows = 13, 40
+    lower = rng.uniform(-5, 5, n_genes)
+    upper = lower + rng.uniform(0, 10, n_genes)
+    upper[3] = lower[3]
+    bits = rng.integers(0, 2, size=(rows, n_genes * n_bits)).astype(np.uint8)
+    bits[0] = 1  # every gene at its upper bound
+    bits[1] = 0
+    words = bit_words(n_genes * n_bits)
+    packed = pack_bits(bits, words)
+    np.testing.assert_array_equal(unpack_bits(packed, n_genes * n_bits), bits)
+    settings = ffi().new("vgt_ga_settings *", {"n_genes": n_genes, "n_bits": n_bits, "words": words})
+    genes = np.empty((rows, n_genes))
+    lib.vgt_ga_decode(settings, rows, _u(packed), _d(lower), _d(upper), _d(genes))
+    np.testing.assert_array_equal(genes, ga.decode(bits, lower, upper, n_bits))
+
+
+def test_decode_inside_the_activation_matches_numpy(lib, robot):
+    """The activation's 8-bit fast path: its best genes are a decoded code."""
+    ref = reference(robot, duration=0.05)
+    scm = SwitchingControl.with_gains(5000.0, 300.0, threshold=1e-9, ga=GAOptions(max_generations=3))
+    compiled = _ga(robot, ref, scm)
+    out = compiled.activate(1, ref.q[1] + 1e-4, ref.qd[1], seed=3)
+    lower, upper = scm.bounds()
+    codes = ga.encode(out.genes, lower, upper, 8)
+    np.testing.assert_array_equal(ga.decode(codes, lower, upper, 8), out.genes)
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_rank_expectations_match_numpy(lib, seed):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 160))
+    costs = rng.choice(rng.normal(size=n // 2 + 1), size=n)  # ties
+    costs[rng.random(n) < 0.1] = np.inf
+    costs[rng.random(n) < 0.05] = np.nan
+    n_parents = int(rng.integers(1, 3 * n))
+    out = np.empty(n)
+    lib.vgt_ga_rank_expectations(n, _d(np.ascontiguousarray(costs)), n_parents, _d(out))
+    # the same ranks, ties and weights; sums may differ in the last bit from NumPy's SIMD summation
+    assert_close(out, ga.rank_expectations(costs, n_parents), rtol=1e-14, atol=0)
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_sus_matches_numpy_given_the_same_pointer(lib, seed):
+    rng = np.random.default_rng(100 + seed)
+    n = int(rng.integers(1, 80))
+    expectations = ga.rank_expectations(rng.normal(size=n), n)
+    n_select = int(rng.integers(0, 2 * n + 1))
+    u = float(rng.random())
+    out = np.empty(n_select, dtype=np.int64)
+    lib.vgt_ga_sus(n, _d(expectations), n_select, u, _l(out))
+    np.testing.assert_array_equal(out, ga._sus(expectations, n_select, DrawsRng([u])))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_crossover_matches_numpy_given_the_same_masks(lib, seed):
+    rng = np.random.default_rng(200 + seed)
+    rows, length = int(rng.integers(2, 30)), int(rng.integers(1, 300))
+    parents = rng.integers(0, 2, size=(rows, length)).astype(np.uint8)
+    uniforms = rng.random(rows // 2)
+    crossed = uniforms < 0.6
+    mask_bytes = rng.integers(0, 256, size=(int(crossed.sum()), -(-length // 8)), dtype=np.uint8)
+    expected = ga._crossover(parents, 0.6, DrawsRng(uniforms, integers=mask_bytes))
+    words = bit_words(length)
+    packed = pack_bits(parents, words)
+    masks = pack_bits(np.unpackbits(mask_bytes, axis=1, count=length), words)
+    flags = np.ascontiguousarray(crossed.astype(np.uint8))
+    lib.vgt_ga_crossover(words, rows, _u(packed), ffi().cast("unsigned char *", flags.ctypes.data), _u(masks))
+    np.testing.assert_array_equal(unpack_bits(packed, length), expected)
+
+
+def test_mutation_flips_the_same_positions_as_numpy(lib):
+    rng = np.random.default_rng(5)
+    rows, length = 7, 190
+    bits = rng.integers(0, 2, size=(rows, length)).astype(np.uint8)
+    positions = np.sort(rng.choice(rows * length, size=25, replace=False))
+    expected = ga._mutate(bits, 0.01, DrawsRng(binomial=len(positions), choice=positions))
+    # the compiled GA flips positions of the children block laid end to end
+    words = bit_words(length)
+    packed = pack_bits(bits, words)
+    for p in positions:
+        lib.vgt_ga_flip(words, _u(packed[p // length]), 1, _l(np.array([p % length], dtype=np.int64)))
+    np.testing.assert_array_equal(unpack_bits(packed, length), expected)
+
+
+# ---------------------------------------------------------------------------------------------
+# The generator and the operators' distributions
+# ---------------------------------------------------------------------------------------------
+
+
+def test_generator_is_uniform_and_seeded(lib):
+    n = 200_000
+    a, b, c = np.empty(n), np.empty(n), np.empty(n)
+    lib.vgt_rng_uniform(7, n, _d(a))
+    lib.vgt_rng_uniform(7, n, _d(b))
+    lib.vgt_rng_uniform(8, n, _d(c))
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, c)
+    assert 0.0 <= a.min() and a.max() < 1.0
+    assert abs(a.mean() - 0.5) < SIGMAS * math.sqrt(1 / 12 / n)
+    assert abs(a.var() - 1 / 12) < 0.002
+    counts = np.histogram(a, bins=20, range=(0, 1))[0]
+    assert np.all(np.abs(counts / n - 0.05) < binomial_bound(n, 0.05))
+    assert abs(np.corrcoef(a[:-1], a[1:])[0, 1]) < SIGMAS / math.sqrt(n)
+
+
+@pytest.mark.parametrize("p", [0.001, 0.02])
+def test_mutation_positions_have_the_per_bit_distribution(lib, p):
+    total, trials = 39_200, 200
+    flips_per_trial, all_positions = [], []
+    for seed in range(trials):
+        out = np.empty(total, dtype=np.int64)
+        n = ffi().new("long *")
+        lib.vgt_rng_mutation_positions(seed, total, p, total, _l(out), n)
+        positions = out[: n[0]]
+        assert np.all(np.diff(positions) > 0) and (positions.size == 0 or (positions[0] >= 0 and positions[-1] < total))
+        flips_per_trial.append(n[0])
+        all_positions.append(positions)
+    flips = np.array(flips_per_trial)
+    mean, var = total * p, total * p * (1 - p)
+    assert abs(flips.mean() - mean) < SIGMAS * math.sqrt(var / trials)
+    assert 0.7 * var < flips.var() < 1.3 * var
+    spread = np.histogram(np.concatenate(all_positions), bins=10, range=(0, total))[0]
+    expected = flips.sum() / 10
+    assert np.all(np.abs(spread - expected) < SIGMAS * math.sqrt(expected))
+
+
+def test_mutation_edge_probabilities(lib):
+    out = np.empty(50, dtype=np.int64)
+    n = ffi().new("long *")
+    lib.vgt_rng_mutation_positions(1, 50, 0.0, 50, _l(out), n)
+    assert n[0] == 0
+    lib.vgt_rng_mutation_positions(1, 50, 1.0, 50, _l(out), n)
+    assert n[0] == 50 and list(out) == list(range(50))
+
+
+# ---------------------------------------------------------------------------------------------
+# Predictions
+# ---------------------------------------------------------------------------------------------
+
+
+def _ga(robot, ref, scm, model=None):
+    model = model or robot
+    from vgtarm.model.assembly import linear_form
+    from vgtarm.model.closedloop import LoopArrays
+
+    n = len(ref.t)
+    G, h = linear_form(robot.parameters.b, robot.parameters.d)
+    arrays = LoopArrays(
+        q_d=ref.q,
+        qd_d=ref.qd,
+        qdd_d=ref.qdd,
+        tip_d=robot.tip_position(ref.q),
+        disturbance=np.zeros((n, 3)),
+        p_plant=robot.parameter_vector,
+        p_ctrl=model.parameter_vector,
+        G=G,
+        h=h,
+        q_min=robot.parameters.lower,
+        q_max=robot.parameters.upper,
+        q0=ref.q[0],
+        qd0=ref.qd[0],
+    )
+    return _compiled_ga(scm, ClosedLoopDriver(robot.backend), model, arrays, ref.dt)
+
+
+@pytest.mark.parametrize("stable_scale", [0.05, 0.3])
+def test_cheap_predictions_agree_with_the_exact_one(lib, robot, stable_scale):
+    """Joint errors of a few tenths of a millimetre (the switching threshold's scale): the
+    quadratic map is within 1e-3 relative of the exact prediction, the linear map is not as good."""
+    ref = reference(robot, duration=0.1)
+    scm = SwitchingControl.with_gains(5000.0, 300.0, kp_bounds=(0, 15000), kv_bounds=(0, 600), exact_above=0.0)
+    compiled = _ga(robot, ref, scm)
+    rng = np.random.default_rng(4)
+    lower, upper = scm.bounds()
+    genes = lower + stable_scale * rng.random((64, len(lower))) * (upper - lower)
+    genes[0] = np.concatenate([scm.fixed.Kp.ravel(), scm.fixed.Kv.ravel()])
+    k = 30
+    q0 = ref.q[k] + rng.normal(scale=2e-4, size=7)
+    qd0 = ref.qd[k] + rng.normal(scale=2e-3, size=7)
+    costs = {}
+    for name in PREDICTIONS:
+        compiled._ga.prediction = PREDICTIONS[name]
+        costs[name] = compiled.predict(k, q0, qd0, genes)
+    # the exact mode is the NumPy prediction
+    from vgtarm.control import predict_tip_error
+
+    window = slice(k, k + scm.horizon + 1)
+    Kp, Kv = scm.split(genes)
+    tip_d = robot.tip_position(ref.q[window])
+    numpy_exact = predict_tip_error(
+        robot, ref.dt, q0, qd0, ref.q[window], ref.qd[window], ref.qdd[window], tip_d, Kp, Kv
+    )
+    finite = np.isfinite(numpy_exact)
+    assert finite[0]
+    assert_close(costs["exact"][finite], numpy_exact[finite], rtol=1e-12, atol=0)
+    bounded = finite & (numpy_exact < 1.0)
+    rel = np.abs(costs["quadratic"][bounded] - numpy_exact[bounded]) / numpy_exact[bounded]
+    assert rel.max() < 1e-3, rel.max()
+    assert np.abs(costs["linear"][0] - numpy_exact[0]) / numpy_exact[0] < 3e-2
+
+
+def test_trust_region_falls_back_to_the_exact_map(lib, robot):
+    """Candidates whose predicted joint error leaves the region get the exact map for those steps."""
+    ref = reference(robot, duration=0.1)
+    scm = SwitchingControl.with_gains(5000.0, 300.0, kp_bounds=(0, 15000), kv_bounds=(0, 600))
+    compiled = _ga(robot, ref, scm)
+    rng = np.random.default_rng(9)
+    lower, upper = scm.bounds()
+    genes = lower + rng.random((40, len(lower))) * (upper - lower)  # many unstable candidates
+    k = 20
+    q0, qd0 = ref.q[k] + 1e-4, ref.qd[k]
+    compiled._ga.prediction = PREDICTIONS["exact"]
+    exact = compiled.predict(k, q0, qd0, genes)
+    compiled._ga.prediction = PREDICTIONS["quadratic"]
+    compiled._ga.exact_above = 1e-12  # every step outside: the exact map everywhere
+    everywhere = compiled.predict(k, q0, qd0, genes)
+    assert_close(everywhere[np.isfinite(exact)], exact[np.isfinite(exact)], rtol=1e-12, atol=0)
+    np.testing.assert_array_equal(np.isfinite(everywhere), np.isfinite(exact))
+    compiled._ga.exact_above = 0.0  # never: the quadratic map even far outside its range
+    far = compiled.predict(k, q0, qd0, genes)
+    ok = np.isfinite(exact) & np.isfinite(far)
+    assert np.max(np.abs(far[ok] - exact[ok]) / exact[ok]) > 1e-3  # why the fallback exists
+
+
+# ---------------------------------------------------------------------------------------------
+# Whole activations and runs
+# ---------------------------------------------------------------------------------------------
+
+
+def test_activation_is_reproducible_per_seed_and_never_worse_than_the_seeded_gains(lib, robot):
+    ref = reference(robot, duration=0.1)
+    scm = SwitchingControl.with_gains(5000.0, 300.0)
+    compiled = _ga(robot, ref, scm)
+    q0, qd0 = ref.q[10] + 3e-4, ref.qd[10] - 1e-3
+    a = compiled.activate(10, q0, qd0, seed=11)
+    b = compiled.activate(10, q0, qd0, seed=11)
+    c = compiled.activate(10, q0, qd0, seed=12)
+    np.testing.assert_array_equal(a.genes, b.genes)
+    assert a.best_cost == b.best_cost and a.evaluations == b.evaluations
+    assert not np.array_equal(a.genes, c.genes)
+    assert a.best_cost <= a.seeded_cost and a.generations == 50
+    assert 50 < a.evaluations <= 50 * 51
+
+
+def test_a_ga_whose_best_is_the_seeded_gains_returns_them_exactly(lib, robot):
+    """With a one-step horizon no candidate can do better than the seeded fixed gains."""
+    ref = reference(robot, duration=0.05)
+    scm = SwitchingControl.with_gains(4321.0, 123.0, horizon=1)
+    compiled = _ga(robot, ref, scm)
+    out = compiled.activate(5, ref.q[5] + 2e-4, ref.qd[5], seed=1)
+    seeded = ga.decode(scm.initial_bits(), *scm.bounds())[0]
+    np.testing.assert_array_equal(out.genes, seeded)
+    assert out.best_cost == out.seeded_cost
+
+
+def test_compiled_ga_finds_gains_as_good_as_the_numpy_ga(lib, robot):
+    """Same problem, the paper's settings, ten seeds each: the two GAs reach the same quality."""
+    ref = reference(robot, duration=0.1)
+    scm = SwitchingControl.with_gains(5000.0, 300.0, prediction="exact")
+    compiled = _ga(robot, ref, scm)
+    k, q0, qd0 = 10, ref.q[10] + 3e-4, ref.qd[10] - 2e-3
+    window = slice(k, k + scm.horizon + 1)
+    predict = ClosedLoopDriver(robot.backend).ga_predictor(
+        robot.parameter_vector, ref.dt, q0, qd0, ref.q[window], ref.qd[window], ref.qdd[window],
+        robot.tip_position(ref.q[window]),
+    )
+    c_best = [compiled.activate(k, q0, qd0, seed=s).best_cost for s in range(10)]
+    n_best = [scm.tune(predict, np.random.default_rng(s))[1].cost for s in range(10)]
+    seeded = float(predict(scm.fixed.Kp[None], scm.fixed.Kv[None])[0])
+    assert max(c_best) <= seeded and max(n_best) <= seeded
+    spread = np.std(n_best) + np.std(c_best)
+    assert abs(np.mean(c_best) - np.mean(n_best)) < 3 * spread + 1e-3 * seeded
+
+
+def test_switching_control_run_is_reproducible_bit_for_bit(lib, robot):
+    ref = reference(robot, duration=0.2)
+    scm = SwitchingControl.with_gains(5000.0, 300.0, threshold=5e-5)
+    runs = [simulate(robot, ref, scm, external_force=ExternalForce(), seed=s) for s in (3, 3, 4)]
+    assert runs[0].activations
+    for name in ("q", "qd", "effort", "tip_error"):
+        np.testing.assert_array_equal(getattr(runs[0], name), getattr(runs[1], name))
+    assert not np.array_equal(runs[0].q, runs[2].q)
+    summary = runs[0].summary()
+    assert 0 < summary["ga_activation_time_median_s"] <= summary["ga_activation_time_p99_s"]
+
+
+def test_switching_control_without_a_compiler_runs_the_numpy_ga(robot, caplog):
+    """The interpreter fallback (no C compiler) still runs switching control, slowly."""
+    slow = vgtarm.Robot(robot.parameters, InterpretedBackend(build_functions()))
+    ref = reference(robot, duration=0.02)
+    scm = SwitchingControl.with_gains(5000.0, 300.0, threshold=1e-9, ga=GAOptions(max_generations=2))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        run = simulate(slow, ref, scm, initial_state=(ref.q[0] + 1e-4, ref.qd[0]))
+    assert run.metadata["backend"] == "interpreted" and run.activations
+    assert all(a.best_fitness <= a.fixed_gains_fitness for a in run.activations)
+    cfc = simulate(slow, ref, ComputedForceControl.with_gains(5000.0, 300.0))
+    assert cfc.success
+
+
+def test_bad_prediction_settings_are_named():
+    with pytest.raises(vgtarm.InputError, match="prediction = 'cubic'"):
+        SwitchingControl.with_gains(1.0, 1.0, prediction="cubic")
+    with pytest.raises(vgtarm.InputError, match="exact_above"):
+        SwitchingControl.with_gains(1.0, 1.0, exact_above=-1.0)
