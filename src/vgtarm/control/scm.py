@@ -85,7 +85,9 @@ class SwitchingControl:
         if not (isinstance(self.horizon, int | np.integer) and self.horizon >= 1):
             raise InputError(f"horizon = {self.horizon!r}: expected a whole number of control periods >= 1")
         if not (np.isfinite(self.exact_above) and self.exact_above >= 0):
-            raise InputError(f"exact_above = {self.exact_above!r}: expected a joint-error norm >= 0 (m, rad; 0 = never)")
+            raise InputError(
+                f"exact_above = {self.exact_above!r}: expected a joint-error norm >= 0 (m, rad; 0 = never)"
+            )
         if self.prediction not in PREDICTIONS:
             raise InputError(f"prediction = {self.prediction!r}: expected one of {list(PREDICTIONS)}")
 

@@ -233,8 +233,9 @@ class CompiledGA:
         exact_above: joint-error norm above which a candidate is predicted exactly (0: never).
         p_ctrl: the controller's parameter vector.
         q_d, qd_d, qdd_d: ``(N, n)`` joint reference; ``tip_d`` ``(N, 3)`` desired tip.
-        tip_offset: ``(N, 3)`` ``tip_d - P^(q_d)``; ``J_d`` ``(N, 3, n)`` and ``H_d``
-            ``(N, 3, n, n)`` (quadratic only) the model's tip Jacobian and Hessian at ``q_d``.
+        derivatives: maps a slice of rows of the reference to ``tip_d - P^(q_d)`` ``(m, 3)``, the
+            model's tip Jacobian ``(m, 3, n)`` and (with ``quadratic``) Hessian ``(m, 3, n, n)`` at
+            ``q_d``; called for blocks of rows as activations first need them.
     """
 
     def __init__(
@@ -259,9 +260,8 @@ class CompiledGA:
         qd_d: Array,
         qdd_d: Array,
         tip_d: Array,
-        tip_offset: Array,
-        J_d: Array,
-        H_d: Array | None = None,
+        derivatives: Callable[[slice], tuple[Array, Array, Array | None]],
+        quadratic: bool,
     ) -> None:
         if prediction not in PREDICTIONS:
             raise ValueError(f"prediction = {prediction!r}: expected one of {sorted(PREDICTIONS)}")
@@ -281,11 +281,14 @@ class CompiledGA:
                 qd_d=qd_d,
                 qdd_d=qdd_d,
                 tip_d=tip_d,
-                tip_offset=tip_offset,
-                J_d=J_d,
-                H_d=H_d if H_d is not None else np.zeros(1),
+                tip_offset=np.zeros((n, 3)),
+                J_d=np.zeros((n, 3, n_joints)),
+                H_d=np.zeros((n, 3, n_joints, n_joints) if quadratic else 1),
             ).items()
         }
+        self._derivatives = derivatives
+        self._quadratic = quadratic
+        self._ready = np.zeros(-(-n // self.BLOCK), dtype=bool)
         self._initial = pack_bits(np.atleast_2d(initial_bits), words)
         self._settings = ffi().new("vgt_settings *", {"n_joints": n_joints, "dt": dt})
         self._ga = ffi().new(
@@ -319,11 +322,28 @@ class CompiledGA:
         self._base["H_d"] = _ptr(self._arrays["H_d"])
         self._row = {"q_d": n_joints, "qd_d": n_joints, "qdd_d": n_joints, "tip_d": 3, "tip_offset": 3}
         self._row["J_d"] = 3 * n_joints
-        self._row["H_d"] = 3 * n_joints * n_joints if H_d is not None else 0
+        self._row["H_d"] = 3 * n_joints * n_joints if quadratic else 0
+
+    #: Rows of the reference whose tip derivatives are evaluated together.
+    BLOCK = 256
+
+    def _ensure(self, first: int, last: int) -> None:
+        """Evaluate the tip derivatives of the blocks that hold rows ``first .. last``."""
+        for block in range(first // self.BLOCK, last // self.BLOCK + 1):
+            if self._ready[block]:
+                continue
+            rows = slice(block * self.BLOCK, min((block + 1) * self.BLOCK, self.n))
+            offset, J, H = self._derivatives(rows)
+            self._arrays["tip_offset"][rows] = offset
+            self._arrays["J_d"][rows] = J
+            if self._quadratic and H is not None:
+                self._arrays["H_d"][rows] = H
+            self._ready[block] = True
 
     def _window(self, k: int, q0: Array, qd0: Array) -> int:
         """Point the problem at samples ``k .. k+h``; returns the horizon ``h`` left."""
         horizon = min(self.horizon, self.n - 1 - k)
+        self._ensure(k, k + horizon)
         self._state[0], self._state[1] = q0, qd0
         for name, base in self._base.items():
             setattr(self._problem, name, base + k * self._row[name])
