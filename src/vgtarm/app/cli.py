@@ -19,6 +19,7 @@ from ..ik import CSV_COLUMNS, write_csv
 from ..model.parameters import JOINT_NAMES, JOINT_UNITS
 from ..model.robot import load_robot
 from ..paths import Path as DesiredPath
+from . import cli_visual
 
 
 def _format_vector(values: Sequence[float] | np.ndarray, digits: int = 6) -> str:
@@ -156,7 +157,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
             f"{spec.folder:<26} {s['max_tip_error_m'] * 1e3:>10.4f} {s['max_tip_error_after_transient_m'] * 1e3:>17.4f}"
             f" {s['ga_activations']:>5} {s['wall_time_s']:>9.3f}"
         )
-    print(f"report written to {made.report} ({made.wall_time_s:.1f} s)")
+    print(f"report written to {made.report} and {made.report.with_suffix('.html')} ({made.wall_time_s:.1f} s)")
     return 0
 
 
@@ -338,6 +339,7 @@ def build_parser() -> argparse.ArgumentParser:
     ik.add_argument("-o", "--output", type=Path, default=None, metavar="FILE", help="CSV file to write")
     _add_config(ik)
     ik.set_defaults(run=cmd_ik)
+    cli_visual.add_parsers(sub)  # draw, animate, report
 
     return parser
 

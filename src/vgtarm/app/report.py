@@ -79,11 +79,13 @@ def reproduce(
     runs: list[RunSpec] | None = None,
     progress: Progress | None = None,
 ) -> Reproduction:
-    """Run the paper's combinations, save every run, the figures and ``report.md`` into ``out``."""
+    """Run the paper's combinations, save every run, the figures, ``report.md`` and the interactive
+    ``report.html`` (with ``plotly.min.js`` beside it) into ``out``."""
     start = time.perf_counter()
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "report.md").unlink(missing_ok=True)
+    (folder / "report.html").unlink(missing_ok=True)
     specs = runs or paper_runs()
     references: dict[tuple[int, str], JointReference] = {}
     results: dict[RunSpec, SimulationResult] = {}
@@ -113,6 +115,15 @@ def reproduce(
         results, figures, seed=seed, integrator=integrator, substeps=substeps, wall_time_s=time.perf_counter() - start
     )
     atomic_write_text(folder / "report.md", text)
+    from .html_report import runs_from_reproduction, write_html_report  # it imports this module's table
+
+    write_html_report(
+        robot,
+        runs_from_reproduction(results),
+        folder,
+        title="vgtarm: the paper's case studies reproduced",
+        intro=f"The interactive companion of report.md (seed {seed}, integrator {integrator}).",
+    )
     return Reproduction(results, folder / "report.md", time.perf_counter() - start)
 
 
@@ -168,6 +179,46 @@ def _mm(value: float | None) -> str:
     return "—" if value is None else f"{value * 1e3:.4f}"
 
 
+#: Columns of the report's table (``report.md`` and ``report.html`` show the same table).
+TABLE_COLUMNS = (
+    "case",
+    "controller",
+    "tool force",
+    "rates",
+    "paper",
+    "ours: max (mm)",
+    "ours: max after 0.2 s (mm)",
+    "ours: RMS (mm)",
+    "peak force (N)",
+    "GA activations",
+    "GA time (s)",
+    "wall (s)",
+    "folder",
+)
+
+
+def table_row(spec: RunSpec, summary: dict[str, Any], folder: str | None = None) -> list[str]:
+    """The cells of one run in the report's table (:data:`TABLE_COLUMNS`); ``folder`` defaults to
+    the spec's folder name."""
+    s = summary
+    paper = PAPER_RESULTS.get((spec.case, spec.controller, spec.external_force))
+    return [
+        str(spec.case),
+        spec.controller.upper(),
+        "yes" if spec.external_force else "no",
+        "exact" if spec.rates == "exact" else "finite diff.",
+        paper.text if paper else "—",
+        _mm(s["max_tip_error_m"]),
+        _mm(s["max_tip_error_after_transient_m"]),
+        _mm(s["rms_tip_error_m"]),
+        "—" if s["peak_force_n"] is None else f"{s['peak_force_n']:.1f}",
+        str(s["ga_activations"]),
+        f"{s['ga_time_s']:.2f}",
+        f"{s['wall_time_s']:.2f}",
+        folder if folder is not None else spec.folder,
+    ]
+
+
 def render_report(
     results: dict[RunSpec, SimulationResult],
     figures: dict[str, str],
@@ -189,20 +240,12 @@ def render_report(
         "",
         "## Maximum tip error, ours beside the paper's",
         "",
-        "| case | controller | tool force | rates | paper | ours: max (mm) | ours: max after 0.2 s (mm) |"
-        " ours: RMS (mm) | peak force (N) | GA activations | GA time (s) | wall (s) | folder |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| " + " | ".join(TABLE_COLUMNS) + " |",
+        "|" + " --- |" * len(TABLE_COLUMNS),
     ]
     for spec, s in summaries.items():
-        paper = PAPER_RESULTS.get((spec.case, spec.controller, spec.external_force))
-        lines.append(
-            f"| {spec.case} | {spec.controller.upper()} | {'yes' if spec.external_force else 'no'} | "
-            f"{'exact' if spec.rates == 'exact' else 'finite diff.'} | {paper.text if paper else '—'} | "
-            f"{_mm(s['max_tip_error_m'])} | {_mm(s['max_tip_error_after_transient_m'])} | "
-            f"{_mm(s['rms_tip_error_m'])} | "
-            f"{s['peak_force_n']:.1f} | {s['ga_activations']} | {s['ga_time_s']:.2f} | {s['wall_time_s']:.2f} | "
-            f"`{spec.folder}/` |"
-        )
+        *cells, folder = table_row(spec, s)
+        lines.append("| " + " | ".join(cells) + f" | `{folder}/` |")
     lines += ["", "## Figures", ""]
     for caption, name in figures.items():
         lines += [f"**{caption}**", "", f"![{caption}]({name})", ""]

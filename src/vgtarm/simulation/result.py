@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ..errors import InputError
 from ..fileio import atomic_write_text
 from ..model.parameters import JOINT_NAMES
 
@@ -129,11 +130,80 @@ class SimulationResult:
         atomic_write_text(out / "summary.json", json.dumps(_jsonable(self.summary()), indent=2) + "\n")
         return out
 
-    def _table(self) -> tuple[list[str], Array]:
+    @classmethod
+    def load(cls, folder: str | Path) -> SimulationResult:
+        """Read back a run written by :meth:`save` (``timeseries.csv``, ``ga_activations.csv``,
+        ``summary.json``); ``load(save(r))`` holds the same arrays, activations and summary as ``r``.
+
+        Raises :class:`~vgtarm.errors.InputError` naming the file when the folder does not hold a
+        complete, readable run.
+        """
+        where = Path(folder)
+        summary_file, table_file = where / "summary.json", where / "timeseries.csv"
+        for file in (summary_file, table_file):
+            if not file.is_file():
+                raise InputError(f"run folder {where}: missing {file.name} (expected a folder written by save())")
+        try:
+            summary = json.loads(summary_file.read_text("utf-8"))
+            header = table_file.read_text("utf-8").split("\n", 1)[0].split(",")
+            table = np.genfromtxt(table_file, delimiter=",", skip_header=1, dtype=float, ndmin=2)
+        except (OSError, UnicodeDecodeError, ValueError) as exc:
+            raise InputError(f"run folder {where}: cannot read the run: {exc}") from None
+        columns = cls._columns()
+        if header != columns or table.shape[1:] != (len(columns),):
+            raise InputError(
+                f"{table_file}: columns {header[:4]}...({len(header)}) do not match a run's {len(columns)} columns"
+            )
+        index = {name: i for i, name in enumerate(columns)}
+
+        def block(names: list[str]) -> Array:
+            return np.ascontiguousarray(table[:, [index[n] for n in names]])
+
+        joints = list(JOINT_NAMES)
+        activations: list[GAActivation] = []
+        act_file = where / "ga_activations.csv"
+        if act_file.is_file() and len(act_file.read_text("utf-8").strip().splitlines()) > 1:
+            rows = np.genfromtxt(act_file, delimiter=",", skip_header=1, dtype=float, ndmin=2)
+            fields = GAActivation.__dataclass_fields__
+            for row in rows:
+                values: dict[str, Any] = {
+                    name: int(v) if fields[name].type in (int, "int") else float(v)
+                    for name, v in zip(fields, row, strict=True)
+                }
+                activations.append(GAActivation(**values))
+        mode = np.nan_to_num(table[:, index["mode"]], nan=MODE_NOT_RUN).astype(np.int8)
+        loaded = cls(
+            t=block(["t"])[:, 0],
+            tip_desired=block(["x_d", "y_d", "z_d"]),
+            tip=block(["x", "y", "z"]),
+            tip_error=block(["tip_error"])[:, 0],
+            q_desired=block([f"{n}_d" for n in joints]),
+            qd_desired=block([f"d{n}_d" for n in joints]),
+            q=block(joints),
+            qd=block([f"d{n}" for n in joints]),
+            effort=block([f"F_{n}" for n in joints]),
+            f_ext=block(["fx", "fy", "fz"]),
+            mode=mode,
+            activations=tuple(activations),
+            success=bool(summary["success"]),
+            message=str(summary["message"]),
+            wall_time_s=float(summary["wall_time_s"]),
+            ga_time_s=float(summary["ga_time_s"]),
+        )
+        # the summary is the metadata updated with figures computed from the arrays: keep the rest
+        computed = set(loaded.summary())
+        return replace(loaded, metadata={k: v for k, v in summary.items() if k not in computed})
+
+    @staticmethod
+    def _columns() -> list[str]:
         columns = ["t", "x_d", "y_d", "z_d", "x", "y", "z", "tip_error"]
         columns += [f"{n}_d" for n in JOINT_NAMES] + list(JOINT_NAMES)
         columns += [f"d{n}_d" for n in JOINT_NAMES] + [f"d{n}" for n in JOINT_NAMES]
         columns += [f"F_{n}" for n in JOINT_NAMES] + ["fx", "fy", "fz", "mode"]
+        return columns
+
+    def _table(self) -> tuple[list[str], Array]:
+        columns = self._columns()
         table = np.column_stack(
             [
                 self.t,

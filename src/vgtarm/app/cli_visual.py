@@ -1,0 +1,124 @@
+"""``vgtarm draw``, ``vgtarm animate`` and ``vgtarm report``: see the robot.
+
+Registered in :func:`vgtarm.app.cli.build_parser` by :func:`add_parsers`. Plotly, imageio and
+imageio-ffmpeg (the ``viz`` extra) are imported only when a command needs them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+from typing import Any
+
+from ..errors import InputError
+from ..model.parameters import JOINT_NAMES
+from ..model.robot import load_robot
+
+#: Picture formats of ``vgtarm draw``.
+PICTURE_FORMATS = (".png", ".svg", ".pdf")
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text}")
+    return value
+
+
+def _config(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--config", type=Path, default=None, metavar="FILE", help="robot TOML file (default: the reference robot)"
+    )
+
+
+def cmd_draw(args: argparse.Namespace) -> int:
+    """Draw the robot at one configuration: both operating planes and an isometric view."""
+    from .drawing import pose_figure
+    from .plotting import save_figure
+
+    if args.out.suffix.lower() not in PICTURE_FORMATS:
+        raise InputError(f"--out {args.out}: expected a file name ending in one of {list(PICTURE_FORMATS)}")
+    robot = load_robot(args.config)
+    q = args.q or robot.parameters.home
+    if len(q) != len(robot.parameters.home):
+        raise InputError(
+            f"Q: expected {len(robot.parameters.home)} joint values ({' '.join(JOINT_NAMES)}), got {len(q)}"
+        )
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    save_figure(pose_figure(robot, q), args.out)
+    print(f"drawing written to {args.out}")
+    return 0
+
+
+def _load_run(folder: Path) -> Any:
+    from ..simulation import SimulationResult
+
+    return SimulationResult.load(folder)
+
+
+def cmd_animate(args: argparse.Namespace) -> int:
+    """Render a saved run as MP4 or GIF."""
+    from .animation import render_animation
+
+    robot = load_robot(args.config)
+    made = render_animation(
+        robot, _load_run(args.run_dir), args.out, fps=args.fps, speed=args.speed, dpi=args.dpi, progress=not args.quiet
+    )
+    print(
+        f"animation written to {made.path} ({len(made.plan)} frames at {made.plan.fps:g} fps,"
+        f" {made.plan.duration_s:.3f} s of run at {made.plan.speed:g}x)"
+    )
+    return 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    """Write report.html for saved runs."""
+    from .html_report import load_runs, write_html_report
+
+    robot = load_robot(args.config)
+    page = write_html_report(
+        robot, load_runs(args.runs), args.out, title=args.title, intro="Runs: " + ", ".join(p.name for p in args.runs)
+    )
+    print(f"report written to {page}")
+    return 0
+
+
+def add_parsers(sub: Any) -> None:
+    """Add ``draw``, ``animate`` and ``report`` to the subparsers ``sub``."""
+    draw = sub.add_parser("draw", help="draw the robot at a configuration (two operating planes and isometric)")
+    draw.add_argument(
+        "q",
+        nargs="*",
+        type=float,
+        metavar="Q",
+        default=None,
+        help=f"joint values {' '.join(JOINT_NAMES)} (m, rad); none: the home pose",
+    )
+    draw.add_argument("--out", type=Path, required=True, metavar="FILE", help="picture file: .png, .svg or .pdf")
+    _config(draw)
+    draw.set_defaults(run=cmd_draw)
+
+    animate = sub.add_parser("animate", help="animate a saved run (MP4, or GIF without the encoder)")
+    animate.add_argument(
+        "run_dir", type=Path, metavar="RUN_DIR", help="a folder written by simulate --out or reproduce"
+    )
+    animate.add_argument("--out", type=Path, required=True, metavar="FILE", help="video file: .mp4 or .gif")
+    animate.add_argument("--fps", type=_positive, default=25.0, help="frames per second of video (default 25)")
+    animate.add_argument(
+        "--speed", type=_positive, default=1.0, help="simulated seconds per second of video (default 1)"
+    )
+    animate.add_argument("--dpi", type=_positive, default=100.0, help="resolution; 100 gives 1280 x 640 (default)")
+    animate.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    _config(animate)
+    animate.set_defaults(run=cmd_animate)
+
+    report = sub.add_parser("report", help="write an interactive report.html for saved runs")
+    report.add_argument("runs", type=Path, nargs="+", metavar="RUN_DIR", help="folders of saved runs")
+    report.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder of report.html")
+    report.add_argument("--title", default="vgtarm: runs", help="title of the page")
+    _config(report)
+    report.set_defaults(run=cmd_report)

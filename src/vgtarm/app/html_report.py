@@ -1,0 +1,522 @@
+"""``report.html``: the runs on one interactive page that opens from disk, written with Plotly.
+
+The page holds the same table as ``report.md`` (:func:`vgtarm.app.report.table_row`), zoomable
+plots of the tip error and of every actuator's effort (runs toggled from the legend: one legend
+entry per run controls all of its traces), the desired and actual tip paths in 3-D, and the
+mechanism animated along the first run of each case study, with a time slider and a play button.
+
+Light enough to open at once:
+
+- every time series is decimated for display by :func:`decimate_min_max`, which keeps the smallest
+  and the largest sample of each bucket, so peaks (the maximum error) survive;
+- plotly.js is not embedded: the page loads ``plotly.min.js`` from its own folder, written once
+  there (the same copy serves every page of the folder), so it opens from disk with no server
+  and no network.
+"""
+
+from __future__ import annotations
+
+import html
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..errors import InputError
+from ..fileio import atomic_write_text
+from ..model.parameters import EFFORT_UNITS, JOINT_NAMES
+from ..model.robot import Robot
+from ..simulation.result import MODE_GA, SimulationResult
+from .drawing import CLOSENESS_COLOURS, MM
+from .geometry import MechanismGeometry, mechanism_geometries
+from .report import TABLE_COLUMNS, RunSpec, table_row
+
+Array = NDArray[np.float64]
+
+#: Name of the shared plotly.js file written beside the pages.
+PLOTLY_JS = "plotly.min.js"
+#: Largest number of points of one displayed time series.
+MAX_POINTS = 1200
+#: Largest number of frames of one mechanism animation.
+MAX_FRAMES = 90
+#: Colours of the runs (Plotly's default sequence).
+COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf")
+#: Colour scale of the legs' closeness to a limit (as the Matplotlib drawing: green to red).
+CLOSENESS_SCALE = [[i / (len(CLOSENESS_COLOURS) - 1), c] for i, c in enumerate(CLOSENESS_COLOURS)]
+_COLOURBAR_TITLE = "legs: closeness<br>to a limit<br>(0 mid-range,<br>1 at a limit)"
+
+
+@dataclass(frozen=True)
+class ReportRun:
+    """One run on the page: its table cells' spec, its legend label and the folder it is saved in."""
+
+    spec: RunSpec
+    label: str
+    folder: str
+    result: SimulationResult
+
+
+def spec_of(result: SimulationResult) -> RunSpec:
+    """The :class:`RunSpec` of a run from its metadata (case 0 when the run is not a case study)."""
+    meta = result.metadata
+    return RunSpec(
+        case=int(meta.get("case", 0) or 0),
+        controller=str(meta.get("controller", "run")),
+        external_force=bool(meta.get("external_force", False)),
+        rates=str(meta.get("reference_rates", "exact")),
+    )
+
+
+def decimate_min_max(t: ArrayLike, y: ArrayLike, max_points: int = MAX_POINTS) -> NDArray[np.int64]:
+    """Indices of at most ``max_points`` samples of ``y`` (N,) that keep its shape for display.
+
+    The samples are cut into ``max_points // 2`` buckets of consecutive samples; each gives the
+    index of its smallest and of its largest finite value, in time order. The first and last
+    samples are always kept. ``t`` (N,) only fixes the length. Returns sorted unique indices.
+    """
+    ta, ya = np.asarray(t, dtype=float), np.asarray(y, dtype=float)
+    if ta.shape != ya.shape or ta.ndim != 1:
+        raise InputError(f"t and y must be 1-D of one length, got shapes {ta.shape} and {ya.shape}")
+    if not (isinstance(max_points, int) and max_points >= 4):
+        raise InputError(f"max_points = {max_points!r}: expected a whole number >= 4")
+    n = len(ya)
+    if n <= max_points:
+        return np.arange(n)
+    buckets = (max_points - 2) // 2
+    edges = np.linspace(1, n - 1, buckets + 1).astype(np.int64)
+    keep = [0, n - 1]
+    finite = np.where(np.isfinite(ya), ya, np.nan)
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        chunk = finite[lo:hi]
+        if hi <= lo or np.isnan(chunk).all():
+            continue
+        keep += [lo + int(np.nanargmin(chunk)), lo + int(np.nanargmax(chunk))]
+    return np.unique(np.array(keep, dtype=np.int64))
+
+
+def _series(result: SimulationResult, y: Array, max_points: int) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    n = result.completed
+    index = decimate_min_max(result.t[:n], y[:n], max_points)
+    return result.t[index].astype(np.float32), y[index].astype(np.float32)
+
+
+def _error_figure(runs: Sequence[ReportRun], max_points: int) -> Any:
+    import plotly.graph_objects as go
+
+    fig = go.Figure()
+    for i, run in enumerate(runs):
+        t, e = _series(run.result, run.result.tip_error * MM, max_points)
+        fig.add_trace(
+            go.Scatter(x=t, y=e, name=run.label, mode="lines", line={"color": COLOURS[i % len(COLOURS)], "width": 1.2})
+        )
+    fig.update_layout(
+        title="Tip error |P(q_d) - P(q)| (click a legend entry to hide or show a run; drag to zoom)",
+        xaxis_title="time (s)",
+        yaxis={"title": "tip error (mm)", "type": "log", "exponentformat": "power"},
+        height=480,
+        template="plotly_white",
+        legend={"font": {"size": 10}},
+    )
+    return fig
+
+
+def _effort_figure(runs: Sequence[ReportRun], max_points: int) -> Any:
+    import plotly.graph_objects as go
+    from plotly.subplots import make_subplots
+
+    n = runs[0].result.effort.shape[1]
+    fig = make_subplots(rows=n, cols=1, shared_xaxes=True, vertical_spacing=0.012)
+    for i, run in enumerate(runs):
+        colour = COLOURS[i % len(COLOURS)]
+        for j in range(n):
+            t, f = _series(run.result, run.result.effort[:, j], max_points)
+            fig.add_trace(
+                go.Scatter(
+                    x=t,
+                    y=f,
+                    name=run.label,
+                    legendgroup=run.label,
+                    showlegend=j == 0,
+                    mode="lines",
+                    line={"color": colour, "width": 1.0},
+                ),
+                row=j + 1,
+                col=1,
+            )
+    for j in range(n):
+        fig.update_yaxes(title_text=f"{JOINT_NAMES[j]} ({EFFORT_UNITS[j]})", title_font={"size": 10}, row=j + 1, col=1)
+    fig.update_xaxes(title_text="time (s)", row=n, col=1)
+    fig.update_layout(
+        title="Actuator efforts (legend toggles a run in every panel)",
+        height=150 * n + 120,
+        template="plotly_white",
+        legend={"font": {"size": 10}},
+    )
+    return fig
+
+
+def _path_figure(runs: Sequence[ReportRun], max_points: int) -> Any:
+    import plotly.graph_objects as go
+
+    fig = go.Figure()
+    shown_desired: set[int] = set()
+    for i, run in enumerate(runs):
+        r = run.result
+        n = r.completed
+        index = decimate_min_max(r.t[:n], r.tip_error[:n], max_points)
+        if run.spec.case not in shown_desired:
+            shown_desired.add(run.spec.case)
+            d = (r.tip_desired[index] * MM).astype(np.float32)
+            name = f"case {run.spec.case}: desired" if run.spec.case else f"{run.label}: desired"
+            fig.add_trace(
+                go.Scatter3d(
+                    x=d[:, 0], y=d[:, 1], z=d[:, 2], name=name, mode="lines", line={"color": "black", "width": 3}
+                )
+            )
+        a = (r.tip[index] * MM).astype(np.float32)
+        fig.add_trace(
+            go.Scatter3d(
+                x=a[:, 0],
+                y=a[:, 1],
+                z=a[:, 2],
+                name=run.label,
+                mode="lines",
+                line={"color": COLOURS[i % len(COLOURS)], "width": 2},
+            )
+        )
+    fig.update_layout(
+        title="Desired and actual tip paths (mm; drag to rotate)",
+        scene={"xaxis_title": "x (mm)", "yaxis_title": "y (mm)", "zaxis_title": "z (mm)", "aspectmode": "data"},
+        height=620,
+        template="plotly_white",
+        legend={"font": {"size": 10}},
+    )
+    return fig
+
+
+def _polylines(pairs: Sequence[tuple[Array, Array]]) -> tuple[list[float | None], ...]:
+    """x, y, z lists (mm) of segments separated by gaps (None)."""
+    xs: list[float | None] = []
+    ys: list[float | None] = []
+    zs: list[float | None] = []
+    for start, end in pairs:
+        for point in (start * MM, end * MM):
+            xs.append(float(point[0]))
+            ys.append(float(point[1]))
+            zs.append(float(point[2]))
+        xs.append(None)
+        ys.append(None)
+        zs.append(None)
+    return xs, ys, zs
+
+
+def mechanism_traces(geometry: MechanismGeometry) -> list[dict[str, Any]]:
+    """The moving traces of the mechanism at one configuration, as Plotly trace dicts (mm).
+
+    Order: legs (coloured by closeness), bars (bases, platforms' top edges, tool), twist axis,
+    end-effector bar, plates, frames' u1, u2, u3 axes, tip. The legs' trace carries ``customdata``
+    with the leg names.
+    """
+    legs = geometry.of_kind("leg")
+    lx, ly, lz = _polylines([(s.start, s.end) for s in legs])
+    colour: list[float] = []
+    for s in legs:
+        colour += [float(s.closeness or 0.0)] * 3
+    bars = geometry.of_kind("base") + geometry.of_kind("platform") + geometry.of_kind("tool")
+    bx, by, bz = _polylines([(s.start, s.end) for s in bars])
+    axis = geometry.segment("twist_axis")
+    ax_, ay, az = _polylines([(axis.start, axis.end)])
+    bar = geometry.segment("end_effector")
+    ex, ey, ez = _polylines([(bar.start, bar.end)])
+    vertices = np.concatenate([p.vertices for p in geometry.plates]) * MM
+    i_, j_, k_ = [], [], []
+    offset = 0
+    for plate in geometry.plates:  # fan triangulation of each convex polygon
+        for m in range(1, len(plate.vertices) - 1):
+            i_.append(offset)
+            j_.append(offset + m)
+            k_.append(offset + m + 1)
+        offset += len(plate.vertices)
+    traces: list[dict[str, Any]] = [
+        {
+            "type": "scatter3d",
+            "mode": "lines",
+            "name": "legs",
+            "showlegend": False,  # a legend entry of a line coloured by values draws wrongly; the colour bar names it
+            "x": lx,
+            "y": ly,
+            "z": lz,
+            "customdata": [s.name for s in legs for _ in range(3)],
+            "line": {
+                "width": 9,
+                "color": colour,
+                "colorscale": CLOSENESS_SCALE,
+                "cmin": 0.0,
+                "cmax": 1.0,
+                "showscale": True,
+                "colorbar": {"title": {"text": _COLOURBAR_TITLE}, "len": 0.6},
+            },
+            "hoverinfo": "skip",
+        },
+        {"type": "scatter3d", "mode": "lines", "name": "bases, platforms, tool", "x": bx, "y": by, "z": bz,
+         "line": {"width": 7, "color": "#333333"}, "hoverinfo": "skip"},
+        {"type": "scatter3d", "mode": "lines", "name": "twist axis", "x": ax_, "y": ay, "z": az,
+         "line": {"width": 2, "color": "#777777", "dash": "dash"}, "hoverinfo": "skip"},
+        {"type": "scatter3d", "mode": "lines", "name": "end-effector (twist)", "x": ex, "y": ey, "z": ez,
+         "line": {"width": 8, "color": "#6a3d9a"}, "hoverinfo": "skip"},
+        {"type": "mesh3d", "name": "plates", "x": vertices[:, 0], "y": vertices[:, 1], "z": vertices[:, 2],
+         "i": i_, "j": j_, "k": k_, "color": "#6baed6", "opacity": 0.35, "hoverinfo": "skip"},
+    ]  # fmt: skip
+    for i, colour_name in enumerate(("#d62728", "#2ca02c", "#1f77b4")):
+        fx, fy, fz = _polylines(
+            [(f.origin, f.origin + geometry.axis_length * f.rotation[:, i]) for f in geometry.frames]
+        )
+        traces.append(
+            {"type": "scatter3d", "mode": "lines", "name": f"frames F0-F3: u{i + 1}", "x": fx, "y": fy, "z": fz,
+             "line": {"width": 4, "color": colour_name}, "hoverinfo": "skip"}
+        )  # fmt: skip
+    tip = geometry.tip * MM
+    traces.append(
+        {"type": "scatter3d", "mode": "markers", "name": "tip", "x": [tip[0]], "y": [tip[1]], "z": [tip[2]],
+         "marker": {"size": 4, "color": "black"}}
+    )  # fmt: skip
+    return traces
+
+
+def _status(result: SimulationResult, k: int) -> str:
+    text = f"t = {result.t[k]:.3f} s, tip error = {result.tip_error[k] * 1e3:.4f} mm"
+    if str(result.metadata.get("controller", "")).lower() == "scm":
+        text += ", gains: " + ("GA (switched)" if result.mode[k] == MODE_GA else "fixed")
+    return text
+
+
+def mechanism_figure(robot: Robot, run: ReportRun, *, max_frames: int = MAX_FRAMES, fps: float = 10.0) -> Any:
+    """The mechanism along ``run`` with a play button and a time slider (at most ``max_frames``
+    frames at evenly spaced completed samples; playing at ``fps`` frames per second)."""
+    import plotly.graph_objects as go
+
+    r = run.result
+    n = r.completed
+    samples = np.unique(np.linspace(0, n - 1, min(n, max_frames)).round().astype(np.int64))
+    geometries = mechanism_geometries(robot, r.q[samples])
+    first = mechanism_traces(geometries[0])
+    index = decimate_min_max(r.t[:n], r.tip_error[:n], MAX_POINTS)
+    d, a = r.tip_desired[index] * MM, r.tip[index] * MM
+    static = [
+        go.Scatter3d(x=d[:, 0], y=d[:, 1], z=d[:, 2], mode="lines", name="desired tip path",
+                     line={"color": "#1f77b4", "width": 3, "dash": "dash"}, hoverinfo="skip"),
+        go.Scatter3d(x=a[:, 0], y=a[:, 1], z=a[:, 2], mode="lines", name="actual tip path",
+                     line={"color": "#ff7f0e", "width": 3}, hoverinfo="skip"),
+    ]  # fmt: skip
+    moving = list(range(len(static), len(static) + len(first)))
+    points = np.concatenate([g.points() for g in geometries]) * MM
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    pad = 0.05 * float((hi - lo).max())
+    frames = [
+        go.Frame(
+            name=str(i),
+            data=mechanism_traces(g),
+            traces=moving,
+            layout={"title": {"text": f"{run.label}: {_status(r, int(k))}"}},
+        )
+        for i, (g, k) in enumerate(zip(geometries, samples, strict=True))
+    ]
+    fig = go.Figure(data=[*static, *first], frames=frames)
+    step_ms = 1000.0 / fps
+    fig.update_layout(
+        title=f"{run.label}: {_status(r, int(samples[0]))}",
+        height=720,
+        template="plotly_white",
+        scene={
+            "xaxis": {"title": "x (mm)", "range": [lo[0] - pad, hi[0] + pad]},
+            "yaxis": {"title": "y (mm)", "range": [lo[1] - pad, hi[1] + pad]},
+            "zaxis": {"title": "z (mm)", "range": [lo[2] - pad, hi[2] + pad]},
+            "aspectmode": "manual",
+            "aspectratio": dict(zip("xyz", (hi - lo + 2 * pad) / float((hi - lo + 2 * pad).max()), strict=True)),
+            "camera": {"eye": {"x": 0.95, "y": -1.05, "z": 0.45}, "center": {"x": 0, "y": 0, "z": -0.05}},
+        },
+        margin={"l": 0, "r": 0, "t": 60, "b": 0},
+        legend={"font": {"size": 10}, "x": 0.0, "y": 1.0},
+        updatemenus=[
+            {
+                "type": "buttons",
+                "direction": "left",
+                "x": 0.0,
+                "y": 0.0,
+                "xanchor": "left",
+                "yanchor": "top",
+                "pad": {"t": 40},
+                "buttons": [
+                    {
+                        "label": "\u25b6 Play",
+                        "method": "animate",
+                        "args": [
+                            None,
+                            {
+                                "frame": {"duration": step_ms, "redraw": True},
+                                "fromcurrent": True,
+                                "transition": {"duration": 0},
+                                "mode": "immediate",
+                            },
+                        ],
+                    },
+                    {
+                        "label": "\u275a\u275a Pause",
+                        "method": "animate",
+                        "args": [[None], {"frame": {"duration": 0, "redraw": False}, "mode": "immediate"}],
+                    },
+                ],
+            }
+        ],
+        sliders=[
+            {
+                "active": 0,
+                "x": 0.16,
+                "len": 0.84,
+                "y": 0.0,
+                "pad": {"t": 30},
+                "currentvalue": {"prefix": "t = ", "suffix": " s"},
+                "steps": [
+                    {
+                        "label": f"{r.t[k]:.2f}",
+                        "method": "animate",
+                        "args": [
+                            [str(i)],
+                            {
+                                "frame": {"duration": 0, "redraw": True},
+                                "mode": "immediate",
+                                "transition": {"duration": 0},
+                            },
+                        ],
+                    }
+                    for i, k in enumerate(samples)
+                ],
+            }
+        ],
+    )
+    return fig
+
+
+def write_plotly_js(folder: str | Path) -> Path:
+    """Write ``plotly.min.js`` into ``folder`` unless the same copy is already there."""
+    from plotly.offline import get_plotlyjs
+
+    target = Path(folder) / PLOTLY_JS
+    text = get_plotlyjs()
+    if not (
+        target.is_file() and target.stat().st_size == len(text.encode("utf-8")) and target.read_text("utf-8") == text
+    ):
+        atomic_write_text(target, text)
+    return target
+
+
+_STYLE = """
+body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 1.5em auto; max-width: 1200px;
+       color: #222; padding: 0 1em; }
+table { border-collapse: collapse; font-size: 13px; margin: 1em 0; }
+th, td { border: 1px solid #ccc; padding: 3px 7px; text-align: right; }
+th { background: #f2f2f2; }
+td:nth-child(-n+5) { text-align: left; }
+.plot { margin: 1.5em 0; border-top: 1px solid #ddd; padding-top: 0.5em; }
+.note { color: #555; font-size: 13px; }
+"""
+
+
+def render_html(
+    robot: Robot,
+    runs: Sequence[ReportRun],
+    *,
+    title: str = "vgtarm: runs",
+    intro: str = "",
+    max_points: int = MAX_POINTS,
+    max_frames: int = MAX_FRAMES,
+) -> str:
+    """The page's HTML (it expects ``plotly.min.js`` beside it)."""
+    import plotly.io as pio
+
+    if not runs:
+        raise InputError("runs: expected at least one run to report")
+    figures: list[tuple[str, str, Any]] = [
+        ("tip-error", "Tip error", _error_figure(runs, max_points)),
+        ("efforts", "Actuator efforts", _effort_figure(runs, max_points)),
+        ("paths", "Tip paths in 3-D", _path_figure(runs, max_points)),
+    ]
+    animated: set[int] = set()
+    for run in runs:  # the first run of each case study
+        if run.spec.case in animated:
+            continue
+        animated.add(run.spec.case)
+        figures.append(
+            (
+                f"mechanism-{len(animated)}",
+                f"The mechanism along {run.label}",
+                mechanism_figure(robot, run, max_frames=max_frames),
+            )
+        )
+    header = "".join(f"<th>{html.escape(c)}</th>" for c in TABLE_COLUMNS)
+    rows = []
+    for run in runs:
+        cells = table_row(run.spec, run.result.summary(), run.folder)
+        rows.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in cells) + "</tr>")
+    parts = [
+        "<!DOCTYPE html>",
+        '<html lang="en"><head><meta charset="utf-8">',
+        f"<title>{html.escape(title)}</title>",
+        f'<script src="{PLOTLY_JS}"></script>',
+        f"<style>{_STYLE}</style></head><body>",
+        f"<h1>{html.escape(title)}</h1>",
+        f'<p class="note">{intro} Generated on {time.strftime("%Y-%m-%d %H:%M")} for robot'
+        f" <b>{html.escape(robot.parameters.name)}</b>. Lengths in mm on the plots; plots are decimated for display"
+        f" (at most {max_points} points per curve, keeping each bucket's extremes).</p>",
+        "<h2>Maximum tip error</h2>",
+        f'<table id="summary-table"><thead><tr>{header}</tr></thead><tbody>{"".join(rows)}</tbody></table>',
+    ]
+    config = {"displaylogo": False, "responsive": True}
+    for div_id, heading, fig in figures:
+        body = pio.to_html(fig, include_plotlyjs=False, full_html=False, div_id=div_id, auto_play=False, config=config)
+        parts.append(f'<div class="plot"><h2>{html.escape(heading)}</h2>{body}</div>')
+    parts.append("</body></html>")
+    return "\n".join(parts) + "\n"
+
+
+def write_html_report(
+    robot: Robot,
+    runs: Sequence[ReportRun],
+    out: str | Path,
+    *,
+    name: str = "report.html",
+    title: str = "vgtarm: runs",
+    intro: str = "",
+    max_points: int = MAX_POINTS,
+    max_frames: int = MAX_FRAMES,
+) -> Path:
+    """Write the page ``out/name`` and the folder's shared ``plotly.min.js``; returns the page's path."""
+    folder = Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    text = render_html(robot, runs, title=title, intro=intro, max_points=max_points, max_frames=max_frames)
+    write_plotly_js(folder)
+    return atomic_write_text(folder / name, text)
+
+
+def load_runs(folders: Sequence[str | Path]) -> list[ReportRun]:
+    """Runs saved by :meth:`SimulationResult.save`, labelled from their metadata and folder names."""
+    runs = []
+    for folder in folders:
+        path = Path(folder)
+        result = SimulationResult.load(path)
+        spec = spec_of(result)
+        label = f"{path.name}: {spec.label}" if spec.case == 0 else f"case {spec.case} {spec.label} ({path.name})"
+        runs.append(ReportRun(spec=spec, label=label, folder=path.name, result=result))
+    return runs
+
+
+def runs_from_reproduction(results: dict[RunSpec, SimulationResult]) -> list[ReportRun]:
+    """The runs of ``vgtarm reproduce`` with their own specs and folder names."""
+    return [
+        ReportRun(spec=spec, label=f"case {spec.case} {spec.label}", folder=spec.folder, result=result)
+        for spec, result in results.items()
+    ]

@@ -1,0 +1,194 @@
+"""report.html: the table of report.md, decimated plots, one shared plotly.js, and the page checked in
+a real headless Chromium (no JavaScript errors, every plot rendered, play moves the mechanism)."""
+
+from __future__ import annotations
+
+import html
+import os
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.viz_support import short_case1_run
+from vgtarm.app import cli
+from vgtarm.app.geometry import mechanism_geometry
+from vgtarm.app.html_report import (
+    PLOTLY_JS,
+    decimate_min_max,
+    load_runs,
+    mechanism_traces,
+    runs_from_reproduction,
+    write_html_report,
+)
+from vgtarm.app.report import TABLE_COLUMNS, RunSpec, render_report
+from vgtarm.errors import InputError
+
+#: The browser: Debian's chromium (``VGTARM_CHROMIUM`` points elsewhere).
+CHROMIUM = os.environ.get("VGTARM_CHROMIUM", "/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+#: Plots of a page of runs of one case: tip error, efforts, 3-D paths, the mechanism.
+PLOTS_ONE_CASE = 4
+
+
+@pytest.fixture(scope="module")
+def runs(robot):
+    return {
+        RunSpec(1, "cfc", False, "exact"): short_case1_run(robot, "cfc"),
+        RunSpec(1, "scm", False, "exact"): short_case1_run(robot, "scm"),
+    }
+
+
+@pytest.fixture(scope="module")
+def page(robot, runs, tmp_path_factory) -> Path:
+    return write_html_report(robot, runs_from_reproduction(runs), tmp_path_factory.mktemp("page"), max_frames=12)
+
+
+def _cells(row_html: str) -> list[str]:
+    return [html.unescape(c) for c in re.findall(r"<t[dh]>(.*?)</t[dh]>", row_html)]
+
+
+def test_page_table_is_the_markdown_reports_table(runs, page):
+    markdown = render_report(runs, {}, seed=0, integrator="euler", substeps=1, wall_time_s=1.0)
+    md_rows = [line for line in markdown.splitlines() if line.startswith("| 1 |")]
+    md_cells = [[c.strip().strip("`").rstrip("/") for c in row.strip("|").split("|")] for row in md_rows]
+    table = re.search(r'<table id="summary-table">(.*?)</table>', page.read_text(), re.S).group(1)
+    rows = re.findall(r"<tr>(.*?)</tr>", table, re.S)
+    assert _cells(rows[0]) == list(TABLE_COLUMNS)
+    assert [_cells(r) for r in rows[1:]] == md_cells
+    assert len(md_cells) == len(runs)
+
+
+def test_page_loads_plotly_from_its_folder_once_and_needs_no_network(page):
+    text = page.read_text()
+    assert re.findall(r"<script[^>]*\bsrc=\"([^\"]*)\"", text) == [PLOTLY_JS]
+    assert "<link" not in text and "<iframe" not in text
+    assert (page.parent / PLOTLY_JS).stat().st_size > 1_000_000
+
+
+def test_pages_of_one_folder_share_one_plotly_js(robot, runs, tmp_path):
+    specs = runs_from_reproduction(runs)
+    first = write_html_report(robot, specs[:1], tmp_path, name="a.html", max_frames=4)
+    stamp = (tmp_path / PLOTLY_JS).stat().st_mtime_ns
+    write_html_report(robot, specs[1:], tmp_path, name="b.html", max_frames=4)
+    assert (tmp_path / PLOTLY_JS).stat().st_mtime_ns == stamp, "an identical plotly.js is not rewritten"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.html", "b.html", PLOTLY_JS]
+    assert first.stat().st_size < 2_000_000
+
+
+def test_min_max_decimation_keeps_peaks_ends_and_order():
+    rng = np.random.default_rng(3)
+    t = np.linspace(0.0, 6.0, 20_001)
+    y = np.sin(t) + 0.01 * rng.standard_normal(t.size)
+    y[12_345] = 9.0  # a spike
+    y[777] = -9.0
+    y[5_000:5_010] = np.nan
+    index = decimate_min_max(t, y, 500)
+    assert len(index) <= 500 and index[0] == 0 and index[-1] == len(t) - 1
+    assert np.all(np.diff(index) > 0)
+    assert 12_345 in index and 777 in index
+    # every bucket's extremes are kept, so the decimated curve spans the same range everywhere
+    assert np.nanmax(y[index]) == np.nanmax(y) and np.nanmin(y[index]) == np.nanmin(y)
+    np.testing.assert_array_equal(decimate_min_max(t[:100], y[:100], 500), np.arange(100))
+    with pytest.raises(InputError, match="max_points = 2"):
+        decimate_min_max(t, y, 2)
+
+
+def test_page_mechanism_traces_are_the_drawn_geometry(robot):
+    q = robot.parameters.home
+    geometry = mechanism_geometry(robot, q)
+    legs = mechanism_traces(geometry)[0]
+    xyz = np.array([legs["x"], legs["y"], legs["z"]], dtype=float).T.reshape(-1, 3, 3)[:, :2] / 1e3
+    lengths = np.linalg.norm(xyz[:, 1] - xyz[:, 0], axis=1)
+    names = legs["customdata"][::3]
+    from vgtarm.model.parameters import JOINT_NAMES
+
+    np.testing.assert_allclose(lengths, [q[JOINT_NAMES.index(n)] for n in names], rtol=0, atol=1e-12)
+    tip = mechanism_traces(geometry)[-1]
+    np.testing.assert_allclose(
+        np.array([tip["x"], tip["y"], tip["z"]]).ravel() / 1e3, robot.tip_position(q), atol=1e-12
+    )
+
+
+def test_report_command_writes_a_page_for_saved_runs(runs, tmp_path, capsys):
+    folders = []
+    for spec, result in runs.items():
+        folders.append(result.save(tmp_path / spec.folder))
+    assert cli.main(["report", *map(str, folders), "--out", str(tmp_path / "page")]) == 0
+    assert (tmp_path / "page" / "report.html").is_file() and (tmp_path / "page" / PLOTLY_JS).is_file()
+    assert [r.folder for r in load_runs(folders)] == [f.name for f in folders]
+    assert "report written to" in capsys.readouterr().out
+    assert cli.main(["report", str(tmp_path / "nothing"), "--out", str(tmp_path / "x")]) == 1
+    assert "missing summary.json" in capsys.readouterr().err
+
+
+def _browser_or_skip():
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        pytest.skip("playwright is not installed: pip install -e '.[test]' to run the browser test")
+    if not (Path(CHROMIUM).is_file() or shutil.which(CHROMIUM)):
+        pytest.skip(f"no headless Chromium at {CHROMIUM}: apt-get install chromium (or set VGTARM_CHROMIUM) to run it")
+    return sync_playwright
+
+
+def test_page_in_a_real_browser(page, tmp_path):
+    sync_playwright = _browser_or_skip()
+    problems: list[str] = []
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        try:
+            tab = browser.new_page(viewport={"width": 1280, "height": 900})
+            tab.on("console", lambda m: problems.append(f"console {m.type}: {m.text}") if m.type == "error" else None)
+            tab.on("pageerror", lambda e: problems.append(f"page error: {e}"))
+            tab.on("requestfailed", lambda r: problems.append(f"request failed: {r.url}"))
+            tab.on("request", lambda r: None if r.url.startswith("file://") else problems.append(f"network: {r.url}"))
+            tab.goto(page.as_uri(), wait_until="load")
+            tab.wait_for_function(
+                f"document.querySelectorAll('.js-plotly-plot').length === {PLOTS_ONE_CASE}", timeout=60_000
+            )
+            # the table: a header and one row per run
+            assert tab.locator("#summary-table tbody tr").count() == 2
+            assert tab.locator("#summary-table th").count() == len(TABLE_COLUMNS)
+            # every plot rendered: its SVG layers, traces drawn, and a WebGL canvas for the 3-D ones
+            report = tab.evaluate(
+                """() => Array.from(document.querySelectorAll('.plotly-graph-div')).map(d => ({
+                    id: d.id, rendered: d.classList.contains('js-plotly-plot'),
+                    svg: d.querySelectorAll('svg.main-svg').length, traces: (d.data || []).length,
+                    lines: d.querySelectorAll('path.js-line').length, canvas: d.querySelectorAll('canvas').length,
+                    threeD: !!(d._fullLayout && d._fullLayout.scene)}))"""
+            )
+            assert [p["id"] for p in report] == ["tip-error", "efforts", "paths", "mechanism-1"]
+            for plot in report:
+                assert plot["rendered"] and plot["svg"] >= 1 and plot["traces"] >= 1, plot
+                assert plot["canvas"] >= 1 if plot["threeD"] else plot["lines"] >= plot["traces"], plot
+            # pressing play moves the mechanism: the legs' trace data and the slider change
+            legs = "document.getElementById('mechanism-1').data.findIndex(t => t.customdata)"
+            read = f"""() => {{ const d = document.getElementById('mechanism-1');
+                return JSON.stringify([Array.from(d.data[{legs}].z), d._fullLayout.sliders[0].active]); }}"""
+            before = tab.evaluate(read)
+            tab.locator("#mechanism-1").scroll_into_view_if_needed()
+            tab.locator("#mechanism-1 .updatemenu-button").first.click()
+            tab.wait_for_function(
+                """() => { const d = document.getElementById('mechanism-1');
+                    return d._fullLayout.sliders[0].active >= 3; }""",
+                timeout=30_000,
+            )
+            after = tab.evaluate(read)
+            assert after != before
+            tab.screenshot(path=str(tmp_path / "report.png"), full_page=True)
+        finally:
+            browser.close()
+    assert (tmp_path / "report.png").stat().st_size > 10_000
+    assert not problems, problems
