@@ -366,8 +366,11 @@ static inline __attribute__((always_inline)) void block_kernel(const predictor *
     vf K[2 * nn], E[nj], Ed[nj], a[nj];
     const vf zero = {0.0f};
     double sum[BLOCK] = {0.0}, big[BLOCK] = {0.0};
-    for (int gi = 0; gi < 2 * nn; ++gi)
-        for (int c = 0; c < BLOCK; ++c) K[gi][c] = c < count ? (float)genes[(long)c * 2 * nn + gi] : 0.0f;
+    for (int gi = 0; gi < 2 * nn; ++gi) K[gi] = zero;
+    for (int c = 0; c < count; ++c) {
+        const double *row = genes + (long)c * 2 * nn;
+        for (int gi = 0; gi < 2 * nn; ++gi) K[gi][c] = (float)row[gi];
+    }
     for (int i = 0; i < nj; ++i) {
         E[i] = zero + (float)(pb->q_d[i] - pb->q0[i]);
         Ed[i] = zero + (float)(pb->qd_d[i] - pb->qd0[i]);
