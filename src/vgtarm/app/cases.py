@@ -131,10 +131,12 @@ def run_case(
     controller_model: RobotParameters | None = None,
     reference: JointReference | None = None,
     progress: Callable[[int, int], None] | None = None,
+    **options: Any,
 ) -> SimulationResult:
     """Run one case study; the robot starts at rest at ``q_d(0)`` (the paper's start).
 
-    ``reference`` reuses a joint reference computed before (it must match ``dt`` and ``rates``).
+    ``reference`` reuses a joint reference computed before (it must match ``dt`` and ``rates``);
+    ``options`` go to :func:`vgtarm.simulation.simulate` (observer, force sensor, sensing, ...).
     """
     case = case_study(number)
     ref = reference if reference is not None else joint_reference(robot, number, dt=dt, rates=rates)
@@ -150,4 +152,5 @@ def run_case(
         seed=seed,
         metadata=metadata,
         progress=progress,
+        **options,
     )

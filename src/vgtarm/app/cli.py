@@ -98,6 +98,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                 horizon=args.horizon,
                 controller_model=None if exact_model else model,
                 progress=progress,
+                observer=args.observer,
+                observer_gain=args.observer_gain,
+                force_sensor=args.force_sensor,
+                encoder_resolution=args.encoder_resolution,
+                velocity_noise=args.velocity_noise,
+                velocity_filter_hz=args.velocity_filter,
             )
         except SimulationError as exc:
             if args.out is not None and exc.result is not None:
@@ -175,6 +181,48 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
         "--seed", type=_non_negative_int, default=0, help="seed of the disturbance and the GA (default 0)"
     )
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+
+
+def _add_observer_options(parser: argparse.ArgumentParser) -> None:
+    from ..simulation.sensing import DEFAULT_OBSERVER_GAIN, DEFAULT_VELOCITY_FILTER_HZ, OBSERVERS
+
+    parser.add_argument(
+        "--observer",
+        choices=OBSERVERS,
+        default="none",
+        help="momentum: cancel the external efforts estimated by a generalised-momentum observer",
+    )
+    parser.add_argument(
+        "--observer-gain",
+        type=float,
+        default=DEFAULT_OBSERVER_GAIN,
+        metavar="K",
+        help=f"observer gain K_O in 1/s (default {DEFAULT_OBSERVER_GAIN:g}; at most 1/dt)",
+    )
+    parser.add_argument(
+        "--force-sensor", action="store_true", help="feed the tool force measured one period late forward"
+    )
+    parser.add_argument(
+        "--encoder-resolution",
+        type=float,
+        default=0.0,
+        metavar="R",
+        help="encoder step of the legs in m (e.g. 1e-6); the twist gets a 20-bit encoder",
+    )
+    parser.add_argument(
+        "--velocity-noise",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="standard deviation of Gaussian noise on each differenced velocity (m/s, rad/s)",
+    )
+    parser.add_argument(
+        "--velocity-filter",
+        type=float,
+        default=DEFAULT_VELOCITY_FILTER_HZ,
+        metavar="HZ",
+        help=f"cut-off of the velocity filter with sensing (default {DEFAULT_VELOCITY_FILTER_HZ:g} Hz)",
+    )
 
 
 def _positive_int(text: str) -> int:
@@ -311,6 +359,7 @@ def build_parser() -> argparse.ArgumentParser:
             metavar="FACTOR",
             help=f"scale the controller model's {name} (a wrong model; default 1)",
         )
+    _add_observer_options(simulate)
     simulate.add_argument(
         "--out", type=Path, default=None, metavar="DIR", help="write summary.json, the time series and a figure here"
     )

@@ -19,6 +19,7 @@ from matplotlib.figure import Figure
 from ..fileio import atomic_write_text
 from ..model.robot import Robot
 from ..simulation import JointReference, SimulationResult
+from .beyond import beyond_figure, beyond_section, run_beyond
 from .cases import PAPER_RESULTS, case_study, joint_reference, run_case
 from .plotting import plot_efforts, plot_path_3d, plot_tip_error, save_figure
 
@@ -78,9 +79,11 @@ def reproduce(
     substeps: int = 1,
     runs: list[RunSpec] | None = None,
     progress: Progress | None = None,
+    beyond_paper: bool = True,
 ) -> Reproduction:
     """Run the paper's combinations, save every run, the figures, ``report.md`` and the interactive
-    ``report.html`` (with ``plotly.min.js`` beside it) into ``out``."""
+    ``report.html`` (with ``plotly.min.js`` beside it) into ``out``; with ``beyond_paper`` also the
+    section on the disturbance observer, the force sensor and realistic sensing (:mod:`.beyond`)."""
     start = time.perf_counter()
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
@@ -111,9 +114,20 @@ def reproduce(
     if progress:
         progress("figures and report", len(specs), len(specs))
     figures = _figures(results, folder)
+    beyond: list[str] = []
+    if beyond_paper:
+        if progress:
+            progress("beyond the paper: observer and sensing", len(specs), len(specs))
+        key = (2, "exact")
+        if key not in references:
+            references[key] = joint_reference(robot, 2)
+        extra = run_beyond(robot, references[key], folder, seed=seed, integrator=integrator, substeps=substeps)
+        beyond = beyond_section(extra, beyond_figure(extra, folder))
     text = render_report(
         results, figures, seed=seed, integrator=integrator, substeps=substeps, wall_time_s=time.perf_counter() - start
     )
+    if beyond:
+        text += "\n" + "\n".join(beyond) + "\n"
     atomic_write_text(folder / "report.md", text)
     from .html_report import runs_from_reproduction, write_html_report  # it imports this module's table
 

@@ -33,8 +33,11 @@ NO_MEMORY = _STATUS["VGT_NO_MEMORY"]
 #: Integrator codes by name (enum ``vgt_integrator`` of the header, ``VGT_RK4`` -> ``"rk4"``).
 INTEGRATOR_CODES = {name.removeprefix("VGT_").lower(): code for name, code in enum("vgt_integrator").items()}
 
+#: Observer codes by name (enum ``vgt_observer`` of the header, ``VGT_OBSERVER_MOMENTUM`` -> ``"momentum"``).
+OBSERVER_CODES = {name.removeprefix("VGT_OBSERVER_").lower(): code for name, code in enum("vgt_observer").items()}
+
 #: The generated functions the loop calls, by field of ``vgt_model``.
-_MODEL_FIELDS = ("cfc", "fd", "tip_state", "tip")
+_MODEL_FIELDS = ("cfc", "fd", "tip_state", "tip", "id", "jac")
 
 
 def _ptr(array: Array) -> Any:
@@ -55,6 +58,10 @@ class LoopSettings:
     cutting_speed: float
     threshold: float
     limit_tolerance: float
+    observer: str = "none"
+    observer_gain: float = 0.0
+    sensing: bool = False
+    velocity_filter: float = 0.0
 
     def struct(self, n_joints: int, n_margins: int) -> Any:
         """The C structure of these settings for a robot of ``n_joints`` joints."""
@@ -71,6 +78,10 @@ class LoopSettings:
                 "cutting_speed": self.cutting_speed,
                 "threshold": self.threshold,
                 "limit_tolerance": self.limit_tolerance,
+                "observer": OBSERVER_CODES[self.observer],
+                "observer_gain": self.observer_gain,
+                "sensing": int(self.sensing),
+                "velocity_filter": self.velocity_filter,
             },
         )
 
@@ -94,6 +105,8 @@ class LoopArrays:
         q_max: Array,
         q0: Array,
         qd0: Array,
+        resolution: Array | None = None,
+        velocity_noise: Array | None = None,
     ) -> None:
         n, n_joints = np.shape(q_d)
         self.n = n
@@ -113,6 +126,8 @@ class LoopArrays:
                 h=h,
                 q_min=q_min,
                 q_max=q_max,
+                resolution=np.zeros(n_joints) if resolution is None else resolution,
+                velocity_noise=np.zeros((n, n_joints)) if velocity_noise is None else velocity_noise,
             ).items()
         }
         self.q = np.full((n, n_joints), np.nan)
@@ -122,6 +137,9 @@ class LoopArrays:
         self.f_ext = np.full((n, 3), np.nan)
         self.tip = np.full((n, 3), np.nan)
         self.error = np.full(n, np.nan)
+        self.q_meas = np.full((n, n_joints), np.nan)
+        self.qd_meas = np.full((n, n_joints), np.nan)
+        self.tau_hat = np.full((n, n_joints), np.nan)
         fields = {name: _ptr(a) for name, a in self.inputs.items()}
         fields.update(
             q=_ptr(self.q),
@@ -130,6 +148,9 @@ class LoopArrays:
             f_ext=_ptr(self.f_ext),
             tip=_ptr(self.tip),
             error=_ptr(self.error),
+            q_meas=_ptr(self.q_meas),
+            qd_meas=_ptr(self.qd_meas),
+            tau_hat=_ptr(self.tau_hat),
         )
         self.struct = ffi().new("vgt_run *", {"n": n, **fields})
 

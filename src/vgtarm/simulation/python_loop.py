@@ -6,6 +6,7 @@ the same computation sample by sample through the :class:`~vgtarm.robot.Robot` m
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -78,6 +79,35 @@ class PythonLoop:
             return OUTSIDE_LIMITS
         return DONE
 
+    def _measure(self, s: LoopSettings, arrays: LoopArrays, k: int) -> None:
+        """What the controller sees at sample ``k`` (as ``measure`` in ``closed_loop.c``)."""
+        q, qd = arrays.q[k], arrays.qd[k]
+        if not s.sensing:
+            arrays.q_meas[k], arrays.qd_meas[k] = q, qd
+            return
+        step = arrays.inputs["resolution"]
+        safe = np.where(step > 0, step, 1.0)
+        arrays.q_meas[k] = np.where(step > 0, step * np.floor(q / safe + 0.5), q)
+        if k == 0:
+            arrays.qd_meas[k] = qd
+            return
+        raw = (arrays.q_meas[k] - arrays.q_meas[k - 1]) / s.dt + arrays.inputs["velocity_noise"][k]
+        arrays.qd_meas[k] = s.velocity_filter * arrays.qd_meas[k - 1] + (1.0 - s.velocity_filter) * raw
+
+    def _observe(self, s: LoopSettings, arrays: LoopArrays, k: int) -> None:
+        """Estimated external joint efforts at sample ``k`` (as ``observe`` in ``closed_loop.c``)."""
+        if s.observer == "none" or k == 0:
+            arrays.tau_hat[k] = 0.0
+            return
+        if s.observer == "force":
+            J = self.model.tip_jacobian(arrays.q_meas[k])
+            arrays.tau_hat[k] = J.T @ arrays.f_ext[k - 1]
+            return
+        acc = (arrays.qd_meas[k] - arrays.qd_meas[k - 1]) / s.dt
+        raw = self.model.inverse_dynamics(arrays.q_meas[k - 1], arrays.qd_meas[k - 1], acc) - arrays.F[k - 1]
+        keep = math.exp(-s.observer_gain * s.dt)
+        arrays.tau_hat[k] = keep * arrays.tau_hat[k - 1] + (1.0 - keep) * raw
+
     def simulate(
         self, settings: LoopSettings, arrays: LoopArrays, Kp: Array, Kv: Array, k0: int, k1: int
     ) -> tuple[int, int]:
@@ -88,11 +118,14 @@ class PythonLoop:
             velocity, _ = self.plant.tip_velocity(q, qd)
             arrays.tip[k] = self.plant.tip_position(q)
             arrays.error[k] = np.linalg.norm(inp["tip_d"][k] - arrays.tip[k])
+            self._measure(settings, arrays, k)
             if settings.threshold > 0 and arrays.error[k] > settings.threshold:
                 return ABOVE_THRESHOLD, k
-            e, e_dot = inp["q_d"][k] - q, inp["qd_d"][k] - qd
-            M, C = self.model.mass_matrix(q), self.model.bias_forces(q, qd)
-            arrays.F[k] = computed_force(M, C, inp["qdd_d"][k], e, e_dot, Kp, Kv)
+            self._observe(settings, arrays, k)
+            qm, vm = arrays.q_meas[k], arrays.qd_meas[k]
+            e, e_dot = inp["q_d"][k] - qm, inp["qd_d"][k] - vm
+            M, C = self.model.mass_matrix(qm), self.model.bias_forces(qm, vm)
+            arrays.F[k] = computed_force(M, C, inp["qdd_d"][k], e, e_dot, Kp, Kv, arrays.tau_hat[k])
             dist = inp["disturbance"][k]
             arrays.f_ext[k] = self._tool_force(settings, velocity, dist)
             if k + 1 >= arrays.n:

@@ -46,6 +46,7 @@ from .external import ExternalForce
 from .python_loop import PythonLoop
 from .reference import HasJointReference, JointReference
 from .result import MODE_FIXED, MODE_GA, MODE_NOT_RUN, GAActivation, SimulationResult
+from .sensing import DEFAULT_OBSERVER_GAIN, DEFAULT_VELOCITY_FILTER_HZ, sensing_settings
 
 #: Integrators by name.
 INTEGRATORS: dict[str, str] = {
@@ -78,6 +79,13 @@ def simulate(
     seed: int = 0,
     initial_state: tuple[np.ndarray, np.ndarray] | None = None,
     limit_tolerance: float = 0.05,
+    observer: str = "none",
+    observer_gain: float = DEFAULT_OBSERVER_GAIN,
+    force_sensor: bool = False,
+    encoder_resolution: float = 0.0,
+    twist_resolution: float | None = None,
+    velocity_noise: float = 0.0,
+    velocity_filter_hz: float = DEFAULT_VELOCITY_FILTER_HZ,
     transient_s: float = 0.2,
     metadata: Mapping[str, Any] | None = None,
     progress: Progress | None = None,
@@ -94,6 +102,16 @@ def simulate(
         seed: seeds the disturbance and the genetic algorithm; the same seed gives the same run.
         initial_state: ``(q0, qd0)``; default: at rest at ``q_d(0)`` (the paper's start).
         limit_tolerance: distance (m, rad) outside a joint limit at which the run is stopped.
+        observer: ``"none"`` or ``"momentum"``: computed force control subtracts the estimate of a
+            generalised-momentum disturbance observer with gain ``observer_gain`` (K_O, 1/s; the
+            estimate follows the external efforts as ``1 - exp(-K_O t)``; at most 1/dt).
+        force_sensor: instead, feed the tool force measured one period late forward through
+            ``J_P^T`` (exclusive with ``observer``).
+        encoder_resolution: encoder step of the legs (m); with it, or with ``velocity_noise``,
+            the controller sees quantised joints and velocities from their differences, filtered
+            at ``velocity_filter_hz`` (first order) with Gaussian noise of ``velocity_noise``
+            (m/s, rad/s) on each difference, seeded from ``seed``. ``twist_resolution`` (rad)
+            defaults to a 20-bit encoder (2 pi / 2^20) when encoders are on.
         transient_s: length of the start transient excluded from the "after transient" figures.
         metadata: extra entries for the summary (case name, ...).
         progress: called as ``progress(samples_done, samples_total)`` now and then.
@@ -111,17 +129,33 @@ def simulate(
     if not (isinstance(seed, int | np.integer) and seed >= 0):
         raise InputError(f"seed = {seed!r}: expected a whole number >= 0")
     ref = JointReference.of(reference)
+    n, dt = len(ref.t), ref.dt
+    sensing = sensing_settings(
+        ref.q.shape[1],
+        dt,
+        observer,
+        observer_gain,
+        force_sensor,
+        encoder_resolution,
+        twist_resolution,
+        velocity_noise,
+        velocity_filter_hz,
+    )
     external = external_force or ExternalForce.none()
     if isinstance(controller_model, Robot):
         model = controller_model
     else:
         model = plant.with_parameters(controller_model or plant.parameters)
-    n, dt = len(ref.t), ref.dt
     tip_d = plant.tip_position(ref.q)
-    dist_seed, ga_seed = np.random.SeedSequence(int(seed)).spawn(2)
+    dist_seed, ga_seed, sensor_seed = np.random.SeedSequence(int(seed)).spawn(3)
     disturbance = external.disturbance_samples(n, np.random.default_rng(dist_seed))
     ga_rng = np.random.default_rng(ga_seed)
-    q0, qd0 = initial_state if initial_state is not None else (ref.q[0], np.zeros(7))
+    q0, qd0 = initial_state if initial_state is not None else (ref.q[0], np.zeros(ref.q.shape[1]))
+    noise = (
+        np.random.default_rng(sensor_seed).normal(scale=sensing.velocity_noise, size=ref.q.shape)
+        if sensing.velocity_noise > 0
+        else None
+    )
     G, h = linear_form(plant.parameters.b, plant.parameters.d)
     arrays = LoopArrays(
         q_d=ref.q,
@@ -137,6 +171,8 @@ def simulate(
         q_max=plant.parameters.upper,
         q0=np.asarray(q0, dtype=float),
         qd0=np.asarray(qd0, dtype=float),
+        resolution=sensing.resolution,
+        velocity_noise=noise,
     )
     loop: ClosedLoopDriver | PythonLoop
     if isinstance(plant.backend, CompiledBackend) and isinstance(model.backend, CompiledBackend):
@@ -152,6 +188,10 @@ def simulate(
         cutting_speed=external.cutting_speed,
         threshold=controller.threshold if isinstance(controller, SwitchingControl) else 0.0,
         limit_tolerance=limit_tolerance,
+        observer=sensing.loop_observer,
+        observer_gain=sensing.observer_gain,
+        sensing=sensing.active,
+        velocity_filter=sensing.velocity_filter,
     )
     mode = np.full(n, MODE_NOT_RUN, dtype=np.int8)
     activations: list[GAActivation] = []
@@ -225,6 +265,7 @@ def simulate(
         "controller_model": model.parameters.name,
         "plant": plant.parameters.name,
         "backend": plant.backend.kind,
+        **sensing.metadata(),
     }
     if isinstance(controller, SwitchingControl):
         info.update(
@@ -281,7 +322,7 @@ def _tune(
         if "ga" not in compiled:
             compiled["ga"] = _compiled_ga(controller, loop, model, arrays, dt)
         seed = int(rng.integers(0, 2**63, dtype=np.int64))
-        out = compiled["ga"].activate(k, arrays.q[k], arrays.qd[k], seed)
+        out = compiled["ga"].activate(k, arrays.q_meas[k], arrays.qd_meas[k], seed)
         Kp, Kv = controller.split(out.genes)
         return Gains.of(Kp, Kv), (out.generations, out.evaluations, out.best_cost, out.seeded_cost)
     window = slice(k, end + 1)
@@ -290,8 +331,8 @@ def _tune(
     predict = loop.ga_predictor(
         model.parameter_vector,
         dt,
-        arrays.q[k],
-        arrays.qd[k],
+        arrays.q_meas[k],
+        arrays.qd_meas[k],
         inp["q_d"][window],
         inp["qd_d"][window],
         inp["qdd_d"][window],
@@ -355,5 +396,5 @@ def _where(plant: Robot, arrays: LoopArrays, k: int) -> str:
     if not np.isfinite(q).all():
         return ""
     lower, upper = plant.parameters.lower, plant.parameters.upper
-    outside = [f"{JOINT_NAMES[i]} = {q[i]:.4g}" for i in range(7) if not lower[i] <= q[i] <= upper[i]]
+    outside = [f"{JOINT_NAMES[i]} = {q[i]:.4g}" for i in range(len(q)) if not lower[i] <= q[i] <= upper[i]]
     return f" ({', '.join(outside)})" if outside else ""

@@ -20,19 +20,24 @@ typedef struct {
     double *w;
 } vgt_work;
 
-static vgt_int max4(vgt_int a, vgt_int b, vgt_int c, vgt_int d)
+static vgt_int max_size(const vgt_model *m, int which)
 {
-    vgt_int m = a > b ? a : b;
-    m = m > c ? m : c;
-    return (m > d ? m : d) + 1;
+    const vgt_call *calls[6] = {&m->cfc, &m->fd, &m->tip_state, &m->tip, &m->id, &m->jac};
+    vgt_int best = 0;
+    for (int i = 0; i < 6; ++i) {
+        vgt_int v = which == 0 ? calls[i]->sz_arg : which == 1 ? calls[i]->sz_res : which == 2 ? calls[i]->sz_iw
+                                                                                            : calls[i]->sz_w;
+        best = v > best ? v : best;
+    }
+    return best + 1;
 }
 
 static int work_alloc(vgt_work *wk, const vgt_model *m)
 {
-    wk->arg = malloc(sizeof(double *) * (size_t)max4(m->cfc.sz_arg, m->fd.sz_arg, m->tip_state.sz_arg, m->tip.sz_arg));
-    wk->res = malloc(sizeof(double *) * (size_t)max4(m->cfc.sz_res, m->fd.sz_res, m->tip_state.sz_res, m->tip.sz_res));
-    wk->iw = malloc(sizeof(vgt_int) * (size_t)max4(m->cfc.sz_iw, m->fd.sz_iw, m->tip_state.sz_iw, m->tip.sz_iw));
-    wk->w = malloc(sizeof(double) * (size_t)max4(m->cfc.sz_w, m->fd.sz_w, m->tip_state.sz_w, m->tip.sz_w));
+    wk->arg = malloc(sizeof(double *) * (size_t)max_size(m, 0));
+    wk->res = malloc(sizeof(double *) * (size_t)max_size(m, 1));
+    wk->iw = malloc(sizeof(vgt_int) * (size_t)max_size(m, 2));
+    wk->w = malloc(sizeof(double) * (size_t)max_size(m, 3));
     return wk->arg && wk->res && wk->iw && wk->w;
 }
 
@@ -142,9 +147,70 @@ static int check_state(const vgt_settings *s, const vgt_run *r, const double *q,
     return VGT_DONE;
 }
 
+/* Encoder reading of joint value x with step `step` (0: exact): the nearest count. */
+static double quantise(double x, double step) { return step > 0.0 ? step * floor(x / step + 0.5) : x; }
+
+/* What the controller sees at sample k: encoder-quantised joints, and velocities from their
+ * differences (plus noise) through a first-order filter; the true state without sensing. */
+static void measure(const vgt_settings *s, const vgt_run *r, long k)
+{
+    const int nj = s->n_joints;
+    const double *q = r->q + nj * k, *qd = r->qd + nj * k;
+    double *qm = r->q_meas + nj * k, *vm = r->qd_meas + nj * k;
+    if (!s->sensing) {
+        memcpy(qm, q, sizeof(double) * (size_t)nj);
+        memcpy(vm, qd, sizeof(double) * (size_t)nj);
+        return;
+    }
+    for (int i = 0; i < nj; ++i) qm[i] = quantise(q[i], r->resolution[i]);
+    if (k == 0) { /* the run starts from a known state */
+        memcpy(vm, qd, sizeof(double) * (size_t)nj);
+        return;
+    }
+    const double *qm0 = qm - nj, *vm0 = vm - nj, *noise = r->velocity_noise + nj * k;
+    const double a = s->velocity_filter;
+    for (int i = 0; i < nj; ++i) vm[i] = a * vm0[i] + (1.0 - a) * ((qm[i] - qm0[i]) / s->dt + noise[i]);
+}
+
+/* Estimated external joint efforts at sample k (enum vgt_observer), from what the controller saw
+ * and applied. The momentum observer is the generalised-momentum residual in discrete form, the
+ * mass matrix held over the period: the raw estimate M^(q_{k-1}) (v_k - v_{k-1}) / dt + C^_{k-1}
+ * - F_{k-1} (inverse dynamics of the controller's model, no acceleration sensor) is filtered by
+ * the exact discretisation of d tau/dt = K_O (tau_ext - tau), so its step response is
+ * 1 - exp(-K_O t) at the samples. The force sensor feeds the tool force of the previous period
+ * forward through J_P^T. */
+static int observe(const vgt_model *m, const vgt_settings *s, const vgt_run *r, vgt_work *wk, long k)
+{
+    const int nj = s->n_joints;
+    double *tau = r->tau_hat + nj * k;
+    if (s->observer == VGT_OBSERVER_NONE || k == 0) {
+        for (int i = 0; i < nj; ++i) tau[i] = 0.0;
+        return VGT_DONE;
+    }
+    const double *qm0 = r->q_meas + nj * (k - 1), *vm0 = r->qd_meas + nj * (k - 1), *vm = r->qd_meas + nj * k;
+    if (s->observer == VGT_OBSERVER_FORCE) {
+        double J[3 * nj], Jw[3 * nj];
+        const double *in_j[2] = {r->q_meas + nj * k, r->p_ctrl};
+        double *out_j[2] = {J, Jw};
+        if (call(&m->jac, wk, 2, in_j, 2, out_j)) return VGT_FUNCTION_FAILED;
+        const double *f = r->f_ext + 3 * (k - 1);
+        for (int i = 0; i < nj; ++i) tau[i] = J[i] * f[0] + J[nj + i] * f[1] + J[2 * nj + i] * f[2];
+        return VGT_DONE;
+    }
+    double acc[nj], raw[nj], zero[3] = {0.0, 0.0, 0.0};
+    for (int i = 0; i < nj; ++i) acc[i] = (vm[i] - vm0[i]) / s->dt;
+    const double *in_id[5] = {qm0, vm0, acc, zero, r->p_ctrl};
+    double *out_id[1] = {raw};
+    if (call(&m->id, wk, 5, in_id, 1, out_id)) return VGT_FUNCTION_FAILED;
+    const double keep = exp(-s->observer_gain * s->dt), *F0 = r->F + nj * (k - 1), *tau0 = tau - nj;
+    for (int i = 0; i < nj; ++i) tau[i] = keep * tau0[i] + (1.0 - keep) * (raw[i] - F0[i]);
+    return VGT_DONE;
+}
+
 /* Run samples k0 .. k1-1 with the gains Kp, Kv (row-major nj x nj). Sample k: measure the tip and
- * its error, stop if it exceeds the threshold (*stop = k, before any control), compute the
- * effort and the tool force, and integrate to sample k+1 (unless k is the last sample).
+ * its error and what the controller sees, stop if the error exceeds the threshold (*stop = k,
+ * before any control), estimate the external efforts, compute the effort (computed force control
+ * minus the estimate) and the tool force, and integrate to sample k+1 (unless k is the last).
  * On any other stop, *stop is the sample whose state failed. */
 int vgt_simulate(const vgt_model *m, const vgt_settings *s, const vgt_run *r,
                  const double *Kp, const double *Kv, long k0, long k1, long *stop)
@@ -167,11 +233,15 @@ int vgt_simulate(const vgt_model *m, const vgt_settings *s, const vgt_run *r,
         const double *td = r->tip_d + 3 * k;
         double e0 = td[0] - tip[0], e1 = td[1] - tip[1], e2 = td[2] - tip[2];
         r->error[k] = sqrt(e0 * e0 + e1 * e1 + e2 * e2);
+        measure(s, r, k);
         if (s->threshold > 0.0 && r->error[k] > s->threshold) { status = VGT_ABOVE_THRESHOLD; *stop = k; break; }
+        if (observe(m, s, r, &wk, k)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
         double *F = r->F + nj * k;
-        const double *in_c[8] = {q, qd, r->q_d + nj * k, r->qd_d + nj * k, r->qdd_d + nj * k, Kp, Kv, r->p_ctrl};
+        const double *qm = r->q_meas + nj * k, *vm = r->qd_meas + nj * k, *tau = r->tau_hat + nj * k;
+        const double *in_c[8] = {qm, vm, r->q_d + nj * k, r->qd_d + nj * k, r->qdd_d + nj * k, Kp, Kv, r->p_ctrl};
         double *out_c[1] = {F};
         if (call(&m->cfc, &wk, 8, in_c, 1, out_c)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
+        for (int i = 0; i < nj; ++i) F[i] -= tau[i];
         const double *dist = r->disturbance + 3 * k;
         tool_force(s, V, dist, r->f_ext + 3 * k);
         if (k + 1 >= r->n) continue;

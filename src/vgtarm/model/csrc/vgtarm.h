@@ -23,7 +23,16 @@ typedef struct {
     vgt_call fd;        /* q, qd, F, f, p -> qdd                            */
     vgt_call tip_state; /* q, qd, p -> tip, tip velocity                    */
     vgt_call tip;       /* q, p -> tip                                      */
+    vgt_call id;        /* q, qd, qdd, f, p -> F (inverse dynamics)         */
+    vgt_call jac;       /* q, p -> J_P, J_W                                 */
 } vgt_model;
+
+/* What the controller adds to computed force control to cancel external efforts. */
+enum vgt_observer {
+    VGT_OBSERVER_NONE = 0,     /* plain computed force control                                  */
+    VGT_OBSERVER_MOMENTUM = 1, /* generalised-momentum disturbance observer, first order         */
+    VGT_OBSERVER_FORCE = 2     /* tip force sensor, one period late, through J_P^T              */
+};
 
 /* Integrators of the plant. */
 enum vgt_integrator {
@@ -54,6 +63,10 @@ typedef struct {
     double cutting_speed;   /* |V| below which the cutting force is zero (m/s)            */
     double threshold;       /* stop before controlling a sample whose tip error exceeds it */
     double limit_tolerance; /* distance outside a joint limit that counts as divergence   */
+    int observer;           /* an enum vgt_observer                                       */
+    double observer_gain;   /* K_O (1/s) of the momentum observer                         */
+    int sensing;            /* 1: the controller sees encoder-quantised, differenced state */
+    double velocity_filter; /* sensing: weight of the previous velocity estimate, [0, 1)   */
 } vgt_settings;
 
 /* One run: n samples of an n_joints robot (nj below). */
@@ -67,6 +80,10 @@ typedef struct {
     const double *q_min, *q_max;            /* (nj) joint limits                           */
     double *q, *qd;                         /* (n, nj) state; row 0 is the initial state   */
     double *F, *f_ext, *tip, *error;        /* (n, nj), (n, 3), (n, 3), (n)                */
+    const double *resolution;               /* (nj) encoder step of each joint (0: exact)   */
+    const double *velocity_noise;           /* (n, nj) noise on the differenced velocity    */
+    double *q_meas, *qd_meas;               /* (n, nj) what the controller sees              */
+    double *tau_hat;                        /* (n, nj) estimated external joint efforts      */
 } vgt_run;
 
 /* Evaluate one generated function over n samples (batch.c). */

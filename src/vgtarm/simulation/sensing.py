@@ -1,0 +1,117 @@
+"""What the controller knows: the disturbance observer or force sensor, and realistic sensing.
+
+Validated here once, from the arguments of :func:`vgtarm.simulation.simulate`; the loops
+(``closed_loop.c`` and its NumPy twin) do the computation. See ``docs/control.md``,
+"Disturbance observer and sensing", for the formulas and how to choose the gain.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import InputError
+from ..model.parameters import JOINT_UNITS
+
+#: Default gain K_O of the momentum observer (1/s): a time constant of about 3 ms (see docs/control.md).
+DEFAULT_OBSERVER_GAIN = 300.0
+#: Default cut-off of the first-order filter of differenced velocities (Hz).
+DEFAULT_VELOCITY_FILTER_HZ = 1000.0
+#: Encoder step of revolute joints when encoders are on and none is given: 20 bits a turn.
+DEFAULT_TWIST_RESOLUTION = 2.0 * math.pi / 2**20
+#: Observers by name.
+OBSERVERS = ("none", "momentum")
+
+
+@dataclass(frozen=True)
+class Sensing:
+    """The validated observer and sensing settings of one run."""
+
+    observer: str
+    observer_gain: float
+    force_sensor: bool
+    resolution: NDArray[np.float64]
+    velocity_noise: float
+    velocity_filter_hz: float
+    velocity_filter: float
+
+    @property
+    def active(self) -> bool:
+        """Whether the controller sees measured rather than true joint states."""
+        return bool(np.any(self.resolution > 0) or self.velocity_noise > 0)
+
+    @property
+    def loop_observer(self) -> str:
+        """The loop's observer code name (``vgt_observer``): none, momentum or force."""
+        return "force" if self.force_sensor else self.observer
+
+    def metadata(self) -> dict[str, object]:
+        """Summary entries of these settings."""
+        legs = [float(r) for r, unit in zip(self.resolution, JOINT_UNITS, strict=False) if unit == "m"]
+        twists = [float(r) for r, unit in zip(self.resolution, JOINT_UNITS, strict=False) if unit == "rad"]
+        return {
+            "observer": self.observer,
+            "observer_gain_per_s": self.observer_gain if self.observer != "none" else None,
+            "force_sensor": self.force_sensor,
+            "sensing": self.active,
+            "encoder_resolution_m": legs[0] if legs else 0.0,
+            "twist_resolution_rad": twists[0] if twists else 0.0,
+            "velocity_noise": self.velocity_noise,
+            "velocity_filter_hz": self.velocity_filter_hz if self.active else None,
+        }
+
+
+def _number(name: str, value: object, *, minimum: float = 0.0, strict: bool = False) -> float:
+    try:
+        number = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise InputError(f"{name} = {value!r}: expected a number") from None
+    if not math.isfinite(number) or number < minimum or (strict and number == minimum):
+        relation = ">" if strict else ">="
+        raise InputError(f"{name} = {value!r}: expected a finite number {relation} {minimum:g}")
+    return number
+
+
+def sensing_settings(
+    n_joints: int,
+    dt: float,
+    observer: str,
+    observer_gain: float,
+    force_sensor: bool,
+    encoder_resolution: float,
+    twist_resolution: float | None,
+    velocity_noise: float,
+    velocity_filter_hz: float,
+) -> Sensing:
+    """Validate the observer and sensing arguments of a run with control period ``dt``."""
+    if observer not in OBSERVERS:
+        raise InputError(f"observer = {observer!r}: expected one of {list(OBSERVERS)}")
+    if not isinstance(force_sensor, bool | np.bool_):
+        raise InputError(f"force_sensor = {force_sensor!r}: expected True or False")
+    if force_sensor and observer != "none":
+        raise InputError(f"force_sensor = True with observer = {observer!r}: choose one way to cancel the tool force")
+    gain = _number("observer_gain", observer_gain, strict=True)
+    if gain * dt > 1.0:
+        raise InputError(
+            f"observer_gain = {observer_gain!r}: expected at most 1/dt = {1.0 / dt:g} 1/s "
+            "(the estimate's time constant must be at least one control period)"
+        )
+    legs = _number("encoder_resolution", encoder_resolution)
+    twist = DEFAULT_TWIST_RESOLUTION if twist_resolution is None and legs > 0 else twist_resolution or 0.0
+    twist = _number("twist_resolution", twist)
+    noise = _number("velocity_noise", velocity_noise)
+    cutoff = _number("velocity_filter_hz", velocity_filter_hz, strict=True)
+    units = JOINT_UNITS if len(JOINT_UNITS) == n_joints else ("m",) * n_joints
+    resolution = np.array([legs if unit == "m" else twist for unit in units])
+    return Sensing(
+        observer=observer,
+        observer_gain=gain,
+        force_sensor=bool(force_sensor),
+        resolution=resolution,
+        velocity_noise=noise,
+        velocity_filter_hz=cutoff,
+        velocity_filter=math.exp(-2.0 * math.pi * cutoff * dt),
+    )
