@@ -5,11 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from vgtarm import paths
-from vgtarm.ik.problem import IKProblem
+from vgtarm.ik.problem import BatchState, IKProblem, Task
 from vgtarm.ik.rates import exact
 from vgtarm.ik.solve import _task
-from vgtarm.ik.state import BatchState
-from vgtarm.ik.tasks import Task
 
 from .conftest import assert_close, central_difference, random_configurations
 

@@ -5,11 +5,13 @@ from __future__ import annotations
 import numpy as np
 
 from vgtarm import paths
-from vgtarm.ik import continuation, newton, sampling
-from vgtarm.ik.problem import IKProblem
+from vgtarm.ik import fast as sampling
+from vgtarm.ik import newton
+from vgtarm.ik import newton as continuation
+from vgtarm.ik.kkt import ldl_pivots
+from vgtarm.ik.options import NewtonSettings
+from vgtarm.ik.problem import BatchState, IKProblem
 from vgtarm.ik.solve import _task
-from vgtarm.ik.state import BatchState
-from vgtarm.ik.verify import ldl_pivots
 
 from .conftest import assert_close
 
@@ -51,13 +53,13 @@ def test_parallel_continuation_equals_the_sequential_loop(robot):
     n = len(path)
     start = {"q": robot.parameters.home, "lam": np.zeros(3), "mu": np.zeros(16), "active": np.zeros(16, bool)}
     parallel = BatchState.empty(n, 3, 16)
-    continuation.solve_in_order(problem, task, parallel, np.arange(n), start, newton.NewtonSettings())
+    continuation.solve_in_order(problem, task, parallel, np.arange(n), start, NewtonSettings())
     sequential = BatchState.empty(n, 3, 16)
     for i in range(n):
         source = start if i == 0 else {k: getattr(sequential, k)[i - 1] for k in start}
         for name, value in source.items():
             getattr(sequential, name)[i] = value
-        assert newton.iterate(problem, task, sequential, np.array([i]), newton.NewtonSettings())[0]
+        assert newton.iterate(problem, task, sequential, np.array([i]), NewtonSettings())[0]
     assert parallel.converged.all()
     assert_close(parallel.q, sequential.q, rtol=0, atol=1e-10)
 

@@ -7,15 +7,14 @@ conditions. See ``docs/ik.md``.
 
 Public API: :func:`inverse_kinematics` (also ``Robot.inverse_kinematics``), the records
 :class:`IKResult` and :class:`IKSamples`, :class:`OrientationPath`, :class:`IKOptions`, the
-solver registry (:data:`SOLVERS`, :func:`solver_names`) and :func:`write_csv`.
+solver interface and registry (:class:`Solver`, :class:`SolverResult`, :func:`register_solver`,
+:data:`SOLVERS`, :func:`solver_names`) and :func:`write_csv`.
 """
 
-from .export import CSV_COLUMNS, write_csv
 from .options import IKOptions
 from .pose import OrientationPath
-from .records import IKResult, IKSamples
-from .registry import ALIASES, SOLVERS, solver_names
-from .solve import inverse_kinematics
+from .records import CSV_COLUMNS, IKResult, IKSamples, write_csv
+from .solve import ALIASES, SOLVERS, Solver, SolverResult, in_place, inverse_kinematics, register_solver, solver_names
 
 __all__ = [
     "ALIASES",
@@ -25,7 +24,11 @@ __all__ = [
     "IKResult",
     "IKSamples",
     "OrientationPath",
+    "Solver",
+    "SolverResult",
+    "in_place",
     "inverse_kinematics",
+    "register_solver",
     "solver_names",
     "write_csv",
 ]

@@ -4,7 +4,7 @@
    ones are at most ``coarse_step`` apart along the path) are solved as sequential warm-started
    continuation would (each Newton solve starts from the previous sample's solution; the first
    is reached from the start pose, home or the user's guess, by continuation along a straight
-   line, and a rotation arc for the pose task). :mod:`vgtarm.ik.continuation` computes that chain
+   line, and a rotation arc for the pose task). :func:`vgtarm.ik.newton.solve_in_order` computes that chain
    with two batched runs and checks it.
 2. **Levels.** Every ``8^(J-1)``-th sample, then every ``8^(J-2)``-th, ..., then all samples:
    each level starts from the quintic Hermite interpolation of the samples solved so far (with
@@ -16,45 +16,31 @@
 3. A sample that does not converge is retried by sequential continuation over the path samples
    from its nearest solved neighbour; what still fails is left unconverged for the caller (which
    re-solves it with the reference solver, or reports it unreachable).
+
+Coarse-to-fine sample sets of a path and quintic Hermite interpolation between solved samples.
+
+The fast solver solves a few samples sequentially, then every ``8^j``-th sample, ..., then all
+of them; each level starts from the quintic Hermite interpolation of the solved samples (values,
+exact first and second derivatives), whose error falls as the sixth power of the spacing, so
+most samples of the finest level already satisfy the optimality conditions before any Newton step.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation, Slerp
 
-from . import continuation, newton, rates, sampling
-from .newton import NewtonSettings
-from .problem import IKProblem
-from .state import BatchState
-from .tasks import Task
+from . import newton, rates
+from .options import FastSettings
+from .problem import BatchState, IKProblem, Task
 
 Array = NDArray[np.float64]
 Index = NDArray[np.intp]
 
 METHOD = "newton"
-
-
-@dataclass(frozen=True)
-class FastSettings:
-    """Settings of the fast solver.
-
-    Attributes:
-        newton: Stopping tests and safeguards of the Newton iterations.
-        coarse_step: Largest tip travel between consecutive coarse samples, and step of the
-            continuation from the start pose (m; 0.1 m counts for one radian of rotation).
-        top_count: Smallest number of samples of the coarsest level.
-        retry_pieces: Intermediate path samples of the continuation that retries a failed sample.
-    """
-
-    newton: NewtonSettings = field(default_factory=NewtonSettings)
-    coarse_step: float = 0.02
-    top_count: int = 4
-    retry_pieces: int = 8
 
 
 def _rest_start(q: Array, m: int, n_inequalities: int) -> dict[str, Array]:
@@ -86,7 +72,7 @@ def approach(problem: IKProblem, task: Task, state: BatchState, i: int, q_start:
     line = task.with_targets(points, rotations)
     sub = BatchState.empty(pieces, task.m, state.mu.shape[1])
     start = _rest_start(q_start, task.m, state.mu.shape[1])
-    continuation.solve_in_order(problem, line, sub, np.arange(pieces, dtype=np.intp), start, settings.newton)
+    newton.solve_in_order(problem, line, sub, np.arange(pieces, dtype=np.intp), start, settings.newton)
     state.iterations[i] += int(sub.iterations.sum())
     ok = bool(sub.converged[-1])
     if ok:
@@ -101,7 +87,7 @@ def chain(problem: IKProblem, task: Task, state: BatchState, a: int, b: int, set
     steps = np.unique(np.linspace(a, b, settings.retry_pieces + 1).round().astype(np.intp))
     steps = steps[steps != a]
     start = _sample_start(state, a)
-    continuation.solve_in_order(problem, task, state, steps, start, settings.newton, with_rates=True)
+    newton.solve_in_order(problem, task, state, steps, start, settings.newton, with_rates=True)
     return bool(state.converged[b])
 
 
@@ -118,7 +104,7 @@ def _start_level(problem: IKProblem, task: Task, state: BatchState, new: Index) 
             getattr(state, name)[new] = getattr(state, name)[nearest]
         return
     tk, t = task.t[known], task.t[new]
-    both = sampling.quintic_hermite(
+    both = quintic_hermite(
         tk,
         np.concatenate([state.q[known], state.lam[known]], axis=1),
         np.concatenate([state.qd[known], state.lam_d[known]], axis=1),
@@ -128,11 +114,11 @@ def _start_level(problem: IKProblem, task: Task, state: BatchState, new: Index) 
     q = both[:, :7]
     bad = ~problem.assemblable(q, 0.5 * problem.margin)
     if bad.any():
-        q[bad] = sampling.linear(tk, state.q[known], t[bad])
+        q[bad] = linear(tk, state.q[known], t[bad])
     state.q[new], state.lam[new] = q, both[:, 7:]
     known_mu = state.mu[known]
     if known_mu.any():
-        mu = np.maximum(sampling.linear(tk, known_mu, t), 0.0)
+        mu = np.maximum(linear(tk, known_mu, t), 0.0)
         state.mu[new], state.active[new] = mu, mu > 0
     else:
         state.mu[new], state.active[new] = 0.0, False
@@ -158,17 +144,17 @@ def solve(problem: IKProblem, task: Task, state: BatchState, q_start: Array, set
     last model evaluation where no inequality is active; the caller completes the others).
     """
     n = len(task)
-    strides = sampling.level_strides(n, settings.top_count)
-    top = sampling.refine_by_distance(sampling.level_indices(n, strides[0]), task.position, settings.coarse_step)
+    strides = level_strides(n, settings.top_count)
+    top = refine_by_distance(level_indices(n, strides[0]), task.position, settings.coarse_step)
     if approach(problem, task, state, int(top[0]), q_start, settings):
         start, rest = _sample_start(state, int(top[0])), top[1:]
     else:
         start, rest = _rest_start(q_start, task.m, state.mu.shape[1]), top
-    continuation.solve_in_order(problem, task, state, rest, start, settings.newton, with_rates=True)
+    newton.solve_in_order(problem, task, state, rest, start, settings.newton, with_rates=True)
     _rescue(problem, task, state, top[~state.converged[top]], settings)
     _complete_rates(problem, task, state, top)
     for stride in strides[1:]:
-        level = sampling.level_indices(n, stride)
+        level = level_indices(n, stride)
         new = level[~state.converged[level]]
         if new.size == 0:
             continue
@@ -186,3 +172,74 @@ def _complete_rates(problem: IKProblem, task: Task, state: BatchState, idx: Inde
     missing = idx[state.converged[idx] & ~state.rates_ready[idx]]
     if missing.size:
         rates.exact(problem, task, state, missing)
+
+
+#: Ratio of the sample spacing of consecutive levels.
+LEVEL_RATIO = 8
+
+
+def level_strides(n: int, top_count: int = 4) -> list[int]:
+    """Strides ``[8^J, ..., 8, 1]`` with the coarsest level holding about ``top_count`` samples or more."""
+    strides = [1]
+    while (n - 1) // (strides[-1] * LEVEL_RATIO) >= top_count:
+        strides.append(strides[-1] * LEVEL_RATIO)
+    return strides[::-1]
+
+
+def level_indices(n: int, stride: int) -> Index:
+    """Every ``stride``-th sample of ``n`` and the last one."""
+    indices = np.arange(0, n, stride, dtype=np.intp)
+    return indices if indices[-1] == n - 1 else np.append(indices, np.intp(n - 1))
+
+
+def refine_by_distance(indices: Index, points: Array, step: float) -> Index:
+    """Add samples to sorted ``indices`` so that consecutive chosen ``points`` ``(N, 3)`` are at most ``step`` apart.
+
+    Distances are measured along the sampled path (arc length), so a loop between two chosen
+    samples counts in full.
+    """
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    chosen = [int(indices[0])]
+    for b in indices[1:].tolist():
+        a = chosen[-1]
+        pieces = int(np.ceil((arc[b] - arc[a]) / step)) if step > 0 else 1
+        if pieces > 1:
+            marks = arc[a] + (arc[b] - arc[a]) * np.arange(1, pieces) / pieces
+            inner = np.searchsorted(arc[a : b + 1], marks) + a
+            chosen.extend(int(i) for i in np.unique(inner) if a < i < b)
+        chosen.append(int(b))
+    return np.asarray(sorted(set(chosen)), dtype=np.intp)
+
+
+def quintic_hermite(t_known: Array, y: Array, yd: Array, ydd: Array, t: Array) -> Array:
+    """Quintic Hermite interpolation at times ``t`` ``(n,)`` of samples at sorted ``t_known`` ``(K,)``.
+
+    ``y``, ``yd``, ``ydd`` ``(K, d)`` are values and first and second derivatives. Returns ``(n, d)``;
+    times outside the known range are extrapolated from the nearest segment.
+    """
+    segment = np.clip(np.searchsorted(t_known, t, side="right") - 1, 0, t_known.shape[0] - 2)
+    t0, t1 = t_known[segment], t_known[segment + 1]
+    h = (t1 - t0)[:, None]
+    s = ((t - t0) / (t1 - t0))[:, None]
+    s2 = s * s
+    s3 = s2 * s
+    s4 = s3 * s
+    s5 = s4 * s
+    h0 = 1 - 10 * s3 + 15 * s4 - 6 * s5
+    h1 = s - 6 * s3 + 8 * s4 - 3 * s5
+    h2 = 0.5 * s2 - 1.5 * s3 + 1.5 * s4 - 0.5 * s5
+    h3 = 0.5 * s3 - s4 + 0.5 * s5
+    h4 = -4 * s3 + 7 * s4 - 3 * s5
+    h5 = 10 * s3 - 15 * s4 + 6 * s5
+    a, b = segment, segment + 1
+    return np.asarray(
+        h0 * y[a] + h1 * h * yd[a] + h2 * h * h * ydd[a] + h3 * h * h * ydd[b] + h4 * h * yd[b] + h5 * y[b]
+    )
+
+
+def linear(t_known: Array, y: Array, t: Array) -> Array:
+    """Piecewise-linear interpolation of ``y`` ``(K, d)`` at times ``t`` ``(n,)``, ``(n, d)``."""
+    segment = np.clip(np.searchsorted(t_known, t, side="right") - 1, 0, t_known.shape[0] - 2)
+    t0, t1 = t_known[segment], t_known[segment + 1]
+    s = ((t - t0) / (t1 - t0))[:, None]
+    return np.asarray((1 - s) * y[segment] + s * y[segment + 1])

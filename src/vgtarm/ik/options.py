@@ -3,17 +3,62 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import InputError
-from .fast import FastSettings
-from .newton import NewtonSettings
 from .problem import DEFAULT_MARGIN
-from .verify import Tolerances
+
+
+@dataclass(frozen=True)
+class NewtonSettings:
+    """Stopping tests and safeguards of the Newton iteration.
+
+    Attributes:
+        tol_primal: Largest equality residual (m; rad-like for the orientation rows).
+        tol_stationarity: Largest entry of the Lagrangian gradient (cost per m).
+        tol_active: Hysteresis of the active-set rule (m / multiplier units).
+        max_iterations: Newton steps per sample before it is declared failed.
+        max_step: Largest change of any joint value in one step (m, rad).
+    """
+
+    tol_primal: float = 1e-12
+    tol_stationarity: float = 1e-10
+    tol_active: float = 1e-12
+    max_iterations: int = 30
+    max_step: float = 0.02
+
+
+@dataclass(frozen=True)
+class FastSettings:
+    """Settings of the fast solver.
+
+    Attributes:
+        newton: Stopping tests and safeguards of the Newton iterations.
+        coarse_step: Largest tip travel between consecutive coarse samples, and step of the
+            continuation from the start pose (m; 0.1 m counts for one radian of rotation).
+        top_count: Smallest number of samples of the coarsest level.
+        retry_pieces: Intermediate path samples of the continuation that retries a failed sample.
+    """
+
+    newton: NewtonSettings = field(default_factory=NewtonSettings)
+    coarse_step: float = 0.02
+    top_count: int = 4
+    retry_pieces: int = 8
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """Acceptance thresholds of a verified sample."""
+
+    primal: float = 1e-10
+    stationarity: float = 1e-6
+    feasibility: float = 1e-10
+    multiplier: float = 1e-8
+    curvature: float = 1e-10
 
 
 @dataclass(frozen=True)

@@ -9,12 +9,22 @@ that margin are dropped, so the active-set systems stay small (for the reference
 ``s + 2d > p`` rows remain).
 
 Inequalities are ordered: 7 lower limits, 7 upper limits, then the kept triangle rows.
+
+The equality constraints of a path, evaluated through the compiled model.
+
+A :class:`Task` holds the desired tip point per sample (and, for the pose variant, the desired
+orientation with its angular velocity and acceleration) and evaluates, for any subset of samples,
+the residual ``c(q) - c_d``, its Jacobian and the Hessian of ``lam^T c`` (functions ``ik_position``
+and ``ik_pose`` of :mod:`vgtarm.functions_ik`), and the path derivatives of the KKT residual that
+the exact rates need.
+
+The working arrays of a batch of inverse-kinematics samples (primal, dual, active set, last model values).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,6 +32,7 @@ from numpy.typing import NDArray
 from ..errors import InputError
 from ..model.assembly import TRIANGLE_INEQUALITIES, linear_form
 from ..model.parameters import JOINT_NAMES, RobotParameters
+from ..model.robot import Robot
 
 Array = NDArray[np.float64]
 
@@ -155,3 +166,215 @@ class IKProblem:
     def feasible(self, q: Array, tolerance: float = 1e-12) -> NDArray[np.bool_]:
         """Whether ``q`` ``(..., 7)`` satisfies every inequality to ``tolerance``."""
         return np.asarray((self.slacks(q) >= -tolerance).all(axis=-1))
+
+
+Index = NDArray[np.intp]
+
+
+@dataclass(frozen=True, eq=False)
+class Task:
+    """Targets of every sample of a path and the compiled functions of the task.
+
+    Attributes:
+        kind: ``"position"`` (3 equality rows: tip point) or ``"pose"`` (6: tip point and the
+            orientation residual ``0.5 vee(R_d^T R - R^T R_d)``).
+        t: ``(N,)`` sample times (s).
+        position, velocity, acceleration: ``(N, 3)`` desired tip point and its derivatives (SI).
+        rotation: ``(N, 9)`` desired orientation, row-major, or ``None`` for the position task.
+        angular_velocity, angular_acceleration: ``(N, 3)`` of the desired orientation in F0
+            (rad/s, rad/s^2), or ``None``.
+        model: the robot whose compiled functions the task evaluates (by name, through
+            :meth:`vgtarm.Robot.evaluate`).
+        evaluations: a one-element counter of samples evaluated through the compiled functions,
+            shared by the task and every task derived from it (a solver's work counter).
+    """
+
+    kind: str
+    t: Array
+    position: Array
+    velocity: Array
+    acceleration: Array
+    rotation: Array | None
+    angular_velocity: Array | None
+    angular_acceleration: Array | None
+    model: Robot
+    evaluations: list[int] = field(default_factory=lambda: [0])
+
+    def _evaluate(self, name: str, inputs: dict[str, Array], n: int) -> dict[str, Array]:
+        self.evaluations[0] += n
+        return self.model.evaluate(name, inputs, n)
+
+    @property
+    def m(self) -> int:
+        """Number of equality rows."""
+        return 3 if self.kind == "position" else 6
+
+    def __len__(self) -> int:
+        return int(self.position.shape[0])
+
+    def subset(self, idx: Index) -> Task:
+        """The task restricted to samples ``idx``."""
+
+        def pick(a: Array | None) -> Array | None:
+            return None if a is None else a[idx]
+
+        return Task(
+            self.kind,
+            self.t[idx],
+            self.position[idx],
+            self.velocity[idx],
+            self.acceleration[idx],
+            pick(self.rotation),
+            pick(self.angular_velocity),
+            pick(self.angular_acceleration),
+            self.model,
+            self.evaluations,
+        )
+
+    def with_targets(self, position: Array, rotation: Array | None) -> Task:
+        """A task with other target points ``(n, 3)`` (and orientations ``(n, 9)``), at rest, times ``0..n-1``."""
+        n = position.shape[0]
+        zeros = np.zeros((n, 3))
+        moving = None if rotation is None else zeros
+        return Task(
+            self.kind,
+            np.arange(n, dtype=float),
+            position,
+            zeros,
+            zeros,
+            rotation,
+            moving,
+            moving,
+            self.model,
+            self.evaluations,
+        )
+
+    def forward(self, q: Array) -> tuple[Array, Array]:
+        """Tip point ``(n, 3)`` and row-major end-effector orientation ``(n, 9)`` of ``q`` ``(n, 7)``."""
+        out = self._evaluate("fk", {"q": q}, q.shape[0])
+        return out["tip"], out["C03"]
+
+    def _orientation_inputs(self, idx: Index) -> dict[str, Array]:
+        assert self.rotation is not None
+        return {"R_d": self.rotation[idx]}
+
+    def _motion_inputs(self, idx: Index, suffix: str = "") -> dict[str, Array]:
+        assert self.angular_velocity is not None and self.angular_acceleration is not None
+        return {"w" + suffix: self.angular_velocity[idx], "a" + suffix: self.angular_acceleration[idx]}
+
+    def evaluate(self, idx: Index, q: Array, lam: Array) -> tuple[Array, Array, Array]:
+        """Residual ``c(q) - c_d`` ``(n, m)``, Jacobian ``(n, m, 7)``, ``d^2(lam^T c)/dq^2`` ``(n, 7, 7)``.
+
+        ``idx`` selects the samples (their targets); ``q`` ``(n, 7)`` and ``lam`` ``(n, m)``.
+        """
+        n = idx.shape[0]
+        if self.kind == "position":
+            out = self._evaluate("ik_position", {"q": q, "lam": lam}, n)
+            c, J, H = out["c"], out["J"], out["H"]
+            c -= self.position[idx]
+        else:
+            out = self._evaluate("ik_pose", {"q": q, "lam": lam, **self._orientation_inputs(idx)}, n)
+            c, J, H = out["c"], out["J"], out["H"]
+            c[:, :3] -= self.position[idx]
+        return c, J.reshape(n, self.m, 7), H.reshape(n, 7, 7)
+
+    def evaluate_with_rates(self, idx: Index, q: Array, lam: Array, weight: Array) -> tuple[Array, ...]:
+        """As :meth:`evaluate`, plus the exact ``qd, lam_d, qdd, lam_dd`` for no active inequality.
+
+        One compiled call (``ik_position_rates`` / ``ik_pose_rates``) per sample; ``weight`` ``(7,)``
+        is the diagonal of the Hessian of ``Phi``. The rates are valid only where ``(q, lam)`` is
+        a solution with no active limit or triangle row.
+        """
+        n = idx.shape[0]
+        inputs = {"q": q, "lam": lam, "w": weight, "xd": self.velocity[idx], "xdd": self.acceleration[idx]}
+        if self.kind == "position":
+            out = self._evaluate("ik_position_rates", inputs, n)
+            out["c"] -= self.position[idx]
+        else:
+            inputs.update(self._orientation_inputs(idx), **self._motion_inputs(idx, "_d"))
+            out = self._evaluate("ik_pose_rates", inputs, n)
+            out["c"][:, :3] -= self.position[idx]
+        rates = (out["qd"], out["lam_d"], out["qdd"], out["lam_dd"])
+        return (out["c"], out["J"].reshape(n, self.m, 7), out["H"].reshape(n, 7, 7), *rates)
+
+    def first_order_rhs(self, idx: Index, q: Array, lam: Array) -> Array:
+        """``-dF/dt`` at fixed ``(q, lam)`` of the KKT residual ``F = [grad L; c - c_d]``, ``(n, 7 + m)``."""
+        n = idx.shape[0]
+        rhs = np.zeros((n, 7 + self.m))
+        rhs[:, 7:10] = self.velocity[idx]
+        if self.kind == "pose":
+            inputs = {"q": q, "lam": lam, **self._orientation_inputs(idx), **self._motion_inputs(idx)}
+            rhs -= self._evaluate("ik_pose_dt", inputs, n)["dt"]
+        return rhs
+
+    def second_order_rhs(self, idx: Index, q: Array, lam: Array, qd: Array, lam_d: Array) -> Array:
+        """``-d^2/dt^2 F(q + t qd, lam + t lam_d, t)`` at ``t = 0``, ``(n, 7 + m)``.
+
+        With ``K [qdd; lam_dd] = this`` (active set fixed), ``(qdd, lam_dd)`` are the second
+        derivatives of the optimum along the path.
+        """
+        n = idx.shape[0]
+        inputs = {"q": q, "lam": lam, "qd": qd, "lam_d": lam_d}
+        if self.kind == "position":
+            d2 = self._evaluate("ik_position_d2", inputs, n)["d2"]
+        else:
+            inputs.update(self._orientation_inputs(idx), **self._motion_inputs(idx))
+            d2 = self._evaluate("ik_pose_d2", inputs, n)["d2"]
+        rhs = -d2
+        rhs[:, 7:10] += self.acceleration[idx]
+        return rhs
+
+
+@dataclass
+class BatchState:
+    """Mutable per-sample arrays, all with ``N`` rows, updated in place by the solvers.
+
+    Attributes:
+        q: ``(N, 7)`` joint values.
+        lam: ``(N, m)`` multipliers of the equality rows.
+        mu: ``(N, 14 + k)`` multipliers of the inequalities (>= 0), in the problem's order.
+        active: ``(N, 14 + k)`` active flags of the inequalities.
+        residual, J, H: ``(N, m)``, ``(N, m, 7)``, ``(N, 7, 7)`` task residual, Jacobian and
+            ``d^2(lam^T c)/dq^2`` at ``(q, lam)`` (valid where ``evaluated``).
+        iterations: ``(N,)`` Newton (or solver) iterations spent on each sample.
+        converged: ``(N,)`` whether the sample met the Newton stopping test.
+        method: ``(N,)`` name of the method that produced each sample.
+        qd, qdd, lam_d, lam_dd: exact rates of ``q`` and ``lam`` where ``rates_ready``.
+        rates_ready: ``(N,)`` whether the exact rates of a sample are computed.
+    """
+
+    q: Array
+    lam: Array
+    mu: Array
+    active: NDArray[np.bool_]
+    residual: Array
+    J: Array
+    H: Array
+    iterations: NDArray[np.int64]
+    converged: NDArray[np.bool_]
+    method: NDArray[np.str_]
+    qd: Array
+    qdd: Array
+    lam_d: Array
+    lam_dd: Array
+    rates_ready: NDArray[np.bool_]
+
+    @classmethod
+    def empty(cls, n: int, m: int, n_inequalities: int) -> BatchState:
+        return cls(
+            q=np.zeros((n, 7)),
+            lam=np.zeros((n, m)),
+            mu=np.zeros((n, n_inequalities)),
+            active=np.zeros((n, n_inequalities), dtype=bool),
+            residual=np.full((n, m), np.nan),
+            J=np.full((n, m, 7), np.nan),
+            H=np.full((n, 7, 7), np.nan),
+            iterations=np.zeros(n, dtype=np.int64),
+            converged=np.zeros(n, dtype=bool),
+            method=np.full(n, "", dtype="<U24"),
+            qd=np.zeros((n, 7)),
+            qdd=np.zeros((n, 7)),
+            lam_d=np.zeros((n, m)),
+            lam_dd=np.zeros((n, m)),
+            rates_ready=np.zeros(n, dtype=bool),
+        )

@@ -25,9 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import kkt
-from .problem import IKProblem
-from .state import BatchState
-from .tasks import Task
+from .problem import BatchState, IKProblem, Task
 
 Array = NDArray[np.float64]
 Index = NDArray[np.intp]

@@ -1,12 +1,18 @@
-"""Result records of inverse kinematics: per-sample arrays and the overall result."""
+"""Result records of inverse kinematics: per-sample arrays and the overall result.
+
+Writing the joint reference as CSV, atomically.
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ..fileio import atomic_open
 from ..model.parameters import JOINT_NAMES
 
 Array = NDArray[np.float64]
@@ -30,7 +36,7 @@ class IKSamples:
         stationarity: ``(N,)`` largest entry of the Lagrangian gradient.
         curvature: ``(N,)`` certificate of the second-order condition, positive when the Hessian of
             the Lagrangian is verified positive definite on the null space of the active
-            constraints (see :func:`vgtarm.ik.verify.reduced_curvature`).
+            constraints (see :func:`vgtarm.ik.kkt.reduced_curvature`).
         iterations: ``(N,)`` Newton or solver iterations spent on the sample (0: the interpolated
             guess already met the tolerances).
         method: ``(N,)`` method that produced the sample: ``"newton"``, ``"slsqp"``, ``"ipopt"``,
@@ -79,6 +85,8 @@ class IKResult:
         wall_time: wall-clock time of the solve (s).
         success: every sample succeeded.
         message: a one-line summary (which samples failed, if any).
+        work: the solver's work counters (``n_iterations``, ``n_evaluations``, ``n_converged``,
+            ``wall_time_s``; see :class:`vgtarm.ik.SolverResult`), before any fallback.
     """
 
     t: Array
@@ -99,6 +107,7 @@ class IKResult:
     wall_time: float
     success: bool
     message: str
+    work: Mapping[str, float] = field(default_factory=dict)
 
     joint_names: tuple[str, ...] = JOINT_NAMES
 
@@ -108,3 +117,24 @@ class IKResult:
     def limit_clearance(self) -> tuple[Array, Array]:
         """Smallest distance of each joint to its lower and to its upper limit over the path, ``(7,)`` each."""
         return (self.q - self.lower).min(axis=0), (self.upper - self.q).min(axis=0)
+
+
+#: Columns of the CSV file: time, desired tip point, joints, rates, accelerations (SI units).
+CSV_COLUMNS: tuple[str, ...] = (
+    ("t", "x", "y", "z")
+    + JOINT_NAMES
+    + tuple(f"d{name}" for name in JOINT_NAMES)
+    + tuple(f"dd{name}" for name in JOINT_NAMES)
+)
+
+
+def write_csv(result: IKResult, file: str | os.PathLike[str]) -> None:
+    """Write one row per sample with the columns :data:`CSV_COLUMNS` (full double precision).
+
+    The file is written atomically (:func:`vgtarm.fileio.atomic_open`): a reader never sees a
+    partial file and nothing is left behind when writing fails.
+    """
+    table = np.column_stack([result.t, result.position, result.q, result.qd, result.qdd])
+    with atomic_open(file) as stream:
+        stream.write(",".join(CSV_COLUMNS) + "\n")
+        np.savetxt(stream, table, delimiter=",", fmt="%.17g")

@@ -1,28 +1,34 @@
 """Inverse kinematics of a desired tip path: validation, solver dispatch, fallback, rates, records.
 
 :func:`inverse_kinematics` is what :meth:`vgtarm.Robot.inverse_kinematics` calls.
+
+The solvers by name: a solver is any :class:`Solver`, ``solver(problem, task, q_start, options)``
+returning a :class:`SolverResult` (the per-sample state and work counters); the built-in ones fill
+a fresh :class:`~vgtarm.ik.problem.BatchState` in place and are wrapped by :func:`in_place`. A
+solver never raises for a sample it could not solve: it leaves it unconverged, and
+:func:`inverse_kinematics` re-solves it with the reference solver or reports it unreachable.
 """
 
 from __future__ import annotations
 
 import time
-from typing import Any
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from types import MappingProxyType
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import InputError, PathError, UnreachableError
+from ..model.robot import Robot
 from ..paths import Path
+from . import fast, kkt, reference
 from . import rates as rate_modes
-from . import slsqp, verify
 from .options import IKOptions
 from .pose import HOLD, OrientationTarget, angle_error, orientation_target
-from .problem import IKProblem
+from .problem import BatchState, IKProblem, Task
 from .records import IKResult, IKSamples
-from .registry import Solver, get_solver
-from .robot_protocol import RobotLike
-from .state import BatchState
-from .tasks import Task
 
 Array = NDArray[np.float64]
 FALLBACK = "slsqp (fallback)"
@@ -37,10 +43,10 @@ def _check_start(problem: IKProblem, q: Array) -> Array:
     return q
 
 
-def _task(robot: RobotLike, path: Path, target: OrientationTarget | None) -> Task:
+def _task(robot: Robot, path: Path, target: OrientationTarget | None) -> Task:
     common = (path.t, path.position, path.velocity, path.acceleration)
     if target is None:
-        return Task("position", *common, None, None, None, robot.backend, robot.parameter_vector)
+        return Task("position", *common, None, None, None, robot)
     rotation = target.rotation.reshape(-1, 9)
     return Task(
         "pose",
@@ -48,8 +54,7 @@ def _task(robot: RobotLike, path: Path, target: OrientationTarget | None) -> Tas
         rotation,
         target.angular_velocity,
         target.angular_acceleration,
-        robot.backend,
-        robot.parameter_vector,
+        robot,
     )
 
 
@@ -64,7 +69,7 @@ def _start_for(state: BatchState, i: int, q_start: Array) -> Array:
 def _closest_or_raise(problem: IKProblem, task: Task, i: int, starts: list[Array], options: IKOptions) -> Array:
     """The feasible ``q`` closest to sample ``i``'s target; :class:`UnreachableError` if it misses by more
     than :data:`REACH_TOLERANCE`."""
-    q, r = slsqp.closest(problem, task, i, starts, options)
+    q, r = reference.closest(problem, task, i, starts, options)
     position = float(np.linalg.norm(r[:3]))
     orientation = float(np.arcsin(min(1.0, float(np.linalg.norm(r[3:]))))) if task.m == 6 else 0.0
     if max(position, orientation) <= REACH_TOLERANCE:
@@ -92,7 +97,7 @@ def _recover(problem: IKProblem, task: Task, state: BatchState, q_start: Array, 
         state.method[i] = CLOSEST
         for attempt in range(2):
             if options.fallback:
-                solution = slsqp.solve_sample(problem, task, i, start, options)
+                solution = reference.solve_sample(problem, task, i, start, options)
                 state.iterations[i] += solution.iterations
                 if solution.success:
                     state.q[i], state.converged[i], state.method[i] = solution.q, True, FALLBACK
@@ -100,16 +105,15 @@ def _recover(problem: IKProblem, task: Task, state: BatchState, q_start: Array, 
             if attempt == 0:
                 # From the closest feasible pose (which may lie on another branch of solutions).
                 start = state.q[i] = _closest_or_raise(problem, task, i, [start, q_start], options)
-    slsqp.finish(problem, task, state, failed)
+    reference.finish(problem, task, state, failed)
 
 
 def _hold_orientation(
-    robot: RobotLike, path: Path, solver: Solver, problem: IKProblem, q_start: Array, options: IKOptions
+    robot: Robot, path: Path, solver: Solver, problem: IKProblem, q_start: Array, options: IKOptions
 ) -> Array:
     """Orientation ``(3, 3)`` of the free-orientation optimum at the first sample."""
     first = _task(robot, path, None).subset(np.array([0], dtype=np.intp))
-    state = BatchState.empty(1, 3, 14 + problem.n_triangle)
-    solver(problem, first, state, q_start, options)
+    state = _checked(solver(problem, first, q_start, options), first).state
     if not state.converged[0]:
         _recover(problem, first, state, q_start, options)
     _, rotation = first.forward(state.q[:1])
@@ -117,7 +121,7 @@ def _hold_orientation(
 
 
 def inverse_kinematics(
-    robot: RobotLike,
+    robot: Robot,
     path: Path,
     *,
     solver: str = "fast",
@@ -172,21 +176,31 @@ def inverse_kinematics(
             raise InputError(f"pose must be None, {HOLD!r}, rotation matrices or an OrientationPath, got {pose!r}")
         target = orientation_target(pose, n, rates == "exact")
     task = _task(robot, path, target)
-    state = BatchState.empty(n, task.m, 14 + problem.n_triangle)
-    solve(problem, task, state, q_start, settings)
+    solved = _checked(solve(problem, task, q_start, settings), task)
+    state = solved.state
     _recover(problem, task, state, q_start, settings)
     if rates == "exact":
         rate_modes.exact(problem, task, state, np.flatnonzero(~state.rates_ready))
         qd, qdd = state.qd, state.qdd
     else:
         qd, qdd = rate_modes.finite_difference(state.q, path.dt)
-    check = verify.verify(problem, state, settings.tolerances)
+    check = kkt.verify(problem, state, settings.tolerances)
     samples = _samples(problem, task, state, check, target)
-    return _result(path, state, qd, qdd, samples, target, problem, name, rates, task.kind, started)
+    result = _result(path, state, qd, qdd, samples, target, problem, name, rates, task.kind, started)
+    return replace(result, work=solved.counters)
+
+
+def _checked(result: object, task: Task) -> SolverResult:
+    """The solver's result, checked against the interface (a user's solver may get it wrong)."""
+    if not isinstance(result, SolverResult):
+        raise InputError(f"an inverse-kinematics solver must return a SolverResult, got {type(result).__name__}")
+    if result.state.q.shape != (len(task), 7):
+        raise InputError(f"the solver returned q of shape {result.state.q.shape}, expected ({len(task)}, 7)")
+    return result
 
 
 def _samples(
-    problem: IKProblem, task: Task, state: BatchState, check: verify.Verification, target: OrientationTarget | None
+    problem: IKProblem, task: Task, state: BatchState, check: kkt.Verification, target: OrientationTarget | None
 ) -> IKSamples:
     orientation = np.full(len(task), np.nan)
     if target is not None:
@@ -256,3 +270,121 @@ def _result(
         success=failed.size == 0,
         message=message,
     )
+
+
+@dataclass(frozen=True)
+class SolverResult:
+    """What an inverse-kinematics solver returns for a batch of samples (the solver interface).
+
+    Attributes:
+        state: the per-sample arrays (:class:`~vgtarm.ik.problem.BatchState`): ``q`` for every
+            sample and, where the solver succeeded, ``converged = True``, the multipliers, the
+            active set and the model values at ``q``; ``iterations`` and ``method`` per sample.
+        n_iterations: iterations (Newton steps, or the reference solver's) over all samples.
+        n_evaluations: samples evaluated through the compiled task functions, over all calls.
+        n_converged: samples the solver solved.
+        wall_time_s: the solver's wall time.
+    """
+
+    state: BatchState
+    n_iterations: int
+    n_evaluations: int
+    n_converged: int
+    wall_time_s: float
+
+    @property
+    def counters(self) -> dict[str, float]:
+        """The work counters by name (as recorded in :attr:`IKResult.work`)."""
+        return {
+            "n_iterations": self.n_iterations,
+            "n_evaluations": self.n_evaluations,
+            "n_converged": self.n_converged,
+            "wall_time_s": self.wall_time_s,
+        }
+
+
+class Solver(Protocol):
+    """An inverse-kinematics solver: ``solver(problem, task, q_start, options) -> SolverResult``.
+
+    The contract, for a solver of one's own (register it with :func:`register_solver`):
+
+    - ``problem`` (:class:`~vgtarm.ik.problem.IKProblem`) gives the cost ``Phi``, the bounds and
+      the linear assembly margins; ``task`` (:class:`~vgtarm.ik.problem.Task`) the targets of every
+      sample and the compiled residual, Jacobian and Hessian (``task.evaluate``); ``q_start``
+      ``(n,)`` the start of the first sample; ``options`` the :class:`~vgtarm.ik.options.IKOptions`.
+    - Return a :class:`SolverResult` whose ``state`` has a row per sample. A sample the solver
+      could not solve is left with ``converged = False``, never raised for: the caller re-solves it
+      with the reference solver or reports it unreachable, and verifies every sample's optimality
+      conditions itself, whatever the solver says.
+    """
+
+    def __call__(self, problem: IKProblem, task: Task, q_start: Array, options: IKOptions) -> SolverResult: ...
+
+
+InPlace = Callable[[IKProblem, Task, BatchState, Array, IKOptions], None]
+
+
+def in_place(step: InPlace) -> Solver:
+    """A :class:`Solver` from a function that fills a fresh :class:`BatchState` in place."""
+
+    def solver(problem: IKProblem, task: Task, q_start: Array, options: IKOptions) -> SolverResult:
+        started, evaluations = time.perf_counter(), task.evaluations[0]
+        state = BatchState.empty(len(task), task.m, 14 + problem.n_triangle)
+        step(problem, task, state, q_start, options)
+        return SolverResult(
+            state=state,
+            n_iterations=int(state.iterations.sum()),
+            n_evaluations=task.evaluations[0] - evaluations,
+            n_converged=int(state.converged.sum()),
+            wall_time_s=time.perf_counter() - started,
+        )
+
+    solver.__doc__ = step.__doc__
+    return solver
+
+
+def _fast(problem: IKProblem, task: Task, state: BatchState, q_start: Array, options: IKOptions) -> None:
+    """The batched, warm-started trajectory solver (:mod:`vgtarm.ik.fast`)."""
+    fast.solve(problem, task, state, q_start, options.fast)
+
+
+_REGISTRY: dict[str, Solver] = {
+    "fast": in_place(_fast),
+    "slsqp": in_place(reference.solve_slsqp),
+    "ipopt": in_place(reference.solve_ipopt),
+}
+#: Solvers by name (a read-only view; :func:`register_solver` adds to it).
+SOLVERS: MappingProxyType[str, Solver] = MappingProxyType(_REGISTRY)
+#: Other names of solvers.
+ALIASES: MappingProxyType[str, str] = MappingProxyType({"reference": "slsqp"})
+_BUILT_IN = frozenset(_REGISTRY) | frozenset(ALIASES)
+
+
+def register_solver(name: str, solver: Solver, *, replace: bool = False) -> None:
+    """Make ``solver`` (see :class:`Solver`) available as ``inverse_kinematics(..., solver=name)``.
+
+    A built-in name cannot be taken; another registered name only with ``replace=True``.
+    """
+    if not isinstance(name, str) or not name.isidentifier():
+        raise InputError(f"solver name {name!r}: expected a name like 'my_solver'")
+    if not callable(solver):
+        raise InputError(f"solver {name!r}: expected a callable (problem, task, q_start, options) -> SolverResult")
+    if name in _BUILT_IN or (name in _REGISTRY and not replace):
+        raise InputError(f"solver name {name!r} is taken; choose another name (or replace=True for your own)")
+    _REGISTRY[name] = solver
+
+
+def solver_names() -> list[str]:
+    """Every accepted name, sorted."""
+    return sorted([*SOLVERS, *ALIASES])
+
+
+def get_solver(name: object) -> tuple[str, Solver]:
+    """The canonical name and the solver of ``name``.
+
+    An unknown name raises :class:`InputError` listing the valid ones.
+    """
+    key = ALIASES.get(name, name) if isinstance(name, str) else None
+    if key is None or key not in SOLVERS:
+        raise InputError(f"unknown inverse-kinematics solver {name!r}; valid solvers are {', '.join(solver_names())}")
+    return key, SOLVERS[key]

@@ -57,6 +57,8 @@ class Signature:
     sz_res: int
     sz_iw: int
     sz_w: int
+    in_names: tuple[str, ...] = ()
+    out_names: tuple[str, ...] = ()
 
     @classmethod
     def of(cls, f: ca.Function) -> Signature:
@@ -68,6 +70,8 @@ class Signature:
             sz_res=int(f.sz_res()),
             sz_iw=int(f.sz_iw()),
             sz_w=int(f.sz_w()),
+            in_names=tuple(f.name_in()),
+            out_names=tuple(f.name_out()),
         )
 
 
@@ -284,6 +288,8 @@ def _load_signatures(path: Path) -> dict[str, Signature]:
             sz_res=v["sz_res"],
             sz_iw=v["sz_iw"],
             sz_w=v["sz_w"],
+            in_names=tuple(v.get("in_names", ())),
+            out_names=tuple(v.get("out_names", ())),
         )
         for key, v in payload.items()
     }

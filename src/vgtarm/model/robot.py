@@ -7,6 +7,7 @@ batch runs one compiled loop, so prefer batches to Python loops over single conf
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -116,6 +117,24 @@ class Robot:
         flat = [np.broadcast_to(a, shape + a.shape[-1:]).reshape(n, a.shape[-1]) for a in arrays]
         outputs = self.backend.evaluate(name, [*flat, self._p], n)
         return shape, outputs
+
+    def evaluate(self, name: str, inputs: Mapping[str, ArrayLike], n: int) -> dict[str, Array]:
+        """Evaluate the compiled function ``name`` on ``n`` samples, inputs and outputs by name.
+
+        ``inputs`` maps each input name of the function but ``p`` (the robot's parameters, added
+        here) to an ``(n, size)`` array or a ``(size,)`` value shared by every sample. Returns
+        ``{output name: (n, size)}``. This is how layers above (inverse kinematics) reach the
+        generated functions that have no method of their own.
+        """
+        sig = self.backend.signature(name)
+        wanted = [label for label in sig.in_names if label != "p"]
+        unknown = sorted(set(inputs) - set(wanted))
+        missing = [label for label in wanted if label not in inputs]
+        if unknown or missing:
+            raise InputError(f"{name}: inputs {wanted} expected, got unknown {unknown} and missing {missing}")
+        arrays = [np.asarray(inputs[label], dtype=np.float64) for label in wanted]
+        outputs = self.backend.evaluate(name, [*arrays, self._p], n)
+        return dict(zip(sig.out_names, outputs, strict=True))
 
     # -- kinematics --------------------------------------------------------------------------
 

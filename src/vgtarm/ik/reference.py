@@ -6,25 +6,34 @@ orientation residual for the pose task), the joint limits as bounds and the kept
 linear inequalities ``G q + h - margin >= 0``. Samples are solved in order, each warm-started from
 the previous solution (the first from the start pose). The same machinery finds the closest
 reachable point of a target (:func:`closest`), used to report unreachable samples.
+
+A second reference solver: IPOPT (interior point, through ``casadi.nlpsol``) per sample.
+
+The nonlinear program is the reference solver's (SLSQP, above), written symbolically
+from :func:`vgtarm.symbolic.kinematics` so that IPOPT gets exact first and second derivatives.
+Samples are solved in order, each started from the previous solution.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
+import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import Bounds, OptimizeResult, minimize
 
-from . import multipliers
+from ..model.codegen.ik import pose_constraints, rotation_from_row_major
+from ..model.parameters import N_PARAMETERS
+from ..model.symbolic import kinematics
+from . import kkt
 from .options import IKOptions
-from .problem import IKProblem
-from .state import BatchState
-from .tasks import Task
+from .problem import BatchState, IKProblem, Task
 
 Array = NDArray[np.float64]
-METHOD = "slsqp"
+METHOD_SLSQP = "slsqp"
 #: Slack below which a reference solution's constraint counts as active (m, rad).
 ACTIVE_TOLERANCE = 1e-9
 #: Scales of the closest-point objective ``scale |r|^2 / 2``, one pass each: SLSQP's ``ftol`` is
@@ -156,7 +165,7 @@ def finish(problem: IKProblem, task: Task, state: BatchState, idx: NDArray[np.in
         return
     q = state.q[idx]
     _, J, _ = task.evaluate(idx, q, np.zeros((idx.size, task.m)))
-    lam, mu, active = multipliers.estimate(problem, q, J, ACTIVE_TOLERANCE)
+    lam, mu, active = kkt.estimate_multipliers(problem, q, J, ACTIVE_TOLERANCE)
     residual, J, H = task.evaluate(idx, q, lam)
     state.lam[idx], state.mu[idx], state.active[idx] = lam, mu, active
     state.residual[idx], state.J[idx], state.H[idx] = residual, J, H
@@ -169,7 +178,7 @@ def solve_path(
     q_start: Array,
     options: IKOptions,
     solve_one: Callable[[IKProblem, Task, int, Array, IKOptions], SampleSolution] = solve_sample,
-    method: str = METHOD,
+    method: str = METHOD_SLSQP,
 ) -> None:
     """Solve every sample in order with ``solve_one``, each from the previous solution (solver contract)."""
     previous = q_start
@@ -185,6 +194,65 @@ def solve_path(
     finish(problem, task, state, done)
 
 
-def solve(problem: IKProblem, task: Task, state: BatchState, q_start: Array, options: IKOptions) -> None:
-    """The SLSQP reference solver (solver contract of :mod:`vgtarm.ik.registry`)."""
+def solve_slsqp(problem: IKProblem, task: Task, state: BatchState, q_start: Array, options: IKOptions) -> None:
+    """The SLSQP reference solver (solver contract: :class:`vgtarm.ik.Solver`)."""
     solve_path(problem, task, state, q_start, options)
+
+
+METHOD_IPOPT = "ipopt"
+
+
+def build_ipopt(problem: IKProblem, kind: str, options: IKOptions) -> ca.Function:
+    """The IPOPT solver of one sample; its parameter is ``[target point (3), R_d row-major (9, pose only), p]``."""
+    q = ca.SX.sym("q", 7)
+    point = ca.SX.sym("point", 3)
+    p = ca.SX.sym("p", N_PARAMETERS)
+    if kind == "position":
+        parameters = ca.vertcat(point, p)
+        c = kinematics(q, p).tip - point
+    else:
+        rd = ca.SX.sym("R_d", 9)
+        parameters = ca.vertcat(point, rd, p)
+        c = pose_constraints(q, rotation_from_row_major(rd), p) - ca.vertcat(point, ca.SX.zeros(3))
+    cost = 0.5 * ca.sum1(ca.DM(problem.weight) * (q - ca.DM(problem.centre)) ** 2)
+    g = ca.vertcat(c, ca.DM(problem.G) @ q + ca.DM(problem.h))
+    settings: dict[str, Any] = {
+        "print_time": False,
+        "error_on_fail": False,
+        "ipopt.print_level": 0,
+        "ipopt.sb": "yes",
+        "ipopt.tol": 1e-12,
+        "ipopt.constr_viol_tol": 1e-12,
+        "ipopt.max_iter": options.reference_maxiter,
+    }
+    return ca.nlpsol("vgtarm_ik_ipopt", "ipopt", {"x": q, "p": parameters, "f": cost, "g": g}, settings)
+
+
+def solve_ipopt(problem: IKProblem, task: Task, state: BatchState, q_start: Array, options: IKOptions) -> None:
+    """The IPOPT reference solver (solver contract: :class:`vgtarm.ik.Solver`)."""
+    solver = build_ipopt(problem, task.kind, options)
+    m, k = task.m, problem.n_triangle
+    lbg = np.concatenate([np.zeros(m), np.full(k, problem.margin)])
+    ubg = np.concatenate([np.zeros(m), np.full(k, np.inf)])
+
+    def solve_one(problem: IKProblem, task: Task, i: int, q0: Array, options: IKOptions) -> SampleSolution:
+        parts = (
+            [task.position[i]]
+            + ([task.rotation[i]] if task.rotation is not None else [])
+            + [task.model.parameter_vector]
+        )
+        result = solver(
+            x0=np.clip(q0, problem.lower, problem.upper),
+            p=np.concatenate(parts),
+            lbx=problem.lower,
+            ubx=problem.upper,
+            lbg=lbg,
+            ubg=ubg,
+        )
+        stats = solver.stats()
+        q = np.asarray(result["x"], dtype=float).ravel()
+        residual = float(np.abs(np.asarray(result["g"]).ravel()[:m]).max())
+        success = bool(stats["success"]) and residual <= options.accept_primal and bool(problem.feasible(q, 1e-10))
+        return SampleSolution(q, success, int(stats["iter_count"]), str(stats["return_status"]), residual)
+
+    solve_path(problem, task, state, q_start, options, solve_one, METHOD_IPOPT)
