@@ -16,6 +16,15 @@ from vgtarm.ik.problem import BatchState
 PATH = paths.case2(dt=0.05)
 
 
+@pytest.fixture(autouse=True)
+def clean_registry():
+    """Leave the registry as it was: solvers registered by a test are removed after it."""
+    before = set(SOLVERS)
+    yield
+    for name in set(SOLVERS) - before:
+        unregister_solver(name)
+
+
 def test_built_in_solvers_return_records_with_work_counters(robot):
     result = inverse_kinematics(robot, PATH)
     assert result.success
@@ -66,3 +75,5 @@ def test_bad_registrations_and_results_are_refused(robot):
         inverse_kinematics(robot, PATH, solver="broken")
     with pytest.raises(InputError, match="unknown inverse-kinematics solver 'nope'"):
         inverse_kinematics(robot, PATH, solver="nope")
+    with pytest.raises(InputError, match="not a registered solver"):
+        unregister_solver("fast")

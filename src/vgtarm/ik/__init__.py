@@ -14,7 +14,17 @@ solver interface and registry (:class:`Solver`, :class:`SolverResult`, :func:`re
 from .options import IKOptions
 from .pose import OrientationPath
 from .records import CSV_COLUMNS, IKResult, IKSamples, write_csv
-from .solve import ALIASES, SOLVERS, Solver, SolverResult, in_place, inverse_kinematics, register_solver, solver_names
+from .solve import (
+    ALIASES,
+    SOLVERS,
+    Solver,
+    SolverResult,
+    in_place,
+    inverse_kinematics,
+    register_solver,
+    solver_names,
+    unregister_solver,
+)
 
 __all__ = [
     "ALIASES",
@@ -30,5 +40,6 @@ __all__ = [
     "inverse_kinematics",
     "register_solver",
     "solver_names",
+    "unregister_solver",
     "write_csv",
 ]

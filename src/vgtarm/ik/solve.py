@@ -374,6 +374,13 @@ def register_solver(name: str, solver: Solver, *, replace: bool = False) -> None
     _REGISTRY[name] = solver
 
 
+def unregister_solver(name: str) -> None:
+    """Remove a solver registered with :func:`register_solver` (built-in solvers stay)."""
+    if name in _BUILT_IN or name not in _REGISTRY:
+        raise InputError(f"solver name {name!r}: not a registered solver of one's own")
+    del _REGISTRY[name]
+
+
 def solver_names() -> list[str]:
     """Every accepted name, sorted."""
     return sorted([*SOLVERS, *ALIASES])
