@@ -10,7 +10,7 @@ import pytest
 
 from vgtarm import paths
 from vgtarm.errors import InputError
-from vgtarm.ik import SOLVERS, in_place, inverse_kinematics, register_solver, solver_names
+from vgtarm.ik import SOLVERS, in_place, inverse_kinematics, register_solver, solver_names, unregister_solver
 from vgtarm.ik.problem import BatchState
 
 PATH = paths.case2(dt=0.05)
