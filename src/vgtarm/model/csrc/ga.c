@@ -327,7 +327,8 @@ void vgt_ga_crossover(int words, long rows, uint64_t *bits, const unsigned char 
 
 /* ---- prediction ----------------------------------------------------------------------------- */
 
-enum { BLOCK = 8 }; /* candidates per vectorised block (two AVX2 registers) */
+enum { BLOCK = 8 }; /* candidates per vectorised block */
+typedef float vf __attribute__((vector_size(32))); /* the BLOCK candidates of one quantity */
 
 typedef struct {
     int nj;
@@ -346,6 +347,14 @@ typedef struct {
     int n_hes[3];        /* per axis k, the pairs (index into pair) with a nonzero H[k]             */
     int *hes;            /* (3, n_pairs) their indices                                             */
     float *coef;         /* (H, 3, n_pairs) -H[k][l][m] (-H/2 on the diagonal) per step and axis    */
+    long exact_candidates, exact_steps; /* work counters of the trust-region fallback              */
+    vf *K;               /* (2 nj^2) gains of the block, one lane per candidate                     */
+    float *far;          /* (BLOCK H, nj) predicted joint errors of the steps outside the region     */
+    long *far_at;        /* (BLOCK H) their lane * H + step                                         */
+    const double **arg;  /* work arrays of the generated tip function                               */
+    double **res;
+    vgt_int *iw;
+    double *w;
 } predictor;
 
 /* Predicted tip error of up to BLOCK candidates by the linear recursion (see the top). Every
@@ -354,23 +363,18 @@ typedef struct {
  * AVX2 register: the errors are about 1e-4 m and the gains at most about 1e4, so rounding moves
  * the fitness by about 1e-7 relative (measured in docs/control.md), far below what the GA's
  * ranking resolves; the sums of squares are completed in double. */
-typedef float vf __attribute__((vector_size(32))); /* BLOCK = 8 candidates */
 
 static inline __attribute__((always_inline)) void block_kernel(const predictor *restrict x, const int nj, int count,
-                                                               const double *restrict genes, double *restrict cost,
-                                                               double *restrict peak)
+                                                               const vf *restrict K, double *restrict sum,
+                                                               float *restrict far, long *restrict far_at,
+                                                               long *restrict n_far)
 {
     const int nn = nj * nj;
     const float dt = (float)x->dt;
     const vgt_ga_problem *pb = x->pb;
-    vf K[2 * nn], E[nj], Ed[nj], a[nj];
+    vf E[nj], Ed[nj], a[nj];
     const vf zero = {0.0f};
-    double sum[BLOCK] = {0.0}, big[BLOCK] = {0.0};
-    for (int gi = 0; gi < 2 * nn; ++gi) K[gi] = zero;
-    for (int c = 0; c < count; ++c) {
-        const double *row = genes + (long)c * 2 * nn;
-        for (int gi = 0; gi < 2 * nn; ++gi) K[gi][c] = (float)row[gi];
-    }
+    for (int c = 0; c < BLOCK; ++c) sum[c] = 0.0;
     for (int i = 0; i < nj; ++i) {
         E[i] = zero + (float)(pb->q_d[i] - pb->q0[i]);
         Ed[i] = zero + (float)(pb->qd_d[i] - pb->qd0[i]);
@@ -405,28 +409,68 @@ static inline __attribute__((always_inline)) void block_kernel(const predictor *
             for (int e = 0; e < x->n_hes[1]; ++e) t1 += coef[np + x->hes[np + e]] * P[x->hes[np + e]];
             for (int e = 0; e < x->n_hes[2]; ++e) t2 += coef[2 * np + x->hes[2 * np + e]] * P[x->hes[2 * np + e]];
         }
-        for (int c = 0; c < BLOCK; ++c) {
-            sum[c] += (double)t0[c] * t0[c] + (double)t1[c] * t1[c] + (double)t2[c] * t2[c];
-            big[c] = norm2[c] > big[c] ? norm2[c] : big[c];
+        for (int c = 0; c < count; ++c) {
+            if (x->exact_above2 > 0.0 && !(norm2[c] <= x->exact_above2)) { /* outside the trust region */
+                long f = (*n_far)++;
+                far_at[f] = (long)c * x->horizon + j;
+                for (int i = 0; i < nj; ++i) far[f * nj + i] = E[i][c];
+            } else {
+                sum[c] += (double)t0[c] * t0[c] + (double)t1[c] * t1[c] + (double)t2[c] * t2[c];
+            }
         }
-    }
-    for (int c = 0; c < count; ++c) {
-        cost[c] = isfinite(sum[c]) ? sqrt(sum[c]) : INFINITY;
-        peak[c] = big[c];
     }
 }
 
 /* The kernel with the joint count known at compile time for the common sizes (the loops unroll
  * and the gains stay in registers), and for any other count at run time. */
 __attribute__((target_clones("arch=x86-64-v3", "default"), optimize("fp-contract=fast"))) static void predict_block(
-    const predictor *restrict x, int count, const double *restrict genes, double *restrict cost,
-    double *restrict peak)
+    const predictor *restrict x, int count, const vf *restrict K, double *restrict sum, float *restrict far,
+    long *restrict far_at, long *restrict n_far)
 {
     switch (x->nj) {
-    case 3: block_kernel(x, 3, count, genes, cost, peak); break;
-    case 6: block_kernel(x, 6, count, genes, cost, peak); break;
-    case 7: block_kernel(x, 7, count, genes, cost, peak); break;
-    default: block_kernel(x, x->nj, count, genes, cost, peak); break;
+    case 3: block_kernel(x, 3, count, K, sum, far, far_at, n_far); break;
+    case 6: block_kernel(x, 6, count, K, sum, far, far_at, n_far); break;
+    case 7: block_kernel(x, 7, count, K, sum, far, far_at, n_far); break;
+    default: block_kernel(x, x->nj, count, K, sum, far, far_at, n_far); break;
+    }
+}
+
+/* The gains of up to BLOCK candidates, as the kernel wants them: gene-major, one float per lane.
+ * From decoded genes (row by row), or straight from the bit strings `rows[c]` of 8-bit genes,
+ * decoded across the lanes with ga._decode's arithmetic (in double, then rounded to float). */
+static void gains_from_genes(int n_genes, int count, const double *genes, vf *K)
+{
+    const vf zero = {0.0f};
+    for (int gi = 0; gi < n_genes; ++gi) K[gi] = zero;
+    for (int c = 0; c < count; ++c)
+        for (int gi = 0; gi < n_genes; ++gi) K[gi][c] = (float)genes[(long)c * n_genes + gi];
+}
+
+/* Lane `lane` of K from the bit string of one candidate of 8-bit genes: decode_bytes's arithmetic
+ * (four genes per vector, in double), rounded to float and stored gene-major. */
+__attribute__((target_clones("arch=x86-64-v3", "default"))) static void gains_from_bytes(
+    int n_genes, int lane, const uint64_t *restrict bits, const double *restrict lower, const double *restrict upper,
+    vf *restrict K)
+{
+    int i = 0;
+    for (; i + 4 <= n_genes; i += 4) {
+        uint64_t word = bits[i >> 3];
+        int shift = 56 - 8 * (i & 7);
+        v4 code = {(double)((word >> shift) & 0xFFu), (double)((word >> (shift - 8)) & 0xFFu),
+                   (double)((word >> (shift - 16)) & 0xFFu), (double)((word >> (shift - 24)) & 0xFFu)};
+        v4 lo, hi;
+        memcpy(&lo, lower + i, sizeof lo);
+        memcpy(&hi, upper + i, sizeof hi);
+        v4 value = lo + code / 255.0 * (hi - lo);
+        value = select4((m4)(value < hi), value, hi);
+        value = select4((m4)(code == 255.0), hi, value);
+        for (int l = 0; l < 4; ++l) K[i + l][lane] = (float)value[l];
+    }
+    for (; i < n_genes; ++i) {
+        double code = (double)((bits[i >> 3] >> (56 - 8 * (i & 7))) & 0xFFu);
+        double value = lower[i] + code / 255.0 * (upper[i] - lower[i]);
+        value = value < upper[i] ? value : upper[i];
+        K[i][lane] = (float)(code == 255.0 ? upper[i] : value);
     }
 }
 
@@ -455,108 +499,58 @@ static int predict_exact(const vgt_model *m, const vgt_settings *s, const predic
     return status;
 }
 
-/* The candidates listed in `which` whose predicted joint error left the trust region, in double
- * precision and in the exact prediction's own arithmetic (q, qd advanced by explicit Euler): a
- * step whose joint error is within the region is mapped to the tip by the Taylor expansion, a
- * step outside it by the exact forward kinematics, as the exact prediction does. */
-static int predict_mixed(const vgt_model *m, const predictor *x, long n, const long *which, const double *genes,
-                         double *cost)
-{
-    const int nj = x->nj, nn = nj * nj;
-    const vgt_ga_problem *pb = x->pb;
-    const double dt = x->dt;
-    const vgt_call *c = &m->tip;
-    const double **arg = malloc(sizeof(double *) * (size_t)(c->sz_arg > 2 ? c->sz_arg : 2));
-    double **res = malloc(sizeof(double *) * (size_t)(c->sz_res > 1 ? c->sz_res : 1));
-    vgt_int *iw = malloc(sizeof(vgt_int) * (size_t)(c->sz_iw + 1));
-    double *w = malloc(sizeof(double) * (size_t)(c->sz_w + 1));
-    int status = arg && res && iw && w ? VGT_DONE : VGT_NO_MEMORY;
-    for (long k = 0; k < n && status == VGT_DONE; ++k) {
-        const long row = which[k];
-        const double *kp = genes + row * 2 * nn, *kv = kp + nn;
-        double q[nj], qd[nj], e[nj], ed[nj], a[nj], E[nj], tip[3], sum = 0.0;
-        memcpy(q, pb->q0, sizeof q);
-        memcpy(qd, pb->qd0, sizeof qd);
-        for (long j = 0; j < x->horizon; ++j) {
-            const double *q_d = pb->q_d + j * nj, *qd_d = pb->qd_d + j * nj, *qdd_d = pb->qdd_d + j * nj;
-            for (int i = 0; i < nj; ++i) {
-                e[i] = q_d[i] - q[i];
-                ed[i] = qd_d[i] - qd[i];
-            }
-            for (int i = 0; i < nj; ++i) {
-                double acc = qdd_d[i];
-                for (int l = 0; l < nj; ++l) acc += kp[nj * i + l] * e[l] + kv[nj * i + l] * ed[l];
-                a[i] = acc;
-            }
-            double norm2 = 0.0;
-            for (int i = 0; i < nj; ++i) {
-                q[i] += dt * qd[i];
-                qd[i] += dt * a[i];
-                E[i] = pb->q_d[(j + 1) * nj + i] - q[i];
-                norm2 += E[i] * E[i];
-            }
-            double t[3];
-            if (norm2 <= x->exact_above2) {
-                const double *J = pb->J_d + (j + 1) * 3 * nj, *H = pb->H_d + (j + 1) * 3 * nn;
-                for (int d = 0; d < 3; ++d) {
-                    t[d] = pb->tip_offset[(j + 1) * 3 + d];
-                    for (int q1 = 0; q1 < x->n_jac[d]; ++q1) {
-                        int l = x->jac[d * nj + q1];
-                        t[d] += J[d * nj + l] * E[l];
-                    }
-                    for (int q1 = 0; q1 < x->n_hes[d] && x->quadratic; ++q1) {
-                        int pair = x->hes[d * x->n_pairs + q1], l = x->pair[2 * pair], mm = x->pair[2 * pair + 1];
-                        t[d] -= (l == mm ? 0.5 : 1.0) * H[(d * nj + l) * nj + mm] * E[l] * E[mm];
-                    }
-                }
-            } else {
-                arg[0] = q;
-                arg[1] = pb->p_ctrl;
-                res[0] = tip;
-                if (c->f(arg, res, iw, w, 0)) {
-                    sum = INFINITY;
-                    break;
-                }
-                const double *td = pb->tip_d + 3 * (j + 1);
-                for (int d = 0; d < 3; ++d) t[d] = td[d] - tip[d];
-            }
-            sum += t[0] * t[0] + t[1] * t[1] + t[2] * t[2];
-            if (!isfinite(sum)) break;
-        }
-        cost[row] = isfinite(sum) ? sqrt(sum) : INFINITY;
-    }
-    free(arg);
-    free(res);
-    free(iw);
-    free(w);
-    return status;
-}
-
-static int predict(const vgt_model *m, const vgt_settings *s, const vgt_ga_settings *g, const predictor *x, long n,
-                   const double *genes, double *cost)
+/* Predicted tip error of n candidates given as decoded genes (row by row), or, with genes NULL, as
+ * the bit strings rows[0..n) of 8-bit genes. */
+static int predict(const vgt_model *m, const vgt_settings *s, const vgt_ga_settings *g, predictor *x, long n,
+                   const double *genes, const uint64_t *const *rows, double *cost)
 {
     if (g->prediction == VGT_PREDICT_EXACT) return predict_exact(m, s, x, n, NULL, genes, cost);
-    double peak[BLOCK];
-    long *far = malloc(sizeof(long) * (size_t)(n + 1)), n_far = 0;
-    if (!far) return VGT_NO_MEMORY;
+    const int nj = x->nj;
+    const vgt_ga_problem *pb = x->pb;
     for (long c = 0; c < n; c += BLOCK) {
         int count = n - c < BLOCK ? (int)(n - c) : BLOCK;
-        predict_block(x, count, genes + c * g->n_genes, cost + c, peak);
-        for (int k = 0; k < count; ++k)
-            if (x->exact_above2 > 0.0 && !(peak[k] <= x->exact_above2)) far[n_far++] = c + k;
+        double sum[BLOCK];
+        long n_far = 0;
+        int seen[BLOCK] = {0};
+        if (genes) {
+            gains_from_genes(g->n_genes, count, genes + c * g->n_genes, x->K);
+        } else {
+            const vf zero = {0.0f};
+            if (count < BLOCK) /* lanes without a candidate predict with zero gains, unused */
+                for (int gi = 0; gi < g->n_genes; ++gi) x->K[gi] = zero;
+            for (int k = 0; k < count; ++k) gains_from_bytes(g->n_genes, k, rows[c + k], pb->lower, pb->upper, x->K);
+        }
+        predict_block(x, count, x->K, sum, x->far, x->far_at, &n_far);
+        /* the steps outside the trust region: the exact forward kinematics of the predicted joints */
+        for (long f = 0; f < n_far; ++f) {
+            long lane = x->far_at[f] / x->horizon, j = x->far_at[f] % x->horizon;
+            double q[nj], tip[3];
+            for (int i = 0; i < nj; ++i) q[i] = pb->q_d[(j + 1) * nj + i] - (double)x->far[f * nj + i];
+            x->arg[0] = q;
+            x->arg[1] = pb->p_ctrl;
+            x->res[0] = tip;
+            if (m->tip.f(x->arg, x->res, x->iw, x->w, 0)) return VGT_FUNCTION_FAILED;
+            const double *td = pb->tip_d + 3 * (j + 1);
+            double d0 = td[0] - tip[0], d1 = td[1] - tip[1], d2 = td[2] - tip[2];
+            sum[lane] += d0 * d0 + d1 * d1 + d2 * d2;
+            x->exact_steps++;
+            if (!seen[lane]) x->exact_candidates++;
+            seen[lane] = 1;
+        }
+        for (int k = 0; k < count; ++k) cost[c + k] = isfinite(sum[k]) ? sqrt(sum[k]) : INFINITY;
     }
-    int status = n_far ? predict_mixed(m, x, n_far, far, genes, cost) : VGT_DONE;
-    free(far);
-    return status;
+    return VGT_DONE;
 }
 
-static int predictor_init(predictor *x, const vgt_settings *s, const vgt_ga_settings *g, const vgt_ga_problem *pb)
+static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *s, const vgt_ga_settings *g,
+                          const vgt_ga_problem *pb)
 {
     x->nj = s->n_joints;
     x->horizon = g->horizon;
     x->dt = s->dt;
     x->quadratic = g->prediction == VGT_PREDICT_QUADRATIC;
     x->exact_above2 = g->exact_above * g->exact_above;
+    x->exact_candidates = x->exact_steps = 0;
     x->pb = pb;
     const int nj = x->nj;
     x->r = malloc(sizeof(float) * (size_t)(g->horizon * nj + 1));
@@ -567,7 +561,16 @@ static int predictor_init(predictor *x, const vgt_settings *s, const vgt_ga_sett
     x->pair = malloc(sizeof(int) * (size_t)(nj * (nj + 1) + 2));
     x->hes = malloc(sizeof(int) * (size_t)(3 * nj * (nj + 1) / 2 + 3));
     x->coef = NULL;
-    if (!x->r || !x->s || !x->jac_f || !x->off_f || !x->jac || !x->pair || !x->hes) return VGT_NO_MEMORY;
+    x->K = aligned_alloc(sizeof(vf), sizeof(vf) * (size_t)(2 * nj * nj));
+    x->far = malloc(sizeof(float) * (size_t)(BLOCK * (g->horizon + 1) * nj));
+    x->far_at = malloc(sizeof(long) * (size_t)(BLOCK * (g->horizon + 1)));
+    x->arg = malloc(sizeof(double *) * (size_t)(m->tip.sz_arg > 2 ? m->tip.sz_arg : 2));
+    x->res = malloc(sizeof(double *) * (size_t)(m->tip.sz_res > 1 ? m->tip.sz_res : 1));
+    x->iw = malloc(sizeof(vgt_int) * (size_t)(m->tip.sz_iw + 1));
+    x->w = malloc(sizeof(double) * (size_t)(m->tip.sz_w + 1));
+    if (!x->r || !x->s || !x->jac_f || !x->off_f || !x->jac || !x->pair || !x->hes || !x->K || !x->far || !x->far_at ||
+        !x->arg || !x->res || !x->iw || !x->w)
+        return VGT_NO_MEMORY;
     if (g->prediction != VGT_PREDICT_EXACT) {
         for (long i = 0; i < (g->horizon + 1) * 3 * nj; ++i) x->jac_f[i] = (float)pb->J_d[i];
         for (long i = 0; i < (g->horizon + 1) * 3; ++i) x->off_f[i] = (float)pb->tip_offset[i];
@@ -626,6 +629,13 @@ static void predictor_free(predictor *x)
     free(x->s);
     free(x->jac_f);
     free(x->off_f);
+    free(x->K);
+    free(x->far);
+    free(x->far_at);
+    free(x->arg);
+    free(x->res);
+    free(x->iw);
+    free(x->w);
     free(x->jac);
     free(x->pair);
     free(x->hes);
@@ -636,8 +646,8 @@ int vgt_ga_predict(const vgt_model *m, const vgt_settings *s, const vgt_ga_setti
                    long n_cand, const double *genes, double *cost)
 {
     predictor x;
-    int status = predictor_init(&x, s, g, pb);
-    if (status == VGT_DONE) status = predict(m, s, g, &x, n_cand, genes, cost);
+    int status = predictor_init(&x, m, s, g, pb);
+    if (status == VGT_DONE) status = predict(m, s, g, &x, n_cand, genes, NULL, cost);
     predictor_free(&x);
     return status;
 }
@@ -667,7 +677,7 @@ int vgt_ga_activation(const vgt_model *m, const vgt_settings *s, const vgt_ga_se
     rng_t rng;
     rng_seed(&rng, seed);
     predictor x;
-    int status = predictor_init(&x, s, g, pb);
+    int status = predictor_init(&x, m, s, g, pb);
 
     uint64_t *pop = calloc((size_t)P * W, sizeof(uint64_t)), *next = calloc((size_t)P * W, sizeof(uint64_t));
     uint64_t *best_bits = calloc((size_t)W, sizeof(uint64_t)), *valid = calloc((size_t)W, sizeof(uint64_t));
@@ -677,6 +687,7 @@ int vgt_ga_activation(const vgt_model *m, const vgt_settings *s, const vgt_ga_se
     double *parent_cost = malloc(sizeof(double) * (size_t)P), *weights = malloc(sizeof(double) * (size_t)P);
     long *order = malloc(sizeof(long) * (size_t)P), *pool = malloc(sizeof(long) * (size_t)P);
     long *fresh = malloc(sizeof(long) * (size_t)P);
+    const uint64_t **fresh_rows = malloc(sizeof(uint64_t *) * (size_t)P);
     long max_flips = 64 + (long)(4.0 * g->p_mutation * (double)(C * L)) + 8 * (long)sqrt((double)C * L + 1.0);
     if (max_flips > C * L) max_flips = C * L;
     long *flips = malloc(sizeof(long) * (size_t)(max_flips + 1));
@@ -689,7 +700,7 @@ int vgt_ga_activation(const vgt_model *m, const vgt_settings *s, const vgt_ga_se
             for (long c = 0; c < codes; ++c) fractions[c] = (double)c / top;
     }
     if (status == VGT_DONE && !(pop && next && best_bits && valid && cost && next_cost && genes && new_cost &&
-                                expectation && work && parent_cost && weights && order && pool && fresh && flips))
+                                expectation && work && parent_cost && weights && order && pool && fresh && fresh_rows && flips))
         status = VGT_NO_MEMORY;
     if (status != VGT_DONE) goto done;
 
@@ -707,7 +718,7 @@ int vgt_ga_activation(const vgt_model *m, const vgt_settings *s, const vgt_ga_se
         }
     }
     vgt_ga_decode(g, P, pop, pb->lower, pb->upper, genes);
-    status = predict(m, s, g, &x, P, genes, cost);
+    status = predict(m, s, g, &x, P, genes, NULL, cost);
     if (status != VGT_DONE) goto done;
     for (int k = 0; k < P; ++k) cost[k] = clean_cost(cost[k]);
     out->evaluations = P;
@@ -757,10 +768,14 @@ int vgt_ga_activation(const vgt_model *m, const vgt_settings *s, const vgt_ga_se
             else
                 fresh[n_fresh++] = i;
         }
-        for (long f = 0; f < n_fresh; ++f)
-            decode_with(g, children + fresh[f] * W, pb->lower, pb->upper, fractions, genes + f * g->n_genes);
+        const int from_bytes = g->n_bits == 8 && g->prediction != VGT_PREDICT_EXACT;
+        for (long f = 0; f < n_fresh; ++f) {
+            fresh_rows[f] = children + fresh[f] * W;
+            if (!from_bytes)
+                decode_with(g, children + fresh[f] * W, pb->lower, pb->upper, fractions, genes + f * g->n_genes);
+        }
         if (n_fresh) {
-            status = predict(m, s, g, &x, n_fresh, genes, work);
+            status = predict(m, s, g, &x, n_fresh, from_bytes ? NULL : genes, fresh_rows, work);
             if (status != VGT_DONE) goto done;
             for (long f = 0; f < n_fresh; ++f) new_cost[fresh[f]] = clean_cost(work[f]);
             out->evaluations += n_fresh;
@@ -785,6 +800,8 @@ int vgt_ga_activation(const vgt_model *m, const vgt_settings *s, const vgt_ga_se
         }
     }
     out->generations = generation - 1;
+    out->exact_candidates = x.exact_candidates;
+    out->exact_steps = x.exact_steps;
     out->best_cost = best_cost;
     decode_one(g, best_bits, pb->lower, pb->upper, out->best);
 
@@ -805,6 +822,7 @@ done:
     free(order);
     free(pool);
     free(fresh);
+    free((void *)fresh_rows);
     free(flips);
     free(fractions);
     return status;

@@ -151,6 +151,8 @@ typedef struct {
     double seeded_cost;     /* predicted tip error of the first seeded individual (or NaN)       */
     long generations;       /* generations run                                                   */
     long evaluations;       /* candidates whose prediction was computed                          */
+    long exact_candidates;  /* of those, recomputed for leaving the trust region                  */
+    long exact_steps;       /* steps of those mapped by the exact forward kinematics              */
 } vgt_ga_result;
 
 /* One GA activation: evolve the gains from a seeded first population, all in C. */
