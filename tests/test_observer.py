@@ -10,7 +10,7 @@ import pytest
 import vgtarm
 from vgtarm.control import ComputedForceControl
 from vgtarm.model.compiled import InterpretedBackend, build_functions
-from vgtarm.simulation import ExternalForce, JointReference, simulate
+from vgtarm.simulation import ExternalForce, JointReference, SimulationResult, simulate
 
 from .conftest import assert_close
 
@@ -31,13 +31,38 @@ def test_without_external_force_and_with_an_exact_model_the_estimate_is_zero(rob
     plain = simulate(robot, ref, CFC)
     observed = simulate(robot, ref, CFC, observer="momentum", observer_gain=300.0)
     assert observed.metadata["observer"] == "momentum" and observed.metadata["observer_gain_per_s"] == 300.0
-    # The estimate is the round-off of M^ (q_k - q_{k-1}) / dt + C^ - F: tiny against efforts of newtons.
+    # The estimate is the round-off of M^ (v_k - v_{k-1}) / dt + C^ - F: tiny against efforts of newtons.
+    assert plain.effort_estimate is None and observed.effort_estimate is not None
+    assert np.max(np.abs(observed.effort_estimate)) < 1e-9 * np.max(np.abs(plain.effort))
     assert np.max(np.abs(observed.effort - plain.effort)) < 1e-9
     assert_close(observed.q, plain.q, rtol=0, atol=1e-13)
 
 
-def _constant_push(robot, force, gain, dt=1e-3, duration=0.1):
-    """A robot held at home while a constant force pushes on the tool."""
+def test_a_gain_is_only_taken_with_the_observer_and_plain_runs_take_any_period(robot):
+    with pytest.raises(vgtarm.InputError, match="observer_gain = 300.0: only used with observer = 'momentum'"):
+        simulate(robot, reference(robot, duration=0.01), CFC, observer_gain=300.0)
+    slow = reference(robot, duration=0.05, dt=5e-3)  # 1/dt = 200 1/s
+    assert simulate(robot, slow, CFC).success
+    with pytest.raises(vgtarm.InputError, match="observer_gain = 300.0: expected at most 1/dt = 200 1/s"):
+        simulate(robot, slow, CFC, observer="momentum", observer_gain=300.0)
+    assert simulate(robot, slow, CFC, observer="momentum").metadata["observer_gain_per_s"] == pytest.approx(100.0)
+
+
+def test_observer_and_sensing_state_carry_over_between_chunks_of_the_loop(robot):
+    """With a progress callback the loop runs in 100 chunks; the observer and the velocity filter
+    must continue from the sample where the previous chunk stopped."""
+    ref = reference(robot, duration=0.2)
+    options = dict(
+        external_force=ExternalForce(), seed=2, observer="momentum", encoder_resolution=1e-6, velocity_noise=1e-4
+    )
+    whole = simulate(robot, ref, CFC, **options)
+    chunked = simulate(robot, ref, CFC, progress=lambda done, total: None, **options)
+    for name in ("q", "effort", "effort_estimate", "tip_error_measured"):
+        np.testing.assert_array_equal(getattr(whole, name), getattr(chunked, name), err_msg=name)
+
+
+def _constant_push(robot, force, gain, dt=1e-3, duration=0.1, resolution=0.0):
+    """A robot held at home while a constant force pushes on the tool (encoders of ``resolution``)."""
     ref = reference(robot, duration=duration, dt=dt, amplitude=np.zeros(7))
     fixed = ExternalForce(cutting=False, disturbance=False)
     from vgtarm.model.assembly import linear_form
@@ -59,6 +84,7 @@ def _constant_push(robot, force, gain, dt=1e-3, duration=0.1):
         q_max=robot.parameters.upper,
         q0=ref.q[0],
         qd0=ref.qd[0],
+        resolution=np.full(7, resolution),
     )
     settings = LoopSettings(
         dt=dt,
@@ -71,6 +97,8 @@ def _constant_push(robot, force, gain, dt=1e-3, duration=0.1):
         limit_tolerance=0.05,
         observer="momentum",
         observer_gain=gain,
+        sensing=resolution > 0,
+        velocity_filter=math.exp(-2 * math.pi * 100.0 * dt),
     )
     status, _ = ClosedLoopDriver(robot.backend).simulate(settings, arrays, CFC.gains.Kp, CFC.gains.Kv, 0, n)
     assert status == 0
@@ -92,6 +120,20 @@ def test_a_constant_tip_force_is_estimated_with_the_first_order_step_response(ro
     assert error < 0.01
     late = arrays.tau_hat[-1] - tau_ext[-2]
     assert np.linalg.norm(late) < 1e-3 * np.linalg.norm(tau_ext[-2])
+
+
+@pytest.mark.parametrize(("resolution", "at_five", "late_mean"), [(1e-9, 0.01, 1e-4), (1e-6, 0.5, 0.01)])
+def test_with_encoders_a_constant_tip_force_is_still_estimated(robot, resolution, at_five, late_mean):
+    """Velocities differenced from encoder counts: fine encoders follow as without sensing (1 %
+    after five time constants); 1 um counts add noise but no bias (the mean of the last 100 ms)."""
+    gain = 200.0
+    t, arrays = _constant_push(robot, np.array([3.0, -5.0, -20.0]), gain, duration=0.2, resolution=resolution)
+    tau_ext = np.einsum("kij,ki->kj", robot.tip_jacobian(arrays.q), arrays.f_ext)
+    size = np.linalg.norm(tau_ext[-1])
+    five = int(round(5.0 / gain / 1e-3))
+    assert np.linalg.norm(arrays.tau_hat[five] - tau_ext[five - 1]) < at_five * size
+    late = t >= 0.1
+    assert np.linalg.norm(arrays.tau_hat[late].mean(axis=0) - tau_ext[late].mean(axis=0)) < late_mean * size
 
 
 def test_the_observer_removes_the_offset_of_a_constant_push(robot):
@@ -119,7 +161,7 @@ def test_compiled_loop_matches_its_numpy_twin_with_observer_and_sensing(robot, o
     kwargs = dict(external_force=ExternalForce(), seed=5, controller_model=robot.parameters.scaled(mass=1.1), **options)
     fast = simulate(robot, ref, CFC, **kwargs)
     twin = simulate(slow, ref, CFC, **kwargs)
-    for name in ("q", "qd", "effort", "tip_error"):
+    for name in ("q", "qd", "effort", "effort_estimate", "tip_error"):
         assert_close(getattr(fast, name), getattr(twin, name), rtol=1e-9, atol=1e-12, what=name)
 
 
@@ -133,6 +175,9 @@ def test_sensing_is_seeded_and_quantises_what_the_controller_sees(robot):
     assert not np.array_equal(a.q, c.q)
     assert a.metadata["sensing"] and a.metadata["encoder_resolution_m"] == 1e-6
     assert a.metadata["twist_resolution_rad"] == pytest.approx(2 * math.pi / 2**20)
+    # the record keeps the true tip error; the controller saw it through 1 um encoders
+    seen = a.tip_error_measured
+    assert seen is not None and 0 < np.max(np.abs(seen - a.tip_error)) < 1e-5
     # off by default: the run of today, bit for bit
     np.testing.assert_array_equal(simulate(robot, ref, CFC, seed=3).q, simulate(robot, ref, CFC, seed=3).q)
 
@@ -189,9 +234,30 @@ def test_report_section_beyond_the_paper(robot, tmp_path):
     assert errors[("CFC + force sensor", False)] < 0.2 * errors[("CFC", False)]
     saved = _summary_of(tmp_path / "beyond" / "cfc_observer_realistic")
     assert saved["observer"] == "momentum" and saved["sensing"] and saved["encoder_resolution_m"] == 1e-6
+    run = next(r for s, r in results.items() if (s.label, s.realistic) == ("CFC + observer", True))
+    loaded = SimulationResult.load(tmp_path / "beyond" / "cfc_observer_realistic")
+    np.testing.assert_array_equal(loaded.effort_estimate, run.effort_estimate)
+    np.testing.assert_array_equal(loaded.tip_error_measured, run.tip_error_measured)
 
 
 def _summary_of(folder):
     import json
 
     return json.loads((folder / "summary.json").read_text())
+
+
+def test_command_line_observer_and_sensing(capsys, tmp_path):
+    from vgtarm.app.cli import main
+
+    argv = ["simulate", "--case", "2", "--external-force", "--observer", "momentum", "--quiet"]
+    status = main([*argv, "--encoder-resolution", "1e-6", "--model-mass", "1.1", "--out", str(tmp_path)])
+    out, _ = capsys.readouterr()
+    assert status == 0 and "observer                           momentum" in out
+    saved = _summary_of(tmp_path)
+    assert saved["observer_gain_per_s"] == 500.0 and saved["encoder_resolution_m"] == 1e-6
+    assert saved["success"] and saved["max_tip_error_m"] < 1e-4  # issue 9: <= 0.10 mm with encoders, model +10 %
+    assert main([*argv, "--observer-gain", "2000"]) == 1
+    _, err = capsys.readouterr()
+    assert (
+        err.startswith("vgtarm: error: observer_gain = 2000.0: expected at most 1/dt = 1000") and err.count("\n") == 1
+    )

@@ -118,6 +118,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         "integrator",
         "reference_rates",
         "seed",
+        "observer",
+        "observer_gain_per_s",
+        "force_sensor",
+        "sensing",
         "simulated_time_s",
         "wall_time_s",
         "real_time_factor",
@@ -184,7 +188,7 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_observer_options(parser: argparse.ArgumentParser) -> None:
-    from ..simulation.sensing import DEFAULT_OBSERVER_GAIN, DEFAULT_VELOCITY_FILTER_HZ, OBSERVERS
+    from ..simulation.sensing import DEFAULT_OBSERVER_GAIN_DT, DEFAULT_VELOCITY_FILTER_HZ, OBSERVERS
 
     parser.add_argument(
         "--observer",
@@ -195,9 +199,9 @@ def _add_observer_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--observer-gain",
         type=float,
-        default=DEFAULT_OBSERVER_GAIN,
+        default=None,
         metavar="K",
-        help=f"observer gain K_O in 1/s (default {DEFAULT_OBSERVER_GAIN:g}; at most 1/dt)",
+        help=f"with --observer momentum: its gain K_O in 1/s (default {DEFAULT_OBSERVER_GAIN_DT:g}/dt; at most 1/dt)",
     )
     parser.add_argument(
         "--force-sensor", action="store_true", help="feed the tool force measured one period late forward"

@@ -94,17 +94,28 @@ class PythonLoop:
         raw = (arrays.q_meas[k] - arrays.q_meas[k - 1]) / s.dt + arrays.inputs["velocity_noise"][k]
         arrays.qd_meas[k] = s.velocity_filter * arrays.qd_meas[k - 1] + (1.0 - s.velocity_filter) * raw
 
+    def _differenced(self, s: LoopSettings, arrays: LoopArrays, j: int) -> Array:
+        """Velocity of sample ``j`` differenced from the encoders, unfiltered (as ``differenced``)."""
+        if j == 0:
+            return arrays.qd[0]
+        return (arrays.q_meas[j] - arrays.q_meas[j - 1]) / s.dt + arrays.inputs["velocity_noise"][j]
+
     def _observe(self, s: LoopSettings, arrays: LoopArrays, k: int) -> None:
         """Estimated external joint efforts at sample ``k`` (as ``observe`` in ``closed_loop.c``)."""
-        if s.observer == "none" or k == 0:
+        if s.observer == "none" or k == 0 or (s.observer == "momentum" and s.sensing and k < 2):
             arrays.tau_hat[k] = 0.0
             return
         if s.observer == "force":
             J = self.model.tip_jacobian(arrays.q_meas[k])
             arrays.tau_hat[k] = J.T @ arrays.f_ext[k - 1]
             return
-        acc = (arrays.qd_meas[k] - arrays.qd_meas[k - 1]) / s.dt
-        raw = self.model.inverse_dynamics(arrays.q_meas[k - 1], arrays.qd_meas[k - 1], acc) - arrays.F[k - 1]
+        if s.sensing:  # differenced velocities: the change spans the two last periods
+            va, vb = self._differenced(s, arrays, k - 1), self._differenced(s, arrays, k)
+            qa, applied = arrays.q_meas[k - 2], 0.5 * (arrays.F[k - 2] + arrays.F[k - 1])
+        else:
+            va, vb = arrays.qd_meas[k - 1], arrays.qd_meas[k]
+            qa, applied = arrays.q_meas[k - 1], arrays.F[k - 1]
+        raw = self.model.inverse_dynamics(qa, va, (vb - va) / s.dt) - applied
         keep = math.exp(-s.observer_gain * s.dt)
         arrays.tau_hat[k] = keep * arrays.tau_hat[k - 1] + (1.0 - keep) * raw
 

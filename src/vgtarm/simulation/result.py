@@ -44,6 +44,11 @@ class SimulationResult:
     P(q)|``); ``q_desired``, ``qd_desired``, ``q``, ``qd`` (N, 7); ``effort`` (N, 7) N and N m;
     ``f_ext`` (N, 3) N, the force on the tool; ``mode`` (N,) 0 fixed gains, 1 GA gains, -1 not
     reached. Samples after a failure are NaN (``mode == -1``).
+
+    With a disturbance observer or a force sensor, ``effort_estimate`` (N, 7) N and N m holds the
+    estimated external joint efforts the controller subtracted; with realistic sensing,
+    ``tip_error_measured`` (N,) m is the tip error the controller saw, ``|P(q_d) - P(q_meas)|``
+    (``tip_error`` is always the true one). Both are None otherwise.
     """
 
     t: Array
@@ -63,6 +68,8 @@ class SimulationResult:
     wall_time_s: float
     ga_time_s: float
     metadata: Mapping[str, Any] = field(default_factory=dict)
+    effort_estimate: Array | None = None
+    tip_error_measured: Array | None = None
 
     @property
     def dt(self) -> float:
@@ -149,7 +156,8 @@ class SimulationResult:
             table = np.genfromtxt(table_file, delimiter=",", skip_header=1, dtype=float, ndmin=2)
         except (OSError, UnicodeDecodeError, ValueError) as exc:
             raise InputError(f"run folder {where}: cannot read the run: {exc}") from None
-        columns = cls._columns()
+        layouts = [cls._columns(estimate, measured) for estimate in (False, True) for measured in (False, True)]
+        columns = next((c for c in layouts if header == c), layouts[0])
         if header != columns or table.shape[1:] != (len(columns),):
             raise InputError(
                 f"{table_file}: columns {header[:4]}...({len(header)}) do not match a run's {len(columns)} columns"
@@ -189,21 +197,27 @@ class SimulationResult:
             message=str(summary["message"]),
             wall_time_s=float(summary["wall_time_s"]),
             ga_time_s=float(summary["ga_time_s"]),
+            effort_estimate=block([f"tau_hat_{n}" for n in joints]) if "tau_hat_" + joints[0] in index else None,
+            tip_error_measured=block(["tip_error_measured"])[:, 0] if "tip_error_measured" in index else None,
         )
         # the summary is the metadata updated with figures computed from the arrays: keep the rest
         computed = set(loaded.summary())
         return replace(loaded, metadata={k: v for k, v in summary.items() if k not in computed})
 
     @staticmethod
-    def _columns() -> list[str]:
+    def _columns(estimate: bool = False, measured: bool = False) -> list[str]:
         columns = ["t", "x_d", "y_d", "z_d", "x", "y", "z", "tip_error"]
         columns += [f"{n}_d" for n in JOINT_NAMES] + list(JOINT_NAMES)
         columns += [f"d{n}_d" for n in JOINT_NAMES] + [f"d{n}" for n in JOINT_NAMES]
         columns += [f"F_{n}" for n in JOINT_NAMES] + ["fx", "fy", "fz", "mode"]
+        columns += [f"tau_hat_{n}" for n in JOINT_NAMES] if estimate else []
+        columns += ["tip_error_measured"] if measured else []
         return columns
 
     def _table(self) -> tuple[list[str], Array]:
-        columns = self._columns()
+        estimate, measured = self.effort_estimate is not None, self.tip_error_measured is not None
+        columns = self._columns(estimate, measured)
+        extra = [a for a in (self.effort_estimate, self.tip_error_measured) if a is not None]
         table = np.column_stack(
             [
                 self.t,
@@ -217,6 +231,7 @@ class SimulationResult:
                 self.effort,
                 self.f_ext,
                 self.mode.astype(float),
+                *extra,
             ]
         )
         return columns, table

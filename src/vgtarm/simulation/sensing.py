@@ -1,8 +1,9 @@
 """What the controller knows: the disturbance observer or force sensor, and realistic sensing.
 
 Validated here once, from the arguments of :func:`vgtarm.simulation.simulate`; the loops
-(``closed_loop.c`` and its NumPy twin) do the computation. See ``docs/control.md``,
-"Disturbance observer and sensing", for the formulas and how to choose the gain.
+(``closed_loop.c`` and its NumPy twin) do the computation. See ``docs/control.md``, section
+"Disturbance observer, force sensor and realistic sensing", for the formulas and how to choose
+the gain.
 """
 
 from __future__ import annotations
@@ -16,10 +17,11 @@ from numpy.typing import NDArray
 from ..errors import InputError
 from ..model.parameters import JOINT_UNITS
 
-#: Default gain K_O of the momentum observer (1/s): a time constant of about 3 ms (see docs/control.md).
-DEFAULT_OBSERVER_GAIN = 300.0
-#: Default cut-off of the first-order filter of differenced velocities (Hz).
-DEFAULT_VELOCITY_FILTER_HZ = 1000.0
+#: Default gain of the momentum observer as K_O dt: half the largest admissible, 500 1/s at 1 ms
+#: (a 2 ms time constant; measured choice in docs/control.md).
+DEFAULT_OBSERVER_GAIN_DT = 0.5
+#: Default cut-off of the controller's first-order filter of differenced velocities (Hz).
+DEFAULT_VELOCITY_FILTER_HZ = 100.0
 #: Encoder step of revolute joints when encoders are on and none is given: 20 bits a turn.
 DEFAULT_TWIST_RESOLUTION = 2.0 * math.pi / 2**20
 #: Observers by name.
@@ -75,11 +77,28 @@ def _number(name: str, value: object, *, minimum: float = 0.0, strict: bool = Fa
     return number
 
 
+def _observer_gain(observer: str, observer_gain: float | None, dt: float) -> float:
+    """K_O (1/s) of the momentum observer: positive and at most 1/dt (default 0.5/dt); 0 without it."""
+    if observer != "momentum":
+        if observer_gain is not None:
+            raise InputError(f"observer_gain = {observer_gain!r}: only used with observer = 'momentum'")
+        return 0.0
+    if observer_gain is None:
+        observer_gain = DEFAULT_OBSERVER_GAIN_DT / dt
+    gain = _number("observer_gain", observer_gain, strict=True)
+    if gain * dt > 1.0:
+        raise InputError(
+            f"observer_gain = {observer_gain!r}: expected at most 1/dt = {1.0 / dt:g} 1/s "
+            "(the estimate's time constant must be at least one control period)"
+        )
+    return gain
+
+
 def sensing_settings(
     n_joints: int,
     dt: float,
     observer: str,
-    observer_gain: float,
+    observer_gain: float | None,
     force_sensor: bool,
     encoder_resolution: float,
     twist_resolution: float | None,
@@ -93,12 +112,7 @@ def sensing_settings(
         raise InputError(f"force_sensor = {force_sensor!r}: expected True or False")
     if force_sensor and observer != "none":
         raise InputError(f"force_sensor = True with observer = {observer!r}: choose one way to cancel the tool force")
-    gain = _number("observer_gain", observer_gain, strict=True)
-    if gain * dt > 1.0:
-        raise InputError(
-            f"observer_gain = {observer_gain!r}: expected at most 1/dt = {1.0 / dt:g} 1/s "
-            "(the estimate's time constant must be at least one control period)"
-        )
+    gain = _observer_gain(observer, observer_gain, dt)
     legs = _number("encoder_resolution", encoder_resolution)
     twist = DEFAULT_TWIST_RESOLUTION if twist_resolution is None and legs > 0 else twist_resolution or 0.0
     twist = _number("twist_resolution", twist)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -46,7 +47,7 @@ from .external import ExternalForce
 from .python_loop import PythonLoop
 from .reference import HasJointReference, JointReference
 from .result import MODE_FIXED, MODE_GA, MODE_NOT_RUN, GAActivation, SimulationResult
-from .sensing import DEFAULT_OBSERVER_GAIN, DEFAULT_VELOCITY_FILTER_HZ, sensing_settings
+from .sensing import DEFAULT_VELOCITY_FILTER_HZ, sensing_settings
 
 #: Integrators by name.
 INTEGRATORS: dict[str, str] = {
@@ -80,7 +81,7 @@ def simulate(
     initial_state: tuple[np.ndarray, np.ndarray] | None = None,
     limit_tolerance: float = 0.05,
     observer: str = "none",
-    observer_gain: float = DEFAULT_OBSERVER_GAIN,
+    observer_gain: float | None = None,
     force_sensor: bool = False,
     encoder_resolution: float = 0.0,
     twist_resolution: float | None = None,
@@ -103,15 +104,17 @@ def simulate(
         initial_state: ``(q0, qd0)``; default: at rest at ``q_d(0)`` (the paper's start).
         limit_tolerance: distance (m, rad) outside a joint limit at which the run is stopped.
         observer: ``"none"`` or ``"momentum"``: computed force control subtracts the estimate of a
-            generalised-momentum disturbance observer with gain ``observer_gain`` (K_O, 1/s; the
-            estimate follows the external efforts as ``1 - exp(-K_O t)``; at most 1/dt).
+            generalised-momentum disturbance observer with gain ``observer_gain`` (K_O, 1/s,
+            default 0.5/dt; the estimate follows the external efforts as ``1 - exp(-K_O t)``; at
+            most 1/dt; refused without the observer).
         force_sensor: instead, feed the tool force measured one period late forward through
             ``J_P^T`` (exclusive with ``observer``).
         encoder_resolution: encoder step of the legs (m); with it, or with ``velocity_noise``,
             the controller sees quantised joints and velocities from their differences, filtered
-            at ``velocity_filter_hz`` (first order) with Gaussian noise of ``velocity_noise``
-            (m/s, rad/s) on each difference, seeded from ``seed``. ``twist_resolution`` (rad)
-            defaults to a 20-bit encoder (2 pi / 2^20) when encoders are on.
+            at ``velocity_filter_hz`` (first order, default 100 Hz; the observer takes the
+            unfiltered differences) with Gaussian noise of ``velocity_noise`` (m/s, rad/s) on each
+            difference, seeded from ``seed``. ``twist_resolution`` (rad) defaults to a 20-bit
+            encoder (2 pi / 2^20) when encoders are on.
         transient_s: length of the start transient excluded from the "after transient" figures.
         metadata: extra entries for the summary (case name, ...).
         progress: called as ``progress(samples_done, samples_total)`` now and then.
@@ -222,7 +225,6 @@ def simulate(
         status, stop = loop.simulate(unswitched, arrays, gains.Kp, gains.Kv, k, k + 1)
         mode[k] = MODE_GA
         k += 1
-        after = _tip_error(plant, arrays, k) if status == DONE and k < n else float("nan")
         elapsed = time.perf_counter() - ga_start
         ga_time += elapsed
         activations.append(
@@ -234,13 +236,16 @@ def simulate(
                 best_fitness=activation[2],
                 fixed_gains_fitness=activation[3],
                 error_before_m=float(arrays.error[sample]),
-                error_after_m=after,
+                error_after_m=float("nan"),  # the loop measures it at the next sample (filled below)
                 wall_time_s=elapsed,
             )
         )
         if status != DONE:
             break
     wall = time.perf_counter() - start
+    activations = [
+        replace(a, error_after_m=float(arrays.error[a.sample + 1])) if a.sample + 1 < n else a for a in activations
+    ]
     success = status in (DONE, ABOVE_THRESHOLD) and k >= n
     if success:
         message = "completed"
@@ -293,6 +298,8 @@ def simulate(
         wall_time_s=wall,
         ga_time_s=ga_time,
         metadata=info,
+        effort_estimate=_blank(arrays.tau_hat, mode) if sensing.loop_observer != "none" else None,
+        tip_error_measured=_measured_tip_error(model, arrays, tip_d, mode) if sensing.active else None,
     )
     if not success:
         raise SimulationError(message, result)
@@ -381,13 +388,18 @@ def _compiled_ga(
     )
 
 
-def _tip_error(plant: Robot, arrays: LoopArrays, k: int) -> float:
-    return float(np.linalg.norm(arrays.inputs["tip_d"][k] - plant.tip_position(arrays.q[k])))
-
-
 def _blank(values: np.ndarray, mode: np.ndarray) -> np.ndarray:
     out = values.copy()
     out[mode == MODE_NOT_RUN] = np.nan
+    return out
+
+
+def _measured_tip_error(model: Robot, arrays: LoopArrays, tip_d: np.ndarray, mode: np.ndarray) -> np.ndarray:
+    """The tip error the controller saw, ``|P(q_d) - P(q_meas)|`` (m), NaN where not run."""
+    out = np.full(arrays.n, np.nan)
+    run = (mode != MODE_NOT_RUN) & np.isfinite(arrays.q_meas).all(axis=1)
+    if run.any():
+        out[run] = np.linalg.norm(tip_d[run] - model.tip_position(arrays.q_meas[run]), axis=1)
     return out
 
 

@@ -172,22 +172,38 @@ static void measure(const vgt_settings *s, const vgt_run *r, long k)
     for (int i = 0; i < nj; ++i) vm[i] = a * vm0[i] + (1.0 - a) * ((qm[i] - qm0[i]) / s->dt + noise[i]);
 }
 
+/* The velocity of sample j >= 1 differenced from the encoder readings, (q_meas_j - q_meas_{j-1})
+ * / dt plus that sample's noise, before the controller's filter; the known start at j = 0. */
+static void differenced(const vgt_settings *s, const vgt_run *r, long j, double *v)
+{
+    const int nj = s->n_joints;
+    if (j == 0) {
+        memcpy(v, r->qd, sizeof(double) * (size_t)nj);
+        return;
+    }
+    const double *qm = r->q_meas + nj * j, *qm0 = qm - nj, *noise = r->velocity_noise + nj * j;
+    for (int i = 0; i < nj; ++i) v[i] = (qm[i] - qm0[i]) / s->dt + noise[i];
+}
+
 /* Estimated external joint efforts at sample k (enum vgt_observer), from what the controller saw
  * and applied. The momentum observer is the generalised-momentum residual in discrete form, the
- * mass matrix held over the period: the raw estimate M^(q_{k-1}) (v_k - v_{k-1}) / dt + C^_{k-1}
- * - F_{k-1} (inverse dynamics of the controller's model, no acceleration sensor) is filtered by
- * the exact discretisation of d tau/dt = K_O (tau_ext - tau), so its step response is
- * 1 - exp(-K_O t) at the samples. The force sensor feeds the tool force of the previous period
- * forward through J_P^T. */
+ * mass matrix held over the window of the velocity change: the raw estimate is the controller
+ * model's inverse dynamics M^ (v_b - v_a) / dt + C^ minus the effort applied meanwhile (no
+ * acceleration sensor), filtered by the exact discretisation of d tau/dt = K_O (tau_ext - tau),
+ * so its step response is 1 - exp(-K_O t) at the samples. With measured velocities the window is
+ * the last period: (q_{k-1}, v_{k-1}) -> v_k under F_{k-1}. With velocities differenced from
+ * encoders, v_j is the mean velocity over period j-1, so the change v_k - v_{k-1} spans the two
+ * last periods: M^ and C^ at q_{k-2} and v_{k-1}, the mean of F_{k-2} and F_{k-1}, unfiltered
+ * differences (the estimate starts at k = 2). The force sensor feeds the tool force of the
+ * previous period forward through J_P^T. */
 static int observe(const vgt_model *m, const vgt_settings *s, const vgt_run *r, vgt_work *wk, long k)
 {
     const int nj = s->n_joints;
     double *tau = r->tau_hat + nj * k;
-    if (s->observer == VGT_OBSERVER_NONE || k == 0) {
+    if (s->observer == VGT_OBSERVER_NONE || k == 0 || (s->observer == VGT_OBSERVER_MOMENTUM && s->sensing && k < 2)) {
         for (int i = 0; i < nj; ++i) tau[i] = 0.0;
         return VGT_DONE;
     }
-    const double *qm0 = r->q_meas + nj * (k - 1), *vm0 = r->qd_meas + nj * (k - 1), *vm = r->qd_meas + nj * k;
     if (s->observer == VGT_OBSERVER_FORCE) {
         double J[3 * nj], Jw[3 * nj];
         const double *in_j[2] = {r->q_meas + nj * k, r->p_ctrl};
@@ -197,13 +213,26 @@ static int observe(const vgt_model *m, const vgt_settings *s, const vgt_run *r, 
         for (int i = 0; i < nj; ++i) tau[i] = J[i] * f[0] + J[nj + i] * f[1] + J[2 * nj + i] * f[2];
         return VGT_DONE;
     }
-    double acc[nj], raw[nj], zero[3] = {0.0, 0.0, 0.0};
-    for (int i = 0; i < nj; ++i) acc[i] = (vm[i] - vm0[i]) / s->dt;
-    const double *in_id[5] = {qm0, vm0, acc, zero, r->p_ctrl};
+    double acc[nj], raw[nj], applied[nj], va[nj], vb[nj], zero[3] = {0.0, 0.0, 0.0};
+    const double *qa, *F1 = r->F + nj * (k - 1);
+    if (s->sensing) {
+        const double *F2 = F1 - nj;
+        differenced(s, r, k - 1, va);
+        differenced(s, r, k, vb);
+        qa = r->q_meas + nj * (k - 2);
+        for (int i = 0; i < nj; ++i) applied[i] = 0.5 * (F2[i] + F1[i]);
+    } else {
+        memcpy(va, r->qd_meas + nj * (k - 1), sizeof(double) * (size_t)nj);
+        memcpy(vb, r->qd_meas + nj * k, sizeof(double) * (size_t)nj);
+        qa = r->q_meas + nj * (k - 1);
+        memcpy(applied, F1, sizeof(double) * (size_t)nj);
+    }
+    for (int i = 0; i < nj; ++i) acc[i] = (vb[i] - va[i]) / s->dt;
+    const double *in_id[5] = {qa, va, acc, zero, r->p_ctrl};
     double *out_id[1] = {raw};
     if (call(&m->id, wk, 5, in_id, 1, out_id)) return VGT_FUNCTION_FAILED;
-    const double keep = exp(-s->observer_gain * s->dt), *F0 = r->F + nj * (k - 1), *tau0 = tau - nj;
-    for (int i = 0; i < nj; ++i) tau[i] = keep * tau0[i] + (1.0 - keep) * (raw[i] - F0[i]);
+    const double keep = exp(-s->observer_gain * s->dt), *tau0 = tau - nj;
+    for (int i = 0; i < nj; ++i) tau[i] = keep * tau0[i] + (1.0 - keep) * (raw[i] - applied[i]);
     return VGT_DONE;
 }
 
