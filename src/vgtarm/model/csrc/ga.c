@@ -329,6 +329,7 @@ void vgt_ga_crossover(int words, long rows, uint64_t *bits, const unsigned char 
 
 enum { BLOCK = 8 }; /* candidates per vectorised block */
 typedef float vf __attribute__((vector_size(32))); /* the BLOCK candidates of one quantity */
+typedef int vi __attribute__((vector_size(32)));   /* a comparison of two vf */
 
 typedef struct {
     int nj;
@@ -374,7 +375,9 @@ static inline __attribute__((always_inline)) void block_kernel(const predictor *
     const vgt_ga_problem *pb = x->pb;
     vf E[nj], Ed[nj], a[nj];
     const vf zero = {0.0f};
-    for (int c = 0; c < BLOCK; ++c) sum[c] = 0.0;
+    /* no trust region: an infinite radius */
+    const vf limit2 = zero + (x->exact_above2 > 0.0 ? (float)x->exact_above2 : INFINITY);
+    vf total = zero;
     for (int i = 0; i < nj; ++i) {
         E[i] = zero + (float)(pb->q_d[i] - pb->q0[i]);
         Ed[i] = zero + (float)(pb->qd_d[i] - pb->qd0[i]);
@@ -409,16 +412,21 @@ static inline __attribute__((always_inline)) void block_kernel(const predictor *
             for (int e = 0; e < x->n_hes[1]; ++e) t1 += coef[np + x->hes[np + e]] * P[x->hes[np + e]];
             for (int e = 0; e < x->n_hes[2]; ++e) t2 += coef[2 * np + x->hes[2 * np + e]] * P[x->hes[2 * np + e]];
         }
-        for (int c = 0; c < count; ++c) {
-            if (x->exact_above2 > 0.0 && !(norm2[c] <= x->exact_above2)) { /* outside the trust region */
-                long f = (*n_far)++;
-                far_at[f] = (long)c * x->horizon + j;
-                for (int i = 0; i < nj; ++i) far[f * nj + i] = E[i][c];
-            } else {
-                sum[c] += (double)t0[c] * t0[c] + (double)t1[c] * t1[c] + (double)t2[c] * t2[c];
-            }
-        }
+        /* steps inside the trust region add their squared tip error; the others are recorded for
+         * the exact forward kinematics (a NaN error stays inside and makes the cost infinite) */
+        const vi outside = norm2 > limit2;
+        total += (vf)((vi)(t0 * t0 + t1 * t1 + t2 * t2) & ~outside);
+        int any = 0;
+        for (int c = 0; c < BLOCK; ++c) any |= outside[c];
+        if (any)
+            for (int c = 0; c < count; ++c)
+                if (outside[c]) {
+                    long f = (*n_far)++;
+                    far_at[f] = (long)c * x->horizon + j;
+                    for (int i = 0; i < nj; ++i) far[f * nj + i] = E[i][c];
+                }
     }
+    for (int c = 0; c < BLOCK; ++c) sum[c] = (double)total[c];
 }
 
 /* The kernel with the joint count known at compile time for the common sizes (the loops unroll
