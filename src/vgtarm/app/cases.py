@@ -10,6 +10,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from .. import paths
 from ..control import ComputedForceControl, SwitchingControl
 from ..errors import InputError
@@ -108,11 +110,34 @@ def case_study(number: int) -> CaseStudy:
 
 
 def joint_reference(
-    robot: Robot, number: int, *, dt: float = 1e-3, rates: str = "exact", solver: str = "fast"
+    robot: Robot,
+    number: int,
+    *,
+    dt: float = 1e-3,
+    rates: str = "exact",
+    solver: str = "fast",
+    duration: float | None = None,
 ) -> JointReference:
-    """The case's joint reference from the redundancy-resolving inverse kinematics."""
+    """The case's joint reference from the redundancy-resolving inverse kinematics; with
+    ``duration`` (s) only its first ``duration`` seconds (:func:`truncate_reference`)."""
     ik = robot.inverse_kinematics(case_study(number).path(dt), solver=solver, rates=rates)
-    return JointReference(ik.t, ik.q, ik.qd, ik.qdd, rates=rates, name=f"case {number}")
+    reference = JointReference(ik.t, ik.q, ik.qd, ik.qdd, rates=rates, name=f"case {number}")
+    return reference if duration is None else truncate_reference(reference, duration)
+
+
+def truncate_reference(reference: JointReference, duration: float) -> JointReference:
+    """The samples of ``reference`` with ``t - t[0] <= duration`` (s), at least two.
+
+    The reference of the whole path is computed first and then cut, so a run on the first
+    ``duration`` seconds follows exactly the start of the full run's reference.
+    """
+    if not (np.isfinite(duration) and duration > 0):
+        raise InputError(f"duration = {duration!r}: expected a time > 0 (s)")
+    t = reference.t
+    n = max(2, int(np.count_nonzero(t - t[0] <= duration + 1e-6 * reference.dt)))
+    return JointReference(
+        t[:n], reference.q[:n], reference.qd[:n], reference.qdd[:n], rates=reference.rates, name=reference.name
+    )
 
 
 def run_case(

@@ -19,7 +19,7 @@ from ..ik import CSV_COLUMNS, write_csv
 from ..model.parameters import JOINT_NAMES, JOINT_UNITS
 from ..model.robot import load_robot
 from ..paths import Path as DesiredPath
-from . import cli_visual
+from . import cli_study, cli_visual
 
 
 def _format_vector(values: Sequence[float] | np.ndarray, digits: int = 6) -> str:
@@ -74,7 +74,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from ..errors import SimulationError
-    from .cases import run_case
+    from .cases import joint_reference, run_case
     from .plotting import comparison_figure, save_figure
 
     robot = load_robot(args.config)
@@ -96,6 +96,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                 seed=args.seed,
                 rates=args.rates,
                 horizon=args.horizon,
+                reference=None
+                if args.duration is None
+                else joint_reference(robot, args.case, rates=args.rates, duration=args.duration),
                 controller_model=None if exact_model else model,
                 progress=progress,
                 observer=args.observer,
@@ -158,7 +161,14 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
             bar.update(done - bar.n)
 
         made = reproduce(
-            robot, args.out, seed=args.seed, integrator=args.integrator, substeps=args.substeps, progress=progress
+            robot,
+            args.out,
+            seed=args.seed,
+            integrator=args.integrator,
+            substeps=args.substeps,
+            progress=progress,
+            seeds=args.seeds,
+            config=args.config,
         )
     print(f"{'run':<26} {'max (mm)':>10} {'after 0.2 s (mm)':>17} {'GA':>5} {'wall (s)':>9}")
     for spec, result in made.results.items():
@@ -363,6 +373,9 @@ def build_parser() -> argparse.ArgumentParser:
             metavar="FACTOR",
             help=f"scale the controller model's {name} (a wrong model; default 1)",
         )
+    simulate.add_argument(
+        "--duration", type=_positive_float, default=None, metavar="S", help="run only the first S seconds of the path"
+    )
     _add_observer_options(simulate)
     simulate.add_argument(
         "--out", type=Path, default=None, metavar="DIR", help="write summary.json, the time series and a figure here"
@@ -374,6 +387,13 @@ def build_parser() -> argparse.ArgumentParser:
     again = sub.add_parser("reproduce", help="run every case the paper reports and write report.md")
     again.add_argument(
         "--out", type=Path, default=Path("results"), metavar="DIR", help="output folder (default: results)"
+    )
+    again.add_argument(
+        "--seeds",
+        type=_positive_int,
+        default=None,
+        metavar="N",
+        help="also run everything with seeds 0..N-1 on Dask and report mean and spread (needs the study extra)",
     )
     _add_run_options(again)
     _add_config(again)
@@ -393,6 +413,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_config(ik)
     ik.set_defaults(run=cmd_ik)
     cli_visual.add_parsers(sub)  # draw, animate, report
+    cli_study.add_parsers(sub)  # study init, run, report
 
     return parser
 

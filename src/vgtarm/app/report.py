@@ -80,10 +80,15 @@ def reproduce(
     runs: list[RunSpec] | None = None,
     progress: Progress | None = None,
     beyond_paper: bool = True,
+    seeds: int | None = None,
+    config: str | Path | None = None,
 ) -> Reproduction:
     """Run the paper's combinations, save every run, the figures, ``report.md`` and the interactive
     ``report.html`` (with ``plotly.min.js`` beside it) into ``out``; with ``beyond_paper`` also the
-    section on the disturbance observer, the force sensor and realistic sensing (:mod:`.beyond`)."""
+    section on the disturbance observer, the force sensor and realistic sensing (:mod:`.beyond`);
+    with ``seeds`` >= 1 also the mean and spread of every run over seeds ``0..seeds-1``
+    (:func:`.seeds.seed_section`, a study run on a local Dask cluster into ``out/seeds``; ``config``:
+    the robot file ``robot`` was loaded from, for the study's workers)."""
     start = time.perf_counter()
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
@@ -128,6 +133,14 @@ def reproduce(
     )
     if beyond:
         text += "\n" + "\n".join(beyond) + "\n"
+    if seeds:
+        from .seeds import seed_section
+
+        if progress:
+            progress(f"{seeds} seeds of every run (Dask)", len(specs), len(specs))
+        section = seed_section(folder / "seeds", seeds, specs, integrator=integrator, substeps=substeps, config=config)
+        text += "\n" + "\n".join(section)
+        text += "\n"
     atomic_write_text(folder / "report.md", text)
     from .html_report import runs_from_reproduction, write_html_report  # it imports this module's table
 

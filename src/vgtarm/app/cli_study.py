@@ -1,0 +1,87 @@
+"""``vgtarm study init|run|report``: studies at scale on Dask (see :mod:`vgtarm.study`)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from ..errors import InputError
+from ..fileio import atomic_write_text
+
+
+def cmd_study_init(args: argparse.Namespace) -> int:
+    """Write the commented example study."""
+    from ..study.example import EXAMPLE
+
+    if args.file.exists() and not args.force:
+        raise InputError(f"{args.file} exists; give --force to overwrite it")
+    atomic_write_text(args.file, EXAMPLE)
+    print(f"example study written to {args.file}; run it with: vgtarm study run {args.file} --out DIR")
+    return 0
+
+
+def cmd_study_run(args: argparse.Namespace) -> int:
+    """Run (or resume) a study and write its tables."""
+    from ..study.runner import run_study
+    from ..study.spec import load_study
+    from .study_points import check_point, execute_point
+
+    study = load_study(args.study)
+    outcome = run_study(
+        study,
+        args.out,
+        execute_point,
+        check=check_point,
+        scheduler=args.scheduler,
+        workers=args.workers,
+        progress=not args.quiet,
+    )
+    print(
+        f"{outcome.points} runs: {outcome.skipped} already stored, {outcome.executed} run now, {outcome.failed} failed;"
+        f" {outcome.wall_time_s:.1f} s"
+    )
+    print(f"results written to {args.out / 'results.csv'} and {args.out / 'results.parquet'}")
+    if outcome.lost:
+        print(f"{len(outcome.lost)} runs were lost with their workers; run the same command again to finish them")
+        return 1
+    return 0
+
+
+def cmd_study_report(args: argparse.Namespace) -> int:
+    """Write report.md and the figures of a study's results."""
+    from ..study.report import write_report
+
+    report = write_report(args.folder)
+    print(f"report written to {report}")
+    return 0
+
+
+def add_parsers(sub: Any) -> None:
+    """Register ``vgtarm study`` and its subcommands."""
+    study = sub.add_parser("study", help="seeded sweeps and Monte Carlo studies of many runs on Dask")
+    commands = study.add_subparsers(dest="study_command", required=True, metavar="STUDY_COMMAND")
+
+    init = commands.add_parser("init", help="write a commented example study file")
+    init.add_argument("file", type=Path, metavar="FILE")
+    init.add_argument("--force", action="store_true", help="overwrite FILE")
+    init.set_defaults(run=cmd_study_init)
+
+    run = commands.add_parser("run", help="run or resume a study (only the runs not stored yet)")
+    run.add_argument("study", type=Path, metavar="STUDY.toml")
+    run.add_argument("--out", type=Path, required=True, metavar="DIR", help="results folder")
+    run.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (default: a local cluster on this machine)",
+    )
+    run.add_argument(
+        "--workers", type=int, default=None, metavar="N", help="local cluster size (default: one per core)"
+    )
+    run.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    run.set_defaults(run=cmd_study_run)
+
+    report = commands.add_parser("report", help="write report.md and figures from a study's results")
+    report.add_argument("folder", type=Path, metavar="DIR")
+    report.set_defaults(run=cmd_study_report)

@@ -1,0 +1,245 @@
+"""One study point as a closed-loop run: what Dask workers execute for ``vgtarm study run``.
+
+Each worker process keeps the robot (its compiled model) and the joint references it has built in
+a per-process cache, so a study loads the model once per worker, not once per run. A point runs
+exactly as ``vgtarm simulate`` would run it with the same inputs (:func:`simulate_command` gives
+that command line), so any row of a study can be re-run by hand.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import inspect
+import os
+import tempfile
+import tomllib
+from collections.abc import Mapping
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import paths
+from ..control import ComputedForceControl, SwitchingControl
+from ..errors import InputError
+from ..ga import GAOptions
+from ..model.parameters import RobotParameters, parameters_from_dict
+from ..model.robot import Robot, load_robot
+from ..simulation import JointReference, simulate
+from ..simulation.external import ExternalForce
+from ..study.spec import Value, simulate_options
+from .cases import case_study, truncate_reference
+
+Inputs = Mapping[str, Value]
+
+
+@functools.cache
+def _robot(robot_text: str | None) -> Robot:
+    """The study's robot (the reference robot when ``robot_text`` is None), built once per process."""
+    if robot_text is None:
+        return load_robot()
+    return Robot(parameters_from_dict(tomllib.loads(robot_text), source="<study robot file>"))
+
+
+@functools.lru_cache(maxsize=16)
+def _reference(
+    robot_text: str | None, case: int | None, path_text: str | None, dt: float, rates: str, duration: float | None
+) -> JointReference:
+    """The joint reference of a case or of a path file's text, cut to ``duration``; cached."""
+    robot = _robot(robot_text)
+    if case is not None:
+        desired = case_study(case).path(dt)
+        name = f"case {case}"
+    else:
+        assert path_text is not None
+        desired = _path_of(path_text, dt)
+        name = desired.name
+    ik = robot.inverse_kinematics(desired, solver="fast", rates=rates)
+    reference = JointReference(ik.t, ik.q, ik.qd, ik.qdd, rates=rates, name=name)
+    return reference if duration is None else truncate_reference(reference, duration)
+
+
+def _path_of(text: str, dt: float) -> paths.Path:
+    """A desired path from a CSV file's text (written to a private temporary file to be read)."""
+    digest = hashlib.sha256(text.encode()).hexdigest()[:12]
+    fd, name = tempfile.mkstemp(suffix=".csv", prefix=f"vgtarm-path-{digest}-")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as stream:
+            stream.write(text)
+        return paths.from_csv(name, dt, name=f"path {digest}")
+    finally:
+        os.unlink(name)
+
+
+def _controller(inputs: Inputs) -> ComputedForceControl | SwitchingControl:
+    case = case_study(int(inputs["case"] or 1))  # path files use case 1's gains unless given
+    kp = _number(inputs["kp"], case.kp)
+    kv = _number(inputs["kv"], case.kv)
+    if inputs["controller"] == "cfc":
+        return ComputedForceControl.with_gains(kp, kv)
+    if inputs["controller"] == "scm":
+        return SwitchingControl.with_gains(
+            kp,
+            kv,
+            threshold=_number(inputs["threshold"], case.threshold),
+            kp_bounds=(case.kp_bounds[0], _number(inputs["kp_max"], case.kp_bounds[1])),
+            kv_bounds=(case.kv_bounds[0], _number(inputs["kv_max"], case.kv_bounds[1])),
+            horizon=int(inputs["horizon"]),  # type: ignore[arg-type]
+            prediction=inputs["prediction"],
+            ga=GAOptions(population_size=int(inputs["ga_population"]), max_generations=int(inputs["ga_generations"])),  # type: ignore[arg-type]
+        )
+    raise InputError(f"controller = {inputs['controller']!r}: expected one of ['cfc', 'scm']")
+
+
+def _number(value: Value, default: float) -> float:
+    return default if value is None else float(value)
+
+
+def _external(inputs: Inputs) -> ExternalForce | None:
+    if not inputs["external_force"]:
+        return None
+    case = case_study(int(inputs["case"] or 1))
+    eta = float(inputs["disturbance"])  # type: ignore[arg-type]
+    return replace(case.external_force, cutting_force=float(inputs["cutting_force"]), eta=(eta, eta, eta))  # type: ignore[arg-type]
+
+
+def _model(robot: Robot, inputs: Inputs) -> RobotParameters | None:
+    factors = (inputs["model_mass"], inputs["model_inertia"], inputs["model_friction"])
+    if factors == (1.0, 1.0, 1.0):
+        return None  # the plant's own parameters, as `vgtarm simulate` without --model-*
+    mass, inertia, friction = (float(f) for f in factors)  # type: ignore[arg-type]
+    return robot.parameters.scaled(mass=mass, inertia=inertia, friction=friction)
+
+
+def _options(inputs: Inputs) -> dict[str, Any]:
+    """The inputs that are keyword arguments of the installed simulate()."""
+    accepted = inspect.signature(simulate).parameters
+    return {k: inputs[k] for k in simulate_options() if k in inputs and k in accepted}
+
+
+def _metadata(inputs: Inputs) -> dict[str, Any]:
+    if inputs["case"] is not None:
+        return {"case": inputs["case"], "case_title": case_study(int(inputs["case"])).title}
+    return {"path": inputs["path"]}
+
+
+def execute_point(inputs: Inputs, files: Mapping[str, str]) -> tuple[dict[str, Any], str]:
+    """Run one point; returns ``(summary, error)``: the run's ``summary()`` and "" when it completes,
+    else the summary up to the failure (or ``success``/``message`` only) and the error's type name.
+
+    Never raises for a failing run: a divergence, an unreachable path, a bad value or an unexpected
+    exception of one run becomes a failed row, so it does not stop the study.
+    """
+    from ..errors import SimulationError
+
+    try:
+        robot = _robot(files.get("robot"))
+        reference = _reference(
+            files.get("robot"),
+            inputs["case"],
+            files.get("path"),
+            float(inputs["dt"]),  # type: ignore[arg-type]
+            str(inputs["rates"]),
+            None if inputs["duration"] is None else float(inputs["duration"]),
+        )
+        result = simulate(
+            robot,
+            reference,
+            _controller(inputs),
+            controller_model=_model(robot, inputs),
+            external_force=_external(inputs),
+            integrator=str(inputs["integrator"]),
+            substeps=int(inputs["substeps"]),  # type: ignore[arg-type]
+            seed=int(inputs["seed"]),  # type: ignore[arg-type]
+            metadata=_metadata(inputs),
+            **_options(inputs),
+        )
+        return result.summary(), ""
+    except SimulationError as exc:
+        partial = exc.result.summary() if exc.result is not None else {}  # type: ignore[attr-defined]
+        return {**partial, "success": False, "message": str(exc)}, type(exc).__name__
+    except Exception as exc:  # noqa: BLE001 - one run's failure must not stop the study
+        return {"success": False, "message": f"{type(exc).__name__}: {exc}"}, type(exc).__name__
+
+
+def check_point(inputs: Inputs, files: Mapping[str, str]) -> None:
+    """Refuse a point whose inputs the simulator would refuse, without running it.
+
+    Builds the robot, the controller, the tool force and the controller's model, reads the path
+    file, and runs the simulator for two control periods at rest at the home pose with the
+    point's options (so an option's bad value is refused here, whatever the option).
+    """
+    from ..errors import ConfigError
+
+    try:
+        robot = _robot(files.get("robot"))
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"study.robot = {inputs['robot']!r}: TOML syntax error: {exc}") from None
+    if inputs["path"] is not None:
+        _path_of(files["path"], float(inputs["dt"]))  # type: ignore[arg-type]
+    dt = float(inputs["dt"])  # type: ignore[arg-type]
+    n_joints = len(robot.parameters.home)
+    q = np.tile(np.asarray(robot.parameters.home, dtype=float), (3, 1))
+    still = JointReference(np.arange(3.0) * dt, q, np.zeros_like(q), np.zeros_like(q), name="check")
+    assert still.q.shape[1] == n_joints
+    simulate(
+        robot,
+        still,
+        _controller(inputs),
+        controller_model=_model(robot, inputs),
+        external_force=_external(inputs),
+        integrator=str(inputs["integrator"]),
+        substeps=int(inputs["substeps"]),  # type: ignore[arg-type]
+        seed=int(inputs["seed"]),  # type: ignore[arg-type]
+        **_options(inputs),
+    )
+
+
+#: ``vgtarm simulate`` flags of the inputs it can express (the rest must be at their defaults).
+_FLAGS = {
+    "controller": "--controller",
+    "integrator": "--integrator",
+    "substeps": "--substeps",
+    "seed": "--seed",
+    "rates": "--rates",
+    "horizon": "--horizon",
+    "duration": "--duration",
+    "model_mass": "--model-mass",
+    "model_inertia": "--model-inertia",
+    "model_friction": "--model-friction",
+    "observer": "--observer",
+    "observer_gain": "--observer-gain",
+    "encoder_resolution": "--encoder-resolution",
+    "velocity_noise": "--velocity-noise",
+    "velocity_filter_hz": "--velocity-filter",
+}
+_SWITCHES = {"external_force": "--external-force", "force_sensor": "--force-sensor"}
+_STUDY_ONLY = {"kp": None, "kv": None, "threshold": None, "kp_max": None, "kv_max": None, "path": None, "dt": 1e-3}
+
+
+def simulate_command(inputs: Inputs, *, study_folder: str | Path | None = None) -> list[str]:
+    """The ``vgtarm simulate`` arguments that re-run a point (its summary is the row's, timings aside).
+
+    Raises InputError naming an input that ``vgtarm simulate`` has no flag for, when it is not at
+    its default (gains, GA sizes, tool-force magnitudes, a path file, another ``dt``).
+    """
+    from ..study.spec import PARAMETERS
+
+    defaults: dict[str, Value] = {k: p.default for k, p in {**PARAMETERS, **simulate_options()}.items()}
+    defaults.update(_STUDY_ONLY)
+    args = ["simulate", "--case", str(inputs["case"])]
+    for key, value in inputs.items():
+        if key in ("case", "robot"):
+            continue
+        if key in _FLAGS:
+            if value is not None:
+                args += [_FLAGS[key], str(value) if not isinstance(value, float) else repr(value)]
+        elif key in _SWITCHES:
+            args += [_SWITCHES[key]] if value else []
+        elif value != defaults.get(key, value):
+            raise InputError(f"{key} = {value!r}: `vgtarm simulate` has no flag for it (only its default)")
+    if inputs.get("robot") is not None:
+        args += ["--config", str(Path(study_folder or ".") / str(inputs["robot"]))]
+    return args

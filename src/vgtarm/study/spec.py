@@ -1,0 +1,394 @@
+"""Study files: a TOML grid and/or random draws over run inputs, validated, expanded into points.
+
+A study file has three tables (see :mod:`vgtarm.study.example` for a commented one):
+
+- ``[study]``: what every run shares: ``name``, ``case`` (1 or 2) or ``path`` (a CSV file of
+  ``t,x,y,z`` rows, relative to the study file), ``duration`` (s, keep only the start of the
+  reference; default the whole path), ``dt`` (s), ``rates``, ``robot`` (a robot TOML file,
+  default the reference robot) and ``seeds`` (a count ``n`` for 0..n-1, a list, or
+  ``{start = s, count = n}``);
+- ``[grid]``: parameters with one value or a list of values; every combination is run;
+- ``[random]``: ``draws`` (how many), ``seed`` (of the draws) and parameters with a distribution
+  ``{uniform = [a, b]}``, ``{log_uniform = [a, b]}``, ``{normal = [mean, sd]}``,
+  ``{integers = [a, b]}`` (both ends included) or ``{choice = [v1, v2, ...]}``.
+
+Points are the grid's combinations times the draws times the seeds. Every point's inputs hold
+every parameter (defaults filled in) and its id is a hash of its inputs, so the same study gives
+the same ids on any machine and a changed input gives a new id.
+
+Parameters: :data:`PARAMETERS` (controller, gains, GA, tool force, controller-model errors,
+integrator) and every scalar keyword argument of :func:`vgtarm.simulation.simulate` not listed
+there (observer, observer_gain, force_sensor, encoder_resolution, velocity_noise, ... whatever
+the installed simulator accepts), passed to it unchanged.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import inspect
+import itertools
+import json
+import math
+import tomllib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import ConfigError
+from ..simulation import INTEGRATORS, simulate
+
+Value = bool | int | float | str | None
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One run input: its type, default (None: the case's value) and a check of its value."""
+
+    kind: type
+    default: Value
+    expected: str
+    check: Callable[[Any], bool] = field(default=lambda v: True, repr=False)
+    choices: tuple[str, ...] = ()
+
+
+def _positive(v: float) -> bool:
+    return math.isfinite(v) and v > 0
+
+
+def _non_negative(v: float) -> bool:
+    return math.isfinite(v) and v >= 0
+
+
+#: The study's own parameters (what a ``vgtarm simulate`` run can vary, and the gains).
+PARAMETERS: dict[str, Parameter] = {
+    "controller": Parameter(str, "cfc", "one of ['cfc', 'scm']", choices=("cfc", "scm")),
+    "kp": Parameter(float, None, "a gain > 0 (1/s^2; default: the case's)", _positive),
+    "kv": Parameter(float, None, "a gain > 0 (1/s; default: the case's)", _positive),
+    "threshold": Parameter(float, None, "a tip error > 0 (m; SCM; default: the case's)", _positive),
+    "horizon": Parameter(int, 20, "a whole number >= 1 (control periods; SCM)", lambda v: v >= 1),
+    "prediction": Parameter(
+        str, "quadratic", "one of ['exact', 'linear', 'quadratic']", choices=("exact", "linear", "quadratic")
+    ),
+    "kp_max": Parameter(float, None, "an upper GA bound > 0 (1/s^2; default: the case's)", _positive),
+    "kv_max": Parameter(float, None, "an upper GA bound > 0 (1/s; default: the case's)", _positive),
+    "ga_population": Parameter(int, 50, "a whole number >= 2", lambda v: v >= 2),
+    "ga_generations": Parameter(int, 50, "a whole number >= 0", lambda v: v >= 0),
+    "external_force": Parameter(bool, False, "true or false"),
+    "cutting_force": Parameter(float, 20.0, "a force >= 0 (N)", _non_negative),
+    "disturbance": Parameter(float, 5.0, "a bound >= 0 (N, each axis)", _non_negative),
+    "model_mass": Parameter(float, 1.0, "a factor > 0", _positive),
+    "model_inertia": Parameter(float, 1.0, "a factor > 0", _positive),
+    "model_friction": Parameter(float, 1.0, "a factor > 0", _positive),
+    "integrator": Parameter(str, "euler", f"one of {sorted(INTEGRATORS)}", choices=tuple(sorted(INTEGRATORS))),
+    "substeps": Parameter(int, 1, "a whole number >= 1", lambda v: v >= 1),
+}
+
+#: Keyword arguments of simulate() that the study sets itself (or that are not run inputs).
+_MANAGED = {
+    "plant",
+    "reference",
+    "controller",
+    "controller_model",
+    "external_force",
+    "integrator",
+    "substeps",
+    "seed",
+    "initial_state",
+    "metadata",
+    "progress",
+}
+
+
+def simulate_options() -> dict[str, Parameter]:
+    """The scalar keyword arguments of the installed :func:`simulate` the study passes through.
+
+    Found by inspection, so options added to the simulator (observer, sensing, ...) become study
+    parameters without a change here. The type comes from the default (``None``: a number).
+    """
+    found: dict[str, Parameter] = {}
+    for name, p in inspect.signature(simulate).parameters.items():
+        if name in _MANAGED or p.kind is not inspect.Parameter.KEYWORD_ONLY:
+            continue
+        default = p.default
+        if isinstance(default, bool):
+            found[name] = Parameter(bool, default, "true or false")
+        elif isinstance(default, int | float) or default is None:
+            kind: type = int if isinstance(default, int) else float
+            found[name] = Parameter(kind, default, "a number" if kind is float else "a whole number")
+        elif isinstance(default, str):
+            found[name] = Parameter(str, default, "a string")
+    return found
+
+
+def all_parameters() -> dict[str, Parameter]:
+    """:data:`PARAMETERS` and :func:`simulate_options`."""
+    return {**PARAMETERS, **simulate_options()}
+
+
+_STUDY_KEYS = ("name", "case", "path", "duration", "dt", "rates", "robot", "seeds")
+_RATES = ("exact", "finite_difference")
+_DISTRIBUTIONS = ("uniform", "log_uniform", "normal", "integers", "choice")
+
+
+@dataclass(frozen=True)
+class Point:
+    """One run of a study: its id (16 hex digits) and its inputs (name -> value)."""
+
+    id: str
+    inputs: dict[str, Value]
+
+
+@dataclass(frozen=True)
+class Study:
+    """A validated study. ``files`` maps ``"path"``/``"robot"`` to the files' text (shipped to
+    workers, so they need not share the file system)."""
+
+    name: str
+    shared: dict[str, Value]
+    grid: dict[str, list[Value]]
+    random: dict[str, tuple[str, list[Value]]]
+    draws: int
+    random_seed: int
+    seeds: tuple[int, ...]
+    files: dict[str, str]
+    source: str = "<study>"
+
+    def points(self) -> list[Point]:
+        """Every run: grid combinations x draws x seeds, in that order, duplicates removed."""
+        params = all_parameters()
+        rng = np.random.default_rng(self.random_seed)
+        drawn = [
+            {key: _draw(rng, dist, args) for key, (dist, args) in sorted(self.random.items())}
+            for _ in range(self.draws)
+        ] or [{}]
+        for i, values in enumerate(drawn):
+            for key, value in values.items():
+                where = f"{self.source}: random.{key} (draw {i})"
+                values[key] = _check_value(where, value, params[key])
+        grid_keys = list(self.grid)
+        points: dict[str, Point] = {}
+        for combo in itertools.product(*(self.grid[k] for k in grid_keys)):
+            chosen = dict(zip(grid_keys, combo, strict=True))
+            for values in drawn:
+                for seed in self.seeds:
+                    inputs: dict[str, Value] = dict(self.shared)
+                    for name, p in params.items():
+                        inputs[name] = values.get(name, chosen.get(name, p.default))
+                    inputs["seed"] = seed
+                    point_id = point_id_of(inputs, self.files, explicit=set(chosen) | set(values))
+                    points.setdefault(point_id, Point(point_id, inputs))
+        return list(points.values())
+
+
+def point_id_of(inputs: Mapping[str, Value], files: Mapping[str, str], *, explicit: set[str] | None = None) -> str:
+    """A stable id of a run: SHA-256 of its inputs (canonical JSON) and of its files' text.
+
+    Options passed through to the simulator count only when set explicitly or away from their
+    default, so an option added to the simulator later does not change existing ids.
+    """
+    own = set(PARAMETERS) | set(_STUDY_KEYS) | {"seed"}
+    defaults = {k: p.default for k, p in simulate_options().items()}
+    keyed = {
+        k: v
+        for k, v in inputs.items()
+        if k in own or (explicit is not None and k in explicit) or defaults.get(k, object()) != v
+    }
+    digest = hashlib.sha256(json.dumps(keyed, sort_keys=True, separators=(",", ":")).encode())
+    for name in sorted(files):
+        digest.update(f"\0{name}\0{files[name]}".encode())
+    return digest.hexdigest()[:16]
+
+
+def load_study(file: str | Path) -> Study:
+    """Read and validate a study file; raises :class:`ConfigError` (one line naming the key)."""
+    where = Path(file)
+    try:
+        data = tomllib.loads(where.read_text("utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(f"study file {where}: not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"study file {where}: cannot read it: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"study file {where}: TOML syntax error: {exc}") from None
+    return parse_study(data, source=str(where), folder=where.parent)
+
+
+def parse_study(data: Mapping[str, Any], *, source: str = "<study>", folder: Path | None = None) -> Study:
+    """Validate a study given as a dict (a parsed TOML file); files are relative to ``folder``."""
+    unknown = sorted(set(data) - {"study", "grid", "random"})
+    if unknown:
+        raise ConfigError(f"{source}: unknown table [{unknown[0]}]: expected [study], [grid] and [random]")
+    head = _table(source, data, "study")
+    grid_in = _table(source, data, "grid")
+    random_in = dict(_table(source, data, "random"))
+    for key in head:
+        if key not in _STUDY_KEYS:
+            raise ConfigError(f"{source}: study.{key}: unknown key; expected one of {list(_STUDY_KEYS)}")
+    params = all_parameters()
+    name = head.get("name", "study")
+    if not isinstance(name, str) or not name:
+        raise ConfigError(f"{source}: study.name = {name!r}: expected a non-empty string")
+    shared: dict[str, Value] = {}
+    files: dict[str, str] = {}
+    if ("case" in head) == ("path" in head):
+        raise ConfigError(f'{source}: [study]: give exactly one of case = 1|2 and path = "FILE.csv"')
+    if "case" in head:
+        case = head["case"]
+        if isinstance(case, bool) or case not in (1, 2):
+            raise ConfigError(f"{source}: study.case = {case!r}: expected 1 or 2 (the paper's case studies)")
+        shared["case"] = int(case)
+        shared["path"] = None
+    else:
+        shared["case"] = None
+        shared["path"] = _file(source, folder, "path", head["path"], files)
+    duration = head.get("duration")
+    if duration is not None and not (_is_number(duration) and _positive(float(duration))):
+        raise ConfigError(f"{source}: study.duration = {duration!r}: expected a time > 0 (s)")
+    shared["duration"] = None if duration is None else float(duration)
+    dt = head.get("dt", 1e-3)
+    if not (_is_number(dt) and _positive(float(dt))):
+        raise ConfigError(f"{source}: study.dt = {dt!r}: expected a period > 0 (s)")
+    shared["dt"] = float(dt)
+    rates = head.get("rates", "exact")
+    if rates not in _RATES:
+        raise ConfigError(f"{source}: study.rates = {rates!r}: expected one of {list(_RATES)}")
+    shared["rates"] = rates
+    shared["robot"] = None if head.get("robot") is None else _file(source, folder, "robot", head["robot"], files)
+    seeds = _seeds(source, head.get("seeds", 1))
+
+    grid: dict[str, list[Value]] = {}
+    for key, value in grid_in.items():
+        if key not in params:
+            raise ConfigError(f"{source}: grid.{key}: unknown parameter; expected one of {sorted(params)}")
+        values = value if isinstance(value, list) else [value]
+        if not values:
+            raise ConfigError(f"{source}: grid.{key} = []: expected a value or a non-empty list of values")
+        grid[key] = [_check_value(f"{source}: grid.{key}", v, params[key]) for v in values]
+
+    draws = random_in.pop("draws", 0)
+    random_seed = random_in.pop("seed", 0)
+    if isinstance(draws, bool) or not isinstance(draws, int) or draws < 0:
+        raise ConfigError(f"{source}: random.draws = {draws!r}: expected a whole number >= 0")
+    if isinstance(random_seed, bool) or not isinstance(random_seed, int) or random_seed < 0:
+        raise ConfigError(f"{source}: random.seed = {random_seed!r}: expected a whole number >= 0")
+    random: dict[str, tuple[str, list[Value]]] = {}
+    for key, value in random_in.items():
+        if key not in params:
+            raise ConfigError(f"{source}: random.{key}: unknown parameter; expected one of {sorted(params)}")
+        if key in grid:
+            raise ConfigError(f"{source}: random.{key}: already in [grid]; a parameter is either swept or drawn")
+        random[key] = _distribution(f"{source}: random.{key}", value, params[key])
+    if random and draws == 0:
+        raise ConfigError(f"{source}: random.draws = 0: expected a whole number >= 1 with random parameters")
+    study = Study(name, shared, grid, random, draws, random_seed, seeds, files, source)
+    study.points()  # draws are checked here, before any run
+    return study
+
+
+def _table(source: str, data: Mapping[str, Any], name: str) -> Mapping[str, Any]:
+    value = data.get(name, {})
+    if not isinstance(value, Mapping):
+        raise ConfigError(f"{source}: {name} = {value!r}: expected a table [{name}]")
+    return value
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _file(source: str, folder: Path | None, key: str, value: object, files: dict[str, str]) -> str:
+    if not isinstance(value, str) or not value:
+        raise ConfigError(f"{source}: study.{key} = {value!r}: expected a file name")
+    file = Path(value) if folder is None else folder / value
+    try:
+        files[key] = file.read_text("utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{source}: study.{key} = {value!r}: cannot read {file}: {exc}") from None
+    return value
+
+
+def _seeds(source: str, value: object) -> tuple[int, ...]:
+    where = f"{source}: study.seeds = {value!r}"
+
+    def whole(v: object) -> bool:
+        return isinstance(v, int) and not isinstance(v, bool) and v >= 0
+
+    if whole(value) and value:
+        return tuple(range(int(value)))  # type: ignore[call-overload]
+    if isinstance(value, list) and value and all(whole(v) for v in value):
+        if len(set(value)) != len(value):
+            raise ConfigError(f"{where}: expected distinct seeds")
+        return tuple(int(v) for v in value)
+    if isinstance(value, Mapping) and set(value) == {"start", "count"} and whole(value["start"]):
+        if whole(value["count"]) and value["count"] >= 1:
+            return tuple(range(int(value["start"]), int(value["start"]) + int(value["count"])))
+    raise ConfigError(
+        f"{where}: expected a count >= 1, a list of distinct whole numbers >= 0 or {{start = S, count = N}}"
+    )
+
+
+def _check_value(where: str, value: object, p: Parameter) -> Value:
+    """The value converted to the parameter's type, or ConfigError naming it."""
+    bad = ConfigError(f"{where} = {value!r}: expected {p.expected}")
+    if p.kind is bool:
+        if not isinstance(value, bool | np.bool_):
+            raise bad
+        return bool(value)
+    if p.kind is int:
+        if isinstance(value, bool) or not isinstance(value, int | np.integer):
+            raise bad
+        converted: Value = int(value)
+    elif p.kind is float:
+        if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+            raise bad
+        converted = float(value)
+        if not math.isfinite(converted):
+            raise bad
+    else:
+        if not isinstance(value, str):
+            raise bad
+        converted = value
+    if p.choices and converted not in p.choices:
+        raise bad
+    if not p.check(converted):
+        raise bad
+    return converted
+
+
+def _distribution(where: str, value: object, p: Parameter) -> tuple[str, list[Value]]:
+    if not (isinstance(value, Mapping) and len(value) == 1 and next(iter(value)) in _DISTRIBUTIONS):
+        raise ConfigError(f"{where} = {value!r}: expected one of {{{' | '.join(_DISTRIBUTIONS)} = [...]}}")
+    dist, args = next(iter(value.items()))
+    if dist == "choice":
+        if not (isinstance(args, list) and args):
+            raise ConfigError(f"{where}.choice = {args!r}: expected a non-empty list of values")
+        return dist, [_check_value(f"{where}.choice", v, p) for v in args]
+    if not (isinstance(args, list) and len(args) == 2 and all(_is_number(a) for a in args)):
+        raise ConfigError(f"{where}.{dist} = {args!r}: expected two numbers [a, b]")
+    if p.kind not in (int, float) or (dist == "integers") != (p.kind is int):
+        kind = "whole-number" if p.kind is int else ("numeric" if p.kind is float else p.kind.__name__)
+        raise ConfigError(f"{where}.{dist}: not a distribution for a {kind} parameter ({p.expected})")
+    a, b = args
+    if dist == "normal" and not b > 0:
+        raise ConfigError(f"{where}.normal = {args!r}: expected [mean, standard deviation > 0]")
+    if dist != "normal" and not a <= b:
+        raise ConfigError(f"{where}.{dist} = {args!r}: expected [a, b] with a <= b")
+    if dist == "log_uniform" and not a > 0:
+        raise ConfigError(f"{where}.log_uniform = {args!r}: expected 0 < a <= b")
+    return dist, list(args)
+
+
+def _draw(rng: np.random.Generator, dist: str, args: list[Value]) -> Value:
+    if dist == "choice":
+        return args[int(rng.integers(len(args)))]
+    a, b = float(args[0]), float(args[1])  # type: ignore[arg-type]
+    if dist == "uniform":
+        return float(rng.uniform(a, b))
+    if dist == "log_uniform":
+        return float(np.exp(rng.uniform(np.log(a), np.log(b))))
+    if dist == "normal":
+        return float(rng.normal(a, b))
+    return int(rng.integers(int(a), int(b), endpoint=True))

@@ -1,0 +1,168 @@
+"""A study's folder: one atomic JSON file per finished run, the results tables, an execution log.
+
+Layout of ``DIR``::
+
+    runs/<id>.json        one per finished run (inputs, summary, error), written atomically
+    executions.log        "submit <id>" when a run is sent to the cluster, "write <id>" once stored
+    results.csv           one row per run of the study: id, every input, every summary figure
+    results.parquet       the same table (pyarrow)
+
+A run file either exists complete or not at all (written to a temporary name, then renamed), so
+an interrupted study resumes by running exactly the ids without a file.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+from ..errors import InputError
+from ..fileio import atomic_path, atomic_write_text
+from .spec import Point
+
+#: Summary figures that measure the machine, not the run (they differ between two runs of a row).
+TIMING_COLUMNS = (
+    "wall_time_s",
+    "real_time_factor",
+    "ga_time_s",
+    "ga_time_per_activation_s",
+    "ga_activation_time_median_s",
+    "ga_activation_time_p99_s",
+)
+
+
+class Store:
+    """The results folder of a study."""
+
+    def __init__(self, folder: str | Path) -> None:
+        self.folder = Path(folder)
+        self.runs = self.folder / "runs"
+        self.log = self.folder / "executions.log"
+
+    def prepare(self) -> None:
+        """Create the folder and ``runs/``."""
+        self.runs.mkdir(parents=True, exist_ok=True)
+
+    def done(self) -> set[str]:
+        """Ids of the runs stored (temporary files of interrupted writes are ignored)."""
+        if not self.runs.is_dir():
+            return set()
+        return {p.stem for p in self.runs.glob("*.json") if not p.name.startswith(".")}
+
+    def write(self, record: Mapping[str, Any]) -> Path:
+        """Store one finished run ``{"id", "inputs", "summary", "error"}`` atomically, then log it."""
+        path = self.runs / f"{record['id']}.json"
+        atomic_write_text(path, json.dumps(_jsonable(dict(record))) + "\n")
+        self.note("write", [str(record["id"])])
+        return path
+
+    def note(self, what: str, ids: Iterable[str]) -> None:
+        """Append ``what <id>`` lines to the execution log (one small append per call)."""
+        text = "".join(f"{what} {i}\n" for i in ids)
+        if text:
+            fd = os.open(self.log, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+            try:
+                os.write(fd, text.encode())
+            finally:
+                os.close(fd)
+
+    def read(self, point_id: str) -> dict[str, Any]:
+        """One stored run."""
+        path = self.runs / f"{point_id}.json"
+        try:
+            return dict(json.loads(path.read_text("utf-8")))
+        except (OSError, ValueError) as exc:
+            raise InputError(f"run file {path}: cannot read it: {exc}") from None
+
+    def rows(self, points: list[Point] | None = None) -> list[dict[str, Any]]:
+        """The table: one row per point (in the study's order) or per stored run (by id); every row
+        has every column (None where a run has no such figure)."""
+        ids = [p.id for p in points] if points is not None else sorted(self.done())
+        done = self.done()
+        rows = [row_of(self.read(i)) for i in ids if i in done]
+        columns = table_columns(rows)
+        return [{c: row.get(c) for c in columns} for row in rows]
+
+    def write_tables(self, rows: list[dict[str, Any]]) -> tuple[Path, Path]:
+        """Write ``results.csv`` and ``results.parquet`` atomically."""
+        columns = table_columns(rows)
+        buffer = io.StringIO()
+        writer = csv.DictWriter(buffer, fieldnames=columns, lineterminator="\n")
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({c: _cell(row.get(c)) for c in columns})
+        csv_file = atomic_write_text(self.folder / "results.csv", buffer.getvalue())
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        table = pa.table({c: _arrow_column([row.get(c) for row in rows]) for c in columns})
+        parquet_file = self.folder / "results.parquet"
+        with atomic_path(parquet_file) as temporary:
+            pq.write_table(table, temporary)
+        return csv_file, parquet_file
+
+
+def row_of(record: Mapping[str, Any]) -> dict[str, Any]:
+    """A table row from a run record: ``id``, the inputs, ``error`` and the summary figures."""
+    row: dict[str, Any] = {"id": record["id"], **record["inputs"], "error": record.get("error", "")}
+    for key, value in record["summary"].items():
+        if key not in row:
+            row[key] = json.dumps(value) if isinstance(value, list | dict) else value
+    return row
+
+
+def table_columns(rows: list[dict[str, Any]]) -> list[str]:
+    """Every key of the rows, in order of first appearance."""
+    columns: dict[str, None] = {}
+    for row in rows:
+        columns.update(dict.fromkeys(row))
+    return list(columns)
+
+
+def read_table(folder: str | Path) -> list[dict[str, Any]]:
+    """The rows of ``results.parquet`` (None for missing values)."""
+    import pyarrow.parquet as pq
+
+    file = Path(folder) / "results.parquet"
+    if not file.is_file():
+        raise InputError(f"study folder {folder}: no results.parquet (run `vgtarm study run` first)")
+    return list(pq.read_table(file).to_pylist())
+
+
+def _cell(value: Any) -> Any:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return ""
+    if isinstance(value, float):
+        return repr(value)
+    return value
+
+
+def _arrow_column(values: list[Any]) -> Any:
+    import pyarrow as pa
+
+    present = [v for v in values if v is not None]
+    if present and all(isinstance(v, bool) for v in present):
+        return pa.array(values, type=pa.bool_())
+    if present and all(isinstance(v, int | float) and not isinstance(v, bool) for v in present):
+        if all(isinstance(v, int) for v in present):
+            return pa.array(values, type=pa.int64())
+        return pa.array([None if v is None else float(v) for v in values], type=pa.float64())
+    return pa.array([None if v is None else str(v) for v in values], type=pa.string())
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if hasattr(value, "item") and not isinstance(value, str | bytes):
+        return _jsonable(value.item())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
