@@ -350,6 +350,8 @@ typedef struct {
     float *coef;         /* (H, 3, n_pairs) -H[k][l][m] (-H/2 on the diagonal) per step and axis    */
     long exact_candidates, exact_steps; /* work counters of the trust-region fallback              */
     vf *K;               /* (2 nj^2) gains of the block, one lane per candidate                     */
+    float *lut;          /* 8-bit genes: the decoded value of each code, one table per distinct     */
+    int *table_of;       /*   pair of bounds (table_of[gene]), or NULL                               */
     float *far;          /* (BLOCK H, nj) predicted joint errors of the steps outside the region     */
     long *far_at;        /* (BLOCK H) their lane * H + step                                         */
     const double **arg;  /* work arrays of the generated tip function                               */
@@ -454,32 +456,18 @@ static void gains_from_genes(int n_genes, int count, const double *genes, vf *K)
         for (int gi = 0; gi < n_genes; ++gi) K[gi][c] = (float)genes[(long)c * n_genes + gi];
 }
 
-/* Lane `lane` of K from the bit string of one candidate of 8-bit genes: decode_bytes's arithmetic
- * (four genes per vector, in double), rounded to float and stored gene-major. */
-__attribute__((target_clones("arch=x86-64-v3", "default"))) static void gains_from_bytes(
-    int n_genes, int lane, const uint64_t *restrict bits, const double *restrict lower, const double *restrict upper,
-    vf *restrict K)
+/* Lane `lane` of K from the bit string of one candidate of 8-bit genes, through the decoded
+ * values of every code (decode_with's arithmetic, rounded to float). The codes are the bytes of
+ * the string, most significant first within each 64-bit word. */
+static void gains_from_table(const predictor *x, int n_genes, int lane, const uint64_t *bits)
 {
-    int i = 0;
-    for (; i + 4 <= n_genes; i += 4) {
-        uint64_t word = bits[i >> 3];
-        int shift = 56 - 8 * (i & 7);
-        v4 code = {(double)((word >> shift) & 0xFFu), (double)((word >> (shift - 8)) & 0xFFu),
-                   (double)((word >> (shift - 16)) & 0xFFu), (double)((word >> (shift - 24)) & 0xFFu)};
-        v4 lo, hi;
-        memcpy(&lo, lower + i, sizeof lo);
-        memcpy(&hi, upper + i, sizeof hi);
-        v4 value = lo + code / 255.0 * (hi - lo);
-        value = select4((m4)(value < hi), value, hi);
-        value = select4((m4)(code == 255.0), hi, value);
-        for (int l = 0; l < 4; ++l) K[i + l][lane] = (float)value[l];
-    }
-    for (; i < n_genes; ++i) {
-        double code = (double)((bits[i >> 3] >> (56 - 8 * (i & 7))) & 0xFFu);
-        double value = lower[i] + code / 255.0 * (upper[i] - lower[i]);
-        value = value < upper[i] ? value : upper[i];
-        K[i][lane] = (float)(code == 255.0 ? upper[i] : value);
-    }
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+    const unsigned char *bytes = (const unsigned char *)bits;
+    for (int gi = 0; gi < n_genes; ++gi) x->K[gi][lane] = x->lut[x->table_of[gi] * 256 + bytes[gi ^ 7]];
+#else
+    for (int gi = 0; gi < n_genes; ++gi)
+        x->K[gi][lane] = x->lut[x->table_of[gi] * 256 + ((bits[gi >> 3] >> (56 - 8 * (gi & 7))) & 0xFFu)];
+#endif
 }
 
 /* Exact prediction of the candidates listed in `which` (all when which is NULL). */
@@ -526,7 +514,7 @@ static int predict(const vgt_model *m, const vgt_settings *s, const vgt_ga_setti
             const vf zero = {0.0f};
             if (count < BLOCK) /* lanes without a candidate predict with zero gains, unused */
                 for (int gi = 0; gi < g->n_genes; ++gi) x->K[gi] = zero;
-            for (int k = 0; k < count; ++k) gains_from_bytes(g->n_genes, k, rows[c + k], pb->lower, pb->upper, x->K);
+            for (int k = 0; k < count; ++k) gains_from_table(x, g->n_genes, k, rows[c + k]);
         }
         predict_block(x, count, x->K, sum, x->far, x->far_at, &n_far);
         /* the steps outside the trust region: the exact forward kinematics of the predicted joints */
@@ -570,6 +558,30 @@ static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *
     x->hes = malloc(sizeof(int) * (size_t)(3 * nj * (nj + 1) / 2 + 3));
     x->coef = NULL;
     x->K = aligned_alloc(sizeof(vf), sizeof(vf) * (size_t)(2 * nj * nj));
+    x->lut = NULL;
+    x->table_of = NULL;
+    if (g->n_bits == 8 && g->prediction != VGT_PREDICT_EXACT) {
+        /* decode_with's arithmetic for every code, once per distinct pair of bounds */
+        x->table_of = malloc(sizeof(int) * (size_t)g->n_genes);
+        x->lut = malloc(sizeof(float) * 256 * (size_t)g->n_genes);
+        if (!x->table_of || !x->lut) return VGT_NO_MEMORY;
+        int tables = 0;
+        for (int gi = 0; gi < g->n_genes; ++gi) {
+            int t = 0;
+            while (t < gi && !(pb->lower[t] == pb->lower[gi] && pb->upper[t] == pb->upper[gi])) ++t;
+            if (t < gi) {
+                x->table_of[gi] = x->table_of[t];
+                continue;
+            }
+            x->table_of[gi] = tables;
+            for (int code = 0; code < 256; ++code) {
+                double value = pb->lower[gi] + (double)code / 255.0 * (pb->upper[gi] - pb->lower[gi]);
+                value = value < pb->upper[gi] ? value : pb->upper[gi];
+                x->lut[tables * 256 + code] = (float)(code == 255 ? pb->upper[gi] : value);
+            }
+            ++tables;
+        }
+    }
     x->far = malloc(sizeof(float) * (size_t)(BLOCK * (g->horizon + 1) * nj));
     x->far_at = malloc(sizeof(long) * (size_t)(BLOCK * (g->horizon + 1)));
     x->arg = malloc(sizeof(double *) * (size_t)(m->tip.sz_arg > 2 ? m->tip.sz_arg : 2));
@@ -638,6 +650,8 @@ static void predictor_free(predictor *x)
     free(x->jac_f);
     free(x->off_f);
     free(x->K);
+    free(x->lut);
+    free(x->table_of);
     free(x->far);
     free(x->far_at);
     free(x->arg);
