@@ -367,6 +367,21 @@ typedef struct {
  * the fitness by about 1e-7 relative (measured in docs/control.md), far below what the GA's
  * ranking resolves; the sums of squares are completed in double. */
 
+/* sum_e coef[idx[e]] * value[idx[e]] over a list, in four independent sums (FMA latency) */
+static inline __attribute__((always_inline)) vf list_dot(int n, const int *idx, const float *coef, const vf *value)
+{
+    vf s0 = {0.0f}, s1 = {0.0f}, s2 = {0.0f}, s3 = {0.0f};
+    int e = 0;
+    for (; e + 4 <= n; e += 4) {
+        s0 += coef[idx[e]] * value[idx[e]];
+        s1 += coef[idx[e + 1]] * value[idx[e + 1]];
+        s2 += coef[idx[e + 2]] * value[idx[e + 2]];
+        s3 += coef[idx[e + 3]] * value[idx[e + 3]];
+    }
+    for (; e < n; ++e) s0 += coef[idx[e]] * value[idx[e]];
+    return (s0 + s1) + (s2 + s3);
+}
+
 static inline __attribute__((always_inline)) void block_kernel(const predictor *restrict x, const int nj, int count,
                                                                const vf *restrict K, double *restrict sum,
                                                                float *restrict far, long *restrict far_at,
@@ -385,11 +400,28 @@ static inline __attribute__((always_inline)) void block_kernel(const predictor *
         Ed[i] = zero + (float)(pb->qd_d[i] - pb->qd0[i]);
     }
     for (long j = 0; j < x->horizon; ++j) {
-        for (int i = 0; i < nj; ++i) {
+        /* a = Kp E + Kv Ed, two rows at a time with four independent sums (FMA latency) */
+        int i = 0;
+        for (; i + 1 < nj; i += 2) {
+            const vf *kp0 = K + i * nj, *kv0 = K + nn + i * nj, *kp1 = kp0 + nj, *kv1 = kv0 + nj;
+            vf p0 = kp0[0] * E[0], v0 = kv0[0] * Ed[0], p1 = kp1[0] * E[0], v1 = kv1[0] * Ed[0];
+            for (int l = 1; l < nj; ++l) {
+                p0 += kp0[l] * E[l];
+                v0 += kv0[l] * Ed[l];
+                p1 += kp1[l] * E[l];
+                v1 += kv1[l] * Ed[l];
+            }
+            a[i] = p0 + v0;
+            a[i + 1] = p1 + v1;
+        }
+        for (; i < nj; ++i) {
             const vf *kp = K + i * nj, *kv = K + nn + i * nj;
-            vf acc = kp[0] * E[0] + kv[0] * Ed[0];
-            for (int l = 1; l < nj; ++l) acc += kp[l] * E[l] + kv[l] * Ed[l];
-            a[i] = acc;
+            vf p0 = kp[0] * E[0], v0 = kv[0] * Ed[0];
+            for (int l = 1; l < nj; ++l) {
+                p0 += kp[l] * E[l];
+                v0 += kv[l] * Ed[l];
+            }
+            a[i] = p0 + v0;
         }
         const float *r = x->r + j * nj, *s = x->s + j * nj;
         vf norm2 = zero;
@@ -401,18 +433,18 @@ static inline __attribute__((always_inline)) void block_kernel(const predictor *
         const float *J = x->jac_f + (j + 1) * 3 * nj, *off = x->off_f + (j + 1) * 3;
         vf t0 = zero + off[0], t1 = zero + off[1], t2 = zero + off[2];
         /* first order: t_k += J[k][l] E_l over the structurally nonzero entries */
-        for (int e = 0; e < x->n_jac[0]; ++e) t0 += J[x->jac[e]] * E[x->jac[e]];
-        for (int e = 0; e < x->n_jac[1]; ++e) t1 += J[nj + x->jac[nj + e]] * E[x->jac[nj + e]];
-        for (int e = 0; e < x->n_jac[2]; ++e) t2 += J[2 * nj + x->jac[2 * nj + e]] * E[x->jac[2 * nj + e]];
+        t0 += list_dot(x->n_jac[0], x->jac, J, E);
+        t1 += list_dot(x->n_jac[1], x->jac + nj, J + nj, E);
+        t2 += list_dot(x->n_jac[2], x->jac + 2 * nj, J + 2 * nj, E);
         if (x->quadratic) {
             /* second order: t_k -= E^T H_k E / 2, over the nonzero pairs l <= m (H symmetric) */
             const int np = x->n_pairs;
             vf P[np > 0 ? np : 1];
             for (int e = 0; e < np; ++e) P[e] = E[x->pair[2 * e]] * E[x->pair[2 * e + 1]];
             const float *coef = x->coef + j * 3 * np;
-            for (int e = 0; e < x->n_hes[0]; ++e) t0 += coef[x->hes[e]] * P[x->hes[e]];
-            for (int e = 0; e < x->n_hes[1]; ++e) t1 += coef[np + x->hes[np + e]] * P[x->hes[np + e]];
-            for (int e = 0; e < x->n_hes[2]; ++e) t2 += coef[2 * np + x->hes[2 * np + e]] * P[x->hes[2 * np + e]];
+            t0 += list_dot(x->n_hes[0], x->hes, coef, P);
+            t1 += list_dot(x->n_hes[1], x->hes + np, coef + np, P);
+            t2 += list_dot(x->n_hes[2], x->hes + 2 * np, coef + 2 * np, P);
         }
         /* steps inside the trust region add their squared tip error; the others are recorded for
          * the exact forward kinematics (a NaN error stays inside and makes the cost infinite) */
