@@ -573,6 +573,7 @@ static int predict(const vgt_model *m, const vgt_settings *s, const vgt_ga_setti
 static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *s, const vgt_ga_settings *g,
                           const vgt_ga_problem *pb)
 {
+    memset(x, 0, sizeof *x); /* every pointer NULL, so predictor_free is safe after any failure */
     x->nj = s->n_joints;
     x->horizon = g->horizon;
     x->dt = s->dt;
