@@ -21,7 +21,7 @@ from vgtarm.model.closedloop import PREDICTIONS, ClosedLoopDriver, bit_words, pa
 from vgtarm.model.compiled import CompiledBackend, InterpretedBackend, build_functions
 from vgtarm.model.interface import ffi
 from vgtarm.simulation import ExternalForce, JointReference, simulate
-from vgtarm.simulation.simulator import _compiled_ga
+from vgtarm.simulation.simulator import _compiled_ga, loop_arrays
 
 from .conftest import assert_close
 from .test_ga import SIGMAS, binomial_bound
@@ -229,26 +229,8 @@ def test_mutation_edge_probabilities(lib):
 
 def _ga(robot, ref, scm, model=None):
     model = model or robot
-    from vgtarm.model.assembly import linear_form
-    from vgtarm.model.closedloop import LoopArrays
 
-    n = len(ref.t)
-    G, h = linear_form(robot.parameters.b, robot.parameters.d)
-    arrays = LoopArrays(
-        q_d=ref.q,
-        qd_d=ref.qd,
-        qdd_d=ref.qdd,
-        tip_d=robot.tip_position(ref.q),
-        disturbance=np.zeros((n, 3)),
-        p_plant=robot.parameter_vector,
-        p_ctrl=model.parameter_vector,
-        G=G,
-        h=h,
-        q_min=robot.parameters.lower,
-        q_max=robot.parameters.upper,
-        q0=ref.q[0],
-        qd0=ref.qd[0],
-    )
+    arrays = loop_arrays(robot, model, ref, initial_state=(ref.q[0], ref.qd[0]))
     return _compiled_ga(scm, ClosedLoopDriver(robot.backend), model, arrays, ref.dt)
 
 
@@ -351,7 +333,13 @@ def test_compiled_ga_finds_gains_as_good_as_the_numpy_ga(lib, robot):
     k, q0, qd0 = 10, ref.q[10] + 3e-4, ref.qd[10] - 2e-3
     window = slice(k, k + scm.horizon + 1)
     predict = ClosedLoopDriver(robot.backend).ga_predictor(
-        robot.parameter_vector, ref.dt, q0, qd0, ref.q[window], ref.qd[window], ref.qdd[window],
+        robot.parameter_vector,
+        ref.dt,
+        q0,
+        qd0,
+        ref.q[window],
+        ref.qd[window],
+        ref.qdd[window],
         robot.tip_position(ref.q[window]),
     )
     c_best = [compiled.activate(k, q0, qd0, seed=s).best_cost for s in range(10)]

@@ -65,25 +65,16 @@ def _constant_push(robot, force, gain, dt=1e-3, duration=0.1, resolution=0.0):
     """A robot held at home while a constant force pushes on the tool (encoders of ``resolution``)."""
     ref = reference(robot, duration=duration, dt=dt, amplitude=np.zeros(7))
     fixed = ExternalForce(cutting=False, disturbance=False)
-    from vgtarm.model.assembly import linear_form
-    from vgtarm.model.closedloop import ClosedLoopDriver, LoopArrays, LoopSettings
+    from vgtarm.model.closedloop import ClosedLoopDriver, LoopSettings
+    from vgtarm.simulation.simulator import loop_arrays
 
     n = len(ref.t)
-    G, h = linear_form(robot.parameters.b, robot.parameters.d)
-    arrays = LoopArrays(
-        q_d=ref.q,
-        qd_d=ref.qd,
-        qdd_d=ref.qdd,
-        tip_d=robot.tip_position(ref.q),
-        disturbance=np.tile(force, (n, 1)),
-        p_plant=robot.parameter_vector,
-        p_ctrl=robot.parameter_vector,
-        G=G,
-        h=h,
-        q_min=robot.parameters.lower,
-        q_max=robot.parameters.upper,
-        q0=ref.q[0],
-        qd0=ref.qd[0],
+    arrays = loop_arrays(
+        robot,
+        robot,
+        ref,
+        np.tile(force, (n, 1)),
+        initial_state=(ref.q[0], ref.qd[0]),
         resolution=np.full(7, resolution),
     )
     settings = LoopSettings(

@@ -159,21 +159,13 @@ def simulate(
         if sensing.velocity_noise > 0
         else None
     )
-    G, h = linear_form(plant.parameters.b, plant.parameters.d)
-    arrays = LoopArrays(
-        q_d=ref.q,
-        qd_d=ref.qd,
-        qdd_d=ref.qdd,
+    arrays = loop_arrays(
+        plant,
+        model,
+        ref,
+        disturbance,
+        initial_state=(np.asarray(q0, dtype=float), np.asarray(qd0, dtype=float)),
         tip_d=tip_d,
-        disturbance=disturbance,
-        p_plant=plant.parameter_vector,
-        p_ctrl=model.parameter_vector,
-        G=G,
-        h=h,
-        q_min=plant.parameters.lower,
-        q_max=plant.parameters.upper,
-        q0=np.asarray(q0, dtype=float),
-        qd0=np.asarray(qd0, dtype=float),
         resolution=sensing.resolution,
         velocity_noise=noise,
     )
@@ -304,6 +296,45 @@ def simulate(
     if not success:
         raise SimulationError(message, result)
     return result
+
+
+def loop_arrays(
+    plant: Robot,
+    model: Robot,
+    reference: JointReference,
+    disturbance: np.ndarray | None = None,
+    *,
+    initial_state: tuple[np.ndarray, np.ndarray] | None = None,
+    tip_d: np.ndarray | None = None,
+    resolution: np.ndarray | None = None,
+    velocity_noise: np.ndarray | None = None,
+) -> LoopArrays:
+    """The arrays of one closed-loop run of ``plant`` under a controller with model ``model``.
+
+    ``disturbance`` ``(N, 3)`` defaults to none, the initial state to rest at ``q_d(0)``,
+    ``tip_d`` to the plant's tip along the reference; ``resolution`` and ``velocity_noise`` are
+    the sensing arrays (none by default).
+    """
+    n, n_joints = reference.q.shape
+    q0, qd0 = initial_state if initial_state is not None else (reference.q[0], np.zeros(n_joints))
+    G, h = linear_form(plant.parameters.b, plant.parameters.d)
+    return LoopArrays(
+        q_d=reference.q,
+        qd_d=reference.qd,
+        qdd_d=reference.qdd,
+        tip_d=plant.tip_position(reference.q) if tip_d is None else tip_d,
+        disturbance=np.zeros((n, 3)) if disturbance is None else disturbance,
+        p_plant=plant.parameter_vector,
+        p_ctrl=model.parameter_vector,
+        G=G,
+        h=h,
+        q_min=plant.parameters.lower,
+        q_max=plant.parameters.upper,
+        q0=q0,
+        qd0=qd0,
+        resolution=resolution,
+        velocity_noise=velocity_noise,
+    )
 
 
 def _tune(
