@@ -19,7 +19,7 @@ from ..ik import CSV_COLUMNS, write_csv
 from ..model.parameters import JOINT_NAMES, JOINT_UNITS
 from ..model.robot import load_robot
 from ..paths import Path as DesiredPath
-from . import cli_study, cli_visual
+from . import cli_mujoco, cli_study, cli_visual
 
 
 def _format_vector(values: Sequence[float] | np.ndarray, digits: int = 6) -> str:
@@ -377,6 +377,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--duration", type=_positive_float, default=None, metavar="S", help="run only the first S seconds of the path"
     )
     _add_observer_options(simulate)
+
     simulate.add_argument(
         "--out", type=Path, default=None, metavar="DIR", help="write summary.json, the time series and a figure here"
     )
@@ -412,6 +413,7 @@ def build_parser() -> argparse.ArgumentParser:
     ik.add_argument("-o", "--output", type=Path, default=None, metavar="FILE", help="CSV file to write")
     _add_config(ik)
     ik.set_defaults(run=cmd_ik)
+    cli_mujoco.add_parsers(sub)  # export mjcf, check mujoco
     cli_visual.add_parsers(sub)  # draw, animate, report
     cli_study.add_parsers(sub)  # study init, run, report
 

@@ -35,6 +35,11 @@ class PythonLoop:
         self.plant = plant
         self.model = model
 
+    def _tip_state(self, q: Array, qd: Array) -> tuple[Array, Array]:
+        """The plant's tip point and tip velocity at ``(q, qd)``."""
+        velocity, _ = self.plant.tip_velocity(q, qd)
+        return self.plant.tip_position(q), velocity
+
     def _tool_force(self, s: LoopSettings, velocity: Array, dist: Array) -> Array:
         speed = float(np.linalg.norm(velocity))
         f = dist.copy()
@@ -126,8 +131,7 @@ class PythonLoop:
         inp = arrays.inputs
         for k in range(k0, k1):
             q, qd = arrays.q[k], arrays.qd[k]
-            velocity, _ = self.plant.tip_velocity(q, qd)
-            arrays.tip[k] = self.plant.tip_position(q)
+            arrays.tip[k], velocity = self._tip_state(q, qd)
             arrays.error[k] = np.linalg.norm(inp["tip_d"][k] - arrays.tip[k])
             self._measure(settings, arrays, k)
             if settings.threshold > 0 and arrays.error[k] > settings.threshold:

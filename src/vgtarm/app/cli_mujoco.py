@@ -1,0 +1,58 @@
+"""``vgtarm export mjcf`` and ``vgtarm check mujoco``: the MuJoCo bridge from the command line."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from ..fileio import atomic_write_text
+from ..model.robot import load_robot
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    """Write the robot as MJCF."""
+    from ..mujoco_bridge.export import to_mjcf
+
+    robot = load_robot(args.config)
+    text = to_mjcf(robot, timestep=args.timestep)
+    if args.validate:
+        from ..mujoco_bridge.model import require_mujoco
+
+        require_mujoco().MjModel.from_xml_string(text)
+    atomic_write_text(args.out, text + "\n")
+    print(f"MJCF of {robot.parameters.name!r} written to {args.out}")
+    return 0
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    """Compare our dynamics with MuJoCo's on random states and print the worst differences."""
+    from ..mujoco_bridge.check import cross_validate, table
+    from ..mujoco_bridge.model import require_mujoco
+
+    require_mujoco()
+    robot = load_robot(args.config)
+    print(table(cross_validate(robot, n=args.states, seed=args.seed)))
+    return 0
+
+
+def add_parsers(sub: Any) -> None:
+    """Register ``export`` and ``check`` on the ``vgtarm`` command's subparsers."""
+    from .cli import _add_config, _non_negative_int, _positive_int
+
+    export = sub.add_parser("export", help="export the robot for another engine")
+    export.add_argument("format", choices=("mjcf",), help="mjcf: MuJoCo's XML model format")
+    export.add_argument("--out", type=Path, required=True, metavar="FILE", help="the file to write (robot.xml)")
+    export.add_argument("--timestep", type=float, default=1e-3, metavar="DT", help="MuJoCo's time step (s)")
+    export.add_argument(
+        "--validate", action="store_true", help="load the result in MuJoCo before writing (needs vgtarm[mujoco])"
+    )
+    _add_config(export)
+    export.set_defaults(run=cmd_export)
+
+    check = sub.add_parser("check", help="cross-check our dynamics against another engine")
+    check.add_argument("engine", choices=("mujoco",), help="mujoco: the exported model stepped by MuJoCo")
+    check.add_argument("--states", type=_positive_int, default=1000, help="random states (default 1000)")
+    check.add_argument("--seed", type=_non_negative_int, default=0, help="seed of the states (default 0)")
+    _add_config(check)
+    check.set_defaults(run=cmd_check)
