@@ -4,10 +4,17 @@ from __future__ import annotations
 
 import sys
 
-from . import bench_ga, bench_ik, bench_model, bench_sim, bench_study
+from . import bench_ga, bench_ik, bench_model, bench_mujoco, bench_sim, bench_study
 from .common import machine
 
-MODULES = {"model": bench_model, "sim": bench_sim, "ga": bench_ga, "ik": bench_ik, "study": bench_study}
+MODULES = {
+    "model": bench_model,
+    "sim": bench_sim,
+    "ga": bench_ga,
+    "ik": bench_ik,
+    "study": bench_study,
+    "mujoco": bench_mujoco,
+}
 
 
 def main(argv: list[str]) -> None:

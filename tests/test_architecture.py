@@ -24,7 +24,7 @@ LAYERS: tuple[frozenset[str], ...] = (
     frozenset({"ik"}),
     frozenset({"control"}),
     frozenset({"simulation"}),
-    frozenset({"mujoco_bridge"}),  # reserved for the MuJoCo bridge (issue 11)
+    frozenset({"mujoco_bridge"}),
     frozenset({"study"}),
     frozenset({"app"}),
 )

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import vgtarm
+from vgtarm.control import ComputedForceControl
 from vgtarm.model.parameters import ModuleGeometry
 
 from .conftest import random_configurations
@@ -78,3 +79,49 @@ def test_export_command_writes_a_model_mujoco_loads(tmp_path, capsys):
     assert model.nu == 7 and model.site("tip").id >= 0
     assert main(["check", "mujoco", "--states", "3"]) == 0
     assert "mass matrix M (relative)" in capsys.readouterr().out
+
+
+# ---------------------------------------------------------------------------------------------
+# MuJoCo as the plant
+# ---------------------------------------------------------------------------------------------
+
+
+def _short(robot, number, samples):
+    from vgtarm.app.cases import joint_reference
+    from vgtarm.simulation import JointReference
+
+    ref = joint_reference(robot, number)
+    return JointReference(ref.t[:samples], ref.q[:samples], ref.qd[:samples], ref.qdd[:samples])
+
+
+def test_closed_loop_on_the_mujoco_plant_tracks_like_ours_and_is_deterministic(robot):
+    from vgtarm.app.cases import case_study
+    from vgtarm.simulation import simulate
+
+    ref = _short(robot, 1, 300)
+    cfc = case_study(1).controller("cfc")
+    runs = [simulate(robot, ref, cfc, plant_engine="mujoco", seed=2) for _ in range(2)]
+    np.testing.assert_array_equal(runs[0].q, runs[1].q)
+    assert runs[0].metadata["plant_engine"] == "mujoco"
+    ours = simulate(robot, ref, cfc, integrator="semi_implicit_euler", substeps=50, seed=2)
+    assert abs(runs[0].summary()["max_tip_error_m"] / ours.summary()["max_tip_error_m"] - 1) < 0.05
+
+
+def test_unstable_gains_diverge_on_the_mujoco_plant_with_the_same_clear_error(robot):
+    from vgtarm.simulation import simulate
+
+    ref = _short(robot, 2, 200)
+    unstable = ComputedForceControl.with_gains(15000.0, -600.0)
+    messages = []
+    for engine in ("model", "mujoco"):
+        with pytest.raises(vgtarm.SimulationError, match=r"diverged at t = .* s \(sample \d+ of 200\)") as info:
+            simulate(robot, ref, unstable, plant_engine=engine)
+        messages.append(str(info.value))
+    assert all("\n" not in m for m in messages)
+
+
+def test_a_bad_plant_engine_is_refused(robot):
+    from vgtarm.simulation import simulate
+
+    with pytest.raises(vgtarm.InputError, match="plant_engine = 'gazebo'"):
+        simulate(robot, _short(robot, 1, 10), ComputedForceControl.with_gains(1.0, 1.0), plant_engine="gazebo")

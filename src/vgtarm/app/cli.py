@@ -107,6 +107,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                 encoder_resolution=args.encoder_resolution,
                 velocity_noise=args.velocity_noise,
                 velocity_filter_hz=args.velocity_filter,
+                plant_engine=args.plant,
             )
         except SimulationError as exc:
             if args.out is not None and exc.result is not None:
@@ -377,6 +378,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--duration", type=_positive_float, default=None, metavar="S", help="run only the first S seconds of the path"
     )
     _add_observer_options(simulate)
+    simulate.add_argument(
+        "--plant",
+        choices=("model", "mujoco"),
+        default="model",
+        help="what integrates the robot: our model (default) or MuJoCo on the exported MJCF (vgtarm[mujoco])",
+    )
 
     simulate.add_argument(
         "--out", type=Path, default=None, metavar="DIR", help="write summary.json, the time series and a figure here"

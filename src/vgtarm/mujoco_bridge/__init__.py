@@ -1,9 +1,9 @@
-"""MuJoCo bridge (issue 11, in progress): the robot exported as MJCF and loaded in MuJoCo.
-
-Built so far: the export (:func:`to_mjcf`) and the mapping of our joint states onto MuJoCo's
-(:class:`MujocoRobot`), checked against our model. Not built yet: the cross-validation command
-and MuJoCo as the plant of the closed loop. See ``docs/mujoco.md`` for what MuJoCo can and
-cannot match. MuJoCo is the optional extra ``vgtarm[mujoco]``; nothing else imports this package.
+"""MuJoCo bridge: the robot exported as MJCF (:func:`to_mjcf`), loaded in MuJoCo with our joint
+states mapped onto MuJoCo's (:mod:`.model`), cross-checked against our dynamics (:mod:`.check`),
+and stepped by MuJoCo as the plant of our closed loop (:mod:`.plant`,
+``simulate(..., plant_engine="mujoco")``). See ``docs/mujoco.md`` for what MuJoCo can and cannot
+match. MuJoCo is the optional extra ``vgtarm[mujoco]``; the simulator loads this package only
+when asked for the MuJoCo plant.
 """
 
 from .export import to_mjcf

@@ -49,6 +49,9 @@ from .reference import HasJointReference, JointReference
 from .result import MODE_FIXED, MODE_GA, MODE_NOT_RUN, GAActivation, SimulationResult
 from .sensing import DEFAULT_VELOCITY_FILTER_HZ, sensing_settings
 
+#: What integrates the plant: our model (compiled loop or its NumPy twin) or MuJoCo on the exported model.
+PLANT_ENGINES = ("model", "mujoco")
+
 #: Integrators by name.
 INTEGRATORS: dict[str, str] = {
     "euler": "explicit Euler at the control period (the paper's)",
@@ -87,6 +90,7 @@ def simulate(
     twist_resolution: float | None = None,
     velocity_noise: float = 0.0,
     velocity_filter_hz: float = DEFAULT_VELOCITY_FILTER_HZ,
+    plant_engine: str = "model",
     transient_s: float = 0.2,
     metadata: Mapping[str, Any] | None = None,
     progress: Progress | None = None,
@@ -103,6 +107,9 @@ def simulate(
         seed: seeds the disturbance and the genetic algorithm; the same seed gives the same run.
         initial_state: ``(q0, qd0)``; default: at rest at ``q_d(0)`` (the paper's start).
         limit_tolerance: distance (m, rad) outside a joint limit at which the run is stopped.
+        plant_engine: ``"model"`` (our equations: the compiled loop or its NumPy twin) or
+            ``"mujoco"``: the exported MJCF model stepped by MuJoCo (``vgtarm[mujoco]``; see
+            :mod:`vgtarm.mujoco_bridge.plant`).
         observer: ``"none"`` or ``"momentum"``: computed force control subtracts the estimate of a
             generalised-momentum disturbance observer with gain ``observer_gain`` (K_O, 1/s,
             default 0.5/dt; the estimate follows the external efforts as ``1 - exp(-K_O t)``; at
@@ -123,6 +130,8 @@ def simulate(
         SimulationError: the run diverged; ``error.result`` holds the samples up to then.
         InputError: a bad argument (the message names it).
     """
+    if plant_engine not in PLANT_ENGINES:
+        raise InputError(f"plant_engine = {plant_engine!r}: expected one of {list(PLANT_ENGINES)}")
     if integrator not in INTEGRATORS:
         raise InputError(f"integrator = {integrator!r}: expected one of {sorted(INTEGRATORS)}")
     if not (isinstance(substeps, int) and substeps >= 1):
@@ -170,7 +179,13 @@ def simulate(
         velocity_noise=noise,
     )
     loop: ClosedLoopDriver | PythonLoop
-    if isinstance(plant.backend, CompiledBackend) and isinstance(model.backend, CompiledBackend):
+    if plant_engine == "mujoco":
+        from ..mujoco_bridge.model import require_mujoco
+        from ..mujoco_bridge.plant import MujocoLoop  # the optional bridge, loaded only when asked for
+
+        require_mujoco()
+        loop = MujocoLoop(plant, model)
+    elif isinstance(plant.backend, CompiledBackend) and isinstance(model.backend, CompiledBackend):
         loop = ClosedLoopDriver(plant.backend)
     else:
         loop = PythonLoop(plant, model)
@@ -262,6 +277,7 @@ def simulate(
         "controller_model": model.parameters.name,
         "plant": plant.parameters.name,
         "backend": plant.backend.kind,
+        "plant_engine": plant_engine,
         **sensing.metadata(),
     }
     if isinstance(controller, SwitchingControl):
