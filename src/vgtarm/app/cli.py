@@ -78,6 +78,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from .plotting import comparison_figure, save_figure
 
     robot = load_robot(args.config)
+    if args.plant == "mujoco":
+        from .. import mujoco_bridge  # noqa: F401  (registers the MuJoCo plant)
     model = robot.parameters.scaled(mass=args.model_mass, inertia=args.model_inertia, friction=args.model_friction)
     exact_model = (args.model_mass, args.model_inertia, args.model_friction) == (1.0, 1.0, 1.0)
     with tqdm(total=100, desc=f"case {args.case} {args.controller}", unit="%", disable=args.quiet, leave=False) as bar:

@@ -1,11 +1,21 @@
 """MuJoCo bridge: the robot exported as MJCF (:func:`to_mjcf`), loaded in MuJoCo with our joint
 states mapped onto MuJoCo's (:mod:`.model`), cross-checked against our dynamics (:mod:`.check`),
 and stepped by MuJoCo as the plant of our closed loop (:mod:`.plant`,
-``simulate(..., plant_engine="mujoco")``). See ``docs/mujoco.md`` for what MuJoCo can and cannot
-match. MuJoCo is the optional extra ``vgtarm[mujoco]``; the simulator loads this package only
-when asked for the MuJoCo plant.
+``simulate(..., plant_engine="mujoco")``, registered when this package is imported). See
+``docs/mujoco.md`` for what MuJoCo can and cannot match. MuJoCo is the optional extra
+``vgtarm[mujoco]``; importing this package does not need it, using it does.
 """
 
+from ..model.robot import Robot
+from ..simulation.simulator import register_plant_engine
 from .export import to_mjcf
+from .plant import MujocoLoop
 
-__all__ = ["to_mjcf"]
+
+def _mujoco_plant(plant: Robot, model: Robot) -> MujocoLoop:
+    return MujocoLoop(plant, model)
+
+
+register_plant_engine("mujoco", _mujoco_plant)
+
+__all__ = ["MujocoLoop", "to_mjcf"]

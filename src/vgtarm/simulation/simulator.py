@@ -49,8 +49,17 @@ from .reference import HasJointReference, JointReference
 from .result import MODE_FIXED, MODE_GA, MODE_NOT_RUN, GAActivation, SimulationResult
 from .sensing import DEFAULT_VELOCITY_FILTER_HZ, sensing_settings
 
-#: What integrates the plant: our model (compiled loop or its NumPy twin) or MuJoCo on the exported model.
-PLANT_ENGINES = ("model", "mujoco")
+#: Plants other than our own model, by name: ``factory(plant, controller_model)`` returns a loop
+#: with the interface of :class:`PythonLoop`. Packages above this layer register themselves
+#: (``import vgtarm.mujoco_bridge`` adds ``"mujoco"``), so the simulator never imports them.
+PLANT_ENGINES: dict[str, Callable[[Robot, Robot], PythonLoop]] = {}
+
+
+def register_plant_engine(name: str, factory: Callable[[Robot, Robot], PythonLoop]) -> None:
+    """Make ``simulate(..., plant_engine=name)`` run its loop on the plant ``factory`` builds."""
+    if not isinstance(name, str) or not name or name == "model":
+        raise InputError(f"plant engine name {name!r}: expected a name other than 'model'")
+    PLANT_ENGINES[name] = factory
 
 #: Integrators by name.
 INTEGRATORS: dict[str, str] = {
@@ -107,9 +116,9 @@ def simulate(
         seed: seeds the disturbance and the genetic algorithm; the same seed gives the same run.
         initial_state: ``(q0, qd0)``; default: at rest at ``q_d(0)`` (the paper's start).
         limit_tolerance: distance (m, rad) outside a joint limit at which the run is stopped.
-        plant_engine: ``"model"`` (our equations: the compiled loop or its NumPy twin) or
-            ``"mujoco"``: the exported MJCF model stepped by MuJoCo (``vgtarm[mujoco]``; see
-            :mod:`vgtarm.mujoco_bridge.plant`).
+        plant_engine: ``"model"`` (our equations: the compiled loop or its NumPy twin) or a
+            registered engine, such as ``"mujoco"`` after ``import vgtarm.mujoco_bridge``: the
+            exported MJCF model stepped by MuJoCo (``vgtarm[mujoco]``).
         observer: ``"none"`` or ``"momentum"``: computed force control subtracts the estimate of a
             generalised-momentum disturbance observer with gain ``observer_gain`` (K_O, 1/s,
             default 0.5/dt; the estimate follows the external efforts as ``1 - exp(-K_O t)``; at
@@ -130,8 +139,11 @@ def simulate(
         SimulationError: the run diverged; ``error.result`` holds the samples up to then.
         InputError: a bad argument (the message names it).
     """
-    if plant_engine not in PLANT_ENGINES:
-        raise InputError(f"plant_engine = {plant_engine!r}: expected one of {list(PLANT_ENGINES)}")
+    if plant_engine != "model" and plant_engine not in PLANT_ENGINES:
+        raise InputError(
+            f"plant_engine = {plant_engine!r}: expected 'model' or a registered engine {sorted(PLANT_ENGINES)}"
+            " (the MuJoCo plant registers with `import vgtarm.mujoco_bridge`, pip install 'vgtarm[mujoco]')"
+        )
     if integrator not in INTEGRATORS:
         raise InputError(f"integrator = {integrator!r}: expected one of {sorted(INTEGRATORS)}")
     if not (isinstance(substeps, int) and substeps >= 1):
@@ -179,12 +191,8 @@ def simulate(
         velocity_noise=noise,
     )
     loop: ClosedLoopDriver | PythonLoop
-    if plant_engine == "mujoco":
-        from ..mujoco_bridge.model import require_mujoco
-        from ..mujoco_bridge.plant import MujocoLoop  # the optional bridge, loaded only when asked for
-
-        require_mujoco()
-        loop = MujocoLoop(plant, model)
+    if plant_engine != "model":
+        loop = PLANT_ENGINES[plant_engine](plant, model)
     elif isinstance(plant.backend, CompiledBackend) and isinstance(model.backend, CompiledBackend):
         loop = ClosedLoopDriver(plant.backend)
     else:
