@@ -52,7 +52,12 @@ def cross_validate(robot: Robot, n: int = 1000, seed: int = 0, bridge: MujocoRob
         note("tip position (m)", np.linalg.norm(mj.tip() - fk.tip))
         note("orientation (max element)", np.abs(mj.rotation() - fk.rotation).max())
         M = robot.mass_matrix(q)
-        note("mass matrix M (relative)", np.linalg.norm(mj.mass_matrix(q) - M) / np.linalg.norm(M))
+        M_mj = mj.mass_matrix(q)
+        note("mass matrix M (relative)", np.linalg.norm(M_mj - M) / np.linalg.norm(M))
+        # bias forces (velocity products, gravity, friction): C = -M qdd at zero effort
+        C = robot.bias_forces(q, qd)
+        C_mj = -(M_mj @ mj.forward_dynamics(q, qd, zero))
+        note("bias forces C, moving (relative)", np.linalg.norm(C_mj - C) / np.linalg.norm(C))
         for label, v, effort, force in (
             ("forward dynamics at rest, gravity only", zero, zero, None),
             ("forward dynamics at rest, efforts", zero, F, None),
