@@ -233,18 +233,44 @@ static double pairwise_sum(const double *a, long n)
 
 static inline double clean_cost(double c) { return isfinite(c) ? c : INFINITY; }
 
-/* Indices of cost in ascending order, ties in index order (a stable insertion sort). */
+/* Indices of cost in ascending order, ties in index order: a bottom-up merge sort of (cost,
+ * index) pairs, so the order is the same as any stable sort's. */
+typedef struct {
+    double cost;
+    long index;
+} keyed;
+
 static void stable_order(long n, const double *cost, long *order)
 {
-    for (long i = 0; i < n; ++i) {
-        long j = i;
-        double c = clean_cost(cost[i]);
-        while (j > 0 && clean_cost(cost[order[j - 1]]) > c) {
-            order[j] = order[j - 1];
-            --j;
+    keyed small[2 * 64];
+    keyed *a = n <= 64 ? small : malloc(sizeof(keyed) * 2 * (size_t)n);
+    if (!a) { /* no memory for the merge: an insertion sort in place */
+        for (long i = 0; i < n; ++i) {
+            long j = i;
+            while (j > 0 && clean_cost(cost[order[j - 1]]) > clean_cost(cost[i])) {
+                order[j] = order[j - 1];
+                --j;
+            }
+            order[j] = i;
         }
-        order[j] = i;
+        return;
     }
+    keyed *b = a + n;
+    for (long i = 0; i < n; ++i) a[i] = (keyed){clean_cost(cost[i]), i};
+    for (long width = 1; width < n; width *= 2) {
+        for (long lo = 0; lo < n; lo += 2 * width) {
+            long mid = lo + width < n ? lo + width : n, hi = lo + 2 * width < n ? lo + 2 * width : n;
+            long i = lo, j = mid, k = lo;
+            while (i < mid && j < hi) b[k++] = a[j].cost < a[i].cost ? a[j++] : a[i++];
+            while (i < mid) b[k++] = a[i++];
+            while (j < hi) b[k++] = a[j++];
+        }
+        keyed *t = a;
+        a = b;
+        b = t;
+    }
+    for (long i = 0; i < n; ++i) order[i] = a[i].index;
+    if (n > 64) free(a < b ? a : b);
 }
 
 /* Rank weights 1/sqrt(r), r = 1..n. */
@@ -341,17 +367,16 @@ typedef struct {
     float *r, *s;        /* (H, nj) reference residuals of the Euler steps                        */
     float *jac_f;        /* (H+1, 3, nj) tip Jacobian of the window                               */
     float *off_f;        /* (H+1, 3) tip offsets of the window                                    */
-    int n_jac[3];        /* joints l with a nonzero J[k][l] anywhere in the window, per tip axis k  */
-    int *jac;            /* (3, nj) their indices                                                  */
-    int n_pairs;         /* pairs l <= m with a nonzero H[k][l][m] for some k in the window         */
-    int *pair;           /* (n_pairs, 2) the pairs                                                 */
-    int n_hes[3];        /* per axis k, the pairs (index into pair) with a nonzero H[k]             */
-    int *hes;            /* (3, n_pairs) their indices                                             */
-    float *coef;         /* (H, 3, n_pairs) -H[k][l][m] (-H/2 on the diagonal) per step and axis    */
+    float *coef;         /* (H, 3, nj, nj) -H[k][l][m] for m > l, -H/2 for m = l (0 below), per step  */
+    unsigned char *row_used; /* (3, nj) row l of axis k has a nonzero coefficient somewhere in the window */
     long exact_candidates, exact_steps; /* work counters of the trust-region fallback              */
     vf *K;               /* (2 nj^2) gains of the block, one lane per candidate                     */
     float *lut;          /* 8-bit genes: the decoded value of each code, one table per distinct     */
     int *table_of;       /*   pair of bounds (table_of[gene]), or NULL                               */
+    int *lut_offset;     /* (whole words of genes) 256 * table_of[gene], 0 past the last gene         */
+    int avx2;            /* the CPU gathers (decode_words)                                           */
+    long row_length;     /* genes rounded up to whole blocks                                         */
+    float *rowbuf;       /* (BLOCK, row_length) decoded genes of a block's candidates                */
     float *far;          /* (BLOCK H, nj) predicted joint errors of the steps outside the region     */
     long *far_at;        /* (BLOCK H) their lane * H + step                                         */
     const double **arg;  /* work arrays of the generated tip function                               */
@@ -367,21 +392,6 @@ typedef struct {
  * the fitness by about 1e-7 relative (measured in docs/control.md), far below what the GA's
  * ranking resolves; the sums of squares are completed in double. */
 
-/* sum_e coef[idx[e]] * value[idx[e]] over a list, in four independent sums (FMA latency) */
-static inline __attribute__((always_inline)) vf list_dot(int n, const int *idx, const float *coef, const vf *value)
-{
-    vf s0 = {0.0f}, s1 = {0.0f}, s2 = {0.0f}, s3 = {0.0f};
-    int e = 0;
-    for (; e + 4 <= n; e += 4) {
-        s0 += coef[idx[e]] * value[idx[e]];
-        s1 += coef[idx[e + 1]] * value[idx[e + 1]];
-        s2 += coef[idx[e + 2]] * value[idx[e + 2]];
-        s3 += coef[idx[e + 3]] * value[idx[e + 3]];
-    }
-    for (; e < n; ++e) s0 += coef[idx[e]] * value[idx[e]];
-    return (s0 + s1) + (s2 + s3);
-}
-
 static inline __attribute__((always_inline)) void block_kernel(const predictor *restrict x, const int nj, int count,
                                                                const vf *restrict K, double *restrict sum,
                                                                float *restrict far, long *restrict far_at,
@@ -395,17 +405,17 @@ static inline __attribute__((always_inline)) void block_kernel(const predictor *
     /* no trust region: an infinite radius */
     const vf limit2 = zero + (x->exact_above2 > 0.0 ? (float)x->exact_above2 : INFINITY);
     vf total = zero;
-    for (int i = 0; i < nj; ++i) {
+    _Pragma("GCC unroll 16") for (int i = 0; i < nj; ++i) {
         E[i] = zero + (float)(pb->q_d[i] - pb->q0[i]);
         Ed[i] = zero + (float)(pb->qd_d[i] - pb->qd0[i]);
     }
     for (long j = 0; j < x->horizon; ++j) {
         /* a = Kp E + Kv Ed, two rows at a time with four independent sums (FMA latency) */
         int i = 0;
-        for (; i + 1 < nj; i += 2) {
+        _Pragma("GCC unroll 16") for (; i + 1 < nj; i += 2) {
             const vf *kp0 = K + i * nj, *kv0 = K + nn + i * nj, *kp1 = kp0 + nj, *kv1 = kv0 + nj;
             vf p0 = kp0[0] * E[0], v0 = kv0[0] * Ed[0], p1 = kp1[0] * E[0], v1 = kv1[0] * Ed[0];
-            for (int l = 1; l < nj; ++l) {
+            _Pragma("GCC unroll 16") for (int l = 1; l < nj; ++l) {
                 p0 += kp0[l] * E[l];
                 v0 += kv0[l] * Ed[l];
                 p1 += kp1[l] * E[l];
@@ -414,10 +424,10 @@ static inline __attribute__((always_inline)) void block_kernel(const predictor *
             a[i] = p0 + v0;
             a[i + 1] = p1 + v1;
         }
-        for (; i < nj; ++i) {
+        _Pragma("GCC unroll 16") for (; i < nj; ++i) {
             const vf *kp = K + i * nj, *kv = K + nn + i * nj;
             vf p0 = kp[0] * E[0], v0 = kv[0] * Ed[0];
-            for (int l = 1; l < nj; ++l) {
+            _Pragma("GCC unroll 16") for (int l = 1; l < nj; ++l) {
                 p0 += kp[l] * E[l];
                 v0 += kv[l] * Ed[l];
             }
@@ -425,42 +435,46 @@ static inline __attribute__((always_inline)) void block_kernel(const predictor *
         }
         const float *r = x->r + j * nj, *s = x->s + j * nj;
         vf norm2 = zero;
-        for (int i = 0; i < nj; ++i) {
+        _Pragma("GCC unroll 16") for (int i = 0; i < nj; ++i) {
             E[i] = E[i] + dt * Ed[i] + r[i];
             Ed[i] = Ed[i] - dt * a[i] + s[i];
             norm2 += E[i] * E[i];
         }
         const float *J = x->jac_f + (j + 1) * 3 * nj, *off = x->off_f + (j + 1) * 3;
-        vf t0 = zero + off[0], t1 = zero + off[1], t2 = zero + off[2];
-        /* first order: t_k += J[k][l] E_l over the structurally nonzero entries */
-        t0 += list_dot(x->n_jac[0], x->jac, J, E);
-        t1 += list_dot(x->n_jac[1], x->jac + nj, J + nj, E);
-        t2 += list_dot(x->n_jac[2], x->jac + 2 * nj, J + 2 * nj, E);
+        vf t[3];
+        _Pragma("GCC unroll 3") for (int k = 0; k < 3; ++k) t[k] = zero + off[k];
+        /* first order: t_k += J[k][l] E_l (dense: with the joint count known at compile time the
+         * errors stay in registers, which beats skipping the structural zeros through index lists) */
+        _Pragma("GCC unroll 16") for (int l = 0; l < nj; ++l)
+            _Pragma("GCC unroll 3") for (int k = 0; k < 3; ++k) t[k] += J[k * nj + l] * E[l];
         if (x->quadratic) {
-            /* second order: t_k -= E^T H_k E / 2, over the nonzero pairs l <= m (H symmetric) */
-            const int np = x->n_pairs;
-            vf P[np > 0 ? np : 1];
-            for (int e = 0; e < np; ++e) P[e] = E[x->pair[2 * e]] * E[x->pair[2 * e + 1]];
-            const float *coef = x->coef + j * 3 * np;
-            t0 += list_dot(x->n_hes[0], x->hes, coef, P);
-            t1 += list_dot(x->n_hes[1], x->hes + np, coef + np, P);
-            t2 += list_dot(x->n_hes[2], x->hes + 2 * np, coef + 2 * np, P);
+            /* second order: t_k -= E^T H_k E / 2 = sum_l E_l sum_{m >= l} coef[k][l][m] E_m, skipping
+             * the rows that are zero over the whole window (the same rows at every step) */
+            const float *coef = x->coef + j * 3 * nn;
+            _Pragma("GCC unroll 3") for (int k = 0; k < 3; ++k)
+                _Pragma("GCC unroll 16") for (int l = 0; l < nj; ++l) {
+                    if (!x->row_used[k * nj + l]) continue;
+                    const float *c = coef + k * nn + l * nj;
+                    vf u = c[l] * E[l];
+                    _Pragma("GCC unroll 16") for (int m = l + 1; m < nj; ++m) u += c[m] * E[m];
+                    t[k] += u * E[l];
+                }
         }
         /* steps inside the trust region add their squared tip error; the others are recorded for
          * the exact forward kinematics (a NaN error stays inside and makes the cost infinite) */
         const vi outside = norm2 > limit2;
-        total += (vf)((vi)(t0 * t0 + t1 * t1 + t2 * t2) & ~outside);
+        total += (vf)((vi)(t[0] * t[0] + t[1] * t[1] + t[2] * t[2]) & ~outside);
         int any = 0;
-        for (int c = 0; c < BLOCK; ++c) any |= outside[c];
+        _Pragma("GCC unroll 16") for (int c = 0; c < BLOCK; ++c) any |= outside[c];
         if (any)
-            for (int c = 0; c < count; ++c)
+            _Pragma("GCC unroll 16") for (int c = 0; c < count; ++c)
                 if (outside[c]) {
                     long f = (*n_far)++;
                     far_at[f] = (long)c * x->horizon + j;
-                    for (int i = 0; i < nj; ++i) far[f * nj + i] = E[i][c];
+                    _Pragma("GCC unroll 16") for (int i = 0; i < nj; ++i) far[f * nj + i] = E[i][c];
                 }
     }
-    for (int c = 0; c < BLOCK; ++c) sum[c] = (double)total[c];
+    _Pragma("GCC unroll 16") for (int c = 0; c < BLOCK; ++c) sum[c] = (double)total[c];
 }
 
 /* The kernel with the joint count known at compile time for the common sizes (the loops unroll
@@ -488,18 +502,74 @@ static void gains_from_genes(int n_genes, int count, const double *genes, vf *K)
         for (int gi = 0; gi < n_genes; ++gi) K[gi][c] = (float)genes[(long)c * n_genes + gi];
 }
 
-/* Lane `lane` of K from the bit string of one candidate of 8-bit genes, through the decoded
- * values of every code (decode_with's arithmetic, rounded to float). The codes are the bytes of
- * the string, most significant first within each 64-bit word. */
-static void gains_from_table(const predictor *x, int n_genes, int lane, const uint64_t *bits)
+/* Words `first .. last` (exclusive) of one candidate of 8-bit genes decoded into `out` (8 genes a
+ * word) through the decoded value of every code (decode_with's arithmetic, rounded to float): gene
+ * gi's value is lut[offset[gi] + code], its code the gi-th byte of the string, most significant
+ * first within each 64-bit word. `offset` is padded to whole words, `out` to whole words too. */
+static void decode_words_scalar(const float *lut, const int *offset, int first, int last, const uint64_t *bits,
+                                float *out)
 {
-#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
-    const unsigned char *bytes = (const unsigned char *)bits;
-    for (int gi = 0; gi < n_genes; ++gi) x->K[gi][lane] = x->lut[x->table_of[gi] * 256 + bytes[gi ^ 7]];
-#else
-    for (int gi = 0; gi < n_genes; ++gi)
-        x->K[gi][lane] = x->lut[x->table_of[gi] * 256 + ((bits[gi >> 3] >> (56 - 8 * (gi & 7))) & 0xFFu)];
+    for (int w = first; w < last; ++w) {
+        uint64_t word = bits[w];
+        for (int b = 0; b < 8; ++b) out[8 * w + b] = lut[offset[8 * w + b] + (int)((word >> (56 - 8 * b)) & 0xFFu)];
+    }
+}
+
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+__attribute__((target("avx2"))) static void decode_words_avx2(const float *lut, const int *offset, int first,
+                                                               int last, const uint64_t *bits, float *out)
+{
+    for (int w = first; w < last; ++w) {
+        /* the word's bytes, most significant first, as 8 indices */
+        __m128i bytes = _mm_cvtsi64_si128((long long)__builtin_bswap64(bits[w]));
+        __m256i index = _mm256_add_epi32(_mm256_cvtepu8_epi32(bytes), _mm256_loadu_si256((const __m256i *)(offset + 8 * w)));
+        _mm256_storeu_ps(out + 8 * w, _mm256_i32gather_ps(lut, index, 4));
+    }
+}
 #endif
+
+static void decode_words(const predictor *x, int first, int last, const uint64_t *bits, float *out)
+{
+#if defined(__x86_64__) && defined(__GNUC__)
+    if (x->avx2) {
+        decode_words_avx2(x->lut, x->lut_offset, first, last, bits, out);
+        return;
+    }
+#endif
+    decode_words_scalar(x->lut, x->lut_offset, first, last, bits, out);
+}
+
+/* K of a block from up to BLOCK rows of decoded float genes (each padded to a multiple of BLOCK
+ * genes): 8 x 8 transposes, genes of 8 candidates to 8 lanes of each gene. */
+static void gains_from_rows(int n_genes, int count, const float *const *rows, vf *K)
+{
+    const vf zero = {0.0f};
+    for (int g0 = 0; g0 < n_genes; g0 += BLOCK) {
+        vf r[BLOCK];
+        for (int c = 0; c < BLOCK; ++c) {
+            if (c < count)
+                memcpy(&r[c], rows[c] + g0, sizeof(vf));
+            else
+                r[c] = zero;
+        }
+        vf t[BLOCK], u[BLOCK], o[BLOCK];
+        for (int c = 0; c < BLOCK; c += 2) {
+            t[c] = __builtin_shufflevector(r[c], r[c + 1], 0, 8, 1, 9, 4, 12, 5, 13);
+            t[c + 1] = __builtin_shufflevector(r[c], r[c + 1], 2, 10, 3, 11, 6, 14, 7, 15);
+        }
+        for (int c = 0; c < BLOCK; c += 4)
+            for (int h = 0; h < 2; ++h) {
+                u[c + 2 * h] = __builtin_shufflevector(t[c + h], t[c + h + 2], 0, 1, 8, 9, 4, 5, 12, 13);
+                u[c + 2 * h + 1] = __builtin_shufflevector(t[c + h], t[c + h + 2], 2, 3, 10, 11, 6, 7, 14, 15);
+            }
+        for (int i = 0; i < 4; ++i) {
+            o[i] = __builtin_shufflevector(u[i], u[i + 4], 0, 1, 2, 3, 8, 9, 10, 11);
+            o[i + 4] = __builtin_shufflevector(u[i], u[i + 4], 4, 5, 6, 7, 12, 13, 14, 15);
+        }
+        int n = n_genes - g0 < BLOCK ? n_genes - g0 : BLOCK;
+        for (int i = 0; i < n; ++i) K[g0 + i] = o[i];
+    }
 }
 
 /* Exact prediction of the candidates listed in `which` (all when which is NULL). */
@@ -542,11 +612,14 @@ static int predict(const vgt_model *m, const vgt_settings *s, const vgt_ga_setti
         int seen[BLOCK] = {0};
         if (genes) {
             gains_from_genes(g->n_genes, count, genes + c * g->n_genes, x->K);
-        } else {
-            const vf zero = {0.0f};
-            if (count < BLOCK) /* lanes without a candidate predict with zero gains, unused */
-                for (int gi = 0; gi < g->n_genes; ++gi) x->K[gi] = zero;
-            for (int k = 0; k < count; ++k) gains_from_table(x, g->n_genes, k, rows[c + k]);
+        } else { /* decoded rows, transposed; lanes without a candidate get zero gains, unused */
+            const float *decoded[BLOCK];
+            for (int k = 0; k < count; ++k) {
+                float *row = x->rowbuf + (long)k * x->row_length;
+                decode_words(x, 0, x->row_length / 8, rows[c + k], row);
+                decoded[k] = row;
+            }
+            gains_from_rows(g->n_genes, count, decoded, x->K);
         }
         predict_block(x, count, x->K, sum, x->far, x->far_at, &n_far);
         /* the steps outside the trust region: the exact forward kinematics of the predicted joints */
@@ -586,9 +659,7 @@ static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *
     x->s = malloc(sizeof(float) * (size_t)(g->horizon * nj + 1));
     x->jac_f = malloc(sizeof(float) * (size_t)((g->horizon + 1) * 3 * nj));
     x->off_f = malloc(sizeof(float) * (size_t)((g->horizon + 1) * 3));
-    x->jac = malloc(sizeof(int) * (size_t)(3 * nj));
-    x->pair = malloc(sizeof(int) * (size_t)(nj * (nj + 1) + 2));
-    x->hes = malloc(sizeof(int) * (size_t)(3 * nj * (nj + 1) / 2 + 3));
+    x->row_used = calloc((size_t)(3 * nj), 1);
     x->coef = NULL;
     x->K = aligned_alloc(sizeof(vf), sizeof(vf) * (size_t)(2 * nj * nj));
     x->lut = NULL;
@@ -597,7 +668,8 @@ static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *
         /* decode_with's arithmetic for every code, once per distinct pair of bounds */
         x->table_of = malloc(sizeof(int) * (size_t)g->n_genes);
         x->lut = malloc(sizeof(float) * 256 * (size_t)g->n_genes);
-        if (!x->table_of || !x->lut) return VGT_NO_MEMORY;
+        x->lut_offset = calloc((size_t)(g->n_genes + 8), sizeof(int));
+        if (!x->table_of || !x->lut || !x->lut_offset) return VGT_NO_MEMORY;
         int tables = 0;
         for (int gi = 0; gi < g->n_genes; ++gi) {
             int t = 0;
@@ -614,6 +686,13 @@ static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *
             }
             ++tables;
         }
+        for (int gi = 0; gi < g->n_genes; ++gi) x->lut_offset[gi] = 256 * x->table_of[gi];
+        x->row_length = ((long)g->n_genes + BLOCK - 1) / BLOCK * BLOCK;
+        x->rowbuf = malloc(sizeof(float) * (size_t)(BLOCK * x->row_length));
+        if (!x->rowbuf) return VGT_NO_MEMORY;
+#if defined(__x86_64__) && defined(__GNUC__)
+        x->avx2 = __builtin_cpu_supports("avx2");
+#endif
     }
     x->far = malloc(sizeof(float) * (size_t)(BLOCK * (g->horizon + 1) * nj));
     x->far_at = malloc(sizeof(long) * (size_t)(BLOCK * (g->horizon + 1)));
@@ -621,50 +700,24 @@ static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *
     x->res = malloc(sizeof(double *) * (size_t)(m->tip.sz_res > 1 ? m->tip.sz_res : 1));
     x->iw = malloc(sizeof(vgt_int) * (size_t)(m->tip.sz_iw + 1));
     x->w = malloc(sizeof(double) * (size_t)(m->tip.sz_w + 1));
-    if (!x->r || !x->s || !x->jac_f || !x->off_f || !x->jac || !x->pair || !x->hes || !x->K || !x->far || !x->far_at ||
+    if (!x->r || !x->s || !x->jac_f || !x->off_f || !x->row_used || !x->K || !x->far || !x->far_at ||
         !x->arg || !x->res || !x->iw || !x->w)
         return VGT_NO_MEMORY;
     if (g->prediction != VGT_PREDICT_EXACT) {
         for (long i = 0; i < (g->horizon + 1) * 3 * nj; ++i) x->jac_f[i] = (float)pb->J_d[i];
         for (long i = 0; i < (g->horizon + 1) * 3; ++i) x->off_f[i] = (float)pb->tip_offset[i];
-        /* structural sparsity of J and H over the window (e.g. the twist does not move the tip) */
-        const int nn = nj * nj;
-        for (int k = 0; k < 3; ++k) {
-            x->n_jac[k] = 0;
-            for (int l = 0; l < nj; ++l) {
-                int used = 0;
-                for (long j = 1; j <= g->horizon && !used; ++j) used = pb->J_d[(j * 3 + k) * nj + l] != 0.0;
-                if (used) x->jac[k * nj + x->n_jac[k]++] = l;
-            }
-        }
-        x->n_pairs = 0;
         if (x->quadratic) {
-            for (int l = 0; l < nj; ++l)
-                for (int m = l; m < nj; ++m) {
-                    int used = 0;
-                    for (long j = 1; j <= g->horizon && !used; ++j)
-                        for (int k = 0; k < 3 && !used; ++k) used = pb->H_d[(j * 3 + k) * nn + l * nj + m] != 0.0;
-                    if (used) {
-                        x->pair[2 * x->n_pairs] = l;
-                        x->pair[2 * x->n_pairs + 1] = m;
-                        ++x->n_pairs;
-                    }
-                }
-            const int np = x->n_pairs;
-            x->coef = malloc(sizeof(float) * (size_t)(g->horizon * 3 * np + 1));
+            const int nn = nj * nj;
+            x->coef = calloc((size_t)(g->horizon * 3 * nn + 1), sizeof(float));
             if (!x->coef) return VGT_NO_MEMORY;
-            for (int k = 0; k < 3; ++k) {
-                x->n_hes[k] = 0;
-                for (int e = 0; e < np; ++e) {
-                    int l = x->pair[2 * e], m = x->pair[2 * e + 1], used = 0;
-                    for (long j = 1; j <= g->horizon; ++j) {
-                        double h = pb->H_d[(j * 3 + k) * nn + l * nj + m];
-                        x->coef[((j - 1) * 3 + k) * np + e] = (float)((l == m ? -0.5 : -1.0) * h);
-                        used |= h != 0.0;
-                    }
-                    if (used) x->hes[k * np + x->n_hes[k]++] = e;
-                }
-            }
+            for (long j = 1; j <= g->horizon; ++j)
+                for (int k = 0; k < 3; ++k)
+                    for (int l = 0; l < nj; ++l)
+                        for (int m = l; m < nj; ++m) {
+                            double h = pb->H_d[(j * 3 + k) * nn + l * nj + m];
+                            x->coef[((j - 1) * 3 + k) * nn + l * nj + m] = (float)((l == m ? -0.5 : -1.0) * h);
+                            x->row_used[k * nj + l] |= h != 0.0;
+                        }
         }
     }
     for (long j = 0; j < g->horizon; ++j)
@@ -685,15 +738,15 @@ static void predictor_free(predictor *x)
     free(x->K);
     free(x->lut);
     free(x->table_of);
+    free(x->lut_offset);
+    free(x->rowbuf);
     free(x->far);
     free(x->far_at);
     free(x->arg);
     free(x->res);
     free(x->iw);
     free(x->w);
-    free(x->jac);
-    free(x->pair);
-    free(x->hes);
+    free(x->row_used);
     free(x->coef);
 }
 
@@ -743,6 +796,7 @@ int vgt_ga_activation(const vgt_model *m, const vgt_settings *s, const vgt_ga_se
     long *order = malloc(sizeof(long) * (size_t)P), *pool = malloc(sizeof(long) * (size_t)P);
     long *fresh = malloc(sizeof(long) * (size_t)P);
     const uint64_t **fresh_rows = malloc(sizeof(uint64_t *) * (size_t)P);
+    const int from_bytes = g->n_bits == 8 && g->prediction != VGT_PREDICT_EXACT;
     long max_flips = 64 + (long)(4.0 * g->p_mutation * (double)(C * L)) + 8 * (long)sqrt((double)C * L + 1.0);
     if (max_flips > C * L) max_flips = C * L;
     long *flips = malloc(sizeof(long) * (size_t)(max_flips + 1));
@@ -823,7 +877,6 @@ int vgt_ga_activation(const vgt_model *m, const vgt_settings *s, const vgt_ga_se
             else
                 fresh[n_fresh++] = i;
         }
-        const int from_bytes = g->n_bits == 8 && g->prediction != VGT_PREDICT_EXACT;
         for (long f = 0; f < n_fresh; ++f) {
             fresh_rows[f] = children + fresh[f] * W;
             if (!from_bytes)
