@@ -42,7 +42,7 @@ def test_fk_prints_the_tip(capsys):
     ("argv", "message"),
     [
         (["fk", "0.22", "0.3", "0.46", "0.28", "0.28", "0.37", "0"], "module 1 cannot be assembled"),
-        (["describe", "--config", "/nonexistent/robot.toml"], "configuration file not found"),
+        (["describe", "--config", "/nonexistent/robot.toml"], "/nonexistent/robot.toml: not found"),
     ],
 )
 def test_user_errors_are_one_line_and_exit_1(capsys, argv, message):

@@ -403,7 +403,7 @@ def test_from_csv_error_names_file(tmp_path):
 
 def test_from_csv_missing_file(tmp_path):
     missing = tmp_path / "nowhere.csv"
-    with pytest.raises(PathError, match=r"cannot read path file .*nowhere\.csv"):
+    with pytest.raises(PathError, match=r"path file .*nowhere\.csv: not found"):
         paths.from_csv(missing)
 
 

@@ -7,6 +7,36 @@ catch either. Messages name the field, the offending value and what was expected
 
 from __future__ import annotations
 
+#: Longest rendering of a user's value in a message (the rest is cut, saying how much).
+SHOWN_LENGTH = 60
+#: Longest message the command line prints (a last guard; messages should stay far below).
+MESSAGE_LENGTH = 400
+
+
+def escape(text: str) -> str:
+    """``text`` with control and other unprintable characters escaped (``\\x1b``), so that a
+    message can never drive the user's terminal."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
+
+
+def cut(text: str, limit: int = SHOWN_LENGTH) -> str:
+    """``text`` escaped and cut to about ``limit`` characters, saying how many were left off."""
+    text = escape(text)
+    if len(text) <= limit:
+        return text
+    return f"{text[:limit]}... ({len(text) - limit} more characters)"
+
+
+def shown(value: object, limit: int = SHOWN_LENGTH) -> str:
+    """A user's value as it appears in a message: its ``repr``, escaped and cut to ``limit``."""
+    try:
+        text = repr(value)
+    except Exception:  # a user's object whose repr fails still gets a message
+        text = f"<{type(value).__name__}>"
+    return cut(text, limit)
+
 
 class VgtarmError(Exception):
     """Base class of every error raised by vgtarm on purpose."""

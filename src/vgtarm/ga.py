@@ -47,7 +47,7 @@ from numbers import Integral, Real
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import InputError
+from .errors import InputError, shown
 
 __all__ = [
     "CostFunction",
@@ -66,6 +66,10 @@ CostFunction = Callable[[NDArray[np.float64]], ArrayLike]
 """A vectorised cost: (m, n_genes) decoded candidates -> (m,) costs to minimise."""
 
 _MAX_BITS = 32
+#: Largest population and number of generations (far beyond the paper's 50 and 50; bounds that
+#: keep a mistyped value from allocating the machine's memory or running for days).
+_MAX_POPULATION = 1_000_000
+_MAX_GENERATIONS = 1_000_000
 
 
 # ---------------------------------------------------------------------------------------------
@@ -105,10 +109,21 @@ def _as_rng(seed: object, name: str = "seed") -> np.random.Generator:
     return np.random.default_rng(int(seed))
 
 
+def _numbers(name: str, value: object) -> NDArray[np.float64]:
+    """``value`` as a float64 array; strings, objects and ``None`` are refused, not converted."""
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError, OverflowError):  # ragged nested lists
+        raise InputError(f"`{name}` must be an array of numbers, got {shown(value)}") from None
+    if arr.dtype.kind not in "iuf":
+        raise InputError(f"`{name}` must be an array of numbers, got {shown(value)}")
+    return arr.astype(np.float64, copy=False)
+
+
 def _check_bounds(lower: ArrayLike, upper: ArrayLike) -> tuple[NDArray[np.float64], ...]:
     """Validate gene bounds: 1-D, same non-zero length, finite, ``lower <= upper``."""
-    lo = np.asarray(lower, dtype=np.float64)
-    hi = np.asarray(upper, dtype=np.float64)
+    lo = _numbers("lower", lower)
+    hi = _numbers("upper", upper)
     for name, arr in (("lower", lo), ("upper", hi)):
         if arr.ndim != 1 or arr.size == 0:
             raise InputError(f"`{name}` must be a non-empty 1-D array, got shape {arr.shape}")
@@ -168,8 +183,8 @@ class GAOptions:
 
     def __post_init__(self) -> None:
         _check_int("n_bits", self.n_bits, 1, _MAX_BITS)
-        population = _check_int("population_size", self.population_size, 2)
-        _check_int("max_generations", self.max_generations, 0)
+        population = _check_int("population_size", self.population_size, 2, _MAX_POPULATION)
+        _check_int("max_generations", self.max_generations, 0, _MAX_GENERATIONS)
         _check_probability("crossover_probability", self.crossover_probability)
         _check_probability("mutation_probability", self.mutation_probability)
         _check_int("elite_count", self.elite_count, 0, population - 1)
@@ -293,7 +308,7 @@ def encode(values: ArrayLike, lower: ArrayLike, upper: ArrayLike, n_bits: int = 
     """
     n_bits = _check_int("n_bits", n_bits, 1, _MAX_BITS)
     lo, hi = _check_bounds(lower, upper)
-    arr = np.asarray(values, dtype=np.float64)
+    arr = _numbers("values", values)
     if arr.ndim < 1 or arr.shape[-1] != lo.shape[0]:
         raise InputError(f"`values` must have shape (..., {lo.shape[0]}), got {arr.shape}")
     if not np.all(np.isfinite(arr)):
@@ -474,7 +489,11 @@ def _mutate(bits: NDArray[np.uint8], probability: float, rng: np.random.Generato
 def _evaluate(cost: CostFunction, candidates: NDArray[np.float64]) -> NDArray[np.float64]:
     """Call ``cost`` on (m, n_genes) candidates; check it returns (m,) and sanitise non-finite."""
     m = candidates.shape[0]
-    values = np.asarray(cost(candidates), dtype=np.float64)
+    returned = cost(candidates)
+    try:
+        values = np.asarray(returned, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"`cost` must return ({m},) numbers, got {shown(returned)}") from None
     if values.shape != (m,):
         raise InputError(
             f"`cost` must return an array of shape ({m},) for a ({m}, {candidates.shape[1]}) "
@@ -496,7 +515,7 @@ def _initial_population(
     if initial is None:
         seeded = np.empty((0, length), dtype=np.uint8)
     else:
-        values = np.asarray(initial, dtype=np.float64)
+        values = _numbers("initial", initial)
         if values.ndim == 1:
             values = values[None, :]
         if values.ndim != 2 or values.shape[1] != n_genes:

@@ -16,6 +16,7 @@ Units are SI throughout: seconds, metres, m/s, m/s^2.
 from __future__ import annotations
 
 import csv
+import io
 import math
 import os
 from collections.abc import Callable, Sequence
@@ -27,7 +28,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline
 
-from .errors import PathError
+from .errors import PathError, cut, shown
+from .fileio import read_text_limited
 
 FloatArray = NDArray[np.float64]
 
@@ -36,6 +38,17 @@ _COUNT_TOLERANCE = 1e-9
 """Slack, in units of ``dt``, when counting how many samples fit in a duration."""
 _UNIFORM_RTOL = 1e-9
 """Relative tolerance, on ``dt``, for sample times to count as uniformly spaced."""
+MIN_DT = 1e-6
+"""Shortest sampling period and shortest time between given samples, s (a megahertz: far faster
+than any controller; shorter spacings only turn rounding into huge rates)."""
+MAX_SAMPLES = 10_000_000
+"""Most samples a path may have (80 MB per coordinate array; about 2.8 h at 1 ms)."""
+MAX_COORDINATE = 1e3
+"""Largest magnitude of a given position coordinate, m (the arm reaches less than a metre)."""
+MAX_TIME = 1e12
+"""Largest magnitude of a given sample time, s."""
+CSV_FILE_LIMIT = 64 * 2**20
+"""Largest path CSV file read, bytes (about 1.5 million rows)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,6 +89,8 @@ class Path:
         step = (t[-1] - t[0]) / (n - 1)
         if not step > 0.0:
             raise PathError(f"t must be strictly increasing, got t[0]={float(t[0])!r}, t[-1]={float(t[-1])!r}")
+        if not step >= MIN_DT:
+            raise PathError(f"t must be spaced by at least {MIN_DT:g} s, got dt={float(step)!r}")
         deviation = np.abs(t - (t[0] + np.arange(n) * step))
         worst = int(np.argmax(deviation))
         if deviation[worst] > _uniform_tolerance(step, t):
@@ -257,42 +272,48 @@ def from_csv(file: str | os.PathLike[str], dt: float | None = None, *, name: str
         A :class:`Path` sampled at ``t[0] + k*dt`` up to the last row's time.
 
     Raises:
-        PathError: The file cannot be read, or a header, row or value is invalid; the message
+        PathError: The file cannot be read (missing, a folder, not UTF-8 text, larger than
+            :data:`CSV_FILE_LIMIT` bytes), or a header, row or value is invalid; the message
             names the file and the line (1-based, the header being line 1).
     """
     label = os.fspath(file)
+    shown_label = shown(label, 200)
+    text = read_text_limited(file, CSV_FILE_LIMIT, "path file", error=PathError, encoding="utf-8-sig")
     try:
-        with open(file, newline="", encoding="utf-8-sig") as handle:
-            rows = _numbered_rows(csv.reader(handle))
-    except OSError as exc:
-        raise PathError(f"cannot read path file {label!r}: {exc.strerror or exc}") from exc
-    except (UnicodeDecodeError, csv.Error) as exc:
-        raise PathError(f"path file {label!r} is not a readable CSV text file: {exc}") from exc
+        rows = _numbered_rows(csv.reader(io.StringIO(text, newline="")))
+    except csv.Error as exc:
+        raise PathError(f"path file {shown_label} is not a readable CSV text file: {cut(str(exc), 120)}") from None
     if not rows:
-        raise PathError(f"path file {label!r} is empty; expected a header row t,x,y,z")
+        raise PathError(f"path file {shown_label} is empty; expected a header row t,x,y,z")
     header_line, header = rows[0]
     found = tuple(cell.strip().lower() for cell in header)
     if found != _CSV_COLUMNS:
         raise PathError(
-            f"path file {label!r}: line {header_line}: header must be the columns t,x,y,z, "
-            f"found {','.join(cell.strip() for cell in header)!r}"
+            f"path file {shown_label}: line {header_line}: header must be the columns t,x,y,z, "
+            f"found {shown(','.join(cell.strip() for cell in header))}"
         )
     if len(rows) < 3:
-        raise PathError(f"path file {label!r}: need at least 2 data rows after the header, got {len(rows) - 1}")
+        raise PathError(f"path file {shown_label}: need at least 2 data rows after the header, got {len(rows) - 1}")
+    if len(rows) - 1 > MAX_SAMPLES:
+        raise PathError(f"path file {shown_label}: {len(rows) - 1} data rows; at most {MAX_SAMPLES:,} are read")
     data = np.empty((len(rows) - 1, 4))
     lines = []
     for k, (line, row) in enumerate(rows[1:]):
         if len(row) != len(_CSV_COLUMNS):
-            raise PathError(f"path file {label!r}: line {line}: expected 4 fields (t,x,y,z), found {len(row)}: {row!r}")
+            raise PathError(
+                f"path file {shown_label}: line {line}: expected 4 fields (t,x,y,z), found {len(row)}: {shown(row)}"
+            )
         for j, (column, cell) in enumerate(zip(_CSV_COLUMNS, row, strict=True)):
             try:
                 data[k, j] = float(cell)
             except ValueError:
                 raise PathError(
-                    f"path file {label!r}: line {line}, column {column!r}: {cell.strip()!r} is not a number"
+                    f"path file {shown_label}: line {line}, column {column!r}: {shown(cell.strip())} is not a number"
                 ) from None
             if not math.isfinite(data[k, j]):
-                raise PathError(f"path file {label!r}: line {line}, column {column!r}: {cell.strip()!r} is not finite")
+                raise PathError(
+                    f"path file {shown_label}: line {line}, column {column!r}: {shown(cell.strip())} is not finite"
+                )
         lines.append(line)
 
     def where(i: int) -> str:
@@ -303,7 +324,7 @@ def from_csv(file: str | os.PathLike[str], dt: float | None = None, *, name: str
         times, points = _check_samples(data[:, 0], data[:, 1:], "t", "x,y,z", where)
         return _fit_spline(times, points, dt, name if name is not None else stem, "t", where)
     except PathError as exc:
-        raise PathError(f"path file {label!r}: {exc}") from None
+        raise PathError(f"path file {shown_label}: {exc}") from None
 
 
 def _numbered_rows(reader: Any) -> list[tuple[int, list[str]]]:
@@ -341,8 +362,10 @@ def _fit_spline(
         dt = float(step)
     dt = _check_dt(dt)
     t = _sample_times(times[0], times[-1] - times[0], dt, f"{field}[-1] - {field}[0]")
-    spline = CubicSpline(times, points, axis=0, bc_type="not-a-knot")
-    return Path(name, t, spline(t), spline(t, 1), spline(t, 2))
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is found below, as a non-finite value
+        spline = CubicSpline(times, points, axis=0, bc_type="not-a-knot")
+        samples = spline(t), spline(t, 1), spline(t, 2)
+    return Path(name, t, *samples)
 
 
 def _sample_cubic(
@@ -439,6 +462,17 @@ def _check_samples(
     if bad_rows.size:
         i, j = int(bad_rows[0]), int(bad_cols[0])
         raise PathError(f"{where(i)}: {points_field} column {'xyz'[j]!r} is {float(pts[i, j])!r}, must be finite")
+    bad = np.flatnonzero(np.abs(knots) > MAX_TIME)
+    if bad.size:
+        i = int(bad[0])
+        raise PathError(f"{where(i)}: {times_field} is {float(knots[i])!r} s, expected a time within +-{MAX_TIME:g} s")
+    bad_rows, bad_cols = np.nonzero(np.abs(pts) > MAX_COORDINATE)
+    if bad_rows.size:
+        i, j = int(bad_rows[0]), int(bad_cols[0])
+        raise PathError(
+            f"{where(i)}: {points_field} column {'xyz'[j]!r} is {float(pts[i, j])!r} m, expected a coordinate"
+            f" within +-{MAX_COORDINATE:g} m (positions are in metres)"
+        )
     steps = np.diff(knots)
     bad = np.flatnonzero(steps <= 0.0)
     if bad.size:
@@ -446,6 +480,13 @@ def _check_samples(
         raise PathError(
             f"{where(i)}: {times_field} must be strictly increasing, got "
             f"{float(knots[i])!r} after {float(knots[i - 1])!r} ({where(i - 1)})"
+        )
+    bad = np.flatnonzero(steps < MIN_DT)
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise PathError(
+            f"{where(i)}: {times_field} = {float(knots[i])!r} is only {float(steps[i - 1])!r} s after "
+            f"{float(knots[i - 1])!r} ({where(i - 1)}); samples must be at least {MIN_DT:g} s apart"
         )
     return knots, pts
 
@@ -465,7 +506,7 @@ def _as_float_array(field: str, value: object) -> FloatArray:
     try:
         return np.array(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise PathError(f"{field} must be an array of numbers, got {value!r} ({exc})") from None
+        raise PathError(f"{field} must be an array of numbers, got {shown(value)} ({cut(str(exc))})") from None
 
 
 def _frozen_array(field: str, value: object) -> FloatArray:
@@ -484,11 +525,13 @@ def _require_finite(field: str, values: FloatArray) -> None:
 
 
 def _check_finite_scalar(field: str, value: object) -> float:
-    """``value`` as a finite float, else PathError naming ``field``."""
+    """``value`` as a finite float, else PathError naming ``field`` (text is refused, not converted)."""
+    if isinstance(value, str | bytes | bool):
+        raise PathError(f"{field} must be a real number, got {shown(value)}")
     try:
         number = float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        raise PathError(f"{field} must be a real number, got {value!r}") from None
+    except (TypeError, ValueError, OverflowError):
+        raise PathError(f"{field} must be a real number, got {shown(value)}") from None
     if not math.isfinite(number):
         raise PathError(f"{field} must be finite, got {number!r}")
     return number
@@ -503,13 +546,25 @@ def _check_positive(field: str, value: object) -> float:
 
 
 def _check_dt(dt: object) -> float:
-    """The sampling period as a finite float > 0, s."""
-    return _check_positive("dt", dt)
+    """The sampling period as a finite float >= :data:`MIN_DT`, s."""
+    period = _check_positive("dt", dt)
+    if period < MIN_DT:
+        raise PathError(f"dt must be >= {MIN_DT:g} s, got {period!r}")
+    return period
 
 
 def _sample_times(start: float, duration: float, dt: float, field: str) -> FloatArray:
-    """Times ``start + k*dt`` for ``k = 0 .. floor(duration/dt + 1e-9)``, shape ``(N,)``, s."""
-    count = math.floor(duration / dt + _COUNT_TOLERANCE) + 1
+    """Times ``start + k*dt`` for ``k = 0 .. floor(duration/dt + 1e-9)``, shape ``(N,)``, s.
+
+    Refuses more than :data:`MAX_SAMPLES` samples before allocating them.
+    """
+    ratio = duration / dt + _COUNT_TOLERANCE
+    if not ratio < MAX_SAMPLES:
+        raise PathError(
+            f"{field} = {float(duration)!r} s at dt = {dt!r} s makes {ratio:.3g} samples; at most"
+            f" {MAX_SAMPLES:,}: give a larger dt or a shorter path"
+        )
+    count = math.floor(ratio) + 1
     if count < 2:
         raise PathError(f"{field} = {float(duration)!r} s is shorter than dt = {dt!r} s; need 2 samples")
     return float(start) + np.arange(count, dtype=np.float64) * float(dt)

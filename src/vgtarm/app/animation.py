@@ -30,6 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError
 from ..fileio import atomic_path
+from ..memory import check_memory
 from ..model.robot import Robot
 from ..simulation.result import MODE_GA, SimulationResult
 from .drawing import MM, draw_mechanism, label_axes, set_equal_extent
@@ -41,6 +42,10 @@ Array = NDArray[np.float64]
 FORMATS = (".mp4", ".gif")
 #: Figure size (inches); at 100 dpi the frame is 1280 x 640 pixels, multiples of 16 as H.264 likes.
 FIGURE_SIZE = (12.8, 6.4)
+#: Largest resolution: 12,800 x 6,400 pixels a frame.
+MAX_DPI = 1000.0
+#: Most frames of one animation (more than an hour of video at 25 frames per second).
+MAX_FRAMES = 100_000
 #: Largest distance (m) between a run's recorded tip and the robot's tip at its first sample for
 #: the run to count as made with that robot.
 SAME_ROBOT_TOLERANCE = 1e-9
@@ -88,7 +93,13 @@ def frame_plan(result: SimulationResult, *, fps: float = 25.0, speed: float = 1.
         raise InputError("the run has no completed sample to animate")
     t = result.t
     duration = float(t[n - 1] - t[0])
-    count = max(1, int(_round_half_up(duration * fps / speed)))
+    frames = duration * fps / speed
+    if not frames <= MAX_FRAMES:  # before any array of them is made
+        raise InputError(
+            f"fps = {fps!r} at speed = {speed!r} makes {frames:.3g} frames of the {duration:g} s run;"
+            f" at most {MAX_FRAMES:,}: give fewer frames per second or a higher speed"
+        )
+    count = max(1, int(_round_half_up(frames)))
     wanted = np.arange(count) * (speed / fps)
     samples = np.clip(_round_half_up(wanted / result.dt), 0, n - 1)
     return FramePlan(samples=samples, times=t[samples], fps=float(fps), speed=float(speed), duration_s=duration)
@@ -261,10 +272,17 @@ def render_animation(
     path = Path(out)
     if path.suffix.lower() not in FORMATS:
         raise InputError(f"out = {str(path)!r}: expected a file name ending in one of {list(FORMATS)}")
-    if not (isinstance(dpi, int | float) and math.isfinite(dpi) and dpi > 0):
-        raise InputError(f"dpi = {dpi!r}: expected a positive number")
+    if not (isinstance(dpi, int | float) and math.isfinite(dpi) and 0 < dpi <= MAX_DPI):
+        raise InputError(f"dpi = {dpi!r}: expected a positive number at most {MAX_DPI:g}")
     check_same_robot(robot, result)
     plan = frame_plan(result, fps=fps, speed=speed)
+    area = (FIGURE_SIZE[0] * dpi) * (FIGURE_SIZE[1] * dpi)  # pixels a frame
+    kept = len(plan) if path.suffix.lower() == ".gif" else 1  # a GIF is written from all its frames
+    check_memory(
+        area * (16 + kept),  # the canvas and its copies (RGBA), then the palette frames
+        f"{len(plan):,} frames of {FIGURE_SIZE[0] * dpi:.0f} x {FIGURE_SIZE[1] * dpi:.0f} pixels (dpi = {dpi:g})",
+        "give a lower dpi, fewer frames per second or a higher speed (or write .mp4)",
+    )
     geometries = mechanism_geometries(robot, result.q[plan.samples])
     scene = _Scene(result, geometries, title or _title(robot, result, plan.speed), dpi)
     drawn = np.empty((len(plan), 3))

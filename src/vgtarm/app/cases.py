@@ -14,7 +14,7 @@ import numpy as np
 
 from .. import paths
 from ..control import ComputedForceControl, SwitchingControl
-from ..errors import InputError
+from ..errors import InputError, shown
 from ..ga import GAOptions
 from ..model.parameters import RobotParameters
 from ..model.robot import Robot
@@ -121,7 +121,7 @@ def joint_reference(
     """The case's joint reference from the redundancy-resolving inverse kinematics; with
     ``duration`` (s) only its first ``duration`` seconds (:func:`truncate_reference`)."""
     ik = robot.inverse_kinematics(case_study(number).path(dt), solver=solver, rates=rates)
-    reference = JointReference(ik.t, ik.q, ik.qd, ik.qdd, rates=rates, name=f"case {number}")
+    reference = JointReference.of(ik, name=f"case {number}")
     return reference if duration is None else truncate_reference(reference, duration)
 
 
@@ -131,13 +131,13 @@ def truncate_reference(reference: JointReference, duration: float) -> JointRefer
     The reference of the whole path is computed first and then cut, so a run on the first
     ``duration`` seconds follows exactly the start of the full run's reference.
     """
+    if isinstance(duration, bool) or not isinstance(duration, int | float | np.integer | np.floating):
+        raise InputError(f"duration = {shown(duration)}: expected a time > 0 (s)")
     if not (np.isfinite(duration) and duration > 0):
         raise InputError(f"duration = {duration!r}: expected a time > 0 (s)")
     t = reference.t
     n = max(2, int(np.count_nonzero(t - t[0] <= duration + 1e-6 * reference.dt)))
-    return JointReference(
-        t[:n], reference.q[:n], reference.qd[:n], reference.qdd[:n], rates=reference.rates, name=reference.name
-    )
+    return reference.head(n)
 
 
 def run_case(

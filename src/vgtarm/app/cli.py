@@ -1,20 +1,27 @@
 """The ``vgtarm`` command line.
 
 Every user error (bad file, bad number, unreachable path, diverged run) prints one line
-``vgtarm: error: ...`` on standard error and exits with status 1 (2 for bad usage).
+``vgtarm: error: ...`` on standard error and exits with status 1 (2 for bad usage). A closed
+pipe on standard output (``vgtarm describe | head -1``) ends quietly with status 141, like a tool
+killed by SIGPIPE.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import re
+import select
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
 from .. import __version__, paths
-from ..errors import InputError, UnreachableError, VgtarmError
+from ..errors import MESSAGE_LENGTH, InputError, UnreachableError, VgtarmError, cut, escape, shown
+from ..fileio import atomic_folder, check_output_file, check_output_folder
 from ..ik import CSV_COLUMNS, write_csv
 from ..model.parameters import JOINT_NAMES, JOINT_UNITS
 from ..model.robot import load_robot
@@ -33,8 +40,8 @@ def cmd_describe(args: argparse.Namespace) -> int:
     home = p.home
     fk = robot.forward_kinematics(home)
     eigenvalues = np.linalg.eigvalsh(robot.mass_matrix(home))
-    print(f"robot      {p.name}")
-    print(f"source     {p.source}")
+    print(f"robot      {escape(p.name)}")  # a name from a user's file never drives the terminal
+    print(f"source     {escape(p.source)}")
     print(f"model      {robot.backend.kind} CasADi functions")
     for k, module in enumerate(p.modules, start=1):
         print(f"module {k}   b = {module.b:g} m, d = {module.d:g} m")
@@ -74,9 +81,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from ..errors import SimulationError
+    from ..simulation.result import RUN_FILES
     from .cases import joint_reference, run_case
     from .plotting import comparison_figure, save_figure
 
+    if args.out is not None:
+        check_output_folder(args.out, "--out", inputs=[args.config], owned=RUN_FILES)  # before the work
     robot = load_robot(args.config)
     if args.plant == "mujoco":
         from .. import mujoco_bridge  # noqa: F401  (registers the MuJoCo plant)
@@ -113,8 +123,13 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             )
         except SimulationError as exc:
             if args.out is not None and exc.result is not None:
-                exc.result.save(args.out)  # type: ignore[attr-defined]
-                print(f"partial results (up to the failure) written to {args.out}", file=sys.stderr)
+                try:  # the folder is replaced whole: no figure of an earlier run stays beside it
+                    with atomic_folder(args.out, "--out", inputs=[args.config], owned=RUN_FILES) as partial:
+                        exc.result.save(partial)  # type: ignore[attr-defined]
+                except (VgtarmError, OSError, ValueError) as failure:
+                    print(f"vgtarm: partial results not written: {failure}", file=sys.stderr)
+                else:
+                    print(f"partial results (up to the failure, success false) written to {args.out}", file=sys.stderr)
             raise
     summary = result.summary()
     for key in (
@@ -143,8 +158,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         text = f"{value:.6g}" if isinstance(value, float) else str(value)
         print(f"{key:<34} {text}")
     if args.out is not None:
-        result.save(args.out)
-        save_figure(comparison_figure([result]), args.out / "figure.png")
+        with atomic_folder(args.out, "--out", inputs=[args.config], owned=RUN_FILES) as written:  # whole or not
+            result.save(written)
+            save_figure(comparison_figure([result]), written / "figure.png")
         print(f"results written to {args.out}")
     return 0
 
@@ -153,8 +169,9 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     """Run every combination the paper reports and write report.md."""
     from tqdm import tqdm
 
-    from .report import paper_runs, reproduce
+    from .report import REPRODUCE_FILES, paper_runs, reproduce
 
+    check_output_folder(args.out, "--out", inputs=[args.config], owned=REPRODUCE_FILES)  # before the work
     robot = load_robot(args.config)
     runs = paper_runs()
     with tqdm(total=len(runs), desc="reproduce", unit="run", disable=args.quiet) as bar:
@@ -186,6 +203,13 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 
 def _add_run_options(parser: argparse.ArgumentParser) -> None:
     from ..simulation import INTEGRATORS
+    from ..simulation.simulator import MAX_SUBSTEPS
+
+    def substeps(text: str) -> int:
+        value = _positive_int(text)
+        if value > MAX_SUBSTEPS:
+            raise argparse.ArgumentTypeError(f"expected at most {MAX_SUBSTEPS:,} steps per control period, got {text}")
+        return value
 
     parser.add_argument(
         "--integrator",
@@ -193,7 +217,9 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
         default="euler",
         help="plant integrator (default: euler, the paper's)",
     )
-    parser.add_argument("--substeps", type=_positive_int, default=1, help="integration steps per control period")
+    parser.add_argument(
+        "--substeps", type=substeps, default=1, help=f"integration steps per control period (1 to {MAX_SUBSTEPS:,})"
+    )
     parser.add_argument(
         "--seed", type=_non_negative_int, default=0, help="seed of the disturbance and the GA (default 0)"
     )
@@ -270,9 +296,9 @@ def _ik_path(args: argparse.Namespace) -> DesiredPath:
         try:
             dt = float(args.dt)
         except ValueError:
-            raise InputError(f"--dt must be a sampling period in seconds, got {args.dt!r}") from None
+            raise InputError(f"--dt must be a sampling period in seconds, got {shown(args.dt)}") from None
         if not (np.isfinite(dt) and dt > 0):
-            raise InputError(f"--dt must be a finite period > 0 s, got {args.dt!r}")
+            raise InputError(f"--dt must be a finite period > 0 s, got {shown(args.dt)}")
     if (args.case is None) == (args.path is None):
         raise InputError("give exactly one of --case 1|2 and --path FILE")
     if args.path is not None:
@@ -283,14 +309,32 @@ def _ik_path(args: argparse.Namespace) -> DesiredPath:
     return paths.case1(period) if args.case == "1" else paths.case2(period)
 
 
+def _check_ik_memory(args: argparse.Namespace, path: DesiredPath) -> None:
+    """Refuse, naming the flags, a path whose inverse kinematics will not fit in memory."""
+    from ..ik.solve import memory_estimate
+    from ..memory import check_memory
+
+    source = f"--path {shown(str(args.path), 200)}" if args.path is not None else f"--case {args.case}"
+    spacing = f"--dt {path.dt:g} s" if args.dt is not None else f"dt {path.dt:g} s"
+    check_memory(
+        memory_estimate(len(path), args.pose),
+        f"{source} at {spacing}: {len(path):,} samples of inverse kinematics",
+        "give a larger --dt or a shorter path",
+    )
+
+
 def cmd_ik(args: argparse.Namespace) -> int:
     """Inverse kinematics of a desired path: write the joint reference as CSV and print a summary."""
+    if args.output is not None:  # before the work; never over the path file it reads
+        check_output_file(args.output, "-o", inputs=[args.path, args.config])
     path = _ik_path(args)
+    _check_ik_memory(args, path)
     robot = load_robot(args.config)
     result = robot.inverse_kinematics(path, solver=args.solver, rates=args.rates, pose="hold" if args.pose else None)
     if not result.success:
         raise UnreachableError(f"inverse kinematics did not verify every sample: {result.message}; nothing written")
     if args.output is not None:
+        args.output.parent.mkdir(parents=True, exist_ok=True)
         write_csv(result, args.output)
     samples = result.samples
     worst = int(np.argmax(samples.residual))
@@ -328,9 +372,17 @@ def _add_config(parser: argparse.ArgumentParser) -> None:
     )
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse whose usage errors echo a user's text escaped and cut (subcommands inherit it)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.print_usage(sys.stderr)
+        self.exit(2, f"{self.prog}: error: {cut(message, MESSAGE_LENGTH - 100)}\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="vgtarm",
         description="Model, plan and control the 7-DOF redundant hybrid VGT manipulator.",
     )
@@ -398,9 +450,17 @@ def build_parser() -> argparse.ArgumentParser:
     again.add_argument(
         "--out", type=Path, default=Path("results"), metavar="DIR", help="output folder (default: results)"
     )
+    def seed_count(text: str) -> int:
+        from .seeds import MAX_SEEDS
+
+        value = _positive_int(text)
+        if value > MAX_SEEDS:
+            raise argparse.ArgumentTypeError(f"expected at most {MAX_SEEDS:,} seeds, got {text}")
+        return value
+
     again.add_argument(
         "--seeds",
-        type=_positive_int,
+        type=seed_count,
         default=None,
         metavar="N",
         help="also run everything with seeds 0..N-1 on Dask and report mean and spread (needs the study extra)",
@@ -425,22 +485,112 @@ def build_parser() -> argparse.ArgumentParser:
     cli_mujoco.add_parsers(sub)  # export mjcf, check mujoco
     cli_visual.add_parsers(sub)  # draw, animate, report
     cli_study.add_parsers(sub)  # study init, run, report
+    _accept_negative_numbers(parser)
 
     return parser
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``vgtarm`` command."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+#: What argparse takes for a negative number rather than an option: its own pattern (``-1``,
+#: ``-.5``) extended to exponents (``-1e-3``, ``-1E+2``, ``-2.e5``) and ``-inf``/``-nan``, so a
+#: negative value in any form can be given as a positional value or an option's value.
+NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$", re.IGNORECASE)
+
+
+def _accept_negative_numbers(parser: argparse.ArgumentParser) -> None:
+    """Give ``parser`` and every subparser under it the :data:`NEGATIVE_NUMBER` pattern."""
+    parser._negative_number_matcher = NEGATIVE_NUMBER  # argparse's hook (private, stable since 3.2)
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child in set(action.choices.values()):
+                _accept_negative_numbers(child)
+
+
+#: Exit status when the reader of standard output went away (``vgtarm describe | head -1``): what a
+#: tool killed by SIGPIPE reports (128 + 13), like ``cat`` or ``yes``; nothing is printed.
+CLOSED_PIPE = 141
+
+
+def _silence_stdout() -> None:
+    """Point standard output at the null device, so that the flush at exit does not print
+    "Broken pipe" either (the way the Python docs recommend)."""
     try:
-        return int(args.run(args))
-    except VgtarmError as exc:
-        print(f"vgtarm: error: {exc}", file=sys.stderr)
-        return 1
-    except OSError as exc:
-        print(f"vgtarm: error: {exc}", file=sys.stderr)
-        return 1
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):  # standard output without a descriptor (captured in tests)
+        pass
+
+
+def _stdout_reader_gone() -> bool:
+    """Whether standard output is a pipe whose reader has gone (not another pipe that broke)."""
+    try:
+        poller = select.poll()
+        poller.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(events & (select.POLLERR | select.POLLHUP) for _, events in poller.poll(0))
+    except (AttributeError, OSError, ValueError):  # no poll() here, or no descriptor: assume it is
+        return True
+
+
+def _error_line(exc: BaseException) -> str:
+    """The one line printed for an error: escaped and cut, whatever the message holds (a last guard)."""
+    return f"vgtarm: error: {cut(str(exc), MESSAGE_LENGTH - 60)}"
+
+
+#: Exit status of an interrupted command (Ctrl-C): 128 + SIGINT, as a shell reports it.
+INTERRUPTED = 130
+
+
+def _exit_interrupted() -> NoReturn:
+    """End the program at once after Ctrl-C, without the interpreter's clean-up.
+
+    Everything that must be undone (temporary files and folders, worker processes, compiler
+    runs) was undone while the ``KeyboardInterrupt`` unwound the command; what is left is module
+    teardown, which takes up to a second on a busy machine with matplotlib and CasADi loaded."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe or stream: nothing more can be shown anyway
+            pass
+    os._exit(INTERRUPTED)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``vgtarm`` command.
+
+    Ctrl-C at any point after start-up prints ``vgtarm: interrupted`` and gives status 130; run as
+    the program (``argv`` None) it then exits at once (:func:`_exit_interrupted`)."""
+    try:
+        return _main(argv)
     except KeyboardInterrupt:
         print("vgtarm: interrupted", file=sys.stderr)
-        return 130
+        if argv is None:
+            _exit_interrupted()
+        return INTERRUPTED
+
+
+def _main(argv: Sequence[str] | None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit:  # --help, --version or a usage error: a closed pipe stays quiet here too
+        try:
+            sys.stdout.flush()
+        except BrokenPipeError:
+            _silence_stdout()
+        raise
+    try:
+        status = int(args.run(args))
+        sys.stdout.flush()  # a reader that went away shows here, not as a traceback at exit
+        return status
+    except BrokenPipeError as exc:
+        if _stdout_reader_gone():
+            _silence_stdout()
+            return CLOSED_PIPE
+        print(_error_line(exc), file=sys.stderr)  # another pipe (an encoder's, a socket)
+        return 1
+    except VgtarmError as exc:
+        print(_error_line(exc), file=sys.stderr)
+        return 1
+    except OSError as exc:
+        print(_error_line(exc), file=sys.stderr)
+        return 1

@@ -6,7 +6,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from ..fileio import atomic_write_text
+from ..errors import escape
+from ..fileio import atomic_write_text, check_output_file
 from ..model.robot import load_robot
 
 
@@ -14,14 +15,16 @@ def cmd_export(args: argparse.Namespace) -> int:
     """Write the robot as MJCF."""
     from ..mujoco_bridge.export import to_mjcf
 
+    check_output_file(args.out, "--out", inputs=[args.config])
     robot = load_robot(args.config)
     text = to_mjcf(robot, timestep=args.timestep)
     if args.validate:
         from ..mujoco_bridge.model import require_mujoco
 
         require_mujoco().MjModel.from_xml_string(text)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_text(args.out, text + "\n")
-    print(f"MJCF of {robot.parameters.name!r} written to {args.out}")
+    print(f"MJCF of {robot.parameters.name!r} written to {escape(str(args.out))}")
     return 0
 
 
@@ -38,12 +41,12 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 def add_parsers(sub: Any) -> None:
     """Register ``export`` and ``check`` on the ``vgtarm`` command's subparsers."""
-    from .cli import _add_config, _non_negative_int, _positive_int
+    from .cli import _add_config, _non_negative_int, _positive_float, _positive_int
 
     export = sub.add_parser("export", help="export the robot for another engine")
     export.add_argument("format", choices=("mjcf",), help="mjcf: MuJoCo's XML model format")
     export.add_argument("--out", type=Path, required=True, metavar="FILE", help="the file to write (robot.xml)")
-    export.add_argument("--timestep", type=float, default=1e-3, metavar="DT", help="MuJoCo's time step (s)")
+    export.add_argument("--timestep", type=_positive_float, default=1e-3, metavar="DT", help="MuJoCo's time step (s)")
     export.add_argument(
         "--validate", action="store_true", help="load the result in MuJoCo before writing (needs vgtarm[mujoco])"
     )

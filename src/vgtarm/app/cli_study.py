@@ -6,18 +6,20 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from ..errors import InputError
-from ..fileio import atomic_write_text
+from ..errors import InputError, cut, escape
+from ..fileio import atomic_write_text, check_output_file, check_writable_parent
 
 
 def cmd_study_init(args: argparse.Namespace) -> int:
     """Write the commented example study."""
     from ..study.example import EXAMPLE
 
+    check_output_file(args.file, "FILE")  # a name, not a folder, in a folder we may write in
     if args.file.exists() and not args.force:
-        raise InputError(f"{args.file} exists; give --force to overwrite it")
+        raise InputError(f"{cut(str(args.file), 200)} exists; give --force to overwrite it")
     atomic_write_text(args.file, EXAMPLE)
-    print(f"example study written to {args.file}; run it with: vgtarm study run {args.file} --out DIR")
+    shown = escape(str(args.file))
+    print(f"example study written to {shown}; run it with: vgtarm study run {shown} --out DIR")
     return 0
 
 
@@ -27,6 +29,11 @@ def cmd_study_run(args: argparse.Namespace) -> int:
     from ..study.spec import load_study
     from .study_points import check_point, execute_point
 
+    # The folder keeps finished runs to resume from (each run file is atomic): it grows, it is not
+    # replaced; check it before the work.
+    if args.out.exists() and not args.out.is_dir():
+        raise InputError(f"--out {cut(str(args.out))}: is a file, not a folder; give the study's results folder")
+    check_writable_parent(args.out, "--out")
     study = load_study(args.study)
     outcome = run_study(
         study,

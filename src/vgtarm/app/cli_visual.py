@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError
+from ..fileio import atomic_folder, check_output_file, check_output_folder
 from ..model.parameters import JOINT_NAMES
 from ..model.robot import load_robot
 
@@ -42,6 +43,7 @@ def cmd_draw(args: argparse.Namespace) -> int:
 
     if args.out.suffix.lower() not in PICTURE_FORMATS:
         raise InputError(f"--out {args.out}: expected a file name ending in one of {list(PICTURE_FORMATS)}")
+    check_output_file(args.out, "--out", inputs=[args.config])
     robot = load_robot(args.config)
     q = args.q or robot.parameters.home
     if len(q) != len(robot.parameters.home):
@@ -64,6 +66,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
     """Render a saved run as MP4 or GIF."""
     from .animation import render_animation
 
+    check_output_file(args.out, "--out", inputs=[args.config])
     robot = load_robot(args.config)
     made = render_animation(
         robot, _load_run(args.run_dir), args.out, fps=args.fps, speed=args.speed, dpi=args.dpi, progress=not args.quiet
@@ -77,13 +80,16 @@ def cmd_animate(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     """Write report.html for saved runs."""
-    from .html_report import load_runs, write_html_report
+    from .html_report import PLOTLY_JS, load_runs, write_html_report
 
+    inputs, owned = [*args.runs, args.config], ("*.html", PLOTLY_JS)
+    check_output_folder(args.out, "--out", inputs=inputs, owned=owned)  # before the work; never over a run
     robot = load_robot(args.config)
-    page = write_html_report(
-        robot, load_runs(args.runs), args.out, title=args.title, intro="Runs: " + ", ".join(p.name for p in args.runs)
-    )
-    print(f"report written to {page}")
+    runs = load_runs(args.runs)
+    intro = "Runs: " + ", ".join(p.name for p in args.runs)
+    with atomic_folder(args.out, "--out", inputs=inputs, owned=owned) as folder:  # replaces an old report whole
+        page = write_html_report(robot, runs, folder, title=args.title, intro=intro)
+    print(f"report written to {args.out / page.name}")
     return 0
 
 

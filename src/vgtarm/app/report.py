@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from ..fileio import atomic_write_text
+from ..fileio import atomic_folder, atomic_write_text
 from ..model.robot import Robot
 from ..simulation import JointReference, SimulationResult
 from .beyond import beyond_figure, beyond_section, run_beyond
@@ -69,6 +69,10 @@ class Reproduction:
 
 Progress = Callable[[str, int, int], None]
 
+#: Files a reproduction written before folders listed their files may hold at its top level (so
+#: such a folder of only these may be replaced; one with run folders must be moved away first).
+REPRODUCE_FILES = ("report.md", "report.html", "plotly.min.js", "*.png")
+
 
 def reproduce(
     robot: Robot,
@@ -88,13 +92,44 @@ def reproduce(
     section on the disturbance observer, the force sensor and realistic sensing (:mod:`.beyond`);
     with ``seeds`` >= 1 also the mean and spread of every run over seeds ``0..seeds-1``
     (:func:`.seeds.seed_section`, a study run on a local Dask cluster into ``out/seeds``; ``config``:
-    the robot file ``robot`` was loaded from, for the study's workers)."""
+    the robot file ``robot`` was loaded from, for the study's workers).
+
+    ``out`` is written as one unit (:func:`vgtarm.fileio.atomic_folder`): into a temporary sibling
+    that replaces an earlier reproduction whole when everything is written; an error or Ctrl-C
+    leaves the earlier folder as it was. A folder holding files vgtarm did not write is refused."""
     start = time.perf_counter()
-    folder = Path(out)
-    folder.mkdir(parents=True, exist_ok=True)
-    (folder / "report.md").unlink(missing_ok=True)
-    (folder / "report.html").unlink(missing_ok=True)
-    specs = runs or paper_runs()
+    with atomic_folder(out, "out", inputs=[config], owned=REPRODUCE_FILES) as folder:
+        results = _reproduce_into(
+            robot,
+            folder,
+            seed=seed,
+            integrator=integrator,
+            substeps=substeps,
+            specs=runs or paper_runs(),
+            progress=progress,
+            beyond_paper=beyond_paper,
+            seeds=seeds,
+            config=config,
+            start=start,
+        )
+    return Reproduction(results, Path(out) / "report.md", time.perf_counter() - start)
+
+
+def _reproduce_into(
+    robot: Robot,
+    folder: Path,
+    *,
+    seed: int,
+    integrator: str,
+    substeps: int,
+    specs: list[RunSpec],
+    progress: Progress | None,
+    beyond_paper: bool,
+    seeds: int | None,
+    config: str | Path | None,
+    start: float,
+) -> dict[RunSpec, SimulationResult]:
+    """The work of :func:`reproduce`, written into the (temporary) folder ``folder``."""
     references: dict[tuple[int, str], JointReference] = {}
     results: dict[RunSpec, SimulationResult] = {}
     for i, spec in enumerate(specs):
@@ -151,7 +186,7 @@ def reproduce(
         title="vgtarm: the paper's case studies reproduced",
         intro=f"The interactive companion of report.md (seed {seed}, integrator {integrator}).",
     )
-    return Reproduction(results, folder / "report.md", time.perf_counter() - start)
+    return results
 
 
 def _figures(results: dict[RunSpec, SimulationResult], folder: Path) -> dict[str, str]:

@@ -57,7 +57,7 @@ def _reference(
         desired = _path_of(path_text, dt)
         name = desired.name
     ik = robot.inverse_kinematics(desired, solver="fast", rates=rates)
-    reference = JointReference(ik.t, ik.q, ik.qd, ik.qdd, rates=rates, name=name)
+    reference = JointReference.of(ik, name=name)
     return reference if duration is None else truncate_reference(reference, duration)
 
 

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..errors import InputError, shown
 from ..model.robot import Robot
 from .gains import Gains
 from .law import computed_force
@@ -24,6 +25,10 @@ class ComputedForceControl:
 
     gains: Gains
     name: str = field(default="cfc")
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.gains, Gains):
+            raise InputError(f"gains = {shown(self.gains)}: expected Gains (use ComputedForceControl.with_gains)")
 
     @classmethod
     def with_gains(cls, Kp: ArrayLike, Kv: ArrayLike) -> ComputedForceControl:

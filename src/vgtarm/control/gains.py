@@ -7,17 +7,19 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import InputError
+from ..errors import InputError, shown
 
 Array = NDArray[np.float64]
 
 
 def gain_matrix(value: ArrayLike, name: str) -> Array:
     """A 7x7 gain matrix from a scalar (times the identity), 7 diagonal entries or a 7x7 matrix."""
+    if isinstance(value, str | bytes) or value is None:
+        raise InputError(f"{name} must be a number, 7 numbers or a 7x7 matrix, got {shown(value)}")
     try:
         array = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise InputError(f"{name} must be a number, 7 numbers or a 7x7 matrix, got {value!r}") from None
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"{name} must be a number, 7 numbers or a 7x7 matrix, got {shown(value)}") from None
     if array.ndim == 0:
         array = float(array) * np.eye(7)
     elif array.shape == (7,):
@@ -25,7 +27,8 @@ def gain_matrix(value: ArrayLike, name: str) -> Array:
     elif array.shape != (7, 7):
         raise InputError(f"{name} must be a number, 7 numbers or a 7x7 matrix, got shape {array.shape}")
     if not np.isfinite(array).all():
-        raise InputError(f"{name} must be finite, got {array.tolist()}")
+        i, j = (int(k) for k in np.argwhere(~np.isfinite(array))[0])
+        raise InputError(f"{name} must be finite, got {name}[{i}, {j}] = {float(array[i, j])!r}")
     array = array.copy()
     array.flags.writeable = False
     return array
@@ -42,3 +45,30 @@ class Gains:
     def of(cls, Kp: ArrayLike, Kv: ArrayLike) -> Gains:
         """Gains from scalars, diagonals or full matrices."""
         return cls(gain_matrix(Kp, "Kp"), gain_matrix(Kv, "Kv"))
+
+
+def real_number(name: str, value: object, expected: str, *, minimum: float = 0.0, strict: bool = True) -> float:
+    """``value`` as a finite float ``> minimum`` (``>=`` unless ``strict``), else one
+    :class:`InputError` line naming ``name`` and what was ``expected``. Strings, ``None`` and
+    booleans are refused, not converted."""
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+        raise InputError(f"{name} = {shown(value)}: expected {expected}")
+    try:
+        number = float(value)
+    except OverflowError:  # an int beyond any float
+        raise InputError(f"{name} = {shown(value)}: expected {expected}") from None
+    if not (np.isfinite(number) and (number > minimum if strict else number >= minimum)):
+        raise InputError(f"{name} = {shown(value)}: expected {expected}")
+    return number
+
+
+def check_within(gains: Gains, kp_bounds: tuple[float, float], kv_bounds: tuple[float, float]) -> None:
+    """Raise :class:`InputError` naming the first element of ``gains`` outside its bounds."""
+    for label, matrix, (lo, hi) in (("Kp", gains.Kp, kp_bounds), ("Kv", gains.Kv, kv_bounds)):
+        outside = np.argwhere((matrix < lo) | (matrix > hi))
+        if outside.size:
+            i, j = (int(k) for k in outside[0])
+            raise InputError(
+                f"fixed gains {label}[{i}, {j}] = {float(matrix[i, j]):g} is outside {label.lower()}_bounds = "
+                f"[{lo:g}, {hi:g}] (every element of the GA's gains lies within the bounds)"
+            )

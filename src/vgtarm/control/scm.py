@@ -27,14 +27,17 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import InputError
+from ..errors import InputError, shown
 from ..ga import GAOptions, GAResult, encode, minimize
 from ..model.closedloop import PREDICTIONS
 from ..model.robot import Robot
-from .gains import Gains
+from .gains import Gains, check_within, real_number
 from .law import commanded_acceleration
 
 Array = NDArray[np.float64]
+
+#: Longest GA prediction horizon, in control periods (10 s at 1 ms; the GA's work grows with it).
+MAX_HORIZON = 10_000
 
 #: Prediction of the tip error of candidate gains: ``(Kp (P, 7, 7), Kv (P, 7, 7)) -> (P,)``.
 Predictor = Callable[[Array, Array], Array]
@@ -45,12 +48,13 @@ class SwitchingControl:
     """Computed force control whose gains are retuned by the GA while the error is large.
 
     Attributes:
-        fixed: the gains used while the tip error is at most ``threshold``.
+        fixed: the gains used while the tip error is at most ``threshold``; every element within
+            ``kp_bounds`` / ``kv_bounds`` (the GA could not return to them otherwise).
         threshold: tip position error (m) above which the GA chooses the gains (paper: 0.2 mm).
         kp_bounds, kv_bounds: bounds of every element of ``Kp`` and ``Kv`` (paper: [0, 5000]
             and [0, 300] in case 1; [0, 15000] and [0, 600] in case 2).
         ga: the genetic algorithm's options (paper Appendix B by default).
-        horizon: prediction horizon of the fitness, in control periods (>= 1).
+        horizon: prediction horizon of the fitness, in control periods (1 .. :data:`MAX_HORIZON`).
         seed_fixed_gains: put the fixed gains into the first population.
         prediction: how the compiled GA maps the predicted joint errors to the tip:
             ``"quadratic"`` (default: tip Jacobian and Hessian at the reference), ``"linear"``
@@ -77,19 +81,27 @@ class SwitchingControl:
     name: str = "scm"
 
     def __post_init__(self) -> None:
-        if not (np.isfinite(self.threshold) and self.threshold > 0):
-            raise InputError(f"threshold = {self.threshold!r}: expected a positive tip error (m)")
-        for label, (lo, hi) in (("kp_bounds", self.kp_bounds), ("kv_bounds", self.kv_bounds)):
-            if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
-                raise InputError(f"{label} = {(lo, hi)!r}: expected finite (min, max) with min < max")
-        if not (isinstance(self.horizon, int | np.integer) and self.horizon >= 1):
-            raise InputError(f"horizon = {self.horizon!r}: expected a whole number of control periods >= 1")
-        if not (np.isfinite(self.exact_above) and self.exact_above >= 0):
+        if not isinstance(self.fixed, Gains):
+            raise InputError(f"fixed = {shown(self.fixed)}: expected Gains (use SwitchingControl.with_gains)")
+        real_number("threshold", self.threshold, "a positive tip error (m)")
+        for label, pair in (("kp_bounds", self.kp_bounds), ("kv_bounds", self.kv_bounds)):
+            if isinstance(pair, str | bytes) or not hasattr(pair, "__len__") or len(pair) != 2:
+                raise InputError(f"{label} = {shown(pair)}: expected finite (min, max) with min < max")
+            expected = "finite (min, max) with min < max"
+            lo, hi = (real_number(label, x, expected, strict=False, minimum=-np.inf) for x in pair)
+            if not lo < hi:
+                raise InputError(f"{label} = {shown(pair)}: expected finite (min, max) with min < max")
+        check_within(self.fixed, self.kp_bounds, self.kv_bounds)
+        if not isinstance(self.ga, GAOptions):
+            raise InputError(f"ga = {shown(self.ga)}: expected a vgtarm.ga.GAOptions")
+        whole = isinstance(self.horizon, int | np.integer) and not isinstance(self.horizon, bool)
+        if not (whole and 1 <= self.horizon <= MAX_HORIZON):
             raise InputError(
-                f"exact_above = {self.exact_above!r}: expected a joint-error norm >= 0 (m, rad; 0 = never)"
+                f"horizon = {shown(self.horizon)}: expected a whole number of control periods in [1, {MAX_HORIZON}]"
             )
-        if self.prediction not in PREDICTIONS:
-            raise InputError(f"prediction = {self.prediction!r}: expected one of {list(PREDICTIONS)}")
+        real_number("exact_above", self.exact_above, "a joint-error norm >= 0 (m, rad; 0 = never)", strict=False)
+        if not isinstance(self.prediction, str) or self.prediction not in PREDICTIONS:
+            raise InputError(f"prediction = {shown(self.prediction)}: expected one of {list(PREDICTIONS)}")
 
     @classmethod
     def with_gains(cls, Kp: ArrayLike, Kv: ArrayLike, **options: object) -> SwitchingControl:
@@ -158,7 +170,7 @@ def predict_tip_error(
     ``q0``, ``qd0`` (7,): the state at sample k; ``q_d``, ``qd_d``, ``qdd_d`` (H+1, 7) and
     ``tip_d`` (H+1, 3): the reference at samples k .. k+H; ``Kp``, ``Kv`` (P, 7, 7). Returns the
     predicted tip-error norm of each candidate, (P,); +inf where the prediction leaves the set of
-    assemblable configurations.
+    assemblable configurations (or, absurdly far, the accepted joint range of ``Robot.joint_range``).
     """
     Kp_a, Kv_a = np.asarray(Kp, dtype=float), np.asarray(Kv, dtype=float)
     refs = [np.asarray(a, dtype=float) for a in (q_d, qd_d, qdd_d, tip_d)]
@@ -173,7 +185,8 @@ def predict_tip_error(
         a = commanded_acceleration(refs[2][j], e, e_dot, Kp_a, Kv_a)
         q = q + dt * qd
         qd = qd + dt * a
-        alive &= np.isfinite(q).all(axis=1) & model.is_assemblable(np.where(np.isfinite(q), q, 0.0))
+        finite = np.where(np.isfinite(q), q, 0.0)
+        alive &= np.isfinite(q).all(axis=1) & model.is_assemblable(finite) & model.in_joint_range(finite)
         safe = np.where(alive[:, None], q, model.parameters.home)
         total += ((refs[3][j + 1] - model.tip_position(safe)) ** 2).sum(axis=1)
     return np.where(alive, np.sqrt(total), np.inf)

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from ..errors import InputError, shown
 from ..fileio import atomic_open
 from ..model.parameters import JOINT_NAMES
 
@@ -87,6 +88,9 @@ class IKResult:
         message: a one-line summary (which samples failed, if any).
         work: the solver's work counters (``n_iterations``, ``n_evaluations``, ``n_converged``,
             ``wall_time_s``; see :class:`vgtarm.ik.SolverResult`), before any fallback.
+        robot: name of the robot the reference was solved for ("" if unknown).
+        robot_fingerprint: :attr:`vgtarm.Robot.fingerprint` of that robot's parameters, so a
+            simulation of another robot can say so ("" if unknown).
     """
 
     t: Array
@@ -108,6 +112,8 @@ class IKResult:
     success: bool
     message: str
     work: Mapping[str, float] = field(default_factory=dict)
+    robot: str = ""
+    robot_fingerprint: str = ""
 
     joint_names: tuple[str, ...] = JOINT_NAMES
 
@@ -134,6 +140,8 @@ def write_csv(result: IKResult, file: str | os.PathLike[str]) -> None:
     The file is written atomically (:func:`vgtarm.fileio.atomic_open`): a reader never sees a
     partial file and nothing is left behind when writing fails.
     """
+    if not isinstance(result, IKResult):
+        raise InputError(f"result = {shown(result)}: expected an IKResult (from inverse_kinematics)")
     table = np.column_stack([result.t, result.position, result.q, result.qd, result.qdd])
     with atomic_open(file) as stream:
         stream.write(",".join(CSV_COLUMNS) + "\n")

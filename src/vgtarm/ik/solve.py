@@ -20,9 +20,10 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import InputError, PathError, UnreachableError
+from ..errors import InputError, PathError, UnreachableError, shown
+from ..memory import check_memory
 from ..model.robot import Robot
-from ..paths import Path
+from ..paths import MAX_COORDINATE, Path
 from . import fast, kkt, reference
 from . import rates as rate_modes
 from .options import IKOptions
@@ -35,9 +36,25 @@ FALLBACK = "slsqp (fallback)"
 CLOSEST = "closest point (failed)"
 #: A target counts as reachable when a feasible pose comes this close to it (m; rad for orientation).
 REACH_TOLERANCE = 1e-9
+#: Peak memory of the inverse kinematics per path sample (bytes), tip position only and with the
+#: orientation: the measured peak (2.4 kB and 3.1 kB a sample for 50,000 to 200,000 samples of the
+#: fast solver) with a quarter more for safety.
+BYTES_PER_SAMPLE = 3_000
+BYTES_PER_SAMPLE_POSE = 4_000
 
 
-def _check_start(problem: IKProblem, q: Array) -> Array:
+def memory_estimate(n_samples: int, pose: bool = False) -> int:
+    """Bytes the inverse kinematics of a path of ``n_samples`` samples needs at its peak (about)."""
+    return int(n_samples) * (BYTES_PER_SAMPLE_POSE if pose else BYTES_PER_SAMPLE)
+
+
+def _check_start(robot: Robot, problem: IKProblem, q: Array) -> Array:
+    if not robot.in_joint_range(q):
+        low, high = robot.joint_range()
+        raise InputError(
+            f"initial_guess {shown(q.tolist())} is outside the accepted joint range "
+            f"(from {shown(low.round(6).tolist())} to {shown(high.round(6).tolist())})"
+        )
     if not problem.assemblable(q, 0.0):
         raise InputError(f"initial_guess {q.tolist()} cannot be assembled (a triangle inequality of the truss fails)")
     return q
@@ -153,21 +170,42 @@ def inverse_kinematics(
         An :class:`IKResult` with ``.q``, ``.qd``, ``.qdd`` ``(N, 7)`` and the per-sample record.
 
     Raises:
-        PathError: ``path`` is not a :class:`vgtarm.paths.Path`.
-        InputError: Unknown solver, rate mode or option, or a bad option value or pose.
+        PathError: ``path`` is not a :class:`vgtarm.paths.Path`, or has a point farther than
+            :data:`vgtarm.paths.MAX_COORDINATE` (1 km) from the base.
+        InputError: Unknown solver, rate mode or option, or a bad option value or pose; an
+            ``initial_guess`` outside :meth:`vgtarm.Robot.joint_range`; ``robot`` not a Robot.
+
+    A result whose joint rates or accelerations are not finite (rows far too close in time)
+    has ``success`` False and says so in ``message``.
         UnreachableError: A sample cannot be reached within the limits and the assembly margin;
             the message names its time, the target point and the smallest residual reached.
     """
     started = time.perf_counter()
     if not isinstance(path, Path):
         raise PathError(f"path must be a vgtarm.paths.Path (see vgtarm.paths), got {type(path).__name__}")
+    if not isinstance(robot, Robot):
+        raise InputError(f"robot must be a vgtarm.Robot (see vgtarm.load_robot), got {type(robot).__name__}")
+    far = np.flatnonzero(np.abs(path.position).max(axis=1) > MAX_COORDINATE)
+    if far.size:  # not a target of this arm, and the continuation towards it would never end
+        i = int(far[0])
+        raise PathError(
+            f"path {shown(path.name)}: sample {i} (t = {path.t[i]:.6g} s) is at {shown(path.position[i].tolist())} m;"
+            f" expected coordinates within +-{MAX_COORDINATE:g} m"
+        )
     name, solve = get_solver(solver)
     if rates not in rate_modes.RATE_MODES:
         raise InputError(f"unknown rates mode {rates!r}; valid modes are {', '.join(rate_modes.RATE_MODES)}")
     settings = IKOptions.from_keywords(options)
     problem = IKProblem.from_parameters(robot.parameters, settings.margin)
-    q_start = _check_start(problem, robot.parameters.home if settings.initial_guess is None else settings.initial_guess)
+    q_start = _check_start(
+        robot, problem, robot.parameters.home if settings.initial_guess is None else settings.initial_guess
+    )
     n = len(path)
+    check_memory(
+        memory_estimate(n, pose is not None),
+        f"path {shown(path.name)}: {n:,} samples of inverse kinematics",
+        "give a larger dt or a shorter path",
+    )
     target = None
     if pose is not None:
         if isinstance(pose, str) and pose == HOLD:
@@ -187,7 +225,7 @@ def inverse_kinematics(
     check = kkt.verify(problem, state, settings.tolerances)
     samples = _samples(problem, task, state, check, target)
     result = _result(path, state, qd, qdd, samples, target, problem, name, rates, task.kind, started)
-    return replace(result, work=solved.counters)
+    return replace(result, work=solved.counters, robot=robot.parameters.name, robot_fingerprint=robot.fingerprint)
 
 
 def _checked(result: object, task: Task) -> SolverResult:
@@ -240,11 +278,18 @@ def _result(
     started: float,
 ) -> IKResult:
     failed = np.flatnonzero(~samples.success)
+    unbounded = np.flatnonzero(~(np.isfinite(qd).all(axis=1) & np.isfinite(qdd).all(axis=1)))
     if failed.size:
         i = int(failed[0])
         message = (
             f"{failed.size} of {len(path)} samples failed the optimality check (first: sample {i} at t = "
             f"{path.t[i]:.6g} s, residual {samples.residual[i]:.3g} m, stationarity {samples.stationarity[i]:.3g})"
+        )
+    elif unbounded.size:  # solved points whose rates overflowed: not a usable reference
+        i = int(unbounded[0])
+        message = (
+            f"{unbounded.size} of {len(path)} samples have joint rates or accelerations that are not finite "
+            f"(first: sample {i} at t = {path.t[i]:.6g} s; dt = {path.dt:g} s)"
         )
     else:
         message = f"all {len(path)} samples solved and verified"
@@ -267,7 +312,7 @@ def _result(
         lower=problem.lower,
         upper=problem.upper,
         wall_time=time.perf_counter() - started,
-        success=failed.size == 0,
+        success=failed.size == 0 and unbounded.size == 0,
         message=message,
     )
 

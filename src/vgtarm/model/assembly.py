@@ -75,7 +75,8 @@ def check_assembly(q: ArrayLike, b: Sequence[float], d: Sequence[float], *, wher
     module = row // 6 + 1
     qi = qa.reshape(-1, 7)[flat_index]
     s, v, p = qi[3 * (module - 1) : 3 * module]
-    location = "" if qa.ndim == 1 else f" (configuration {np.unravel_index(flat_index, qa.shape[:-1])})"
+    index = tuple(int(i) for i in np.unravel_index(flat_index, qa.shape[:-1]))
+    location = "" if qa.ndim == 1 else f" (configuration {index})"
     prefix = f"{where}: " if where else ""
     raise AssemblyError(
         f"{prefix}module {module} cannot be assembled{location}: triangle inequality "

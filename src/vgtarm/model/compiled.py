@@ -4,25 +4,49 @@ On first use the functions of :mod:`vgtarm.model.codegen` are generated as C by 
 together with the drivers of ``csrc/`` (batch evaluation, the closed loop; their interface is the
 one header ``csrc/vgtarm.h``, read by :mod:`.interface`) into one shared library, and cached on
 disk. The cache key hashes every source file of the ``vgtarm.model`` package (so no list is kept
-by hand), the CasADi and cffi versions and the compiler command; the robot's parameters are a runtime input
-of every function, so changing the robot never recompiles. When no C compiler is present the
-same functions run in CasADi's interpreter, after a one-line warning.
+by hand), the CasADi and cffi versions and the compiler command; the robot's parameters are a
+runtime input of every function, so changing the robot never recompiles.
 
-Cache folder: ``$VGTARM_CACHE_DIR``, else ``$XDG_CACHE_HOME/vgtarm``, else ``~/.cache/vgtarm``.
+Cache folder: ``$VGTARM_CACHE_DIR`` (empty counts as unset; a relative value is taken from the
+current folder), else ``$XDG_CACHE_HOME/vgtarm`` (if absolute), else ``~/.cache/vgtarm``.
 Backend choice: ``$VGTARM_BACKEND`` = ``auto`` (default), ``compiled`` or ``interpreted``.
+
+Trust rules of the cache (the README repeats them for users):
+
+- The folder must belong to the current user and be writable by nobody else (it is created with
+  mode 0700); otherwise it is refused with one line saying why.
+- Beside each library ``vgtarm_<key>.so`` lies ``vgtarm_<key>.json``: the key, the library's
+  size and SHA-256 and the signatures of the generated functions. A library is opened only by
+  absolute path and only after its metadata validated and its size and SHA-256 matched (so a
+  truncated file is never mapped); once opened, the library's own report of every function's
+  sizes and the structure layout must equal the metadata. A library without metadata is never
+  opened.
+- Whatever fails a check is removed and rebuilt once, with one warning line. A build runs in a
+  private temporary folder ``.build-<pid>-*`` of the cache, under a lock, and moves the library
+  and then its metadata into place atomically; build folders left by dead processes or older
+  than an hour are removed.
+- When the compiled model cannot be had (no or failing compiler, a read-only or refused folder,
+  a rebuilt library that still fails), ``auto`` runs CasADi's interpreter after one line naming
+  the reason; ``VGTARM_BACKEND=interpreted`` chooses it silently, and ``compiled`` turns the
+  reason into a :class:`BackendError` instead.
 """
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import functools
 import hashlib
 import json
 import logging
 import os
+import re
 import shutil
+import stat
 import subprocess
 import tempfile
-from collections.abc import Sequence
+import time
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
@@ -33,7 +57,7 @@ import numpy as np
 from cffi import FFI
 from numpy.typing import NDArray
 
-from ..fileio import atomic_write_text
+from ..errors import ConfigError, VgtarmError, cut, shown
 from . import codegen, interface
 
 logger = logging.getLogger("vgtarm")
@@ -44,6 +68,42 @@ _SOURCE_SUFFIXES = (".py", ".c", ".h", ".toml")
 _CSRC = _PACKAGE_DIR / "csrc"
 _CFLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off")
 _GENERATED_NAME = "vgtarm_model"
+
+#: Values of ``$VGTARM_BACKEND`` (and of ``get_backend(kind)``).
+BACKEND_CHOICES = ("auto", "compiled", "interpreted")
+#: Version of the metadata file's layout; another version is rebuilt.
+METADATA_FORMAT = 1
+#: Prefix of the private build folders inside the cache (followed by the builder's pid).
+_BUILD_PREFIX = ".build-"
+#: A build folder older than this (s) is stale even if its process still runs.
+_STALE_BUILD_AGE = 3600.0
+#: Longest wait (s) for another process's build of the same cache before building anyway.
+_LOCK_WAIT = 900.0
+#: Longest a compiler may run (s) before the build counts as failed.
+_COMPILE_TIMEOUT = 1800.0
+#: Samples of one compiled batch call: at most a few tens of milliseconds (the costliest function
+#: takes about 4 us a sample), so Ctrl-C is handled between two calls of a huge batch.
+BATCH_CHUNK = 8192
+#: Samples of one call into CasADi's interpreter (about 50 ms at the costliest 90 us a sample).
+INTERPRETED_CHUNK = 512
+#: Largest metadata file and library read (bytes): anything bigger is damaged, not read.
+_MAX_METADATA_BYTES = 1 << 20
+_MAX_LIBRARY_BYTES = 1 << 30
+#: Largest size or count a metadata field may hold (far above any real function's hundreds).
+_MAX_COUNT = 1 << 20
+_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,127}")
+
+
+class BackendError(VgtarmError, RuntimeError):
+    """``VGTARM_BACKEND=compiled`` was asked for, but the model cannot be compiled or loaded."""
+
+
+class _Unavailable(Exception):
+    """The compiled backend cannot be had; the message is the one-line reason."""
+
+
+class _Damaged(Exception):
+    """A cached library or its metadata fails a check; the message says which and how."""
 
 
 @dataclass(frozen=True)
@@ -101,12 +161,42 @@ def _check_inputs(sig: Signature, inputs: Sequence[NDArray[np.float64]], n: int)
             raise ValueError(f"{sig.name}: input {i} has shape {x.shape}, expected ({n}, {nnz}) or ({nnz},)")
 
 
+def _declarations(names: Sequence[str]) -> str:
+    """cffi declarations of the generated functions ``names`` and of CasADi's report of their sizes."""
+    lines = [f"int {_GENERATED_NAME}_casadi_int_size(void);"]
+    for name in names:
+        lines += [
+            f"int {name}(const double **, double **, vgt_int *, double *, int);",
+            f"vgt_int {name}_n_in(void);",
+            f"vgt_int {name}_n_out(void);",
+            f"const vgt_int *{name}_sparsity_in(vgt_int);",
+            f"const vgt_int *{name}_sparsity_out(vgt_int);",
+            f"const char *{name}_name_in(vgt_int);",
+            f"const char *{name}_name_out(vgt_int);",
+            f"int {name}_work(vgt_int *, vgt_int *, vgt_int *, vgt_int *);",
+        ]
+    return "\n".join(lines) + "\n"
+
+
+def _nonzeros(pattern: Any) -> int | None:
+    """Number of nonzeros of a CasADi sparsity pattern (``nrow, ncol, 1`` when dense, else
+    ``nrow, ncol, colind[ncol + 1], row[nnz]``); None for a null or absurd pattern."""
+    if pattern == cffi.FFI.NULL:
+        return None
+    nrow, ncol = int(pattern[0]), int(pattern[1])
+    if not (0 <= nrow <= _MAX_COUNT and 0 <= ncol <= _MAX_COUNT):
+        return None
+    return nrow * ncol if int(pattern[2]) == 1 else int(pattern[2 + ncol])
+
+
 class CompiledBackend:
-    """Functions evaluated through the compiled shared library."""
+    """Functions evaluated through the compiled shared library (opened by absolute path)."""
 
     kind = "compiled"
 
     def __init__(self, library_path: Path, signatures: dict[str, Signature]) -> None:
+        if not library_path.is_absolute():
+            raise ValueError(f"a compiled library is opened only by absolute path, not {library_path}")
         self.library_path = library_path
         self.ffi = interface.ffi()
         self.library = interface.open_library(library_path)
@@ -114,15 +204,56 @@ class CompiledBackend:
         # the generated functions share one C type; declare them by name to find their addresses
         generated = FFI()
         generated.include(self.ffi)
-        generated.cdef(
-            "".join(
-                f"int {sig.name}(const double **, double **, vgt_int *, double *, int);\n"
-                for sig in signatures.values()
-            )
-        )
-        symbols = generated.dlopen(str(library_path))
-        self._pointers = {key: self.ffi.cast("vgt_fn", getattr(symbols, sig.name)) for key, sig in signatures.items()}
-        self._keep = (generated, symbols)
+        generated.cdef(_declarations([sig.name for sig in signatures.values()]))
+        try:
+            symbols = generated.dlopen(str(library_path))
+            self._generated, self._symbols = generated, symbols
+            self._pointers = {
+                key: self.ffi.cast("vgt_fn", getattr(symbols, sig.name)) for key, sig in signatures.items()
+            }
+        except BaseException:
+            self.ffi.dlclose(self.library)
+            raise
+
+    def close(self) -> None:
+        """Let go of the library (after a failed check); the backend is unusable afterwards."""
+        self._generated.dlclose(self._symbols)
+        self.ffi.dlclose(self.library)
+
+    def mismatches(self) -> list[str]:
+        """Where the library's own report (CasADi's size functions, the structure layout) contradicts
+        the signatures it was opened with; empty when they agree."""
+        lib = self._symbols
+        found: list[str] = []
+        if getattr(lib, f"{_GENERATED_NAME}_casadi_int_size")() != self.ffi.sizeof("vgt_int"):
+            found.append("integer size")
+        if self.layout() != interface.python_layout():
+            found.append("structure layout")
+        sizes = self._generated.new("vgt_int[4]")
+        for key, sig in self._signatures.items():
+            name = sig.name
+            counts = [
+                (getattr(lib, f"{name}_n_in")(), len(sig.nnz_in)),
+                (getattr(lib, f"{name}_n_out")(), len(sig.nnz_out)),
+            ]
+            if any(got != want for got, want in counts):
+                found.append(f"{key}: number of inputs or outputs")
+                continue
+            for side, expected, names in (("in", sig.nnz_in, sig.in_names), ("out", sig.nnz_out, sig.out_names)):
+                sparsity, label = getattr(lib, f"{name}_sparsity_{side}"), getattr(lib, f"{name}_name_{side}")
+                for i, nnz in enumerate(expected):
+                    if _nonzeros(sparsity(i)) != nnz:
+                        found.append(f"{key}: size of {side}put {i}")
+                    text = label(i)
+                    if names and (text == cffi.FFI.NULL or self.ffi.string(text).decode(errors="replace") != names[i]):
+                        found.append(f"{key}: name of {side}put {i}")
+            # the generated code may need less work space than the CasADi function reports
+            # (local variables instead of w), never more: the metadata's sizes are allocated
+            status = getattr(lib, f"{name}_work")(sizes, sizes + 1, sizes + 2, sizes + 3)
+            recorded = (sig.sz_arg, sig.sz_res, sig.sz_iw, sig.sz_w)
+            if status != 0 or any(need > have for need, have in zip(sizes, recorded, strict=True)):
+                found.append(f"{key}: work sizes")
+        return found
 
     def signature(self, name: str) -> Signature:
         return self._signatures[name]
@@ -153,22 +284,23 @@ class CompiledBackend:
         in_ptrs = [ffi.cast("double *", x.ctypes.data) for x in arrays]
         in_strides = [0 if x.ndim == 1 else x.shape[1] for x in arrays]
         out_ptrs = [ffi.cast("double *", y.ctypes.data) for y in outputs]
-        status = self.library.vgt_batch(
-            self._pointers[name],
-            sig.sz_arg,
-            sig.sz_res,
-            sig.sz_iw,
-            sig.sz_w,
-            len(arrays),
-            len(outputs),
-            n,
-            in_ptrs,
-            in_strides,
-            out_ptrs,
-            list(sig.nnz_out),
-        )
-        if status != 0:
-            raise RuntimeError(f"compiled function {sig.name} failed (status {status})")
+        for start in range(0, n, BATCH_CHUNK):  # Ctrl-C is handled between two chunks
+            status = self.library.vgt_batch(
+                self._pointers[name],
+                sig.sz_arg,
+                sig.sz_res,
+                sig.sz_iw,
+                sig.sz_w,
+                len(arrays),
+                len(outputs),
+                min(BATCH_CHUNK, n - start),
+                [p + start * s for p, s in zip(in_ptrs, in_strides, strict=True)],
+                in_strides,
+                [p + start * s for p, s in zip(out_ptrs, sig.nnz_out, strict=True)],
+                list(sig.nnz_out),
+            )
+            if status != 0:
+                raise RuntimeError(f"compiled function {sig.name} failed (status {status})")
         return outputs
 
 
@@ -191,17 +323,21 @@ class InterpretedBackend:
         _check_inputs(sig, arrays, n)
         if n == 0:
             return [np.empty((0, nnz)) for nnz in sig.nnz_out]
-        key = (name, n)
-        if key not in self._maps:
-            if len(self._maps) > 64:
-                self._maps.clear()
-            self._maps[key] = self.functions[name].map(n, "serial")
-        args = [ca.DM(x.T) if x.ndim == 2 else ca.DM(x) for x in arrays]
-        raw = self._maps[key](*args)
-        results = list(raw) if isinstance(raw, tuple | list) else [raw]
-        return [
-            np.array(r, dtype=np.float64).reshape(nnz, n).T.copy() for r, nnz in zip(results, sig.nnz_out, strict=True)
-        ]
+        outputs = [np.empty((n, nnz)) for nnz in sig.nnz_out]
+        for start in range(0, n, INTERPRETED_CHUNK):  # Ctrl-C is handled between two chunks
+            rows = slice(start, min(start + INTERPRETED_CHUNK, n))
+            m = rows.stop - rows.start
+            key = (name, m)
+            if key not in self._maps:
+                if len(self._maps) > 64:
+                    self._maps.clear()
+                self._maps[key] = self.functions[name].map(m, "serial")
+            args = [ca.DM(x[rows].T) if x.ndim == 2 else ca.DM(x) for x in arrays]
+            raw = self._maps[key](*args)
+            results = list(raw) if isinstance(raw, tuple | list) else [raw]
+            for out, r, nnz in zip(outputs, results, sig.nnz_out, strict=True):
+                out[rows] = np.array(r, dtype=np.float64).reshape(nnz, m).T
+        return outputs
 
 
 def build_functions() -> dict[str, ca.Function]:
@@ -210,11 +346,18 @@ def build_functions() -> dict[str, ca.Function]:
 
 
 def cache_dir() -> Path:
-    """Folder of the compiled libraries."""
-    if "VGTARM_CACHE_DIR" in os.environ:
-        return Path(os.environ["VGTARM_CACHE_DIR"])
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "vgtarm"
+    """Folder of the compiled libraries, always absolute.
+
+    ``$VGTARM_CACHE_DIR`` when set and not empty (a relative value is taken from the current
+    folder), else ``$XDG_CACHE_HOME/vgtarm`` when that is absolute, else ``~/.cache/vgtarm``.
+    """
+    chosen = os.environ.get("VGTARM_CACHE_DIR", "")
+    if chosen:
+        return Path(os.path.abspath(os.path.expanduser(chosen)))
+    base = os.environ.get("XDG_CACHE_HOME", "")
+    if not os.path.isabs(base):  # the XDG specification: a relative value is ignored
+        base = str(Path.home() / ".cache")
+    return Path(os.path.abspath(base)) / "vgtarm"
 
 
 def find_compiler() -> str | None:
@@ -247,86 +390,447 @@ def _cache_key(compiler: str) -> str:
     return digest.hexdigest()[:20]
 
 
-def _compile(built: dict[str, ca.Function], compiler: str, target: Path) -> None:
-    """Generate C for ``built``, compile it with the drivers into ``target`` (atomically)."""
-    target.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=target.parent, prefix=".build-") as tmp:
-        workdir = Path(tmp)
-        generator = ca.CodeGenerator(f"{_GENERATED_NAME}.c", {"with_header": False})
-        for f in built.values():
-            generator.add(f)
-        generator.generate(str(workdir) + os.sep)
-        (workdir / "layout.c").write_text(interface.layout_source())
-        sources = [str(workdir / f"{_GENERATED_NAME}.c"), str(workdir / "layout.c")]
-        sources += [str(path) for path in sorted(_CSRC.glob("*.c"))]
-        library = workdir / target.name
-        base = [compiler, *_CFLAGS, "-I", str(_CSRC), "-o", str(library), *sources, "-lm"]
-        attempts = [base[:1] + ["-fopenmp"] + base[1:], base]
-        errors = ""
-        for command in attempts:
-            done = subprocess.run(command, capture_output=True, text=True, check=False)
-            if done.returncode == 0:
-                os.replace(library, target)
-                return
-            errors = done.stderr
-        raise RuntimeError(f"compiling the model failed: {errors.strip()[:2000]}")
+@dataclass(frozen=True)
+class CacheEntry:
+    """Where the library of one cache key lives: ``folder/vgtarm_<key>.so`` and its ``.json``."""
+
+    folder: Path
+    key: str
+
+    @property
+    def library(self) -> Path:
+        return self.folder / f"vgtarm_{self.key}.so"
+
+    @property
+    def metadata(self) -> Path:
+        return self.folder / f"vgtarm_{self.key}.json"
 
 
-def _save_signatures(path: Path, signatures: dict[str, Signature]) -> None:
-    payload = {key: sig.__dict__ for key, sig in signatures.items()}
-    atomic_write_text(path, json.dumps(payload, indent=1))
+def cache_entry(compiler: str | None = None) -> CacheEntry:
+    """The cache entry of this process's model sources and ``compiler`` (default: the one found).
+
+    Raises :class:`BackendError` when no compiler is given and none is found.
+    """
+    compiler = compiler or find_compiler()
+    if compiler is None:
+        raise BackendError("no C compiler found (cc, gcc or clang on the PATH, or $CC)")
+    return CacheEntry(cache_dir(), _cache_key(compiler))
 
 
-def _load_signatures(path: Path) -> dict[str, Signature]:
-    payload: dict[str, dict[str, Any]] = json.loads(path.read_text())
-    return {
-        key: Signature(
-            name=v["name"],
-            nnz_in=tuple(v["nnz_in"]),
-            nnz_out=tuple(v["nnz_out"]),
-            sz_arg=v["sz_arg"],
-            sz_res=v["sz_res"],
-            sz_iw=v["sz_iw"],
-            sz_w=v["sz_w"],
-            in_names=tuple(v.get("in_names", ())),
-            out_names=tuple(v.get("out_names", ())),
+def _shown_path(path: Path) -> str:
+    return shown(str(path), 160)
+
+
+# ----------------------------------------------------------------------------- trust and checks
+
+
+def _check_folder(folder: Path) -> os.stat_result:
+    """The cache folder's status, creating it (mode 0700) if missing; :class:`_Unavailable`
+    unless it is a folder of the current user that nobody else can write."""
+    try:
+        folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+    except FileExistsError:  # a file (or a dangling link) holds the name: reported below
+        pass
+    except OSError as exc:
+        raise _Unavailable(f"cannot create the cache folder {_shown_path(folder)}: {exc.strerror or exc}") from None
+    try:
+        info = os.stat(folder)
+    except OSError as exc:
+        raise _Unavailable(f"cannot use the cache folder {_shown_path(folder)}: {exc.strerror or exc}") from None
+    if not stat.S_ISDIR(info.st_mode):
+        raise _Unavailable(f"the cache folder {_shown_path(folder)} is not a folder; set VGTARM_CACHE_DIR to a folder")
+    if info.st_uid != os.geteuid():
+        raise _Unavailable(
+            f"refusing the cache folder {_shown_path(folder)}: it belongs to user id {info.st_uid}, not to you "
+            f"({os.geteuid()}); set VGTARM_CACHE_DIR to a folder of yours"
         )
-        for key, v in payload.items()
-    }
+    if info.st_mode & (stat.S_IWGRP | stat.S_IWOTH):
+        raise _Unavailable(
+            f"refusing the cache folder {_shown_path(folder)}: it is writable by group or others (mode "
+            f"{stat.S_IMODE(info.st_mode):04o}), so anyone could plant a library; run chmod go-w on it"
+        )
+    return info
+
+
+def _writable(folder: Path, info: os.stat_result) -> bool:
+    """Whether a build can write into ``folder``: its owner's write bit is set (a folder made
+    read-only counts as such even for root) and the system grants the access."""
+    return bool(info.st_mode & stat.S_IWUSR) and os.access(folder, os.W_OK | os.X_OK)
+
+
+def _read_private(path: Path, limit: int) -> bytes:
+    """The bytes of a regular file of the current user that nobody else can write, at most
+    ``limit`` of them (never following a link, never blocking on a pipe)."""
+    flags = os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
+    try:
+        fd = os.open(path, flags)
+    except FileNotFoundError:
+        raise _Damaged(f"{path.name} is missing") from None
+    except OSError as exc:
+        raise _Damaged(f"{path.name} cannot be opened ({exc.strerror or exc})") from None
+    with os.fdopen(fd, "rb") as handle:
+        info = os.fstat(handle.fileno())
+        if not stat.S_ISREG(info.st_mode):
+            raise _Damaged(f"{path.name} is not a regular file")
+        if info.st_uid != os.geteuid() or info.st_mode & (stat.S_IWGRP | stat.S_IWOTH):
+            raise _Damaged(f"{path.name} belongs to someone else or is writable by others")
+        if info.st_size > limit:
+            raise _Damaged(f"{path.name} is too large ({info.st_size} bytes)")
+        return handle.read(limit + 1)
+
+
+def _count(value: object, where: str, limit: int = _MAX_COUNT) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= limit:
+        raise _Damaged(f"metadata field {where} is {shown(value, 30)}, expected a count")
+    return value
+
+
+def _counts(value: object, where: str) -> tuple[int, ...]:
+    if not isinstance(value, list) or len(value) > 1000:
+        raise _Damaged(f"metadata field {where} is {shown(value, 30)}, expected a list of counts")
+    return tuple(_count(v, f"{where}[{i}]") for i, v in enumerate(value))
+
+
+def _names(value: object, where: str, length: int) -> tuple[str, ...]:
+    if not (
+        isinstance(value, list) and len(value) == length and all(isinstance(v, str) and len(v) < 200 for v in value)
+    ):
+        raise _Damaged(f"metadata field {where} is {shown(value, 30)}, expected {length} names")
+    return tuple(value)
+
+
+def _parse_signature(key: str, value: object) -> Signature:
+    where = f"functions.{key}"
+    if not isinstance(value, dict):
+        raise _Damaged(f"metadata field {where} is {shown(value, 30)}, expected a table")
+    name = value.get("name")
+    if not (isinstance(name, str) and _IDENTIFIER.fullmatch(name)):
+        raise _Damaged(f"metadata field {where}.name is {shown(name, 30)}, expected a C identifier")
+    nnz_in, nnz_out = _counts(value.get("nnz_in"), f"{where}.nnz_in"), _counts(value.get("nnz_out"), f"{where}.nnz_out")
+    sz_arg, sz_res = _count(value.get("sz_arg"), f"{where}.sz_arg"), _count(value.get("sz_res"), f"{where}.sz_res")
+    if sz_arg < len(nnz_in) or sz_res < len(nnz_out):
+        raise _Damaged(f"metadata fields {where}.sz_arg and sz_res are fewer than the inputs and outputs")
+    return Signature(
+        name=name,
+        nnz_in=nnz_in,
+        nnz_out=nnz_out,
+        sz_arg=sz_arg,
+        sz_res=sz_res,
+        sz_iw=_count(value.get("sz_iw"), f"{where}.sz_iw"),
+        sz_w=_count(value.get("sz_w"), f"{where}.sz_w"),
+        in_names=_names(value.get("in_names"), f"{where}.in_names", len(nnz_in)),
+        out_names=_names(value.get("out_names"), f"{where}.out_names", len(nnz_out)),
+    )
+
+
+@dataclass(frozen=True)
+class _Metadata:
+    size: int
+    sha256: str
+    signatures: dict[str, Signature]
+
+
+def _parse_metadata(raw: bytes, entry: CacheEntry) -> _Metadata:
+    """The validated metadata of ``entry``: the format, the key, the library's size and SHA-256,
+    and one signature for each function the model generates (distinct C names)."""
+    try:
+        payload = json.loads(raw)
+    except (ValueError, RecursionError):
+        raise _Damaged(f"{entry.metadata.name} is not valid JSON") from None
+    if not isinstance(payload, dict) or payload.get("format") != METADATA_FORMAT:
+        raise _Damaged(f"{entry.metadata.name} is not metadata of format {METADATA_FORMAT}")
+    if payload.get("key") != entry.key:
+        raise _Damaged(f"metadata field key is {shown(payload.get('key'), 30)}, expected {entry.key!r}")
+    size = _count(payload.get("size"), "size", _MAX_LIBRARY_BYTES)
+    sha256 = payload.get("sha256")
+    if not (isinstance(sha256, str) and re.fullmatch(r"[0-9a-f]{64}", sha256)):
+        raise _Damaged(f"metadata field sha256 is {shown(sha256, 30)}, expected 64 hexadecimal digits")
+    functions = payload.get("functions")
+    expected = set(codegen.all_builders())
+    if not isinstance(functions, dict) or set(functions) != expected:
+        raise _Damaged("metadata field functions does not list exactly the model's functions")
+    signatures = {key: _parse_signature(key, functions[key]) for key in sorted(expected)}
+    if len({sig.name for sig in signatures.values()}) != len(signatures):
+        raise _Damaged("metadata field functions repeats a C name")
+    return _Metadata(size, sha256, signatures)
+
+
+def _sha256(path: Path, limit: int = _MAX_LIBRARY_BYTES) -> tuple[int, str]:
+    """Size and SHA-256 of a private regular file (see :func:`_read_private`)."""
+    data = _read_private(path, limit)
+    return len(data), hashlib.sha256(data).hexdigest()
+
+
+def _load(entry: CacheEntry) -> CompiledBackend:
+    """Open the cached library of ``entry`` after every check; :class:`_Damaged` if one fails.
+
+    Order matters: the metadata is validated and the file's size and SHA-256 compared before the
+    library is handed to the system loader, so a truncated, foreign or planted file is never
+    mapped (a truncated one would end the process with SIGBUS).
+    """
+    try:
+        return _load_checked(entry)
+    except OSError as exc:  # a read error of a file that passed lstat
+        raise _Damaged(f"{entry.library.name} cannot be read ({exc.strerror or exc})") from None
+
+
+def _load_checked(entry: CacheEntry) -> CompiledBackend:
+    if not os.path.lexists(entry.metadata):
+        raise _Damaged(f"{entry.library.name} has no metadata")
+    meta = _parse_metadata(_read_private(entry.metadata, _MAX_METADATA_BYTES), entry)
+    if not os.path.lexists(entry.library):
+        raise _Damaged(f"{entry.library.name} is missing beside its metadata")
+    info = os.lstat(entry.library)
+    if not stat.S_ISREG(info.st_mode):
+        raise _Damaged(f"{entry.library.name} is not a regular file")
+    on_disk = info.st_size
+    if on_disk != meta.size:
+        raise _Damaged(f"{entry.library.name} has {on_disk} bytes, its metadata says {meta.size}")
+    size, digest = _sha256(entry.library, meta.size)
+    if size != meta.size or digest != meta.sha256:
+        raise _Damaged(f"the SHA-256 of {entry.library.name} differs from its metadata")
+    try:
+        backend = CompiledBackend(entry.library, meta.signatures)
+    except (OSError, AttributeError, cffi.FFIError) as exc:
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise _Damaged(f"{entry.library.name} does not load ({cut(first, 120)})") from None
+    try:
+        wrong = backend.mismatches()
+    except (AttributeError, cffi.FFIError) as exc:
+        wrong = [f"missing {cut(str(exc), 80)}"]
+    if wrong:
+        backend.close()
+        more = f" and {len(wrong) - 1} more" if len(wrong) > 1 else ""
+        raise _Damaged(f"{entry.library.name} does not match its metadata ({wrong[0]}{more})")
+    return backend
+
+
+# ----------------------------------------------------------------------------- building
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # somebody else's process: alive
+        return True
+    return True
+
+
+def _clean_stale_builds(folder: Path) -> None:
+    """Remove build folders whose process is gone or that are older than an hour."""
+    now = time.time()
+    for item in folder.iterdir():
+        if not item.name.startswith(_BUILD_PREFIX):
+            continue
+        try:
+            info = item.lstat()
+        except OSError:
+            continue
+        pid_text = item.name[len(_BUILD_PREFIX) :].split("-", 1)[0]
+        dead = not (pid_text.isdigit() and _process_alive(int(pid_text)))
+        if dead or now - info.st_mtime > _STALE_BUILD_AGE:
+            if stat.S_ISDIR(info.st_mode):
+                shutil.rmtree(item, ignore_errors=True)
+            else:
+                with contextlib.suppress(OSError):
+                    item.unlink()
+
+
+@contextlib.contextmanager
+def _build_lock(folder: Path) -> Iterator[None]:
+    """Hold the cache's build lock (a ``flock`` on ``.lock``, released by the system if the
+    holder dies); after a long wait, go on without it (the moves into place are atomic)."""
+    try:
+        fd = os.open(folder / ".lock", os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600)
+    except OSError as exc:
+        raise _Unavailable(f"cannot write in the cache folder {_shown_path(folder)}: {exc.strerror or exc}") from None
+    try:
+        deadline = time.monotonic() + _LOCK_WAIT
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    break
+                time.sleep(0.1)
+        yield
+    finally:
+        os.close(fd)
+
+
+def _compiler_failure(compiler: str, done: subprocess.CompletedProcess[str]) -> str:
+    lines = [line.strip() for line in done.stderr.splitlines() if line.strip()]
+    first = next((line for line in lines if "error" in line.lower()), lines[-1] if lines else "no message")
+    return f"the C compiler {shown(compiler, 80)} failed (exit status {done.returncode}): {cut(first, 160)}"
+
+
+def _compile(compiler: str, workdir: Path) -> tuple[Path, dict[str, Signature]]:
+    """Generate C for every model function into ``workdir`` and compile it with the drivers.
+
+    Returns the library (inside ``workdir``) and the functions' signatures; raises
+    :class:`_Unavailable` when the compiler cannot run or fails. The cache tests replace this
+    function to copy a prebuilt library instead, so that the checks around it run for real
+    without a 10-20 s compile each.
+    """
+    built = build_functions()
+    generator = ca.CodeGenerator(f"{_GENERATED_NAME}.c", {"with_header": False})
+    for f in built.values():
+        generator.add(f)
+    generator.generate(str(workdir) + os.sep)
+    (workdir / "layout.c").write_text(interface.layout_source())
+    sources = [str(workdir / f"{_GENERATED_NAME}.c"), str(workdir / "layout.c")]
+    sources += [str(path) for path in sorted(_CSRC.glob("*.c"))]
+    library = workdir / "library.so"
+    base = [compiler, *_CFLAGS, "-I", str(_CSRC), "-o", str(library), *sources, "-lm"]
+    failure = ""
+    for command in (base[:1] + ["-fopenmp"] + base[1:], base):
+        try:
+            done = subprocess.run(
+                command,
+                capture_output=True,
+                text=True,
+                errors="replace",
+                stdin=subprocess.DEVNULL,
+                check=False,
+                timeout=_COMPILE_TIMEOUT,
+            )
+        except subprocess.TimeoutExpired:
+            raise _Unavailable(
+                f"the C compiler {shown(compiler, 80)} ran longer than {_COMPILE_TIMEOUT:.0f} s"
+            ) from None
+        except OSError as exc:
+            raise _Unavailable(f"cannot run the C compiler {shown(compiler, 80)}: {exc.strerror or exc}") from None
+        if done.returncode == 0 and library.is_file():
+            return library, {key: Signature.of(f) for key, f in built.items()}
+        failure = _compiler_failure(compiler, done)
+    raise _Unavailable(failure)
+
+
+def _build(entry: CacheEntry, compiler: str) -> None:
+    """Compile into a private temporary folder of the cache, then move the library and then its
+    metadata into place (each move atomic; a library without metadata is never opened)."""
+    _clean_stale_builds(entry.folder)
+    logger.info("compiling the vgtarm model into %s (once per model version)", entry.library)
+    workdir = Path(tempfile.mkdtemp(dir=entry.folder, prefix=f"{_BUILD_PREFIX}{os.getpid()}-"))
+    try:
+        library, signatures = _compile(compiler, workdir)
+        os.chmod(library, 0o755)
+        size, digest = _sha256(library)
+        payload = {
+            "format": METADATA_FORMAT,
+            "key": entry.key,
+            "library": entry.library.name,
+            "size": size,
+            "sha256": digest,
+            "compiler": compiler,
+            "casadi": str(getattr(ca, "__version__", "unknown")),
+            "functions": {key: sig.__dict__ for key, sig in signatures.items()},
+        }
+        metadata = workdir / "metadata.json"
+        metadata.write_text(json.dumps(payload, indent=1))
+        os.chmod(metadata, 0o644)
+        os.replace(library, entry.library)
+        os.replace(metadata, entry.metadata)
+    finally:
+        shutil.rmtree(workdir, ignore_errors=True)
+
+
+def _remove(entry: CacheEntry) -> None:
+    for path in (entry.metadata, entry.library):  # metadata first: a library alone is never opened
+        with contextlib.suppress(FileNotFoundError):
+            path.unlink()
 
 
 def _compiled_backend(compiler: str) -> CompiledBackend:
-    key = _cache_key(compiler)
-    folder = cache_dir()
-    library = folder / f"vgtarm_{key}.so"
-    meta = folder / f"vgtarm_{key}.json"
-    if library.exists() and meta.exists():
-        signatures = _load_signatures(meta)
-        if set(signatures) == set(codegen.all_builders()):
-            return CompiledBackend(library, signatures)
-    built = build_functions()
-    logger.info("compiling the vgtarm model into %s (once per model version)", library)
-    _compile(built, compiler, library)
-    signatures = {k: Signature.of(f) for k, f in built.items()}
-    _save_signatures(meta, signatures)
-    return CompiledBackend(library, signatures)
+    """The compiled backend from the cache, (re)built once if missing or damaged.
+
+    Raises :class:`_Unavailable` with a one-line reason when it cannot be had.
+    """
+    try:
+        entry = CacheEntry(cache_dir(), _cache_key(compiler))
+    except RuntimeError as exc:  # Path.home() without a home folder
+        raise _Unavailable(f"no cache folder: {exc}; set VGTARM_CACHE_DIR") from None
+    info = _check_folder(entry.folder)
+    damage = ""
+    if os.path.lexists(entry.library) or os.path.lexists(entry.metadata):
+        try:
+            return _load(entry)
+        except _Damaged as exc:
+            damage = str(exc)
+    if not _writable(entry.folder, info):
+        where = f"the cache folder {_shown_path(entry.folder)} is read-only"
+        why = (
+            f"the cached library is damaged ({damage}) and {where}"
+            if damage
+            else f"{where} and holds no library of this model version"
+        )
+        raise _Unavailable(why)
+    try:
+        with _build_lock(entry.folder):
+            if os.path.lexists(entry.library) or os.path.lexists(entry.metadata):
+                try:  # look again: another process may have (re)built it meanwhile
+                    return _load(entry)
+                except _Damaged as exc:
+                    logger.warning(
+                        "vgtarm: the compile cache in %s is damaged (%s); removing it and rebuilding the library once",
+                        _shown_path(entry.folder),
+                        exc,
+                    )
+                _remove(entry)
+            _build(entry, compiler)
+    except OSError as exc:
+        raise _Unavailable(
+            f"cannot build in the cache folder {_shown_path(entry.folder)}: {exc.strerror or exc}"
+        ) from None
+    try:
+        return _load(entry)
+    except _Damaged as exc:
+        with contextlib.suppress(OSError):
+            _remove(entry)  # else every later command would find it damaged and warn twice
+        raise _Unavailable(f"the library just built fails its checks: {exc}") from None
+
+
+def _backend_choice(kind: object) -> str:
+    """The validated backend choice: ``kind``, else ``$VGTARM_BACKEND`` (empty = unset), else auto."""
+    if kind is None or kind == "":
+        value: object = os.environ.get("VGTARM_BACKEND", "") or "auto"
+    else:
+        value = kind  # the argument stands for the variable, and is named as such
+    if not isinstance(value, str) or value.lower() not in BACKEND_CHOICES:
+        allowed = ", ".join(repr(c) for c in BACKEND_CHOICES)
+        raise ConfigError(f"VGTARM_BACKEND = {shown(value)}: expected one of {allowed}")
+    return value.lower()
 
 
 @functools.cache
 def get_backend(kind: str | None = None) -> CompiledBackend | InterpretedBackend:
-    """The process-wide backend: compiled when a C compiler is present, else interpreted.
+    """The process-wide backend: compiled when possible, else interpreted after one line.
 
-    ``kind`` overrides ``$VGTARM_BACKEND`` (``auto``, ``compiled`` or ``interpreted``).
+    ``kind`` overrides ``$VGTARM_BACKEND`` (``auto``, ``compiled`` or ``interpreted``). With
+    ``compiled`` a model that cannot be compiled raises :class:`BackendError` instead.
     """
-    choice = (kind or os.environ.get("VGTARM_BACKEND", "auto")).lower()
-    if choice not in ("auto", "compiled", "interpreted"):
-        raise ValueError(f"VGTARM_BACKEND = {choice!r}: expected 'auto', 'compiled' or 'interpreted'")
+    choice = _backend_choice(kind)
     if choice == "interpreted":
         return InterpretedBackend(build_functions())
-    compiler = find_compiler()
-    if compiler is None:
+    try:
+        compiler = find_compiler()
+        if compiler is None:
+            named = os.environ.get("CC")
+            raise _Unavailable(
+                f"$CC = {shown(named, 80)} names no program on the PATH"
+                if named
+                else "no C compiler found (cc, gcc or clang)"
+            )
+        return _compiled_backend(compiler)
+    except _Unavailable as exc:
         if choice == "compiled":
-            raise RuntimeError("VGTARM_BACKEND = 'compiled' but no C compiler (cc, gcc, clang) was found")
-        logger.warning("vgtarm: no C compiler found; using CasADi's interpreter (slower)")
-        return InterpretedBackend(build_functions())
-    return _compiled_backend(compiler)
+            raise BackendError(f"VGTARM_BACKEND = 'compiled', but {exc}") from None
+        logger.warning(
+            "vgtarm: %s; using CasADi's interpreter instead (slower; %s chooses it without this line)",
+            exc,
+            "VGTARM_BACKEND=interpreted",
+        )
+    return InterpretedBackend(build_functions())

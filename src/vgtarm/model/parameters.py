@@ -12,17 +12,19 @@ compiled library serves every robot: changing a mass or a dimension never recomp
 from __future__ import annotations
 
 import math
-import tomllib
+import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from importlib import resources
+from numbers import Real
 from pathlib import Path
 from typing import Any, NoReturn
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import ConfigError
+from ..errors import ConfigError, cut, shown
+from ..fileio import parse_toml, read_text_limited
 from .assembly import TRIANGLE_INEQUALITIES, triangle_margins
 
 #: Joint names, in the order of the joint vector ``q``.
@@ -39,7 +41,27 @@ BODY_NAMES: tuple[str, ...] = ("platform1", "platform2", "end_effector")
 N_PARAMETERS = 45
 
 _REFERENCE_FILE = "reference_robot.toml"
+#: Largest robot file read (bytes); the reference robot's file is about 3 kB.
+ROBOT_FILE_LIMIT = 2**20
+#: Longest robot name (characters).
+NAME_LENGTH = 200
+#: Longest rendering of a file name in messages (the name is at its end).
+_SOURCE_LENGTH = 200
+#: Longest rendering of a whole matrix or vector the validation computed (values are cut shorter).
+_ARRAY_LENGTH = 160
 _INERTIA_RELATIVE_TOLERANCE = 1e-9
+# Generous physical bounds: far beyond any arm of this kind, they keep every product of the model
+# (masses times squared lengths, gravity torques) finite, so no value turns into inf or NaN.
+#: Largest length, joint limit (m, or rad for the twist) and centre-of-mass coordinate (m).
+MAX_LENGTH = 1e3
+#: Largest body mass (kg).
+MAX_MASS = 1e6
+#: Largest entry of an inertia matrix (kg m^2).
+MAX_INERTIA = 1e6
+#: Largest viscous friction coefficient (N s/m, N m s/rad).
+MAX_FRICTION = 1e9
+#: Largest gravity component (m/s^2).
+MAX_GRAVITY = 1e3
 
 
 @dataclass(frozen=True)
@@ -136,8 +158,13 @@ class RobotParameters:
     def scaled(self, *, mass: float = 1.0, inertia: float = 1.0, friction: float = 1.0) -> RobotParameters:
         """A copy with every body mass, inertia and friction coefficient multiplied by a factor.
 
-        Convenient for giving a controller a wrong model of the plant.
+        Convenient for giving a controller a wrong model of the plant. Each factor must be a
+        finite number > 0 (``ConfigError`` otherwise).
         """
+        for label, factor in (("mass", mass), ("inertia", inertia), ("friction", friction)):
+            real = isinstance(factor, int | float | np.integer | np.floating) and not isinstance(factor, bool)
+            if not (real and 0 < factor < 1e300):  # also false for NaN and for ints beyond any float
+                raise ConfigError(f"scaled: {label} = {shown(factor)}: expected a finite factor > 0")
         bodies = tuple(
             replace(
                 body,
@@ -154,34 +181,27 @@ class RobotParameters:
         )
 
 
-def load_parameters(path: str | Path | None = None) -> RobotParameters:
+def load_parameters(path: str | os.PathLike[str] | None = None) -> RobotParameters:
     """Load robot parameters from a TOML file; ``None`` loads the shipped reference robot.
 
-    Raises :class:`~vgtarm.errors.ConfigError` for a missing or unreadable file, a TOML syntax
-    error, an unknown or missing key, or any invalid value.
+    Raises :class:`~vgtarm.errors.ConfigError` (one line naming the file) for an empty name, a
+    missing, unreadable, non-UTF-8 or too large file (over :data:`ROBOT_FILE_LIMIT` bytes), a TOML
+    syntax error or nesting too deep to parse, an unknown or missing key, or any invalid value.
     """
     if path is None:
         text = resources.files("vgtarm.model.data").joinpath(_REFERENCE_FILE).read_text("utf-8")
         source = f"<reference robot {_REFERENCE_FILE}>"
     else:
-        file = Path(path)
-        source = str(file)
-        try:
-            text = file.read_text("utf-8")
-        except FileNotFoundError:
-            raise ConfigError(f"{source}: configuration file not found") from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise ConfigError(f"{source}: cannot read the configuration file: {exc}") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{source}: not valid TOML: {exc}") from None
-    return parameters_from_dict(data, source=source)
+        if not isinstance(path, str | os.PathLike):
+            raise ConfigError(f"robot configuration {shown(path)}: expected a file name (str or Path) or None")
+        source = str(path)
+        text = read_text_limited(path, ROBOT_FILE_LIMIT, "configuration file", error=ConfigError)
+    return parameters_from_dict(parse_toml(text, cut(source, _SOURCE_LENGTH), error=ConfigError), source=source)
 
 
 def parameters_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> RobotParameters:
     """Build :class:`RobotParameters` from the nested mapping a TOML file parses to."""
-    reader = _Reader(source)
+    reader = _Reader(cut(str(source), _SOURCE_LENGTH))
     reader.keys(
         data, "", required={"geometry", "limits", "home", "bodies"}, optional={"name", "friction", "environment"}
     )
@@ -228,22 +248,22 @@ def parameters_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> 
                 inertia=inertia,
             )
         )
-    friction = data.get("friction", {"viscous": [0.0] * 7})
+    friction = data.get("friction", {"viscous": [0.0] * N_JOINTS})
     reader.keys(friction, "friction", required={"viscous"})
     environment = data.get("environment", {"gravity": [0.0, 0.0, -9.81]})
     reader.keys(environment, "environment", required={"gravity"})
-    name = data.get("name", Path(source).stem)
-    if not isinstance(name, str):
-        reader.fail("name", name, "a string")
+    name = data.get("name", Path(str(source)).stem)
+    if not isinstance(name, str) or len(name) > NAME_LENGTH:
+        reader.fail("name", name, f"a string of at most {NAME_LENGTH} characters")
     return RobotParameters(
         name=name,
         modules=(modules[0], modules[1]),
         h1=reader.number(geometry["h1"], "geometry.h1"),
         q_min=tuple(q_min),
         q_max=tuple(q_max),
-        q_home=tuple(reader.vector(home["q"], "home.q", 7, "seven joint values")),
+        q_home=tuple(reader.vector(home["q"], "home.q", N_JOINTS, "one value per joint")),
         bodies=(bodies[0], bodies[1], bodies[2]),
-        viscous=tuple(reader.vector(friction["viscous"], "friction.viscous", 7, "seven values")),
+        viscous=tuple(reader.vector(friction["viscous"], "friction.viscous", N_JOINTS, "one value per joint")),
         gravity=tuple(reader.vector(environment["gravity"], "environment.gravity", 3, "[gx, gy, gz]")),  # type: ignore[arg-type]
         source=source,
     )
@@ -256,7 +276,7 @@ class _Reader:
         self.source = source
 
     def fail(self, field_name: str, value: object, expected: str) -> NoReturn:
-        raise ConfigError(f"{self.source}: field '{field_name}' = {value!r}: expected {expected}")
+        raise ConfigError(f"{self.source}: field '{field_name}' = {shown(value)}: expected {expected}")
 
     def keys(
         self,
@@ -270,10 +290,11 @@ class _Reader:
             self.fail(label, table, "a table")
             return
         allowed = required | (optional or set())
-        unknown = sorted(set(table) - allowed)
+        unknown = sorted(set(table) - allowed, key=str)
         if unknown:
             raise ConfigError(
-                f"{self.source}: unknown key '{_join(where, unknown[0])}' in {label}; expected one of {sorted(allowed)}"
+                f"{self.source}: unknown key '{_join(where, cut(str(unknown[0])))}' in {label};"
+                f" expected one of {sorted(allowed)}"
             )
         missing = sorted(required - set(table))
         if missing:
@@ -295,20 +316,64 @@ def _join(where: str, key: str) -> str:
 
 
 def _fail(p: RobotParameters, field_name: str, value: object, expected: str) -> NoReturn:
-    raise ConfigError(f"{p.source}: field '{field_name}' = {value!r}: expected {expected}")
+    limit = _ARRAY_LENGTH if isinstance(value, list | tuple) else None
+    text = shown(value) if limit is None else shown(value, limit)
+    raise ConfigError(f"{cut(str(p.source), _SOURCE_LENGTH)}: field '{field_name}' = {text}: expected {expected}")
 
 
-def _finite(values: Sequence[float]) -> bool:
-    return all(math.isfinite(x) for x in values)
+def _finite(values: Sequence[float], bound: float = math.inf) -> bool:
+    """Whether every value is finite and at most ``bound`` in magnitude."""
+    return all(math.isfinite(x) and abs(x) <= bound for x in values)
+
+
+def _is_real(value: object) -> bool:
+    return isinstance(value, Real) and not isinstance(value, bool)
+
+
+def _check_types(p: RobotParameters) -> None:
+    """Check the types and sizes of ``p``'s fields (given directly, not read from a file)."""
+    if not isinstance(p.name, str):
+        _fail(p, "name", p.name, "a string")
+    modules = p.modules
+    if not (isinstance(modules, tuple) and len(modules) == 2 and all(isinstance(m, ModuleGeometry) for m in modules)):
+        _fail(p, "modules", modules, "a pair of ModuleGeometry")
+    scalars = {"geometry.h1": p.h1}
+    for k, module in enumerate(modules, start=1):
+        scalars.update({f"geometry.module{k}.b": module.b, f"geometry.module{k}.d": module.d})
+    vectors: dict[str, tuple[object, int]] = {
+        "limits (q_min)": (p.q_min, N_JOINTS),
+        "limits (q_max)": (p.q_max, N_JOINTS),
+        "home.q": (p.q_home, N_JOINTS),
+        "friction.viscous": (p.viscous, N_JOINTS),
+        "environment.gravity": (p.gravity, 3),
+    }
+    bodies = p.bodies
+    if not (isinstance(bodies, tuple) and len(bodies) == len(BODY_NAMES) and all(isinstance(b, Body) for b in bodies)):
+        _fail(p, "bodies", bodies, f"a tuple of {len(BODY_NAMES)} Body")
+    for body in bodies:
+        scalars[f"bodies.{body.name}.mass"] = body.mass
+        vectors[f"bodies.{body.name}.com"] = (body.com, 3)
+        rows = body.inertia
+        if not (isinstance(rows, tuple | list) and len(rows) == 3):
+            _fail(p, f"bodies.{body.name}.inertia", rows, "a 3x3 matrix: three rows of three numbers")
+        for i, row in enumerate(rows):
+            vectors[f"bodies.{body.name}.inertia[{i}]"] = (row, 3)
+    for field_name, value in scalars.items():
+        if not _is_real(value):
+            _fail(p, field_name, value, "a number")
+    for field_name, (values, n) in vectors.items():
+        if not (isinstance(values, tuple | list) and len(values) == n and all(_is_real(x) for x in values)):
+            _fail(p, field_name, values, f"{n} numbers")
 
 
 def _validate(p: RobotParameters) -> None:
     """Check every value of ``p``; raise :class:`ConfigError` at the first bad one."""
+    _check_types(p)
     for k, module in enumerate(p.modules, start=1):
         for attr in ("b", "d"):
             value = getattr(module, attr)
-            if not (math.isfinite(value) and value > 0.0):
-                _fail(p, f"geometry.module{k}.{attr}", value, "a positive finite length (m)")
+            if not (math.isfinite(value) and 0.0 < value <= MAX_LENGTH):
+                _fail(p, f"geometry.module{k}.{attr}", value, f"a positive length <= {MAX_LENGTH:g} (m)")
         if module.d >= module.b:
             _fail(
                 p,
@@ -316,14 +381,14 @@ def _validate(p: RobotParameters) -> None:
                 module.d,
                 f"d < b = {module.b} (the module is a trapezoid, platform narrower than base)",
             )
-    if not (math.isfinite(p.h1) and p.h1 >= 0.0):
-        _fail(p, "geometry.h1", p.h1, "a finite length >= 0 (m)")
-    if not (len(p.q_min) == len(p.q_max) == len(p.q_home) == 7):
+    if not (math.isfinite(p.h1) and 0.0 <= p.h1 <= MAX_LENGTH):
+        _fail(p, "geometry.h1", p.h1, f"a length in [0, {MAX_LENGTH:g}] (m)")
+    if not (len(p.q_min) == len(p.q_max) == len(p.q_home) == N_JOINTS):
         _fail(p, "limits", (p.q_min, p.q_max), "seven [min, max] pairs")
     for i, name in enumerate(JOINT_NAMES):
         lo, hi = p.q_min[i], p.q_max[i]
-        if not _finite([lo, hi]):
-            _fail(p, f"limits.{name}", [lo, hi], "finite limits")
+        if not _finite([lo, hi], MAX_LENGTH):
+            _fail(p, f"limits.{name}", [lo, hi], f"finite limits within +-{MAX_LENGTH:g} (m, rad)")
         if not lo < hi:
             _fail(p, f"limits.{name}", [lo, hi], "min < max (the range is inverted or empty)")
         if i < 6 and lo <= 0.0:
@@ -345,24 +410,24 @@ def _validate(p: RobotParameters) -> None:
         )
     for body in p.bodies:
         _validate_body(p, body)
-    if len(p.viscous) != 7:
+    if len(p.viscous) != N_JOINTS:
         _fail(p, "friction.viscous", list(p.viscous), "seven coefficients")
     for i, c in enumerate(p.viscous):
-        if not (math.isfinite(c) and c >= 0.0):
-            _fail(p, f"friction.viscous[{i}] ({JOINT_NAMES[i]})", c, "a finite coefficient >= 0")
-    if len(p.gravity) != 3 or not _finite(p.gravity):
-        _fail(p, "environment.gravity", list(p.gravity), "a finite 3-vector (m/s^2)")
+        if not (math.isfinite(c) and 0.0 <= c <= MAX_FRICTION):
+            _fail(p, f"friction.viscous[{i}] ({JOINT_NAMES[i]})", c, f"a coefficient in [0, {MAX_FRICTION:g}]")
+    if len(p.gravity) != 3 or not _finite(p.gravity, MAX_GRAVITY):
+        _fail(p, "environment.gravity", list(p.gravity), f"a 3-vector with entries within +-{MAX_GRAVITY:g} (m/s^2)")
 
 
 def _validate_body(p: RobotParameters, body: Body) -> None:
     where = f"bodies.{body.name}"
-    if not (math.isfinite(body.mass) and body.mass > 0.0):
-        _fail(p, f"{where}.mass", body.mass, "a positive finite mass (kg)")
-    if len(body.com) != 3 or not _finite(body.com):
-        _fail(p, f"{where}.com", list(body.com), "a finite 3-vector (m)")
+    if not (math.isfinite(body.mass) and 0.0 < body.mass <= MAX_MASS):
+        _fail(p, f"{where}.mass", body.mass, f"a positive mass <= {MAX_MASS:g} (kg)")
+    if len(body.com) != 3 or not _finite(body.com, MAX_LENGTH):
+        _fail(p, f"{where}.com", list(body.com), f"a 3-vector with entries within +-{MAX_LENGTH:g} (m)")
     inertia = np.array(body.inertia, dtype=float)
-    if inertia.shape != (3, 3) or not np.isfinite(inertia).all():
-        _fail(p, f"{where}.inertia", body.inertia, "a finite 3x3 matrix (kg m^2)")
+    if inertia.shape != (3, 3) or not (np.isfinite(inertia).all() and np.abs(inertia).max() <= MAX_INERTIA):
+        _fail(p, f"{where}.inertia", body.inertia, f"a 3x3 matrix with entries within +-{MAX_INERTIA:g} (kg m^2)")
     scale = float(np.abs(inertia).max())
     tol = _INERTIA_RELATIVE_TOLERANCE * max(scale, 1e-300)
     if not np.allclose(inertia, inertia.T, rtol=0.0, atol=tol):

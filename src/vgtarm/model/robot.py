@@ -7,6 +7,7 @@ batch runs one compiled loop, so prefer batches to Python loops over single conf
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,10 +16,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import InputError
+from ..errors import InputError, shown
 from .assembly import check_assembly, triangle_margins
 from .compiled import CompiledBackend, InterpretedBackend, get_backend
-from .parameters import RobotParameters, load_parameters
+from .parameters import JOINT_NAMES, RobotParameters, load_parameters
+from .sanity import check_joint_range, sane_range
 
 Array = NDArray[np.float64]
 
@@ -59,16 +61,21 @@ class BiasAccelerations:
     body_angular: Array
 
 
-def _as_array(value: ArrayLike, name: str, last: int) -> Array:
+#: Arguments whose last axis is the joint vector (messages name the joint).
+_JOINT_VECTORS = frozenset({"q", "qd", "qdd", "F"})
+
+
+def _as_array(value: ArrayLike, name: str, last: int, finite: bool = True) -> Array:
     try:
         array = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise InputError(f"{name} must be an array of numbers, got {value!r}") from None
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"{name} must be an array of numbers, got {shown(value)}") from None
     if array.ndim == 0 or array.shape[-1] != last:
         raise InputError(f"{name} must have shape (..., {last}), got shape {array.shape}")
-    if not np.isfinite(array).all():
+    if finite and not np.isfinite(array).all():
         index = np.argwhere(~np.isfinite(array))[0]
-        raise InputError(f"{name} must be finite; {name}[{', '.join(map(str, index))}] = {array[tuple(index)]}")
+        joint = f" ({JOINT_NAMES[index[-1]]})" if name in _JOINT_VECTORS and last == len(JOINT_NAMES) else ""
+        raise InputError(f"{name} must be finite; {name}[{', '.join(map(str, index))}]{joint} = {array[tuple(index)]}")
     return array
 
 
@@ -77,6 +84,12 @@ class Robot:
 
     Build one with :func:`load_robot`. ``robot.with_parameters(p)`` gives a robot with other
     parameters sharing the same compiled code (for example a controller's imperfect model).
+
+    Every method taking joint values ``q`` refuses, with :class:`~vgtarm.errors.InputError`,
+    values that are not finite or lie outside the accepted range :meth:`joint_range` (lengths
+    within ten spans of their limits and >= 0, angles within 1000 turns: see
+    :mod:`vgtarm.model.sanity`), and, with
+    :class:`~vgtarm.errors.AssemblyError`, leg sets that cannot be assembled.
     """
 
     def __init__(
@@ -84,12 +97,25 @@ class Robot:
         parameters: RobotParameters,
         backend: CompiledBackend | InterpretedBackend | None = None,
     ) -> None:
+        if not isinstance(parameters, RobotParameters):
+            raise InputError(f"parameters = {shown(parameters)}: expected RobotParameters (see vgtarm.load_parameters)")
         self.parameters = parameters
         self.backend = backend if backend is not None else get_backend()
         self._p = parameters.vector()
+        self._low, self._high = sane_range(parameters)
 
     def __repr__(self) -> str:
         return f"Robot({self.parameters.name!r}, backend={self.backend.kind!r})"
+
+    @property
+    def fingerprint(self) -> str:
+        """A short hash (12 hex digits) of the parameters and joint limits: two robots with the same
+        fingerprint have the same model. Results record it (an IK result says which robot it was
+        solved for)."""
+        digest = hashlib.sha256(np.ascontiguousarray(self._p, dtype="<f8").tobytes())
+        limits = [self.parameters.lower, self.parameters.upper]
+        digest.update(np.ascontiguousarray(limits, dtype="<f8").tobytes())
+        return digest.hexdigest()[:12]
 
     @property
     def parameter_vector(self) -> Array:
@@ -99,6 +125,20 @@ class Robot:
     def with_parameters(self, parameters: RobotParameters) -> Robot:
         """A robot with other parameters and the same compiled model."""
         return Robot(parameters, self.backend)
+
+    def joint_range(self) -> tuple[Array, Array]:
+        """Lowest and highest joint values the methods accept, ``(7,)`` each (m, rad).
+
+        The joint limits widened on each side by :data:`~vgtarm.model.sanity.SANE_WIDENING`
+        times their span for lengths (at least 0), by :data:`~vgtarm.model.sanity.SANE_TURNS`
+        turns for angles; beyond, values are refused as not a configuration.
+        """
+        return self._low.copy(), self._high.copy()
+
+    def in_joint_range(self, q: ArrayLike) -> NDArray[np.bool_]:
+        """Whether each configuration ``(..., 7)`` is finite and inside :meth:`joint_range`."""
+        qa = _as_array(q, "q", 7, finite=False)
+        return np.asarray(((qa >= self._low) & (qa <= self._high)).all(axis=-1))
 
     # -- helpers -----------------------------------------------------------------------------
 
@@ -112,6 +152,7 @@ class Robot:
             shapes = ", ".join(f"{label} {a.shape}" for (label, _, _), a in zip(named, arrays, strict=True))
             raise InputError(f"leading shapes do not broadcast: {shapes}") from None
         if check_q:
+            check_joint_range(arrays[0], self.parameters, (self._low, self._high), where=named[0][0])
             check_assembly(arrays[0], self.parameters.b, self.parameters.d, where=named[0][0])
         n = int(np.prod(shape, dtype=int))
         flat = [np.broadcast_to(a, shape + a.shape[-1:]).reshape(n, a.shape[-1]) for a in arrays]
@@ -126,7 +167,10 @@ class Robot:
         ``{output name: (n, size)}``. This is how layers above (inverse kinematics) reach the
         generated functions that have no method of their own.
         """
-        sig = self.backend.signature(name)
+        try:
+            sig = self.backend.signature(name)
+        except (KeyError, TypeError):
+            raise InputError(f"evaluate: no compiled function named {shown(name)}") from None
         wanted = [label for label in sig.in_names if label != "p"]
         unknown = sorted(set(inputs) - set(wanted))
         missing = [label for label in wanted if label not in inputs]
@@ -141,6 +185,8 @@ class Robot:
     def is_assemblable(self, q: ArrayLike, margin: float = 0.0) -> NDArray[np.bool_]:
         """Whether each configuration ``(..., 7)`` can be assembled with the given margin (m)."""
         qa = _as_array(q, "q", 7)
+        if isinstance(margin, bool) or not isinstance(margin, int | float | np.integer | np.floating):
+            raise InputError(f"margin = {shown(margin)}: expected a length (m)")
         return np.asarray((triangle_margins(qa, self.parameters.b, self.parameters.d) > margin).all(axis=-1))
 
     def forward_kinematics(self, q: ArrayLike) -> ForwardKinematics:

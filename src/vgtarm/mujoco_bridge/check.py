@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError, shown
 from ..model.robot import Robot
 from .model import MujocoRobot
 
@@ -17,6 +18,10 @@ class CheckRow:
     quantity: str
     worst: float
     unit: str
+
+
+#: Most random states one check compares (a bound on a mistyped count, not a tuned value).
+MAX_STATES = 1_000_000
 
 
 def random_states(robot: Robot, n: int, seed: int, margin: float = 0.02) -> np.ndarray:
@@ -33,7 +38,9 @@ def random_states(robot: Robot, n: int, seed: int, margin: float = 0.02) -> np.n
 def cross_validate(robot: Robot, n: int = 1000, seed: int = 0, bridge: MujocoRobot | None = None) -> list[CheckRow]:
     """Worst differences between MuJoCo (on the exported model) and our model over ``n`` random
     assemblable states with random velocities (joint speeds up to 0.05 m/s and 0.5 rad/s),
-    efforts (about 20 N) and tip forces (about 10 N)."""
+    efforts (about 20 N) and tip forces (about 10 N). ``n`` is at most :data:`MAX_STATES`."""
+    if isinstance(n, bool) or not isinstance(n, int | np.integer) or not 1 <= n <= MAX_STATES:
+        raise InputError(f"n = {shown(n)}: expected a number of states in [1, {MAX_STATES:,}]")
     mj = bridge or MujocoRobot(robot)
     rng = np.random.default_rng(seed)
     worst: dict[str, float] = {}

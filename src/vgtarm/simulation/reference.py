@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import InputError
+from ..errors import InputError, shown
+from ..paths import MIN_DT
 
 Array = NDArray[np.float64]
 
@@ -35,6 +36,11 @@ class JointReference:
 
     ``rates`` says how ``qd``, ``qdd`` were obtained: ``"exact"`` (differentiated optimality
     conditions) or ``"finite_difference"`` (the paper's numerical differentiation).
+
+    ``tip`` ``(N, 3)`` is the desired tip path the joints were solved for (m; ``None``: unknown),
+    ``robot`` and ``robot_fingerprint`` name the robot they were solved for (see
+    :attr:`vgtarm.Robot.fingerprint`; "" if unknown). The simulator checks that the plant's
+    kinematics put the tip of ``q`` on ``tip``, and names both robots when they do not.
     """
 
     t: Array
@@ -43,20 +49,35 @@ class JointReference:
     qdd: Array
     rates: str = "exact"
     name: str = "reference"
+    tip: Array | None = None
+    robot: str = ""
+    robot_fingerprint: str = ""
 
     def __post_init__(self) -> None:
-        t = np.asarray(self.t, dtype=float)
+        t = _array(self.t, "t")
         if t.ndim != 1 or len(t) < 2:
             raise InputError(f"reference t must be 1-D with at least 2 samples, got shape {t.shape}")
+        if not np.isfinite(t).all():
+            raise InputError("reference t must be finite")
         for label in ("q", "qd", "qdd"):
-            value = np.asarray(getattr(self, label), dtype=float)
+            value = _array(getattr(self, label), label)
             if value.shape != (len(t), 7):
                 raise InputError(f"reference {label} must have shape ({len(t)}, 7), got {value.shape}")
             if not np.isfinite(value).all():
-                raise InputError(f"reference {label} must be finite")
+                row = int(np.argwhere(~np.isfinite(value))[0][0])
+                raise InputError(f"reference {label} must be finite; row {row} (t = {t[row]:.6g} s) is not")
+        if self.tip is not None:
+            tip = _array(self.tip, "tip")
+            if tip.shape != (len(t), 3) or not np.isfinite(tip).all():
+                raise InputError(f"reference tip must be finite of shape ({len(t)}, 3), got shape {tip.shape}")
         steps = np.diff(t)
         if not (steps > 0).all() or np.ptp(steps) > 1e-9 * steps.mean() + 1e-12:
             raise InputError("reference t must be strictly increasing with a uniform period")
+        if steps.mean() < MIN_DT:
+            raise InputError(
+                f"reference t: samples {steps.mean():.3g} s apart; at least {MIN_DT:g} s expected "
+                "(shorter periods turn rounding into huge rates)"
+            )
 
     @property
     def dt(self) -> float:
@@ -65,15 +86,48 @@ class JointReference:
 
     @classmethod
     def of(cls, source: HasJointReference, name: str = "reference") -> JointReference:
-        """Wrap an IK result (or any object with ``t``, ``q``, ``qd``, ``qdd``)."""
+        """Wrap an IK result (or any object with ``t``, ``q``, ``qd``, ``qdd``).
+
+        An IK result also gives its desired tip path (``position``) and the robot it was solved
+        for, which the simulator checks against the plant.
+        """
         if isinstance(source, JointReference):
             return source
+        missing = [label for label in ("t", "q", "qd", "qdd") if not hasattr(source, label)]
+        if missing:
+            raise InputError(
+                f"reference = {shown(source)}: expected an IK result or a JointReference "
+                f"(with t, q, qd, qdd), got a {type(source).__name__} without {', '.join(missing)}"
+            )
         rates = getattr(source, "rates", "exact")
+        position = getattr(source, "position", None)
         return cls(
-            np.asarray(source.t, dtype=float),
-            np.asarray(source.q, dtype=float),
-            np.asarray(source.qd, dtype=float),
-            np.asarray(source.qdd, dtype=float),
+            _array(source.t, "t"),
+            _array(source.q, "q"),
+            _array(source.qd, "qd"),
+            _array(source.qdd, "qdd"),
             rates=str(rates),
             name=name,
+            tip=None if position is None else _array(position, "tip"),
+            robot=str(getattr(source, "robot", "")),
+            robot_fingerprint=str(getattr(source, "robot_fingerprint", "")),
         )
+
+    def head(self, n: int) -> JointReference:
+        """The first ``n`` samples (``n >= 2``), with the same rates, name and robot."""
+        return replace(
+            self,
+            t=self.t[:n],
+            q=self.q[:n],
+            qd=self.qd[:n],
+            qdd=self.qdd[:n],
+            tip=None if self.tip is None else self.tip[:n],
+        )
+
+
+def _array(value: object, label: str) -> Array:
+    """``value`` as a float array, or :class:`InputError` naming the reference's ``label``."""
+    try:
+        return np.asarray(value, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"reference {label} must be an array of numbers, got {shown(value)}") from None

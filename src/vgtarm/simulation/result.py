@@ -13,10 +13,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import InputError
-from ..fileio import atomic_write_text
+from ..fileio import atomic_folder, atomic_write_text
 from ..model.parameters import JOINT_NAMES
 
 Array = NDArray[np.float64]
+
+#: The files :meth:`SimulationResult.save` writes (and the figure ``vgtarm simulate`` adds): an
+#: existing folder of only these, written before folders listed their files, may be replaced.
+RUN_FILES = ("summary.json", "timeseries.csv", "ga_activations.csv", "figure.png")
 
 #: Controller mode per sample.
 MODE_FIXED, MODE_GA, MODE_NOT_RUN = 0, 1, -1
@@ -105,7 +109,7 @@ class SimulationResult:
             rms_tip_error_m=_rms(err),
             max_tip_error_after_transient_m=_max(after),
             rms_tip_error_after_transient_m=_rms(after),
-            time_of_max_tip_error_s=float(self.t[int(np.nanargmax(err))]) if n else None,
+            time_of_max_tip_error_s=float(self.t[int(np.nanargmax(err))]) if (~np.isnan(err)).any() else None,
             peak_force_n=_max(np.abs(forces)),
             rms_force_n=_rms(forces),
             peak_twist_torque_nm=_max(np.abs(torque)),
@@ -122,21 +126,20 @@ class SimulationResult:
     def save(self, folder: str | Path) -> Path:
         """Write ``timeseries.csv``, ``ga_activations.csv`` and ``summary.json`` into ``folder``.
 
-        Each file is written to a temporary name and renamed into place; ``summary.json`` comes
-        last, so a folder with a summary holds a complete result.
+        The folder is written as one unit (:func:`vgtarm.fileio.atomic_folder`): into a temporary
+        sibling that replaces ``folder`` whole when complete, so it never mixes files of two runs
+        and an error leaves the old folder as it was. An existing ``folder`` that holds files
+        vgtarm did not write is refused (:class:`~vgtarm.errors.InputError`), never deleted.
         """
-        out = Path(folder)
-        out.mkdir(parents=True, exist_ok=True)
-        stale = out / "summary.json"
-        if stale.exists():
-            stale.unlink()
         columns, table = self._table()
-        atomic_write_text(out / "timeseries.csv", _csv(columns, table))
         act_columns = list(GAActivation.__dataclass_fields__)
         act_rows = np.array([[getattr(a, c) for c in act_columns] for a in self.activations], dtype=float)
-        atomic_write_text(out / "ga_activations.csv", _csv(act_columns, act_rows.reshape(-1, len(act_columns))))
-        atomic_write_text(out / "summary.json", json.dumps(_jsonable(self.summary()), indent=2) + "\n")
-        return out
+        summary = json.dumps(_jsonable(self.summary()), indent=2) + "\n"
+        with atomic_folder(folder, "folder", owned=RUN_FILES) as out:
+            atomic_write_text(out / "timeseries.csv", _csv(columns, table))
+            atomic_write_text(out / "ga_activations.csv", _csv(act_columns, act_rows.reshape(-1, len(act_columns))))
+            atomic_write_text(out / "summary.json", summary)
+        return Path(folder)
 
     @classmethod
     def load(cls, folder: str | Path) -> SimulationResult:
@@ -250,11 +253,16 @@ _NAN_FIELD = re.compile(r"(?m)(?<![^,\n])nan(?![^,\n])")
 
 
 def _max(values: Array) -> float | None:
-    return float(np.max(values)) if values.size else None
+    """Largest value that is not NaN, or None if there is none (a run failed at its first sample)."""
+    known = values[~np.isnan(values)]
+    return float(np.max(known)) if known.size else None
 
 
 def _rms(values: Array) -> float | None:
-    return float(np.sqrt(np.mean(np.square(values)))) if values.size else None
+    """Root mean square of the values that are not NaN, or None if there is none."""
+    known = values[~np.isnan(values)]
+    with np.errstate(over="ignore"):  # a diverged run's huge values give inf, as they should
+        return float(np.sqrt(np.mean(np.square(known)))) if known.size else None
 
 
 def _csv(columns: list[str], table: Array) -> str:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import InputError
+from ..errors import InputError, shown
 from ..model.parameters import JOINT_UNITS
 
 #: Default gain of the momentum observer as K_O dt: half the largest admissible, 500 1/s at 1 ms
@@ -24,6 +24,11 @@ DEFAULT_OBSERVER_GAIN_DT = 0.5
 DEFAULT_VELOCITY_FILTER_HZ = 100.0
 #: Encoder step of revolute joints when encoders are on and none is given: 20 bits a turn.
 DEFAULT_TWIST_RESOLUTION = 2.0 * math.pi / 2**20
+#: Coarsest encoder steps accepted: a leg encoder of 1 cm and a twist encoder of 0.1 rad (64 counts
+#: a turn). Coarser steps are mistakes (a value meant in mm or um given in m), not sensors: at the
+#: extreme they measure every leg as zero.
+MAX_LEG_RESOLUTION = 1e-2
+MAX_TWIST_RESOLUTION = 0.1
 #: Observers by name.
 OBSERVERS = ("none", "momentum")
 
@@ -67,10 +72,12 @@ class Sensing:
 
 
 def _number(name: str, value: object, *, minimum: float = 0.0, strict: bool = False) -> float:
+    if isinstance(value, str | bytes | bool):  # a number given as text is a mistake, not a number
+        raise InputError(f"{name} = {shown(value)}: expected a number")
     try:
         number = float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        raise InputError(f"{name} = {value!r}: expected a number") from None
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"{name} = {shown(value)}: expected a number") from None
     if not math.isfinite(number) or number < minimum or (strict and number == minimum):
         relation = ">" if strict else ">="
         raise InputError(f"{name} = {value!r}: expected a finite number {relation} {minimum:g}")
@@ -116,6 +123,12 @@ def sensing_settings(
     legs = _number("encoder_resolution", encoder_resolution)
     twist = DEFAULT_TWIST_RESOLUTION if twist_resolution is None and legs > 0 else twist_resolution or 0.0
     twist = _number("twist_resolution", twist)
+    for label, step, largest, unit in (
+        ("encoder_resolution", legs, MAX_LEG_RESOLUTION, "m"),
+        ("twist_resolution", twist, MAX_TWIST_RESOLUTION, "rad"),
+    ):
+        if step > largest:
+            raise InputError(f"{label} = {step!r}: expected an encoder step of at most {largest:g} {unit}")
     noise = _number("velocity_noise", velocity_noise)
     cutoff = _number("velocity_filter_hz", velocity_filter_hz, strict=True)
     units = JOINT_UNITS if len(JOINT_UNITS) == n_joints else ("m",) * n_joints

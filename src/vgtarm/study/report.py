@@ -145,6 +145,10 @@ def write_report(folder: str | Path) -> Path:
         for c in varied(rows, MODEL_FACTORS)
     ]
     figures += [(f"Maximum tip error against {c}", f"study_error_vs_{c}.png", c) for c in varied(rows, GAIN_INPUTS)]
+    keep = {name for _, name, _ in figures}
+    for stale in where.glob("study_error_*.png"):  # figures of an earlier report against other columns
+        if stale.name not in keep:
+            stale.unlink(missing_ok=True)
     for caption, name, against in figures:
         fig = Figure(figsize=(6.4, 4.2), layout="constrained")
         if against is None:

@@ -24,12 +24,13 @@ the installed simulator accepts), passed to it unchanged.
 
 from __future__ import annotations
 
+import difflib
 import hashlib
 import inspect
 import itertools
 import json
 import math
-import tomllib
+import tempfile
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,8 +38,12 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ConfigError
+from ..errors import ConfigError, VgtarmError, cut, shown
+from ..fileio import parse_toml, read_text_limited
+from ..model.parameters import ROBOT_FILE_LIMIT, parameters_from_dict
+from ..paths import CSV_FILE_LIMIT, from_csv
 from ..simulation import INTEGRATORS, simulate
+from ..simulation.simulator import MAX_SUBSTEPS
 
 Value = bool | int | float | str | None
 
@@ -83,7 +88,9 @@ PARAMETERS: dict[str, Parameter] = {
     "model_inertia": Parameter(float, 1.0, "a factor > 0", _positive),
     "model_friction": Parameter(float, 1.0, "a factor > 0", _positive),
     "integrator": Parameter(str, "euler", f"one of {sorted(INTEGRATORS)}", choices=tuple(sorted(INTEGRATORS))),
-    "substeps": Parameter(int, 1, "a whole number >= 1", lambda v: v >= 1),
+    "substeps": Parameter(
+        int, 1, f"a whole number from 1 to {MAX_SUBSTEPS:,}", lambda v: 1 <= v <= MAX_SUBSTEPS
+    ),
 }
 
 #: Keyword arguments of simulate() that the study sets itself (or that are not run inputs).
@@ -131,6 +138,14 @@ def all_parameters() -> dict[str, Parameter]:
 _STUDY_KEYS = ("name", "case", "path", "duration", "dt", "rates", "robot", "seeds")
 _RATES = ("exact", "finite_difference")
 _DISTRIBUTIONS = ("uniform", "log_uniform", "normal", "integers", "choice")
+#: Largest study file read (bytes).
+STUDY_FILE_LIMIT = 2**20
+#: Most runs a study may expand to (grid combinations x draws x seeds), checked before expanding.
+MAX_POINTS = 100_000
+#: Longest study name (characters).
+NAME_LENGTH = 200
+_FILE_LIMITS = {"path": CSV_FILE_LIMIT, "robot": ROBOT_FILE_LIMIT}
+_INT64 = (-(2**63), 2**63 - 1)
 
 
 @dataclass(frozen=True)
@@ -203,34 +218,37 @@ def point_id_of(inputs: Mapping[str, Value], files: Mapping[str, str], *, explic
 
 
 def load_study(file: str | Path) -> Study:
-    """Read and validate a study file; raises :class:`ConfigError` (one line naming the key)."""
+    """Read and validate a study file; raises :class:`ConfigError` (one line naming the key).
+
+    Files larger than :data:`STUDY_FILE_LIMIT` bytes, not UTF-8 text or nested too deep to parse
+    are refused like a TOML syntax error.
+    """
+    text = read_text_limited(file, STUDY_FILE_LIMIT, "study file", error=ConfigError)
     where = Path(file)
-    try:
-        data = tomllib.loads(where.read_text("utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"study file {where}: not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"study file {where}: cannot read it: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"study file {where}: TOML syntax error: {exc}") from None
+    data = parse_toml(text, f"study file {cut(str(where), 200)}", error=ConfigError)
     return parse_study(data, source=str(where), folder=where.parent)
 
 
 def parse_study(data: Mapping[str, Any], *, source: str = "<study>", folder: Path | None = None) -> Study:
     """Validate a study given as a dict (a parsed TOML file); files are relative to ``folder``."""
-    unknown = sorted(set(data) - {"study", "grid", "random"})
+    source = cut(str(source), 200)
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"{source}: {shown(data)}: expected a table of [study], [grid] and [random]")
+    unknown = sorted(set(data) - {"study", "grid", "random"}, key=str)
     if unknown:
-        raise ConfigError(f"{source}: unknown table [{unknown[0]}]: expected [study], [grid] and [random]")
+        raise ConfigError(f"{source}: unknown table [{cut(str(unknown[0]))}]: expected [study], [grid] and [random]")
     head = _table(source, data, "study")
     grid_in = _table(source, data, "grid")
     random_in = dict(_table(source, data, "random"))
     for key in head:
         if key not in _STUDY_KEYS:
-            raise ConfigError(f"{source}: study.{key}: unknown key; expected one of {list(_STUDY_KEYS)}")
+            raise ConfigError(f"{source}: study.{cut(str(key))}: unknown key; expected one of {list(_STUDY_KEYS)}")
     params = all_parameters()
     name = head.get("name", "study")
-    if not isinstance(name, str) or not name:
-        raise ConfigError(f"{source}: study.name = {name!r}: expected a non-empty string")
+    if not isinstance(name, str) or not name or len(name) > NAME_LENGTH:
+        raise ConfigError(
+            f"{source}: study.name = {shown(name)}: expected a non-empty string of at most {NAME_LENGTH} characters"
+        )
     shared: dict[str, Value] = {}
     files: dict[str, str] = {}
     if ("case" in head) == ("path" in head):
@@ -238,7 +256,7 @@ def parse_study(data: Mapping[str, Any], *, source: str = "<study>", folder: Pat
     if "case" in head:
         case = head["case"]
         if isinstance(case, bool) or case not in (1, 2):
-            raise ConfigError(f"{source}: study.case = {case!r}: expected 1 or 2 (the paper's case studies)")
+            raise ConfigError(f"{source}: study.case = {shown(case)}: expected 1 or 2 (the paper's case studies)")
         shared["case"] = int(case)
         shared["path"] = None
     else:
@@ -246,23 +264,24 @@ def parse_study(data: Mapping[str, Any], *, source: str = "<study>", folder: Pat
         shared["path"] = _file(source, folder, "path", head["path"], files)
     duration = head.get("duration")
     if duration is not None and not (_is_number(duration) and _positive(float(duration))):
-        raise ConfigError(f"{source}: study.duration = {duration!r}: expected a time > 0 (s)")
+        raise ConfigError(f"{source}: study.duration = {shown(duration)}: expected a time > 0 (s)")
     shared["duration"] = None if duration is None else float(duration)
     dt = head.get("dt", 1e-3)
     if not (_is_number(dt) and _positive(float(dt))):
-        raise ConfigError(f"{source}: study.dt = {dt!r}: expected a period > 0 (s)")
+        raise ConfigError(f"{source}: study.dt = {shown(dt)}: expected a period > 0 (s)")
     shared["dt"] = float(dt)
     rates = head.get("rates", "exact")
     if rates not in _RATES:
-        raise ConfigError(f"{source}: study.rates = {rates!r}: expected one of {list(_RATES)}")
+        raise ConfigError(f"{source}: study.rates = {shown(rates)}: expected one of {list(_RATES)}")
     shared["rates"] = rates
     shared["robot"] = None if head.get("robot") is None else _file(source, folder, "robot", head["robot"], files)
+    _check_files(source, head, files, float(dt))
     seeds = _seeds(source, head.get("seeds", 1))
 
     grid: dict[str, list[Value]] = {}
     for key, value in grid_in.items():
         if key not in params:
-            raise ConfigError(f"{source}: grid.{key}: unknown parameter; expected one of {sorted(params)}")
+            raise ConfigError(f"{source}: grid.{cut(str(key))}: unknown parameter; expected {_names(key, params)}")
         values = value if isinstance(value, list) else [value]
         if not values:
             raise ConfigError(f"{source}: grid.{key} = []: expected a value or a non-empty list of values")
@@ -271,27 +290,42 @@ def parse_study(data: Mapping[str, Any], *, source: str = "<study>", folder: Pat
     draws = random_in.pop("draws", 0)
     random_seed = random_in.pop("seed", 0)
     if isinstance(draws, bool) or not isinstance(draws, int) or draws < 0:
-        raise ConfigError(f"{source}: random.draws = {draws!r}: expected a whole number >= 0")
+        raise ConfigError(f"{source}: random.draws = {shown(draws)}: expected a whole number >= 0")
     if isinstance(random_seed, bool) or not isinstance(random_seed, int) or random_seed < 0:
-        raise ConfigError(f"{source}: random.seed = {random_seed!r}: expected a whole number >= 0")
+        raise ConfigError(f"{source}: random.seed = {shown(random_seed)}: expected a whole number >= 0")
     random: dict[str, tuple[str, list[Value]]] = {}
     for key, value in random_in.items():
         if key not in params:
-            raise ConfigError(f"{source}: random.{key}: unknown parameter; expected one of {sorted(params)}")
+            raise ConfigError(f"{source}: random.{cut(str(key))}: unknown parameter; expected {_names(key, params)}")
         if key in grid:
             raise ConfigError(f"{source}: random.{key}: already in [grid]; a parameter is either swept or drawn")
         random[key] = _distribution(f"{source}: random.{key}", value, params[key])
     if random and draws == 0:
         raise ConfigError(f"{source}: random.draws = 0: expected a whole number >= 1 with random parameters")
+    total = math.prod(len(values) for values in grid.values()) * max(draws, 1) * len(seeds)
+    if total > MAX_POINTS:
+        raise ConfigError(
+            f"{source}: {total:,} runs (grid combinations x random.draws x study.seeds); at most {MAX_POINTS:,}"
+        )
     study = Study(name, shared, grid, random, draws, random_seed, seeds, files, source)
     study.points()  # draws are checked here, before any run
     return study
 
 
+def _names(key: object, params: Mapping[str, Parameter]) -> str:
+    """The valid parameter names for a message about ``key``: all if few, else the closest ones."""
+    names = sorted(params)
+    if len(names) <= 8:
+        return str(names)
+    close = difflib.get_close_matches(str(key), names, n=3, cutoff=0.5)
+    hint = f"closest: {close}; " if close else ""
+    return f"one of the {len(names)} study parameters ({hint}see the example of `vgtarm study init`)"
+
+
 def _table(source: str, data: Mapping[str, Any], name: str) -> Mapping[str, Any]:
     value = data.get(name, {})
     if not isinstance(value, Mapping):
-        raise ConfigError(f"{source}: {name} = {value!r}: expected a table [{name}]")
+        raise ConfigError(f"{source}: {name} = {shown(value)}: expected a table [{name}]")
     return value
 
 
@@ -301,30 +335,45 @@ def _is_number(value: object) -> bool:
 
 def _file(source: str, folder: Path | None, key: str, value: object, files: dict[str, str]) -> str:
     if not isinstance(value, str) or not value:
-        raise ConfigError(f"{source}: study.{key} = {value!r}: expected a file name")
+        raise ConfigError(f"{source}: study.{key} = {shown(value)}: expected a file name")
     file = Path(value) if folder is None else folder / value
-    try:
-        files[key] = file.read_text("utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{source}: study.{key} = {value!r}: cannot read {file}: {exc}") from None
+    files[key] = read_text_limited(file, _FILE_LIMITS[key], f"{source}: study.{key}: file", error=ConfigError)
     return value
 
 
+def _check_files(source: str, head: Mapping[str, Any], files: Mapping[str, str], dt: float) -> None:
+    """Parse the study's robot and path files now, so a bad one is refused before any run."""
+    if "robot" in files:
+        where = f"{source}: study.robot = {shown(head['robot'])}"
+        parameters_from_dict(parse_toml(files["robot"], where, error=ConfigError), source=where)
+    if "path" in files:
+        with tempfile.TemporaryDirectory(prefix="vgtarm-study-") as folder:  # the text read, not the file again
+            copy = Path(folder) / "path.csv"
+            copy.write_text(files["path"], encoding="utf-8")
+            try:
+                from_csv(copy, dt)
+            except VgtarmError as exc:
+                label = f"path file {shown(str(copy), 200)}"
+                message = str(exc).replace(f"{label}: ", "").replace(label, "the file")
+                raise ConfigError(f"{source}: study.path = {shown(head['path'])}: {message}") from None
+
+
 def _seeds(source: str, value: object) -> tuple[int, ...]:
-    where = f"{source}: study.seeds = {value!r}"
+    where = f"{source}: study.seeds = {shown(value)}"
 
     def whole(v: object) -> bool:
         return isinstance(v, int) and not isinstance(v, bool) and v >= 0
 
     if whole(value) and value:
-        return tuple(range(int(value)))  # type: ignore[call-overload]
+        return tuple(range(min(int(value), MAX_POINTS + 1)))  # type: ignore[call-overload]
     if isinstance(value, list) and value and all(whole(v) for v in value):
         if len(set(value)) != len(value):
             raise ConfigError(f"{where}: expected distinct seeds")
         return tuple(int(v) for v in value)
     if isinstance(value, Mapping) and set(value) == {"start", "count"} and whole(value["start"]):
         if whole(value["count"]) and value["count"] >= 1:
-            return tuple(range(int(value["start"]), int(value["start"]) + int(value["count"])))
+            start, count = int(value["start"]), min(int(value["count"]), MAX_POINTS + 1)
+            return tuple(range(start, start + count))
     raise ConfigError(
         f"{where}: expected a count >= 1, a list of distinct whole numbers >= 0 or {{start = S, count = N}}"
     )
@@ -332,7 +381,7 @@ def _seeds(source: str, value: object) -> tuple[int, ...]:
 
 def _check_value(where: str, value: object, p: Parameter) -> Value:
     """The value converted to the parameter's type, or ConfigError naming it."""
-    bad = ConfigError(f"{where} = {value!r}: expected {p.expected}")
+    bad = ConfigError(f"{where} = {shown(value)}: expected {p.expected}")
     if p.kind is bool:
         if not isinstance(value, bool | np.bool_):
             raise bad
@@ -360,35 +409,38 @@ def _check_value(where: str, value: object, p: Parameter) -> Value:
 
 def _distribution(where: str, value: object, p: Parameter) -> tuple[str, list[Value]]:
     if not (isinstance(value, Mapping) and len(value) == 1 and next(iter(value)) in _DISTRIBUTIONS):
-        raise ConfigError(f"{where} = {value!r}: expected one of {{{' | '.join(_DISTRIBUTIONS)} = [...]}}")
+        raise ConfigError(f"{where} = {shown(value)}: expected one of {{{' | '.join(_DISTRIBUTIONS)} = [...]}}")
     dist, args = next(iter(value.items()))
     if dist == "choice":
         if not (isinstance(args, list) and args):
-            raise ConfigError(f"{where}.choice = {args!r}: expected a non-empty list of values")
+            raise ConfigError(f"{where}.choice = {shown(args)}: expected a non-empty list of values")
         return dist, [_check_value(f"{where}.choice", v, p) for v in args]
     if not (isinstance(args, list) and len(args) == 2 and all(_is_number(a) for a in args)):
-        raise ConfigError(f"{where}.{dist} = {args!r}: expected two numbers [a, b]")
+        raise ConfigError(f"{where}.{dist} = {shown(args)}: expected two numbers [a, b]")
     if p.kind not in (int, float) or (dist == "integers") != (p.kind is int):
         kind = "whole-number" if p.kind is int else ("numeric" if p.kind is float else p.kind.__name__)
         raise ConfigError(f"{where}.{dist}: not a distribution for a {kind} parameter ({p.expected})")
     a, b = args
     if dist == "normal" and not b > 0:
-        raise ConfigError(f"{where}.normal = {args!r}: expected [mean, standard deviation > 0]")
+        raise ConfigError(f"{where}.normal = {shown(args)}: expected [mean, standard deviation > 0]")
     if dist != "normal" and not a <= b:
-        raise ConfigError(f"{where}.{dist} = {args!r}: expected [a, b] with a <= b")
+        raise ConfigError(f"{where}.{dist} = {shown(args)}: expected [a, b] with a <= b")
+    if dist == "integers" and not all(isinstance(x, int) and _INT64[0] <= x <= _INT64[1] for x in args):
+        raise ConfigError(f"{where}.integers = {shown(args)}: expected two whole numbers (64-bit)")
     if dist == "log_uniform" and not a > 0:
-        raise ConfigError(f"{where}.log_uniform = {args!r}: expected 0 < a <= b")
+        raise ConfigError(f"{where}.log_uniform = {shown(args)}: expected 0 < a <= b")
     return dist, list(args)
 
 
 def _draw(rng: np.random.Generator, dist: str, args: list[Value]) -> Value:
     if dist == "choice":
         return args[int(rng.integers(len(args)))]
+    if dist == "integers":
+        return int(rng.integers(int(args[0]), int(args[1]), endpoint=True))  # type: ignore[arg-type]
     a, b = float(args[0]), float(args[1])  # type: ignore[arg-type]
-    if dist == "uniform":
-        return float(rng.uniform(a, b))
-    if dist == "log_uniform":
-        return float(np.exp(rng.uniform(np.log(a), np.log(b))))
-    if dist == "normal":
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is a non-finite draw, refused by the check
+        if dist == "uniform":
+            return float(rng.uniform(a, b))
+        if dist == "log_uniform":
+            return float(np.exp(rng.uniform(np.log(a), np.log(b))))
         return float(rng.normal(a, b))
-    return int(rng.integers(int(a), int(b), endpoint=True))

@@ -1,0 +1,89 @@
+"""Refusing a request that will not fit in memory, before anything is allocated for it.
+
+Large requests (a long path sampled finely for the inverse kinematics, a long simulation) are
+estimated from their sample count and a measured cost per sample, and compared with the memory
+the machine can still give (``MemAvailable`` of ``/proc/meminfo``, else the free physical
+memory, and never more than the address-space limit ``ulimit -v``). ``$VGTARM_MEMORY_LIMIT``
+sets the limit instead: a whole number of bytes, optionally with a suffix ``k``, ``M``, ``G`` or
+``T`` (powers of 1000), e.g. ``VGTARM_MEMORY_LIMIT=4G``.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import resource
+
+from .errors import ConfigError, InputError, VgtarmError, shown
+
+#: The variable that sets the memory limit of one request (bytes, optional suffix k, M, G, T).
+LIMIT_VARIABLE = "VGTARM_MEMORY_LIMIT"
+_SUFFIXES = {"": 1, "k": 10**3, "m": 10**6, "g": 10**9, "t": 10**12}
+_LIMIT_TEXT = re.compile(r"^\s*(\d+)\s*([kmgt]?)b?\s*$", re.IGNORECASE)
+
+
+def size_text(n_bytes: float) -> str:
+    """``n_bytes`` for a message: ``"812 MB"``, ``"24.3 GB"`` (powers of 1000)."""
+    for unit, scale in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n_bytes >= scale:
+            value = n_bytes / scale
+            return f"{value:.3g} {unit}" if value < 100 else f"{value:.0f} {unit}"
+    return f"{int(n_bytes)} bytes"
+
+
+def _meminfo_available() -> int | None:
+    try:
+        with open("/proc/meminfo", encoding="ascii") as stream:
+            for line in stream:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def memory_limit() -> tuple[int | None, str]:
+    """The bytes one request may use and where that figure comes from (for messages).
+
+    ``(None, ...)`` when this system does not say (then nothing is refused).
+
+    Raises:
+        ConfigError: ``$VGTARM_MEMORY_LIMIT`` is set but not a size.
+    """
+    text = os.environ.get(LIMIT_VARIABLE, "")
+    if text.strip():
+        match = _LIMIT_TEXT.match(text)
+        if match is None:
+            raise ConfigError(
+                f"{LIMIT_VARIABLE} = {shown(text)}: expected a whole number of bytes, optionally with k, M, G or T"
+            )
+        return int(match[1]) * _SUFFIXES[match[2].lower()], f"set by {LIMIT_VARIABLE}"
+    available = _meminfo_available()
+    where = f"of memory available (set {LIMIT_VARIABLE} to change the limit)"
+    if available is None:
+        try:
+            available = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+        except (AttributeError, OSError, ValueError):
+            available = None
+    try:
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    except (AttributeError, OSError, ValueError):
+        soft = resource.RLIM_INFINITY
+    if soft != resource.RLIM_INFINITY and soft >= 0 and (available is None or soft < available):
+        available, where = soft, "allowed by the address-space limit (ulimit -v)"
+    return available, where
+
+
+def check_memory(needed: float, request: str, advice: str, *, error: type[VgtarmError] = InputError) -> None:
+    """Refuse ``request`` with one line if its estimated ``needed`` bytes exceed :func:`memory_limit`.
+
+    ``request`` names what was asked with its values (``"--path p.csv at --dt 1e-06 s: 9,000,001
+    samples of inverse kinematics"``); ``advice`` says what to change. The message also names the
+    estimate and the limit and where it comes from.
+    """
+    limit, where = memory_limit()
+    if limit is None or needed <= limit:
+        return
+    raise error(
+        f"{request}: about {size_text(needed)} of memory needed, more than the {size_text(limit)} {where}; {advice}"
+    )

@@ -1,0 +1,145 @@
+"""Checks of what a simulation is given, before it runs: each refusal is one line naming the value.
+
+- the reference must be the plant's: the plant's kinematics must put the tip of the reference
+  joints on the reference's desired tip path (within :data:`REFERENCE_TIP_TOLERANCE`), otherwise
+  a run reports small errors about a path the tool does not follow;
+- the initial state must be a configuration of the plant (shape, finite, in the accepted range,
+  assemblable): a bad one is a bad input, not a divergence;
+- ``limit_tolerance`` must be a positive distance that keeps the run inside the accepted range;
+- every other argument of ``simulate`` must have the right type (one line, not a ``TypeError``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import InputError, VgtarmError, escape, shown
+from ..model.assembly import check_assembly
+from ..model.parameters import RobotParameters
+from ..model.robot import Robot
+from ..model.sanity import check_joint_range
+from .external import ExternalForce
+from .reference import JointReference
+
+Array = NDArray[np.float64]
+
+#: Largest distance (m) between the plant's tip at the reference joints and the reference's
+#: desired tip. Inverse kinematics verifies its samples to 1e-10 m, so anything above this
+#: means the joints were solved for other kinematics (another robot).
+REFERENCE_TIP_TOLERANCE = 1e-6
+
+
+def reference_tip(plant: Robot, reference: JointReference) -> Array:
+    """The plant's tip along the reference joints ``(N, 3)`` (m), checked against the reference.
+
+    Raises :class:`InputError` if the reference joints are not configurations of the plant, or if
+    the reference carries its desired tip path and the plant's tip strays more than
+    :data:`REFERENCE_TIP_TOLERANCE` from it; the message names the robot it was solved for.
+    """
+    try:
+        tip = plant.tip_position(reference.q)
+    except VgtarmError as error:
+        raise InputError(
+            f"reference {escape(reference.name)!r} is not a motion of this plant: {error}{_robots(plant, reference)}"
+        ) from None
+    if reference.tip is None:
+        return tip
+    gap = np.linalg.norm(tip - np.asarray(reference.tip, dtype=float), axis=1)
+    worst = int(np.argmax(gap))
+    if gap[worst] > REFERENCE_TIP_TOLERANCE:
+        raise InputError(
+            f"reference {escape(reference.name)!r}: the plant's tip at its joints is {gap[worst] * 1e3:.3g} mm from "
+            f"its desired tip at t = {float(reference.t[worst]):.6g} s (at most {REFERENCE_TIP_TOLERANCE:g} m "
+            f"expected){_robots(plant, reference)}; solve the inverse kinematics on the plant's robot"
+        )
+    return tip
+
+
+def _robots(plant: Robot, reference: JointReference) -> str:
+    """``"; solved for robot 'A' (fingerprint), simulating robot 'B' (fingerprint)"``, where known."""
+    here = f"robot {shown(plant.parameters.name)} ({plant.fingerprint})"
+    if not reference.robot and not reference.robot_fingerprint:
+        return f"; simulating {here}"
+    there = f"robot {shown(reference.robot)} ({reference.robot_fingerprint or 'fingerprint unknown'})"
+    return f"; solved for {there}, simulating {here}"
+
+
+def initial_state(plant: Robot, reference: JointReference, state: Any) -> tuple[Array, Array]:
+    """The run's initial ``(q0, qd0)`` ``(n,)`` each: rest at ``q_d(0)`` for ``None``, else ``state``
+    checked as a configuration of the plant (:class:`InputError` / ``AssemblyError`` otherwise)."""
+    n = reference.q.shape[1]
+    if state is None:
+        return np.asarray(reference.q[0], dtype=float), np.zeros(n)
+    if isinstance(state, str | bytes) or not hasattr(state, "__len__") or len(state) != 2:
+        raise InputError(f"initial_state = {shown(state)}: expected a pair (q0, qd0) of {n} joint values each")
+    arrays = []
+    for label, value in zip(("q0", "qd0"), state, strict=True):
+        try:
+            array = np.asarray(value, dtype=float)
+        except (TypeError, ValueError, OverflowError):
+            raise InputError(f"initial_state {label} = {shown(value)}: expected {n} numbers") from None
+        if array.shape != (n,):
+            raise InputError(f"initial_state {label}: expected shape ({n},), got {array.shape}")
+        if not np.isfinite(array).all():
+            i = int(np.argwhere(~np.isfinite(array))[0][0])
+            raise InputError(f"initial_state {label}[{i}] = {float(array[i])!r}: expected a finite number")
+        arrays.append(array)
+    q0, qd0 = arrays
+    check_joint_range(q0, plant.parameters, plant.joint_range(), where="initial_state q0")
+    check_assembly(q0, plant.parameters.b, plant.parameters.d, where="initial_state q0")
+    return q0, qd0
+
+
+def limit_tolerance(plant: Robot, value: Any) -> float:
+    """``value`` checked as the run's ``limit_tolerance`` (m, rad): finite, > 0, and small enough
+    that a run stopped that far outside the limits is still inside the accepted joint range."""
+    low, high = plant.joint_range()
+    largest = float(min((plant.parameters.lower - low).min(), (high - plant.parameters.upper).min()))
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+        raise InputError(f"limit_tolerance = {shown(value)}: expected a distance in (0, {largest:.6g}] (m, rad)")
+    number = float(value)
+    if not (math.isfinite(number) and 0.0 < number <= largest):
+        raise InputError(
+            f"limit_tolerance = {shown(number)}: expected a distance in (0, {largest:.6g}] (m, rad) outside the "
+            "joint limits at which a run is stopped (nan or inf would never stop a diverging run)"
+        )
+    return number
+
+
+def arguments(
+    plant: Any,
+    controller_model: Any,
+    external_force: Any,
+    integrator: Any,
+    plant_engine: Any,
+    metadata: Any,
+    progress: Any,
+    transient_s: Any,
+) -> None:
+    """Refuse, with one :class:`InputError` line, arguments of ``simulate`` of the wrong type."""
+    if not isinstance(plant, Robot):
+        raise InputError(f"plant = {shown(plant)}: expected a vgtarm.Robot (see vgtarm.load_robot)")
+    if controller_model is not None and not isinstance(controller_model, Robot | RobotParameters):
+        raise InputError(f"controller_model = {shown(controller_model)}: expected None, a Robot or RobotParameters")
+    if external_force is not None and not isinstance(external_force, ExternalForce):
+        raise InputError(
+            f"external_force = {shown(external_force)}: expected None or a vgtarm.simulation.ExternalForce"
+        )
+    for label, value in (("integrator", integrator), ("plant_engine", plant_engine)):
+        if not isinstance(value, str):
+            raise InputError(f"{label} = {shown(value)}: expected a name (str)")
+    if metadata is not None and not isinstance(metadata, Mapping):
+        raise InputError(f"metadata = {shown(metadata)}: expected None or a mapping of summary entries")
+    if progress is not None and not callable(progress):
+        raise InputError(f"progress = {shown(progress)}: expected None or a callable progress(done, total)")
+    if (
+        isinstance(transient_s, bool)
+        or not isinstance(transient_s, int | float | np.integer | np.floating)
+        or not (math.isfinite(transient_s) and transient_s >= 0)
+    ):
+        raise InputError(f"transient_s = {shown(transient_s)}: expected a duration >= 0 (s)")

@@ -1,0 +1,309 @@
+"""Result folders written as units, output paths checked before the work, quiet closed pipes.
+
+The folder helper (:func:`vgtarm.fileio.atomic_folder`) is tested directly, with the Linux
+atomic exchange and with the rename-aside fallback; the command-line cases are the ones of
+issue 14: a failed run into the folder of an earlier run, Ctrl-C while the figure is drawn, an
+output path that is a file, ``ik -o`` naming its input, ``describe | head -1``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from vgtarm import fileio
+from vgtarm.app.cli import CLOSED_PIPE, main
+from vgtarm.errors import InputError
+from vgtarm.fileio import MANIFEST, atomic_folder, atomic_path, check_output_file, check_output_folder, clean_stale
+
+#: A short, cheap run of case 1 (50 control periods).
+SHORT = ["simulate", "--case", "1", "--duration", "0.05", "--quiet"]
+#: The same run with a controller model 1000 times too heavy: it diverges within a few periods.
+DIVERGING = [*SHORT, "--model-mass", "1000", "--model-inertia", "1000"]
+
+
+def _listing(folder: Path) -> dict[str, bytes]:
+    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def _dead_pid() -> int:
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    child.wait()
+    return child.pid
+
+
+@pytest.fixture(params=["exchange", "rename-aside"])
+def swap(request, monkeypatch):
+    """Run a test with the atomic exchange of Linux and again with the portable fallback."""
+    if request.param == "rename-aside":
+        monkeypatch.setattr(fileio, "_exchange", lambda first, second: False)
+    return request.param
+
+
+# --- the helper -----------------------------------------------------------------------------
+
+
+def test_a_complete_folder_replaces_the_old_one_whole(tmp_path, swap):
+    target = tmp_path / "run"
+    with atomic_folder(target) as folder:
+        (folder / "figure.png").write_bytes(b"old figure")
+        (folder / "sub").mkdir()
+        (folder / "sub" / "a.csv").write_text("old")
+    with atomic_folder(target) as folder:
+        assert folder.parent == tmp_path and folder.name.startswith(".run.") and not target.samefile(folder)
+        (folder / "summary.json").write_text("new")
+        assert (target / "figure.png").read_bytes() == b"old figure"  # untouched until complete
+    assert sorted(_listing(target)) == [MANIFEST, "summary.json"]
+    assert (target / MANIFEST).read_text().splitlines()[1:] == ["summary.json"]
+    assert [p.name for p in tmp_path.iterdir()] == ["run"]  # no temporary or set-aside folder left
+
+
+@pytest.mark.parametrize("error", [RuntimeError("boom"), KeyboardInterrupt()])
+def test_an_error_or_ctrl_c_leaves_the_old_folder_and_no_temporary(tmp_path, swap, error):
+    target = tmp_path / "run"
+    with atomic_folder(target) as folder:
+        (folder / "summary.json").write_text("old")
+    before = _listing(target)
+    with pytest.raises(type(error)), atomic_folder(target) as folder:
+        (folder / "summary.json").write_text("new")
+        raise error
+    assert _listing(target) == before
+    assert [p.name for p in tmp_path.iterdir()] == ["run"]
+
+
+def test_an_error_in_a_new_folder_leaves_nothing_not_even_its_parents(tmp_path):
+    with pytest.raises(RuntimeError), atomic_folder(tmp_path / "a" / "b" / "run") as folder:
+        (folder / "x").write_text("partial")
+        raise RuntimeError("boom")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_stale_temporaries_of_dead_processes_are_cleaned_on_the_next_run(tmp_path):
+    dead, alive = _dead_pid(), os.getpid()
+    stale_folder = tmp_path / f".run.{dead}.0123abcd.tmp"
+    stale_folder.mkdir()
+    (stale_folder / "summary.json").write_text("half")
+    stale_file = tmp_path / f".figure.{dead}.89abcdef.tmp.png"
+    stale_file.write_bytes(b"half")
+    in_use = tmp_path / f".other.{alive}.00000000.tmp"  # a live writer's: kept
+    in_use.mkdir()
+    set_aside = tmp_path / f".kept.{dead}.11111111.old"  # killed between the two renames: put back
+    set_aside.mkdir()
+    (set_aside / "summary.json").write_text("the old run")
+    user = tmp_path / f".notes.{dead}.tmp"  # not our pattern (no random part): never touched
+    user.write_text("mine")
+    with atomic_folder(tmp_path / "run") as folder:
+        (folder / "summary.json").write_text("new")
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == sorted([in_use.name, user.name, "kept", "run"])
+    assert (tmp_path / "kept" / "summary.json").read_text() == "the old run"
+    assert clean_stale(tmp_path) == []
+
+
+def test_sigkill_leaves_only_a_hidden_temporary_that_the_next_run_removes(tmp_path):
+    target = tmp_path / "run"
+    with atomic_folder(target) as folder:
+        (folder / "summary.json").write_text("old")
+    script = textwrap.dedent(
+        f"""
+        import sys, time
+        from vgtarm.fileio import atomic_folder
+        with atomic_folder({str(target)!r}) as folder:
+            (folder / "summary.json").write_text("new, not finished")
+            print("writing", flush=True)
+            time.sleep(60)
+        """
+    )
+    child = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout is not None and child.stdout.readline() == "writing\n"
+    finally:
+        child.send_signal(signal.SIGKILL)
+        child.wait()
+    left = sorted(p.name for p in tmp_path.iterdir())
+    assert left[1:] == ["run"] and left[0].startswith(f".run.{child.pid}.") and left[0].endswith(".tmp")
+    assert (target / "summary.json").read_text() == "old"
+    with atomic_folder(target) as folder:
+        (folder / "summary.json").write_text("next")
+    assert [p.name for p in tmp_path.iterdir()] == ["run"]
+
+
+def test_a_folder_with_files_vgtarm_did_not_write_is_refused_not_deleted(tmp_path):
+    target = tmp_path / "mine"
+    target.mkdir()
+    (target / "notes.txt").write_text("keep me")
+    with pytest.raises(InputError, match=r"^--out .*mine: the folder holds 'notes.txt' and no \.vgtarm-output list"):
+        with atomic_folder(target, "--out"):
+            pytest.fail("the block must not run")
+    with atomic_folder(tmp_path / "run") as folder:  # a run folder the user added a video to later
+        (folder / "summary.json").write_text("run")
+    (tmp_path / "run" / "video.mp4").write_bytes(b"video")
+    with pytest.raises(InputError, match="'video.mp4', which vgtarm did not write"):
+        check_output_folder(tmp_path / "run")
+    assert (target / "notes.txt").read_text() == "keep me" and (tmp_path / "run" / "video.mp4").exists()
+
+
+def test_a_folder_written_before_the_file_list_existed_is_replaced_if_it_holds_only_run_files(tmp_path):
+    legacy = tmp_path / "run"
+    legacy.mkdir()
+    (legacy / "summary.json").write_text("old")
+    (legacy / "figure.png").write_bytes(b"old")
+    with atomic_folder(legacy, owned=("summary.json", "*.png")) as folder:
+        (folder / "summary.json").write_text("new")
+    assert sorted(_listing(legacy)) == [MANIFEST, "summary.json"]
+
+
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        (lambda p: p.write_text("x"), "is a file, not a folder"),
+        (lambda p: (p.parent.joinpath("f").write_text("x"), p.parent / "f" / "run")[1], "f is a file, not a folder"),
+        (lambda p: p.symlink_to(p.parent), "is a symbolic link"),
+    ],
+)
+def test_bad_output_folders_are_named_in_one_line(tmp_path, make, message):
+    path = tmp_path / "out"
+    made = make(path)
+    target = made if isinstance(made, Path) else path
+    with pytest.raises(InputError, match=message) as info:
+        check_output_folder(target, "--out")
+    assert str(info.value).startswith(f"--out {target}:") and "\n" not in str(info.value)
+
+
+def test_the_current_folder_and_a_folder_holding_an_input_are_refused(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(InputError, match="is the current folder"):
+        check_output_folder(".", "--out")
+    (tmp_path / "runs" / "a").mkdir(parents=True)
+    with pytest.raises(InputError, match=r"runs: holds .*a, an input of this command"):
+        check_output_folder(tmp_path / "runs", "--out", inputs=[Path("runs/a"), None])
+
+
+def test_bad_output_files_are_named_in_one_line(tmp_path):
+    source = tmp_path / "path.csv"
+    source.write_text("t,x,y,z\n")
+    with pytest.raises(InputError, match=r"^-o .*path\.csv: is an input of this command"):
+        check_output_file(tmp_path / "." / "path.csv", "-o", inputs=[source])
+    with pytest.raises(InputError, match="is a folder; give a file name"):
+        check_output_file(tmp_path, "-o")
+    with pytest.raises(InputError, match="path.csv is a file, not a folder"):
+        check_output_file(source / "ref.csv", "-o")
+    assert check_output_file(tmp_path / "new" / "ref.csv", "-o") == tmp_path / "new" / "ref.csv"
+
+
+def test_write_errors_name_the_users_path_not_the_temporary(tmp_path):
+    target = tmp_path / "run"
+    with pytest.raises(FileNotFoundError) as info, atomic_folder(target) as folder:
+        (folder / "missing" / "figure.png").write_bytes(b"x")
+    assert info.value.filename == str(target / "missing" / "figure.png") and ".tmp" not in str(info.value)
+    with pytest.raises(OSError) as info, atomic_path(tmp_path / "no" / "ref.csv") as temporary:
+        temporary.write_text("x")
+    assert info.value.filename == str(tmp_path / "no" / "ref.csv")
+
+
+# --- the command line -----------------------------------------------------------------------
+
+
+def test_a_failed_run_replaces_the_folder_of_an_earlier_run_whole(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main([*SHORT, "--out", str(out)]) == 0
+    assert (out / "figure.png").exists() and json.loads((out / "summary.json").read_text())["success"] is True
+    capsys.readouterr()
+    assert main([*DIVERGING, "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "diverged" in err and f"partial results (up to the failure, success false) written to {out}" in err
+    assert sorted(_listing(out)) == [MANIFEST, "ga_activations.csv", "summary.json", "timeseries.csv"]  # no figure
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["success"] is False and 0 < summary["samples_completed"] < summary["samples"]
+    assert [p.name for p in tmp_path.iterdir()] == ["run"]
+
+
+def test_ctrl_c_while_the_figure_is_drawn_leaves_the_earlier_run(tmp_path, capsys, monkeypatch):
+    out = tmp_path / "run"
+    assert main([*SHORT, "--out", str(out)]) == 0
+    before = _listing(out)
+
+    def interrupted(fig, path, **kwargs):
+        Path(path).write_bytes(b"half a figure")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("vgtarm.app.plotting.save_figure", interrupted)
+    assert main([*SHORT, "--seed", "3", "--out", str(out)]) == 130
+    assert _listing(out) == before
+    assert [p.name for p in tmp_path.iterdir()] == ["run"]
+
+
+@pytest.mark.parametrize("kind", ["file", "parent is a file", "foreign folder"])
+def test_a_bad_output_folder_fails_before_the_run(tmp_path, capsys, monkeypatch, kind):
+    def no_run(*args, **kwargs):
+        raise AssertionError("the run started although the output path is bad")
+
+    monkeypatch.setattr("vgtarm.app.cases.run_case", no_run)
+    out = tmp_path / "out"
+    if kind == "file":
+        out.write_text("a file")
+    elif kind == "parent is a file":
+        (tmp_path / "f").write_text("a file")
+        out = tmp_path / "f" / "out"
+    else:
+        out.mkdir()
+        (out / "notes.txt").write_text("mine")
+    before = _listing(tmp_path)
+    assert main([*SHORT, "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith(f"vgtarm: error: --out {out}:") and err.count("\n") == 1
+    assert _listing(tmp_path) == before  # no summary anywhere
+
+
+def test_report_refuses_to_replace_the_run_it_reads(tmp_path, capsys):
+    run = tmp_path / "run"
+    run.mkdir()
+    assert main(["report", str(run), "--out", str(run)]) == 1
+    err = capsys.readouterr().err
+    assert err == f"vgtarm: error: --out {run}: is an input of this command; choose another folder\n"
+
+
+def test_ik_refuses_to_overwrite_its_input_before_any_work(tmp_path, capsys):
+    source = tmp_path / "path.csv"
+    source.write_text("t,x,y,z\n0,0,0,0.66\n0.1,0,0,0.661\n")
+    before = source.read_bytes()
+    assert main(["ik", "--path", str(source), "-o", str(source)]) == 1
+    err = capsys.readouterr().err
+    assert err == f"vgtarm: error: -o {source}: is an input of this command; writing it would destroy it\n"
+    assert source.read_bytes() == before and [p.name for p in tmp_path.iterdir()] == ["path.csv"]
+
+
+@pytest.mark.parametrize(("argv", "status"), [(["describe"], CLOSED_PIPE), (["--help"], 0)])
+def test_a_closed_pipe_ends_quietly(argv, status):
+    """``vgtarm describe | head -1``: the reader is gone before vgtarm writes."""
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        done = subprocess.run(
+            [sys.executable, "-c", "import sys; from vgtarm.app.cli import main; sys.exit(main())", *argv],
+            stdout=write,
+            stderr=subprocess.PIPE,
+            timeout=120,
+        )
+    finally:
+        os.close(write)
+    assert done.stderr == b""
+    assert done.returncode == status
+
+
+def test_a_broken_pipe_that_is_not_standard_output_is_still_an_error():
+    """An encoder's or a socket's broken pipe is a failure, not a reader that went away."""
+    script = (
+        "import sys\nfrom vgtarm.app import cli\n"
+        "def broken(args):\n    raise BrokenPipeError(32, 'Broken pipe')\n"
+        "cli.cmd_describe = broken\nsys.exit(cli.main(['describe']))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1 and done.stderr == "vgtarm: error: [Errno 32] Broken pipe\n"
