@@ -4,11 +4,14 @@ The hardest case is the one that calls the GA most: case 2 with the tool force (
 activations in 4 s). Activation states are captured from that run; on each, the compiled GA
 (``csrc/ga.c``, the default prediction) is timed against the NumPy GA (:func:`vgtarm.ga.minimize`)
 on the compiled exact prediction, which is how every activation ran before the GA moved to C,
-measured here in the same process. The case runs are timed against the simulated duration.
+measured here in the same process, with one thread and with the default thread count
+(``VGTARM_THREADS``, else the CPUs, at most four). The case runs are timed against the simulated
+duration, with the GA called inside the compiled loop.
 """
 
 from __future__ import annotations
 
+import os
 import time
 
 import numpy as np
@@ -16,7 +19,8 @@ import numpy as np
 import vgtarm
 from vgtarm.app.cases import case_study, joint_reference, run_case
 from vgtarm.model import closedloop
-from vgtarm.model.closedloop import ClosedLoopDriver
+from vgtarm.model.closedloop import ClosedLoopDriver, ga_threads
+from vgtarm.simulation import simulator
 
 from .common import Row, print_table
 
@@ -34,10 +38,12 @@ def _capture(robot: vgtarm.Robot, reference) -> list[tuple]:
         return original(self, k, q0, qd0, seed)
 
     closedloop.CompiledGA.activate = record  # type: ignore[method-assign]
+    simulator.GA_IN_LOOP = False  # one call per activation, so that each state can be captured
     try:
         run_case(robot, 2, controller="scm", external_force=True, reference=reference)
     finally:
         closedloop.CompiledGA.activate = original  # type: ignore[method-assign]
+        simulator.GA_IN_LOOP = True
     return captured
 
 
@@ -46,14 +52,18 @@ def run() -> list[Row]:
     ref2 = joint_reference(robot, 2)
     controller = case_study(2).controller("scm")
     states = _capture(robot, ref2)
-    compiled_times, numpy_times = [], []
+    threads = ga_threads()
+    compiled_times: dict[int, list[float]] = {1: [], threads: []}
+    numpy_times = []
     driver = ClosedLoopDriver(robot.backend)
     rng = np.random.default_rng(0)
     for ga, k, q0, qd0, seed in states:
         for _ in range(3):
-            start = time.perf_counter()
-            ga.activate(k, q0, qd0, seed)
-            compiled_times.append(time.perf_counter() - start)
+            for count in compiled_times:
+                ga._ga.threads = count
+                start = time.perf_counter()
+                ga.activate(k, q0, qd0, seed)
+                compiled_times[count].append(time.perf_counter() - start)
         window = slice(k, k + controller.horizon + 1)
         start = time.perf_counter()
         predict = driver.ga_predictor(
@@ -68,11 +78,12 @@ def run() -> list[Row]:
         )
         controller.tune(predict, rng)
         numpy_times.append(time.perf_counter() - start)
-    c_med, c_p99 = np.median(compiled_times), np.percentile(compiled_times, 99)
+    one = float(np.median(compiled_times[1]))
+    c_med, c_p99 = np.median(compiled_times[threads]), np.percentile(compiled_times[threads], 99)
     n_med = float(np.median(numpy_times))
     rows = [
         Row(
-            "one GA activation, compiled, median (case 2 + tool force)",
+            f"one GA activation, compiled, {threads} thread(s), median (case 2 + tool force)",
             c_med,
             "activation",
             1,
@@ -80,16 +91,43 @@ def run() -> list[Row]:
             n_med,
             "<= 1 ms, >= 20x",
         ),
-        Row("one GA activation, compiled, 99th percentile", c_p99, "activation", 1, "control period", 1e-3, "<= 2 ms"),
+        Row(
+            f"one GA activation, compiled, {threads} thread(s), 99th percentile",
+            c_p99,
+            "activation",
+            1,
+            "control period",
+            1e-3,
+            "<= 2 ms",
+        ),
+        Row("one GA activation, compiled, 1 thread, median", one, "activation", 1, "NumPy GA, median", n_med, ""),
     ]
-    for number, force, target in ((2, True, ">= 2x real time"), (1, False, ">= 100x real time")):
+    if threads > 1:
+        rows.append(
+            Row(f"one GA activation, {threads} threads, median", c_med, "activation", 1, "1 thread", one, "")
+        )
+    runs = [(2, True, ">= 2x real time", None), (1, False, ">= 100x real time", None)]
+    if threads > 1:
+        runs.append((2, True, "", 1))
+    for number, force, target, count in runs:
         ref = ref2 if number == 2 else joint_reference(robot, 1)
         duration = float(ref.t[-1] - ref.t[0])
-        start = time.perf_counter()
-        result = run_case(robot, number, controller="scm", external_force=force, reference=ref)
-        wall = time.perf_counter() - start
+        previous = os.environ.get("VGTARM_THREADS")
+        os.environ["VGTARM_THREADS"] = str(count or threads)
+        try:
+            start = time.perf_counter()
+            result = run_case(robot, number, controller="scm", external_force=force, reference=ref)
+            wall = time.perf_counter() - start
+        finally:
+            if previous is None:
+                os.environ.pop("VGTARM_THREADS")
+            else:
+                os.environ["VGTARM_THREADS"] = previous
         summary = result.summary()
-        label = f"case {number}{' + tool force' if force else ''}, SCM ({len(result.activations)} activations)"
+        label = (
+            f"case {number}{' + tool force' if force else ''}, SCM ({len(result.activations)} activations, "
+            f"{count or threads} thread(s))"
+        )
         rows.append(Row(label, wall, "run", 1, "real time", duration, target))
         print(
             f"{label}: max tip error {summary['max_tip_error_m'] * 1e3:.4f} mm; activation median "

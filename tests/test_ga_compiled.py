@@ -314,6 +314,42 @@ def test_activation_is_reproducible_per_seed_and_never_worse_than_the_seeded_gai
     assert 50 < a.evaluations <= 50 * 51
 
 
+@pytest.mark.parametrize("prediction", ["quadratic", "exact"])
+def test_any_thread_count_gives_the_same_activation_bit_for_bit(lib, robot, prediction):
+    """The prediction's blocks are shared out between threads; every candidate's cost depends on
+    its own lane only, so 1, 2 or 3 threads give the same activation, counters included."""
+    ref = reference(robot, duration=0.1)
+    scm = SwitchingControl.with_gains(5000.0, 300.0, prediction=prediction)
+    compiled = _ga(robot, ref, scm)
+    q0, qd0 = ref.q[10] + 3e-4, ref.qd[10] - 1e-3
+    runs = []
+    for threads in (1, 2, 3):
+        compiled._ga.threads = threads
+        runs.append(compiled.activate(10, q0, qd0, seed=5))
+    for other in runs[1:]:
+        np.testing.assert_array_equal(other.genes, runs[0].genes)
+        assert (other.best_cost, other.evaluations, other.exact_candidates, other.exact_steps) == (
+            runs[0].best_cost,
+            runs[0].evaluations,
+            runs[0].exact_candidates,
+            runs[0].exact_steps,
+        )
+
+
+def test_ga_threads_come_from_the_environment(monkeypatch):
+    from vgtarm.errors import ConfigError
+    from vgtarm.model.closedloop import MAX_GA_THREADS, ga_threads
+
+    monkeypatch.setenv("VGTARM_THREADS", "3")
+    assert ga_threads() == 3
+    monkeypatch.delenv("VGTARM_THREADS")
+    assert 1 <= ga_threads() <= MAX_GA_THREADS
+    for bad in ("0", "two", "-1", "1e9"):
+        monkeypatch.setenv("VGTARM_THREADS", bad)
+        with pytest.raises(ConfigError, match="VGTARM_THREADS"):
+            ga_threads()
+
+
 def test_a_ga_whose_best_is_the_seeded_gains_returns_them_exactly(lib, robot):
     """With a one-step horizon no candidate can do better than the seeded fixed gains."""
     ref = reference(robot, duration=0.05)
@@ -360,6 +396,82 @@ def test_switching_control_run_is_reproducible_bit_for_bit(lib, robot):
     assert not np.array_equal(runs[0].q, runs[2].q)
     summary = runs[0].summary()
     assert 0 < summary["ga_activation_time_median_s"] <= summary["ga_activation_time_p99_s"]
+
+
+@pytest.mark.parametrize(("sensing", "threshold"), [(False, 1e-9), (True, 1.2e-4)])
+def test_the_ga_inside_the_compiled_loop_gives_the_per_activation_run_bit_for_bit(
+    lib, robot, monkeypatch, sensing, threshold
+):
+    """One compiled call per chunk (the GA called by the loop) against one call per activation
+    from Python: the same states, efforts, modes and activation records, to the last bit, with
+    the tool force, the observer and sensing where asked, up to the last sample of the path."""
+    from vgtarm.simulation import simulator
+
+    ref = reference(robot, duration=0.12)
+    scm = SwitchingControl.with_gains(5000.0, 300.0, threshold=threshold)
+    options = dict(observer="momentum", encoder_resolution=1e-6, velocity_filter_hz=100.0) if sensing else {}
+    runs = []
+    for in_loop in (True, False):
+        monkeypatch.setattr(simulator, "GA_IN_LOOP", in_loop)
+        runs.append(simulate(robot, ref, scm, external_force=ExternalForce(), seed=7, **options))
+    inside, outside = runs
+    assert len(inside.activations) > 5
+    if threshold < 1e-6:  # every sample above it, the last one too (it keeps the fixed gains)
+        assert len(inside.activations) == len(ref.t) - 1  # all but the first (on the path)
+        assert inside.activations[-1].sample == len(ref.t) - 1 and inside.activations[-1].generations == 0
+    else:  # fixed gains and GA gains alternate
+        assert len(inside.activations) < len(ref.t) - 10
+    for name in ("q", "qd", "effort", "tip_error", "mode"):
+        np.testing.assert_array_equal(getattr(inside, name), getattr(outside, name))
+    for a, b in zip(inside.activations, outside.activations, strict=True):
+        assert (a.sample, a.generations, a.evaluations, a.best_fitness, a.fixed_gains_fitness) == (
+            b.sample,
+            b.generations,
+            b.evaluations,
+            b.best_fitness,
+            b.fixed_gains_fitness,
+        )
+        assert a.error_after_m == b.error_after_m or (np.isnan(a.error_after_m) and np.isnan(b.error_after_m))
+
+
+def test_the_switching_loop_in_slices_is_bit_for_bit_the_loop_in_one_call(lib, robot):
+    """Pauses between samples and inside an activation's sample (rk4, three sub-steps, a budget
+    of one or two units a call) resume exactly: the same states and activation records."""
+    from vgtarm.model.closedloop import LoopSettings
+
+    ref = reference(robot, duration=0.03)
+    scm = SwitchingControl.with_gains(5000.0, 300.0, threshold=2e-5)
+    n = len(ref.t)
+    settings = LoopSettings(
+        dt=ref.dt,
+        integrator="rk4",
+        substeps=3,
+        cutting=True,
+        cutting_force=20.0,
+        cutting_speed=1e-6,
+        threshold=scm.threshold,
+        limit_tolerance=0.05,
+    )
+    unswitched = LoopSettings(**{**settings.__dict__, "threshold": 0.0})
+    runs = []
+    for budget in (10**12, 2, 1):
+        arrays = loop_arrays(robot, robot, ref, np.random.default_rng(1).normal(scale=5.0, size=(n, 3)))
+        driver = ClosedLoopDriver(robot.backend, slice_budget=budget)
+        compiled = _compiled_ga(scm, driver, robot, arrays, ref.dt)
+        compiled.bind_switching(np.random.default_rng(2).integers(0, 2**63, size=n, dtype=np.int64))
+        gains = scm.gains
+        status, stop = driver.simulate_switching(settings, unswitched, arrays, gains.Kp, gains.Kv, compiled, 0, n)
+        assert (status, stop) == (0, n)
+        count = int(compiled.switching.count)
+        runs.append((arrays, compiled.records(0, count), driver.slices))
+    (whole, records, calls) = runs[0]
+    assert len(records["sample"]) > 5
+    for arrays, sliced_records, sliced_calls in runs[1:]:
+        assert sliced_calls > max(n, calls)  # a pause inside (nearly) every sample
+        for name in ("q", "qd", "F", "f_ext", "tip", "error"):
+            np.testing.assert_array_equal(getattr(arrays, name), getattr(whole, name), err_msg=name)
+        for name in ("sample", "generations", "evaluations", "best_cost", "seeded_cost"):
+            np.testing.assert_array_equal(sliced_records[name], records[name], err_msg=name)
 
 
 def test_switching_control_without_a_compiler_runs_the_numpy_ga(robot, caplog):

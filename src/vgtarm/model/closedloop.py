@@ -9,6 +9,8 @@ from the header (:mod:`.interface`); nothing of the C interface is repeated here
 
 from __future__ import annotations
 
+import os
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -16,6 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..errors import ConfigError, shown
 from .compiled import CompiledBackend
 from .interface import enum, ffi
 
@@ -30,6 +33,7 @@ NOT_ASSEMBLABLE = _STATUS["VGT_NOT_ASSEMBLABLE"]
 OUTSIDE_LIMITS = _STATUS["VGT_OUTSIDE_LIMITS"]
 FUNCTION_FAILED = _STATUS["VGT_FUNCTION_FAILED"]
 NO_MEMORY = _STATUS["VGT_NO_MEMORY"]
+PAUSED = _STATUS["VGT_PAUSED"]
 #: Integrator codes by name (enum ``vgt_integrator`` of the header, ``VGT_RK4`` -> ``"rk4"``).
 INTEGRATOR_CODES = {name.removeprefix("VGT_").lower(): code for name, code in enum("vgt_integrator").items()}
 
@@ -155,14 +159,39 @@ class LoopArrays:
         self.struct = ffi().new("vgt_run *", {"n": n, **fields})
 
 
-class ClosedLoopDriver:
-    """The compiled closed loop of one backend."""
+#: Wall time each compiled slice of a run aims at (s): Python handles Ctrl-C between two slices.
+SLICE_SECONDS = 0.05
+#: Work units (sub-steps integrated, samples controlled) of a run's first slice, before the
+#: driver has measured how fast they go (about 30 ms of RK4 sub-steps on a slow machine).
+FIRST_SLICE_BUDGET = 2_000
+#: Bounds of the measured slice budget.
+SLICE_BUDGET_RANGE = (100, 100_000_000)
 
-    def __init__(self, backend: CompiledBackend) -> None:
+
+class ClosedLoopDriver:
+    """The compiled closed loop of one backend.
+
+    A run proceeds in slices of bounded work (``vgt_simulate_slice``), each about
+    :data:`SLICE_SECONDS` long (the budget follows the measured speed), so Ctrl-C is handled
+    between two slices; the results are the same, bit for bit, however the run is sliced.
+    ``slice_budget`` fixes the work units per slice instead (the tests slice a run finely). The
+    switching loop (:meth:`simulate_switching`) is called for as many samples as take about as
+    long (it cannot pause inside a sample).
+    """
+
+    def __init__(self, backend: CompiledBackend, *, slice_budget: int | None = None) -> None:
+        if slice_budget is not None and not (isinstance(slice_budget, int) and slice_budget >= 1):
+            raise ValueError(f"slice_budget = {slice_budget!r}: expected a whole number >= 1")
         self.backend = backend
         self._model = ffi().new("vgt_model *", {field: backend.call(field) for field in _MODEL_FIELDS})
         self._lib = backend.library
         self._settings: dict[tuple[LoopSettings, int, int], Any] = {}
+        self.slice_budget = slice_budget
+        self._budget = FIRST_SLICE_BUDGET
+        self._slices: dict[int, tuple[Any, Array]] = {}
+        self._switching_samples = 1  # samples of the next switching-loop call (follows the speed)
+        #: Compiled calls made by :meth:`simulate` so far (a run's slices).
+        self.slices = 0
 
     @property
     def model(self) -> Any:
@@ -180,8 +209,82 @@ class ClosedLoopDriver:
         kp = np.ascontiguousarray(Kp, dtype=np.float64)
         kv = np.ascontiguousarray(Kv, dtype=np.float64)
         stop = ffi().new("long *")
-        status = self._lib.vgt_simulate(self._model, s, arrays.struct, _ptr(kp), _ptr(kv), k0, k1, stop)
-        return int(status), int(stop[0])
+        piece, _state = self._slice(arrays.n_joints)
+        piece.substep = 0
+        k = k0
+        while True:
+            budget = self.slice_budget or self._budget
+            piece.budget = budget
+            started = time.perf_counter()
+            status = self._lib.vgt_simulate_slice(self._model, s, arrays.struct, _ptr(kp), _ptr(kv), k, k1, stop, piece)
+            elapsed = time.perf_counter() - started
+            self.slices += 1
+            if status == PAUSED or elapsed > 0.1 * SLICE_SECONDS:  # long enough to time
+                rate = piece.used / max(elapsed, 1e-9)
+                low, high = SLICE_BUDGET_RANGE
+                self._budget = int(min(max(rate * SLICE_SECONDS, low), high))
+            if status != PAUSED:
+                return int(status), int(stop[0])
+            k = int(stop[0])  # Ctrl-C raises KeyboardInterrupt here, between two slices
+
+    def _slice(self, n_joints: int) -> tuple[Any, Array]:
+        """The ``vgt_slice`` of runs of ``n_joints`` joints and the plant state it points at."""
+        made = self._slices.get(n_joints)
+        if made is None:
+            state = np.zeros((2, n_joints))
+            piece = ffi().new("vgt_slice *", {"q": _ptr(state[0]), "qd": _ptr(state[1])})
+            made = self._slices[n_joints] = (piece, state)
+        return made
+
+    def simulate_switching(
+        self,
+        settings: LoopSettings,
+        unswitched: LoopSettings,
+        arrays: LoopArrays,
+        Kp: Array,
+        Kv: Array,
+        ga: CompiledGA,
+        k0: int,
+        k1: int,
+    ) -> tuple[int, int]:
+        """Samples ``k0 .. k1-1`` under switching control with the GA in the loop (``csrc/ga.c``):
+        the fixed gains ``Kp``, ``Kv`` below ``settings.threshold``; above it, one activation of
+        ``ga`` (bound with :meth:`CompiledGA.bind_switching`) whose gains control that sample with
+        ``unswitched``. Returns (status, stop sample); the activations are in ``ga``'s records."""
+        structs = []
+        for one in (settings, unswitched):
+            key = (one, arrays.n_joints, arrays.n_margins)
+            if key not in self._settings:
+                self._settings[key] = one.struct(arrays.n_joints, arrays.n_margins)
+            structs.append(self._settings[key])
+        ga.ensure_window(k0, k1 - 1)
+        kp = np.ascontiguousarray(Kp, dtype=np.float64)
+        kv = np.ascontiguousarray(Kv, dtype=np.float64)
+        stop = ffi().new("long *")
+        piece, _state = self._slice(arrays.n_joints)
+        piece.substep = 0
+        ga.switching.slice = piece
+        ga.switching.pending = 0
+        k = k0
+        # in calls of about SLICE_SECONDS each (samples, and sub-steps within a sample, with the
+        # loop's budget), so Ctrl-C is handled between two of them
+        while True:
+            k_end = min(k1, k + self._switching_samples)
+            piece.budget = self.slice_budget or self._budget
+            started = time.perf_counter()
+            status = self._lib.vgt_simulate_switching(
+                self._model, structs[0], structs[1], arrays.struct, _ptr(kp), _ptr(kv), ga.switching, k, k_end, stop
+            )
+            elapsed = time.perf_counter() - started
+            self.slices += 1
+            if status == PAUSED:
+                k = int(stop[0])
+                continue
+            if status != DONE or k_end == k1:
+                return int(status), int(stop[0])
+            rate = (k_end - k) / max(elapsed, 1e-9)
+            self._switching_samples = int(min(max(rate * SLICE_SECONDS, 1), 4 * self._switching_samples))
+            k = k_end
 
     def ga_predictor(
         self, p_ctrl: Array, dt: float, q0: Array, qd0: Array, q_d: Array, qd_d: Array, qdd_d: Array, tip_d: Array
@@ -244,6 +347,32 @@ class GAActivationResult:
     evaluations: int
     exact_candidates: int = 0
     exact_steps: int = 0
+    threads: int = 1  #: threads predicting at the end of the activation
+
+
+
+#: Most threads the GA's prediction uses by default: a generation of the paper's GA predicts about
+#: 40 children, five blocks of eight, so a fourth thread is the last that can shorten it.
+MAX_GA_THREADS = 4
+
+
+def ga_threads() -> int:
+    """Threads of the compiled GA's prediction: ``$VGTARM_THREADS``, else the CPUs this process may
+    use, at most :data:`MAX_GA_THREADS`. A study's workers set 1 (they already fill the CPUs)."""
+    text = os.environ.get("VGTARM_THREADS", "").strip()
+    if text:
+        try:
+            value = int(text)
+        except ValueError:
+            value = 0
+        if not 1 <= value <= 256:
+            raise ConfigError(f"VGTARM_THREADS = {shown(text)}: expected a whole number of threads from 1 to 256")
+        return value
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # not Linux
+        cpus = os.cpu_count() or 1
+    return max(1, min(cpus, MAX_GA_THREADS))
 
 
 class CompiledGA:
@@ -263,6 +392,8 @@ class CompiledGA:
         derivatives: maps a slice of rows of the reference to ``tip_d - P^(q_d)`` ``(m, 3)``, the
             model's tip Jacobian ``(m, 3, n)`` and (with ``quadratic``) Hessian ``(m, 3, n, n)`` at
             ``q_d``; called for blocks of rows as activations first need them.
+        threads: threads that predict a generation's candidates (default :func:`ga_threads`);
+            any count gives the same activation bit for bit.
     """
 
     def __init__(
@@ -289,6 +420,7 @@ class CompiledGA:
         tip_d: Array,
         derivatives: Callable[[slice], tuple[Array, Array, Array | None]],
         quadratic: bool,
+        threads: int | None = None,
     ) -> None:
         if prediction not in PREDICTIONS:
             raise ValueError(f"prediction = {prediction!r}: expected one of {sorted(PREDICTIONS)}")
@@ -333,6 +465,7 @@ class CompiledGA:
                 "p_mutation": p_mutation,
                 "horizon": horizon,
                 "exact_above": exact_above,
+                "threads": ga_threads() if threads is None else threads,
             },
         )
         self._best = np.empty(n_genes)
@@ -367,6 +500,10 @@ class CompiledGA:
                 self._arrays["H_d"][rows] = H
             self._ready[block] = True
 
+    def ensure_window(self, first: int, last: int) -> None:
+        """Make the tip derivatives of every window starting at samples ``first .. last`` ready."""
+        self._ensure(first, min(last + self.horizon, self.n - 1))
+
     def _window(self, k: int, q0: Array, qd0: Array) -> int:
         """Point the problem at samples ``k .. k+h``; returns the horizon ``h`` left."""
         horizon = min(self.horizon, self.n - 1 - k)
@@ -393,7 +530,50 @@ class CompiledGA:
             evaluations=int(self._result.evaluations),
             exact_candidates=int(self._result.exact_candidates),
             exact_steps=int(self._result.exact_steps),
+            threads=int(self._result.threads),
         )
+
+    def bind_switching(self, seeds: NDArray[np.int64]) -> None:
+        """Prepare switching control in the loop (:meth:`ClosedLoopDriver.simulate_switching`):
+        ``seeds`` are the generator seeds of the GA activations in order, one each, and bound the
+        activations recorded (the loop returns when the records are full)."""
+        capacity = len(seeds)
+        self._seeds = np.ascontiguousarray(np.asarray(seeds, dtype=np.int64).view(np.uint64))
+        self._records: dict[str, NDArray[Any]] = {
+            **{n: np.zeros(capacity, dtype=np.int64) for n in ("sample", "generations", "evaluations", "threads")},
+            **{name: np.zeros(capacity) for name in ("best_cost", "seeded_cost", "wall_time")},
+        }
+        self._switch_work = np.zeros(2 * self.n_joints + self.n_genes)
+        base = ffi().new("vgt_ga_problem *")
+        for name in ("lower", "upper", "p_ctrl", "q_d", "qd_d", "qdd_d", "tip_d", "tip_offset", "J_d", "H_d"):
+            setattr(base, name, _ptr(self._arrays[name]))
+        base.initial_bits = self._problem.initial_bits
+        work = self._switch_work
+        self._switching = ffi().new(
+            "vgt_switching *",
+            {
+                "g": self._ga,
+                "pb": base,
+                "seeds": ffi().cast("uint64_t *", self._seeds.ctypes.data),
+                "max_activations": capacity,
+                **{name: _ptr(a) for name, a in self._records.items() if a.dtype == np.float64},
+                **{n: ffi().cast("long *", a.ctypes.data) for n, a in self._records.items() if a.dtype == np.int64},
+                "q0": _ptr(work),
+                "qd0": ffi().cast("double *", work[self.n_joints :].ctypes.data),
+                "best": ffi().cast("double *", work[2 * self.n_joints :].ctypes.data),
+                "backoff": 1,
+            },
+        )
+        self._switch_base = base  # the struct points into it: keep it alive
+
+    @property
+    def switching(self) -> Any:
+        """The ``vgt_switching`` structure (after :meth:`bind_switching`)."""
+        return self._switching
+
+    def records(self, first: int, last: int) -> dict[str, NDArray[Any]]:
+        """Copies of the in-loop activation records ``first .. last-1``."""
+        return {name: array[first:last].copy() for name, array in self._records.items()}
 
     def predict(self, k: int, q0: Array, qd0: Array, genes: Array) -> Array:
         """The GA's predicted tip error of decoded candidates ``genes`` ``(P, n_genes)`` at sample ``k``."""

@@ -25,7 +25,8 @@ import numpy as np
 from ..control.cfc import ComputedForceControl
 from ..control.gains import Gains
 from ..control.scm import SwitchingControl
-from ..errors import InputError, SimulationError
+from ..errors import InputError, SimulationError, shown
+from ..memory import check_memory
 from ..model.assembly import linear_form
 from ..model.closedloop import (
     ABOVE_THRESHOLD,
@@ -43,6 +44,7 @@ from ..model.closedloop import (
 from ..model.compiled import CompiledBackend
 from ..model.parameters import JOINT_NAMES, RobotParameters
 from ..model.robot import Robot
+from . import checks
 from .external import ExternalForce
 from .python_loop import PythonLoop
 from .reference import HasJointReference, JointReference
@@ -68,6 +70,15 @@ INTEGRATORS: dict[str, str] = {
     "rk4": "classical Runge-Kutta, `substeps` steps per control period",
 }
 
+#: Most integration steps per control period: a step of dt / 1e6 (1 ns at the paper's 1 ms) is
+#: far below any time scale of the robot; more only add round-off and hours of work.
+MAX_SUBSTEPS = 1_000_000
+#: Peak memory of a run per reference sample (bytes), beyond the reference: the loop's arrays and
+#: the result's copies (1.2 kB a sample measured with sensing and the observer) with a margin; the
+#: switching method adds its tip Jacobians and Hessians along the reference (1.3 kB).
+BYTES_PER_SAMPLE = 1_600
+BYTES_PER_SAMPLE_SCM = 3_200
+
 _FAILURES = {
     NOT_FINITE: "the state is no longer finite (NaN or infinity)",
     NOT_ASSEMBLABLE: "a leg set can no longer be assembled",
@@ -78,6 +89,11 @@ _FAILURES = {
 
 Controller = ComputedForceControl | SwitchingControl
 Progress = Callable[[int, int], None]
+
+
+#: Whether the compiled GA runs inside the compiled loop (one call per chunk) rather than one call
+#: per activation from Python; both give the same run bit for bit (a test compares them).
+GA_IN_LOOP = True
 
 
 def simulate(
@@ -139,6 +155,9 @@ def simulate(
         SimulationError: the run diverged; ``error.result`` holds the samples up to then.
         InputError: a bad argument (the message names it).
     """
+    checks.arguments(
+        plant, controller_model, external_force, integrator, plant_engine, metadata, progress, transient_s
+    )
     if plant_engine != "model" and plant_engine not in PLANT_ENGINES:
         raise InputError(
             f"plant_engine = {plant_engine!r}: expected 'model' or a registered engine {sorted(PLANT_ENGINES)}"
@@ -146,14 +165,16 @@ def simulate(
         )
     if integrator not in INTEGRATORS:
         raise InputError(f"integrator = {integrator!r}: expected one of {sorted(INTEGRATORS)}")
-    if not (isinstance(substeps, int) and substeps >= 1):
-        raise InputError(f"substeps = {substeps!r}: expected a whole number >= 1")
+    if not (isinstance(substeps, int) and 1 <= substeps <= MAX_SUBSTEPS):
+        raise InputError(f"substeps = {shown(substeps)}: expected a whole number from 1 to {MAX_SUBSTEPS:,}")
     if not isinstance(controller, ComputedForceControl | SwitchingControl):
         raise InputError(f"controller = {controller!r}: expected ComputedForceControl or SwitchingControl")
     if not (isinstance(seed, int | np.integer) and seed >= 0):
         raise InputError(f"seed = {seed!r}: expected a whole number >= 0")
     ref = JointReference.of(reference)
     n, dt = len(ref.t), ref.dt
+    per_sample = BYTES_PER_SAMPLE_SCM if isinstance(controller, SwitchingControl) else BYTES_PER_SAMPLE
+    check_memory(n * per_sample, f"simulation of {n:,} reference samples", "simulate a shorter reference")
     sensing = sensing_settings(
         ref.q.shape[1],
         dt,
@@ -170,11 +191,11 @@ def simulate(
         model = controller_model
     else:
         model = plant.with_parameters(controller_model or plant.parameters)
-    tip_d = plant.tip_position(ref.q)
+    tip_d = checks.reference_tip(plant, ref)  # refuses another robot's reference, naming both
     dist_seed, ga_seed, sensor_seed = np.random.SeedSequence(int(seed)).spawn(3)
     disturbance = external.disturbance_samples(n, np.random.default_rng(dist_seed))
     ga_rng = np.random.default_rng(ga_seed)
-    q0, qd0 = initial_state if initial_state is not None else (ref.q[0], np.zeros(ref.q.shape[1]))
+    q0, qd0 = checks.initial_state(plant, ref, initial_state)
     noise = (
         np.random.default_rng(sensor_seed).normal(scale=sensing.velocity_noise, size=ref.q.shape)
         if sensing.velocity_noise > 0
@@ -205,7 +226,7 @@ def simulate(
         cutting_force=external.cutting_force,
         cutting_speed=external.cutting_speed,
         threshold=controller.threshold if isinstance(controller, SwitchingControl) else 0.0,
-        limit_tolerance=limit_tolerance,
+        limit_tolerance=checks.limit_tolerance(plant, limit_tolerance),
         observer=sensing.loop_observer,
         observer_gain=sensing.observer_gain,
         sensing=sensing.active,
@@ -221,7 +242,49 @@ def simulate(
     k = 0
     status = DONE
     chunk = max(n // 100, 1) if progress else n
-    while k < n:
+    # the compiled GA runs inside the compiled loop: one call per chunk, whatever the activations
+    ga_in_loop = (
+        GA_IN_LOOP
+        and isinstance(controller, SwitchingControl)
+        and isinstance(loop, ClosedLoopDriver)
+        and controller.ga.stall_generations is None
+    )
+    switching_loop = loop if isinstance(loop, ClosedLoopDriver) else None
+    if ga_in_loop:
+        assert isinstance(controller, SwitchingControl) and switching_loop is not None
+        ga = compiled_ga["ga"] = _compiled_ga(controller, switching_loop, model, arrays, dt)
+        # one seed per activation, drawn as _tune draws them one by one (same numbers)
+        ga.bind_switching(ga_rng.integers(0, 2**63, size=n, dtype=np.int64))
+    while k < n and ga_in_loop:
+        k_end = min(k + chunk, n)
+        first = int(ga.switching.count)
+        assert switching_loop is not None
+        status, stop = switching_loop.simulate_switching(settings, unswitched, arrays, fixed.Kp, fixed.Kv, ga, k, k_end)
+        assert status != ABOVE_THRESHOLD  # the records hold one activation per sample
+        mode[k : k_end if status == DONE else stop] = MODE_FIXED
+        records = ga.records(first, int(ga.switching.count))
+        for i, sample in enumerate(records["sample"].tolist()):
+            mode[sample] = MODE_GA
+            ga_time += float(records["wall_time"][i])
+            activations.append(
+                GAActivation(
+                    sample=sample,
+                    time_s=float(ref.t[sample]),
+                    generations=int(records["generations"][i]),
+                    evaluations=int(records["evaluations"][i]),
+                    best_fitness=float(records["best_cost"][i]),
+                    fixed_gains_fitness=float(records["seeded_cost"][i]),
+                    error_before_m=float(arrays.error[sample]),
+                    error_after_m=float("nan"),  # filled below
+                    wall_time_s=float(records["wall_time"][i]),
+                )
+            )
+        if status != DONE:
+            break
+        k = k_end
+        if progress:
+            progress(k, n)
+    while k < n and not ga_in_loop:
         k_end = min(k + chunk, n)
         status, stop = loop.simulate(settings, arrays, fixed.Kp, fixed.Kv, k, k_end)
         mode[k:stop] = MODE_FIXED

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
+import threading
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -148,18 +150,44 @@ class _client:
             except OSError as exc:
                 raise InputError(f"--scheduler {self.scheduler!r}: cannot connect: {exc}") from None
             return self.client
-        self.cluster = LocalCluster(
-            n_workers=self.workers or os.cpu_count() or 1,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=None,
-            silence_logs=logging.ERROR,
-        )
+        # The worker processes start with SIGINT ignored (inherited through exec), so a terminal's
+        # Ctrl-C, sent to the whole process group, reaches only this process, which stops them
+        # (no traceback from each worker). Meanwhile SIGINT is also blocked here: a Ctrl-C during
+        # the start stays pending (Linux never discards a blocked signal) and arrives below.
+        posix = hasattr(signal, "pthread_sigmask") and threading.current_thread() is threading.main_thread()
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if posix else set()
+        handler = signal.signal(signal.SIGINT, signal.SIG_IGN) if posix else None
+        try:
+            self.cluster = LocalCluster(
+                n_workers=self.workers or os.cpu_count() or 1,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=logging.ERROR,
+                env={"VGTARM_THREADS": "1"},  # the workers fill the CPUs; no GA threads on top
+            )
+        finally:
+            if posix:
+                signal.signal(signal.SIGINT, signal.default_int_handler if handler is None else handler)
+                signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
         self.client = Client(self.cluster)
         return self.client
 
-    def __exit__(self, *exc: object) -> None:
+    def __exit__(self, kind: type[BaseException] | None, *exc: object) -> None:
+        if kind is not None and issubclass(kind, KeyboardInterrupt) and self.cluster is not None:
+            self._kill_workers()  # Ctrl-C: the runs under way are lost anyway; do not wait for them
         if self.client is not None:
             self.client.close()
         if self.cluster is not None:
             self.cluster.close()
+
+    def _kill_workers(self) -> None:
+        """Kill the local cluster's worker processes at once (a graceful close waits a second or
+        more for workers busy in compiled code); the close that follows then finds them gone."""
+        for nanny in list(self.cluster.workers.values()):
+            pid = getattr(nanny, "pid", None)  # the worker process a nanny watches
+            if isinstance(pid, int) and pid > 0:
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                except OSError:  # already gone
+                    pass

@@ -1,6 +1,7 @@
 /* Closed-loop drivers for the CasADi-generated model (part of vgtarm).
  *
- * vgt_simulate runs computed force control on the plant for a range of samples in one call;
+ * vgt_simulate runs computed force control on the plant for a range of samples in one call
+ * (vgt_simulate_slice the same in slices of bounded work, so the caller can stop between them);
  * vgt_ga_fitness predicts, for a batch of gain candidates, the tip tracking error over a horizon
  * under the controller's model. Both call the generated functions through pointers filled in by
  * vgtarm/model/closedloop.py (the structures are declared once, in vgtarm.h); the Python reference loop in vgtarm/simulation/python_loop.py does the
@@ -84,17 +85,20 @@ static int acceleration(const vgt_model *m, const vgt_settings *s, const vgt_run
     return VGT_DONE;
 }
 
+/* Integrate the plant over one control period with the effort F and the disturbance held, from
+ * sub-step *substep (state q, qd, advanced in place) to s->substeps, one work unit per sub-step;
+ * stops early, with 0 < *substep < s->substeps, once *used reaches budget (budget <= 0: no
+ * limit); a period's first sub-step is always made, so a pause never falls before it. */
 static int integrate(const vgt_model *m, const vgt_settings *s, const vgt_run *r, vgt_work *wk,
-                     const double *q0, const double *qd0, const double *F, const double *dist,
-                     double *q1, double *qd1)
+                     const double *F, const double *dist, double *q, double *qd, long *substep,
+                     long *used, long budget)
 {
     int steps = s->substeps > 0 ? s->substeps : 1;
     double h = s->dt / steps;
     const int nj = s->n_joints;
-    double q[nj], qd[nj], a[nj];
-    memcpy(q, q0, sizeof q);
-    memcpy(qd, qd0, sizeof qd);
-    for (int step = 0; step < steps; ++step) {
+    double a[nj];
+    for (; *substep < steps; ++*substep) {
+        if (*substep > 0 && budget > 0 && *used >= budget) return VGT_PAUSED;
         int status;
         if (s->integrator == VGT_RK4) {
             double kq[4][nj], kv[4][nj], qs[nj], vs[nj];
@@ -125,9 +129,8 @@ static int integrate(const vgt_model *m, const vgt_settings *s, const vgt_run *r
                 }
             }
         }
+        ++*used;
     }
-    memcpy(q1, q, sizeof q);
-    memcpy(qd1, qd, sizeof qd);
     return VGT_DONE;
 }
 
@@ -244,7 +247,20 @@ static int observe(const vgt_model *m, const vgt_settings *s, const vgt_run *r, 
 int vgt_simulate(const vgt_model *m, const vgt_settings *s, const vgt_run *r,
                  const double *Kp, const double *Kv, long k0, long k1, long *stop)
 {
+    return vgt_simulate_slice(m, s, r, Kp, Kv, k0, k1, stop, NULL);
+}
+
+/* vgt_simulate in slices (see vgtarm.h): the same steps; a pause saves the sub-step count and the
+ * plant state of the sample being integrated in the slice, and the next call resumes there
+ * without controlling that sample again (its effort and tool force are already in the run). */
+int vgt_simulate_slice(const vgt_model *m, const vgt_settings *s, const vgt_run *r,
+                       const double *Kp, const double *Kv, long k0, long k1, long *stop, vgt_slice *slice)
+{
     const int nj = s->n_joints;
+    const long budget = slice ? slice->budget : 0;
+    long used = 0, substep = slice ? slice->substep : 0;
+    double q_own[nj], qd_own[nj];
+    double *qi = slice ? slice->q : q_own, *vi = slice ? slice->qd : qd_own; /* state being integrated */
     vgt_work wk;
     int status = VGT_DONE;
     *stop = k1;
@@ -254,30 +270,46 @@ int vgt_simulate(const vgt_model *m, const vgt_settings *s, const vgt_run *r,
     }
     for (long k = k0; k < k1; ++k) {
         const double *q = r->q + nj * k, *qd = r->qd + nj * k;
-        double V[3];
-        double *tip = r->tip + 3 * k;
-        const double *in_ts[3] = {q, qd, r->p_plant};
-        double *out_ts[2] = {tip, V};
-        if (call(&m->tip_state, &wk, 3, in_ts, 2, out_ts)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
-        const double *td = r->tip_d + 3 * k;
-        double e0 = td[0] - tip[0], e1 = td[1] - tip[1], e2 = td[2] - tip[2];
-        r->error[k] = sqrt(e0 * e0 + e1 * e1 + e2 * e2);
-        measure(s, r, k);
-        if (s->threshold > 0.0 && r->error[k] > s->threshold) { status = VGT_ABOVE_THRESHOLD; *stop = k; break; }
-        if (observe(m, s, r, &wk, k)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
         double *F = r->F + nj * k;
-        const double *qm = r->q_meas + nj * k, *vm = r->qd_meas + nj * k, *tau = r->tau_hat + nj * k;
-        const double *in_c[8] = {qm, vm, r->q_d + nj * k, r->qd_d + nj * k, r->qdd_d + nj * k, Kp, Kv, r->p_ctrl};
-        double *out_c[1] = {F};
-        if (call(&m->cfc, &wk, 8, in_c, 1, out_c)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
-        for (int i = 0; i < nj; ++i) F[i] -= tau[i];
         const double *dist = r->disturbance + 3 * k;
-        tool_force(s, V, dist, r->f_ext + 3 * k);
-        if (k + 1 >= r->n) continue;
+        if (substep == 0) { /* control sample k */
+            if (budget > 0 && used >= budget) { status = VGT_PAUSED; *stop = k; break; }
+            double V[3];
+            double *tip = r->tip + 3 * k;
+            const double *in_ts[3] = {q, qd, r->p_plant};
+            double *out_ts[2] = {tip, V};
+            if (call(&m->tip_state, &wk, 3, in_ts, 2, out_ts)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
+            const double *td = r->tip_d + 3 * k;
+            double e0 = td[0] - tip[0], e1 = td[1] - tip[1], e2 = td[2] - tip[2];
+            r->error[k] = sqrt(e0 * e0 + e1 * e1 + e2 * e2);
+            measure(s, r, k);
+            if (s->threshold > 0.0 && r->error[k] > s->threshold) { status = VGT_ABOVE_THRESHOLD; *stop = k; break; }
+            if (observe(m, s, r, &wk, k)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
+            const double *qm = r->q_meas + nj * k, *vm = r->qd_meas + nj * k, *tau = r->tau_hat + nj * k;
+            const double *in_c[8] = {qm, vm, r->q_d + nj * k, r->qd_d + nj * k, r->qdd_d + nj * k, Kp, Kv, r->p_ctrl};
+            double *out_c[1] = {F};
+            if (call(&m->cfc, &wk, 8, in_c, 1, out_c)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
+            for (int i = 0; i < nj; ++i) F[i] -= tau[i];
+            tool_force(s, V, dist, r->f_ext + 3 * k);
+            ++used;
+            if (k + 1 >= r->n) continue;
+            memcpy(qi, q, sizeof(double) * (size_t)nj);
+            memcpy(vi, qd, sizeof(double) * (size_t)nj);
+        }
+        status = integrate(m, s, r, &wk, F, dist, qi, vi, &substep, &used, budget);
+        if (status == VGT_PAUSED) { *stop = k; break; }
+        substep = 0;
         double *q1 = r->q + nj * (k + 1), *qd1 = r->qd + nj * (k + 1);
-        status = integrate(m, s, r, &wk, q, qd, F, dist, q1, qd1);
-        if (status == VGT_DONE) status = check_state(s, r, q1, qd1);
+        if (status == VGT_DONE) {
+            memcpy(q1, qi, sizeof(double) * (size_t)nj);
+            memcpy(qd1, vi, sizeof(double) * (size_t)nj);
+            status = check_state(s, r, q1, qd1);
+        }
         if (status != VGT_DONE) { *stop = k + 1; break; }
+    }
+    if (slice) {
+        slice->used = used;
+        slice->substep = substep;
     }
     work_free(&wk);
     return status;

@@ -25,10 +25,14 @@
  */
 #include <math.h>
 #include <stdint.h>
+#include <time.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "vgtarm.h"
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 
 /* ---- generator ------------------------------------------------------------------------------ */
 
@@ -233,8 +237,9 @@ static double pairwise_sum(const double *a, long n)
 
 static inline double clean_cost(double c) { return isfinite(c) ? c : INFINITY; }
 
-/* Indices of cost in ascending order, ties in index order: a bottom-up merge sort of (cost,
- * index) pairs, so the order is the same as any stable sort's. */
+/* Indices of cost in ascending order, ties in index order, so the order is the same as any
+ * stable sort's: binary insertion of (cost, index) pairs for small populations, a bottom-up merge
+ * sort for larger ones. */
 typedef struct {
     double cost;
     long index;
@@ -256,6 +261,23 @@ static void stable_order(long n, const double *cost, long *order)
         return;
     }
     keyed *b = a + n;
+    if (n <= 64) { /* a population of the paper's size: binary insertion (after equal costs) */
+        for (long i = 0; i < n; ++i) {
+            const double c = clean_cost(cost[i]);
+            long lo = 0, hi = i;
+            while (lo < hi) {
+                long mid = (lo + hi) >> 1;
+                if (c < a[mid].cost)
+                    hi = mid;
+                else
+                    lo = mid + 1;
+            }
+            memmove(a + lo + 1, a + lo, sizeof(keyed) * (size_t)(i - lo));
+            a[lo] = (keyed){c, i};
+        }
+        for (long i = 0; i < n; ++i) order[i] = a[i].index;
+        return;
+    }
     for (long i = 0; i < n; ++i) a[i] = (keyed){clean_cost(cost[i]), i};
     for (long width = 1; width < n; width *= 2) {
         for (long lo = 0; lo < n; lo += 2 * width) {
@@ -369,13 +391,19 @@ typedef struct {
     float *off_f;        /* (H+1, 3) tip offsets of the window                                    */
     float *coef;         /* (H, 3, nj, nj) -H[k][l][m] for m > l, -H/2 for m = l (0 below), per step  */
     unsigned char *row_used; /* (3, nj) row l of axis k has a nonzero coefficient somewhere in the window */
-    long exact_candidates, exact_steps; /* work counters of the trust-region fallback              */
-    vf *K;               /* (2 nj^2) gains of the block, one lane per candidate                     */
     float *lut;          /* 8-bit genes: the decoded value of each code, one table per distinct     */
     int *table_of;       /*   pair of bounds (table_of[gene]), or NULL                               */
     int *lut_offset;     /* (whole words of genes) 256 * table_of[gene], 0 past the last gene         */
     int avx2;            /* the CPU gathers (decode_words)                                           */
     long row_length;     /* genes rounded up to whole blocks                                         */
+    int threads;         /* threads that predict blocks of candidates (OpenMP), each with a scratch */
+    int n_scratch;       /* scratches allocated (the threads asked for; `threads` may drop to 1)     */
+    struct scratch *sc;  /* (n_scratch) */
+} predictor;
+
+/* What one thread of the prediction writes. */
+typedef struct scratch {
+    vf *K;               /* (2 nj^2) gains of the block, one lane per candidate                     */
     float *rowbuf;       /* (BLOCK, row_length) decoded genes of a block's candidates                */
     float *far;          /* (BLOCK H, nj) predicted joint errors of the steps outside the region     */
     long *far_at;        /* (BLOCK H) their lane * H + step                                         */
@@ -383,7 +411,8 @@ typedef struct {
     double **res;
     vgt_int *iw;
     double *w;
-} predictor;
+    long exact_candidates, exact_steps; /* work counters of the trust-region fallback              */
+} scratch;
 
 /* Predicted tip error of up to BLOCK candidates by the linear recursion (see the top). Every
  * quantity is a vector across the block's candidates (GCC/Clang vector extensions, so the
@@ -597,50 +626,69 @@ static int predict_exact(const vgt_model *m, const vgt_settings *s, const predic
     return status;
 }
 
+/* Costs of candidates c .. c + BLOCK (those below n) with one thread's scratch. */
+static int predict_one_block(const vgt_ga_settings *g, const vgt_model *m, const predictor *x, scratch *sc, long c,
+                             long n, const double *genes, const uint64_t *const *rows, double *cost)
+{
+    const int nj = x->nj;
+    const vgt_ga_problem *pb = x->pb;
+    int count = n - c < BLOCK ? (int)(n - c) : BLOCK;
+    double sum[BLOCK];
+    long n_far = 0;
+    int seen[BLOCK] = {0};
+    if (genes) {
+        gains_from_genes(g->n_genes, count, genes + c * g->n_genes, sc->K);
+    } else { /* decoded rows, transposed; lanes without a candidate get zero gains, unused */
+        const float *decoded[BLOCK];
+        for (int k = 0; k < count; ++k) {
+            float *row = sc->rowbuf + (long)k * x->row_length;
+            decode_words(x, 0, (int)(x->row_length / 8), rows[c + k], row);
+            decoded[k] = row;
+        }
+        gains_from_rows(g->n_genes, count, decoded, sc->K);
+    }
+    predict_block(x, count, sc->K, sum, sc->far, sc->far_at, &n_far);
+    /* the steps outside the trust region: the exact forward kinematics of the predicted joints */
+    for (long f = 0; f < n_far; ++f) {
+        long lane = sc->far_at[f] / x->horizon, j = sc->far_at[f] % x->horizon;
+        double q[nj], tip[3];
+        for (int i = 0; i < nj; ++i) q[i] = pb->q_d[(j + 1) * nj + i] - (double)sc->far[f * nj + i];
+        sc->arg[0] = q;
+        sc->arg[1] = pb->p_ctrl;
+        sc->res[0] = tip;
+        if (m->tip.f(sc->arg, sc->res, sc->iw, sc->w, 0)) return VGT_FUNCTION_FAILED;
+        const double *td = pb->tip_d + 3 * (j + 1);
+        double d0 = td[0] - tip[0], d1 = td[1] - tip[1], d2 = td[2] - tip[2];
+        sum[lane] += d0 * d0 + d1 * d1 + d2 * d2;
+        sc->exact_steps++;
+        if (!seen[lane]) sc->exact_candidates++;
+        seen[lane] = 1;
+    }
+    for (int k = 0; k < count; ++k) cost[c + k] = isfinite(sum[k]) ? sqrt(sum[k]) : INFINITY;
+    return VGT_DONE;
+}
+
 /* Predicted tip error of n candidates given as decoded genes (row by row), or, with genes NULL, as
  * the bit strings rows[0..n) of 8-bit genes. */
 static int predict(const vgt_model *m, const vgt_settings *s, const vgt_ga_settings *g, predictor *x, long n,
                    const double *genes, const uint64_t *const *rows, double *cost)
 {
     if (g->prediction == VGT_PREDICT_EXACT) return predict_exact(m, s, x, n, NULL, genes, cost);
-    const int nj = x->nj;
-    const vgt_ga_problem *pb = x->pb;
-    for (long c = 0; c < n; c += BLOCK) {
-        int count = n - c < BLOCK ? (int)(n - c) : BLOCK;
-        double sum[BLOCK];
-        long n_far = 0;
-        int seen[BLOCK] = {0};
-        if (genes) {
-            gains_from_genes(g->n_genes, count, genes + c * g->n_genes, x->K);
-        } else { /* decoded rows, transposed; lanes without a candidate get zero gains, unused */
-            const float *decoded[BLOCK];
-            for (int k = 0; k < count; ++k) {
-                float *row = x->rowbuf + (long)k * x->row_length;
-                decode_words(x, 0, x->row_length / 8, rows[c + k], row);
-                decoded[k] = row;
-            }
-            gains_from_rows(g->n_genes, count, decoded, x->K);
-        }
-        predict_block(x, count, x->K, sum, x->far, x->far_at, &n_far);
-        /* the steps outside the trust region: the exact forward kinematics of the predicted joints */
-        for (long f = 0; f < n_far; ++f) {
-            long lane = x->far_at[f] / x->horizon, j = x->far_at[f] % x->horizon;
-            double q[nj], tip[3];
-            for (int i = 0; i < nj; ++i) q[i] = pb->q_d[(j + 1) * nj + i] - (double)x->far[f * nj + i];
-            x->arg[0] = q;
-            x->arg[1] = pb->p_ctrl;
-            x->res[0] = tip;
-            if (m->tip.f(x->arg, x->res, x->iw, x->w, 0)) return VGT_FUNCTION_FAILED;
-            const double *td = pb->tip_d + 3 * (j + 1);
-            double d0 = td[0] - tip[0], d1 = td[1] - tip[1], d2 = td[2] - tip[2];
-            sum[lane] += d0 * d0 + d1 * d1 + d2 * d2;
-            x->exact_steps++;
-            if (!seen[lane]) x->exact_candidates++;
-            seen[lane] = 1;
-        }
-        for (int k = 0; k < count; ++k) cost[c + k] = isfinite(sum[k]) ? sqrt(sum[k]) : INFINITY;
+    const long n_blocks = (n + BLOCK - 1) / BLOCK;
+    const int threads = x->threads < n_blocks ? x->threads : (int)n_blocks;
+    int failed = 0;
+    /* the blocks are independent (each candidate's cost depends on its own lane only), so any
+     * split between threads gives the same costs bit for bit */
+#pragma omp parallel for num_threads(threads) schedule(static) if (threads > 1) reduction(| : failed)
+    for (long b = 0; b < n_blocks; ++b) {
+#ifdef _OPENMP
+        scratch *sc = x->sc + omp_get_thread_num();
+#else
+        scratch *sc = x->sc;
+#endif
+        if (predict_one_block(g, m, x, sc, b * BLOCK, n, genes, rows, cost)) failed = 1;
     }
-    return VGT_DONE;
+    return failed ? VGT_FUNCTION_FAILED : VGT_DONE;
 }
 
 static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *s, const vgt_ga_settings *g,
@@ -652,8 +700,8 @@ static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *
     x->dt = s->dt;
     x->quadratic = g->prediction == VGT_PREDICT_QUADRATIC;
     x->exact_above2 = g->exact_above * g->exact_above;
-    x->exact_candidates = x->exact_steps = 0;
     x->pb = pb;
+    x->threads = g->threads > 0 ? g->threads : 1;
     const int nj = x->nj;
     x->r = malloc(sizeof(float) * (size_t)(g->horizon * nj + 1));
     x->s = malloc(sizeof(float) * (size_t)(g->horizon * nj + 1));
@@ -661,7 +709,6 @@ static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *
     x->off_f = malloc(sizeof(float) * (size_t)((g->horizon + 1) * 3));
     x->row_used = calloc((size_t)(3 * nj), 1);
     x->coef = NULL;
-    x->K = aligned_alloc(sizeof(vf), sizeof(vf) * (size_t)(2 * nj * nj));
     x->lut = NULL;
     x->table_of = NULL;
     if (g->n_bits == 8 && g->prediction != VGT_PREDICT_EXACT) {
@@ -688,21 +735,27 @@ static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *
         }
         for (int gi = 0; gi < g->n_genes; ++gi) x->lut_offset[gi] = 256 * x->table_of[gi];
         x->row_length = ((long)g->n_genes + BLOCK - 1) / BLOCK * BLOCK;
-        x->rowbuf = malloc(sizeof(float) * (size_t)(BLOCK * x->row_length));
-        if (!x->rowbuf) return VGT_NO_MEMORY;
 #if defined(__x86_64__) && defined(__GNUC__)
         x->avx2 = __builtin_cpu_supports("avx2");
 #endif
     }
-    x->far = malloc(sizeof(float) * (size_t)(BLOCK * (g->horizon + 1) * nj));
-    x->far_at = malloc(sizeof(long) * (size_t)(BLOCK * (g->horizon + 1)));
-    x->arg = malloc(sizeof(double *) * (size_t)(m->tip.sz_arg > 2 ? m->tip.sz_arg : 2));
-    x->res = malloc(sizeof(double *) * (size_t)(m->tip.sz_res > 1 ? m->tip.sz_res : 1));
-    x->iw = malloc(sizeof(vgt_int) * (size_t)(m->tip.sz_iw + 1));
-    x->w = malloc(sizeof(double) * (size_t)(m->tip.sz_w + 1));
-    if (!x->r || !x->s || !x->jac_f || !x->off_f || !x->row_used || !x->K || !x->far || !x->far_at ||
-        !x->arg || !x->res || !x->iw || !x->w)
-        return VGT_NO_MEMORY;
+    if (!x->r || !x->s || !x->jac_f || !x->off_f || !x->row_used) return VGT_NO_MEMORY;
+    x->sc = calloc((size_t)x->threads, sizeof(scratch));
+    if (!x->sc) return VGT_NO_MEMORY;
+    x->n_scratch = x->threads;
+    for (int t = 0; t < x->n_scratch; ++t) {
+        scratch *sc = x->sc + t;
+        sc->K = aligned_alloc(sizeof(vf), sizeof(vf) * (size_t)(2 * nj * nj));
+        sc->rowbuf = malloc(sizeof(float) * (size_t)(BLOCK * x->row_length + 1));
+        sc->far = malloc(sizeof(float) * (size_t)(BLOCK * (g->horizon + 1) * nj));
+        sc->far_at = malloc(sizeof(long) * (size_t)(BLOCK * (g->horizon + 1)));
+        sc->arg = malloc(sizeof(double *) * (size_t)(m->tip.sz_arg > 2 ? m->tip.sz_arg : 2));
+        sc->res = malloc(sizeof(double *) * (size_t)(m->tip.sz_res > 1 ? m->tip.sz_res : 1));
+        sc->iw = malloc(sizeof(vgt_int) * (size_t)(m->tip.sz_iw + 1));
+        sc->w = malloc(sizeof(double) * (size_t)(m->tip.sz_w + 1));
+        if (!sc->K || !sc->rowbuf || !sc->far || !sc->far_at || !sc->arg || !sc->res || !sc->iw || !sc->w)
+            return VGT_NO_MEMORY;
+    }
     if (g->prediction != VGT_PREDICT_EXACT) {
         for (long i = 0; i < (g->horizon + 1) * 3 * nj; ++i) x->jac_f[i] = (float)pb->J_d[i];
         for (long i = 0; i < (g->horizon + 1) * 3; ++i) x->off_f[i] = (float)pb->tip_offset[i];
@@ -735,17 +788,21 @@ static void predictor_free(predictor *x)
     free(x->s);
     free(x->jac_f);
     free(x->off_f);
-    free(x->K);
     free(x->lut);
     free(x->table_of);
     free(x->lut_offset);
-    free(x->rowbuf);
-    free(x->far);
-    free(x->far_at);
-    free(x->arg);
-    free(x->res);
-    free(x->iw);
-    free(x->w);
+    for (int t = 0; x->sc && t < x->n_scratch; ++t) {
+        scratch *sc = x->sc + t;
+        free(sc->K);
+        free(sc->rowbuf);
+        free(sc->far);
+        free(sc->far_at);
+        free(sc->arg);
+        free(sc->res);
+        free(sc->iw);
+        free(sc->w);
+    }
+    free(x->sc);
     free(x->row_used);
     free(x->coef);
 }
@@ -761,6 +818,31 @@ int vgt_ga_predict(const vgt_model *m, const vgt_settings *s, const vgt_ga_setti
 }
 
 /* ---- the activation ------------------------------------------------------------------------- */
+
+static double seconds(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
+/* predict() with several threads, watched: threads only pay when the CPUs are free. When another
+ * process holds them, a thread of the team may not run for a whole time slice, and every
+ * generation would wait for it; a prediction that takes far longer than the fastest one per
+ * block seen so far (and over half a millisecond) drops the rest of the activation to one thread.
+ * The costs are the same with any count. */
+static int predict_watched(const vgt_model *m, const vgt_settings *s, const vgt_ga_settings *g, predictor *x,
+                           long n, const double *genes, const uint64_t *const *rows, double *cost,
+                           double *fastest_per_block)
+{
+    if (x->threads <= 1) return predict(m, s, g, x, n, genes, rows, cost);
+    const double blocks = (double)((n + BLOCK - 1) / BLOCK), start = seconds();
+    int status = predict(m, s, g, x, n, genes, rows, cost);
+    double elapsed = seconds() - start;
+    if (elapsed / blocks < *fastest_per_block) *fastest_per_block = elapsed / blocks;
+    if (elapsed > 5e-4 && elapsed > 20.0 * blocks * *fastest_per_block) x->threads = 1;
+    return status;
+}
 
 static int same_bits(int words, const uint64_t *a, const uint64_t *b)
 {
@@ -827,7 +909,8 @@ int vgt_ga_activation(const vgt_model *m, const vgt_settings *s, const vgt_ga_se
         }
     }
     vgt_ga_decode(g, P, pop, pb->lower, pb->upper, genes);
-    status = predict(m, s, g, &x, P, genes, NULL, cost);
+    double fastest_per_block = INFINITY;
+    status = predict_watched(m, s, g, &x, P, genes, NULL, cost, &fastest_per_block);
     if (status != VGT_DONE) goto done;
     for (int k = 0; k < P; ++k) cost[k] = clean_cost(cost[k]);
     out->evaluations = P;
@@ -883,7 +966,8 @@ int vgt_ga_activation(const vgt_model *m, const vgt_settings *s, const vgt_ga_se
                 decode_with(g, children + fresh[f] * W, pb->lower, pb->upper, fractions, genes + f * g->n_genes);
         }
         if (n_fresh) {
-            status = predict(m, s, g, &x, n_fresh, from_bytes ? NULL : genes, fresh_rows, work);
+            status = predict_watched(m, s, g, &x, n_fresh, from_bytes ? NULL : genes, fresh_rows, work,
+                                     &fastest_per_block);
             if (status != VGT_DONE) goto done;
             for (long f = 0; f < n_fresh; ++f) new_cost[fresh[f]] = clean_cost(work[f]);
             out->evaluations += n_fresh;
@@ -908,8 +992,12 @@ int vgt_ga_activation(const vgt_model *m, const vgt_settings *s, const vgt_ga_se
         }
     }
     out->generations = generation - 1;
-    out->exact_candidates = x.exact_candidates;
-    out->exact_steps = x.exact_steps;
+    out->exact_candidates = out->exact_steps = 0;
+    out->threads = x.threads;
+    for (int t = 0; t < x.n_scratch; ++t) {
+        out->exact_candidates += x.sc[t].exact_candidates;
+        out->exact_steps += x.sc[t].exact_steps;
+    }
     out->best_cost = best_cost;
     decode_one(g, best_bits, pb->lower, pb->upper, out->best);
 
@@ -934,4 +1022,95 @@ done:
     free(flips);
     free(fractions);
     return status;
+}
+
+/* ---- switching control in the loop ---------------------------------------------------------- */
+
+int vgt_simulate_switching(const vgt_model *m, const vgt_settings *s, const vgt_settings *unswitched,
+                           const vgt_run *r, const double *Kp, const double *Kv, vgt_switching *sw, long k0,
+                           long k1, long *stop)
+{
+    const int nj = s->n_joints, nn = nj * nj;
+    vgt_ga_settings g = *sw->g;
+    const vgt_ga_problem *base = sw->pb;
+    vgt_slice *slice = sw->slice;
+    long k = k0;
+    int status;
+    if (sw->pending) { /* finish the activation's sample where the last call paused */
+        const long record = sw->count;
+        const double start = seconds();
+        const double *kp = sw->pending == 1 ? sw->best : Kp, *kv = sw->pending == 1 ? sw->best + nn : Kv;
+        status = vgt_simulate_slice(m, unswitched, r, kp, kv, k, k + 1, stop, slice);
+        sw->wall_time[record] += seconds() - start;
+        if (status == VGT_PAUSED) return status;
+        sw->pending = 0;
+        sw->count = record + 1;
+        if (status != VGT_DONE) return status;
+        k += 1;
+    }
+    while (k < k1) {
+        status = vgt_simulate_slice(m, s, r, Kp, Kv, k, k1, stop, slice);
+        if (status != VGT_ABOVE_THRESHOLD) return status; /* done, failed or paused */
+        k = *stop;
+        if (sw->count >= sw->max_activations) return VGT_ABOVE_THRESHOLD;
+        const long record = sw->count;
+        const double start = seconds();
+        const double *kp = Kp, *kv = Kv;
+        long horizon = sw->g->horizon < r->n - 1 - k ? sw->g->horizon : r->n - 1 - k;
+        sw->sample[record] = k;
+        sw->generations[record] = sw->evaluations[record] = 0;
+        sw->best_cost[record] = sw->seeded_cost[record] = 0.0;
+        sw->threads[record] = 1;
+        if (horizon > 0) { /* the last sample has nothing left to predict: it keeps the fixed gains */
+            if (sw->seeds_used >= sw->max_activations) return VGT_ABOVE_THRESHOLD;
+            vgt_ga_problem pb = *base;
+            memcpy(sw->q0, r->q_meas + (long)nj * k, sizeof(double) * (size_t)nj);
+            memcpy(sw->qd0, r->qd_meas + (long)nj * k, sizeof(double) * (size_t)nj);
+            pb.q0 = sw->q0;
+            pb.qd0 = sw->qd0;
+            pb.q_d = base->q_d + (long)nj * k;
+            pb.qd_d = base->qd_d + (long)nj * k;
+            pb.qdd_d = base->qdd_d + (long)nj * k;
+            pb.tip_d = base->tip_d + 3 * k;
+            pb.tip_offset = base->tip_offset + 3 * k;
+            pb.J_d = base->J_d + 3L * nj * k;
+            if (g.prediction == VGT_PREDICT_QUADRATIC) pb.H_d = base->H_d + 3L * nn * k;
+            g.horizon = horizon;
+            /* after a stall (a busy machine, see predict_watched) a spell of activations on one
+             * thread, doubling while stalls repeat: a rare hiccup costs a few activations' threads,
+             * a busy machine a dozen stalls a run */
+            g.threads = sw->skip > 0 ? 1 : sw->g->threads;
+            if (sw->skip > 0) --sw->skip;
+            vgt_ga_result out = {.best = sw->best};
+            status = vgt_ga_activation(m, s, &g, &pb, sw->seeds[sw->seeds_used++], &out);
+            if (status != VGT_DONE) {
+                *stop = k;
+                return status;
+            }
+            if (g.threads > 1 && out.threads < g.threads) {
+                sw->skip = sw->backoff;
+                sw->backoff = sw->backoff < 1024 ? 2 * sw->backoff : 1024;
+            } else if (g.threads > 1) {
+                sw->backoff = 1;
+            }
+            sw->generations[record] = out.generations;
+            sw->evaluations[record] = out.evaluations;
+            sw->best_cost[record] = out.best_cost;
+            sw->seeded_cost[record] = out.seeded_cost;
+            sw->threads[record] = out.threads;
+            kp = sw->best;
+            kv = sw->best + nn;
+        }
+        status = vgt_simulate_slice(m, unswitched, r, kp, kv, k, k + 1, stop, slice);
+        sw->wall_time[record] = seconds() - start;
+        if (status == VGT_PAUSED) { /* inside the sample's integration: the next call finishes it */
+            sw->pending = horizon > 0 ? 1 : 2;
+            return status;
+        }
+        sw->count = record + 1;
+        if (status != VGT_DONE) return status;
+        k += 1;
+    }
+    *stop = k1;
+    return VGT_DONE;
 }

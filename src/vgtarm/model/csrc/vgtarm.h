@@ -45,6 +45,7 @@ enum vgt_integrator {
 enum vgt_status {
     VGT_DONE = 0,            /* every requested sample was run                       */
     VGT_ABOVE_THRESHOLD = 1, /* stopped before a sample whose tip error is too large */
+    VGT_PAUSED = 2,          /* vgt_simulate_slice: the slice's budget is used up     */
     VGT_NOT_FINITE = -1,     /* the state is no longer finite                        */
     VGT_NOT_ASSEMBLABLE = -2,/* a leg set can no longer be assembled                 */
     VGT_OUTSIDE_LIMITS = -3, /* a joint is far outside its limits                    */
@@ -96,6 +97,22 @@ int vgt_batch(vgt_fn f, vgt_int sz_arg, vgt_int sz_res, vgt_int sz_iw, vgt_int s
 int vgt_simulate(const vgt_model *m, const vgt_settings *s, const vgt_run *r,
                  const double *Kp, const double *Kv, long k0, long k1, long *stop);
 
+/* A run in slices of bounded work, so that the caller regains control (Ctrl-C) between them. */
+typedef struct {
+    long budget;   /* in: work units this call may do: one per sub-step integrated and one per   */
+                   /* sample controlled (<= 0: no limit); at least one is done                    */
+    long used;     /* out: work units done                                                        */
+    long substep;  /* in/out: sub-steps of sample k0's integration already done (0: none; then    */
+                   /* sample k0 is controlled first), where the last call paused                  */
+    double *q, *qd;/* (nj) in/out: the plant state after `substep` sub-steps of that sample        */
+} vgt_slice;
+
+/* vgt_simulate that stops when slice->budget is used up: returns VGT_PAUSED with *stop = the
+ * sample to continue from (call again with k0 = *stop and the same slice); every result is the
+ * same, bit for bit, as one uninterrupted call. slice NULL: no limit (vgt_simulate). */
+int vgt_simulate_slice(const vgt_model *m, const vgt_settings *s, const vgt_run *r,
+                       const double *Kp, const double *Kv, long k0, long k1, long *stop, vgt_slice *slice);
+
 /* Predicted tip error of n_cand gain candidates over a horizon (closed_loop.c). */
 int vgt_ga_fitness(const vgt_model *m, const vgt_settings *s, const double *p_ctrl, long horizon,
                    const double *q0, const double *qd0, const double *q_d, const double *qd_d,
@@ -130,6 +147,10 @@ typedef struct {
     long horizon;           /* prediction horizon H in control periods                          */
     double exact_above;     /* LINEAR/QUADRATIC: a candidate whose predicted joint error norm  */
                             /* exceeds this (m, rad) is predicted exactly instead (0: never)    */
+    int threads;            /* threads that predict a generation's candidates (OpenMP; 1: none) */
+                            /* any count gives the same activation bit for bit; a generation    */
+                            /* whose prediction stalls (another thread not scheduled: a busy     */
+                            /* machine) makes the rest of the activation use one                 */
 } vgt_ga_settings;
 
 /* One activation: the state at sample k and the reference rows k .. k+H. */
@@ -153,11 +174,47 @@ typedef struct {
     long evaluations;       /* candidates whose prediction was computed                          */
     long exact_candidates;  /* of those, recomputed for leaving the trust region                  */
     long exact_steps;       /* steps of those mapped by the exact forward kinematics              */
+    int threads;            /* threads predicting at the end (fewer than asked after a stall)    */
 } vgt_ga_result;
 
 /* One GA activation: evolve the gains from a seeded first population, all in C. */
 int vgt_ga_activation(const vgt_model *m, const vgt_settings *s, const vgt_ga_settings *g,
                       const vgt_ga_problem *pb, uint64_t seed, vgt_ga_result *out);
+
+/* Switching control in the loop (ga.c): the run's GA and where its activations are recorded. */
+typedef struct {
+    const vgt_ga_settings *g;     /* the GA (its horizon is the full one; shortened near the end)  */
+    const vgt_ga_problem *pb;     /* the reference and its tip derivatives from sample 0 (q0, qd0  */
+                                  /* are taken from the measured state of each activation)         */
+    const uint64_t *seeds;        /* (max_activations) generator seed of each GA activation, in order */
+    long max_activations;         /* capacity of the records below                                 */
+    long count;                   /* activations recorded so far (the next one is record `count`)  */
+    long seeds_used;              /* seeds taken so far (the last sample activates without a GA)   */
+    long *sample;                 /* (max) sample of each activation                               */
+    long *generations, *evaluations; /* (max) GA work                                              */
+    double *best_cost;            /* (max) predicted tip error of the gains applied                */
+    double *seeded_cost;          /* (max) predicted tip error of the fixed gains                  */
+    double *wall_time;            /* (max) seconds spent in the GA                                 */
+    long *threads;                /* (max) threads predicting at the end of the activation         */
+    double *q0, *qd0;             /* (nj) work: the measured state handed to the GA                */
+    double *best;                 /* (n_genes) work: the GA's best genes (Kp then Kv, row by row)  */
+    vgt_slice *slice;             /* bounded work per call (NULL: none); see vgt_simulate_slice     */
+    long skip;                    /* activations left to run on one thread after a stall            */
+    long backoff;                 /* length of the next such spell (doubles while stalls repeat,    */
+                                  /* back to 1 after an activation on threads without one; init 1) */
+    int pending;                  /* a call paused inside an activation's sample: 1 under the GA's */
+                                  /* gains (best), 2 under the fixed ones (the last sample); 0 none */
+} vgt_switching;
+
+/* Samples k0 .. k1-1 under the switching control method: the fixed gains Kp, Kv while the tip
+ * error stays within s->threshold; at a sample above it, one GA activation from the measured
+ * state, whose gains control that sample (with `unswitched`, s without the threshold). Returns
+ * VGT_DONE, a failure status (with *stop), VGT_ABOVE_THRESHOLD with *stop = the sample when
+ * the records are full, or VGT_PAUSED with *stop = the sample to continue from when sw->slice's
+ * budget ran out (call again with k0 = *stop; the results are the same bit for bit). */
+int vgt_simulate_switching(const vgt_model *m, const vgt_settings *s, const vgt_settings *unswitched,
+                           const vgt_run *r, const double *Kp, const double *Kv, vgt_switching *sw, long k0,
+                           long k1, long *stop);
 
 /* Predicted tip error of n_cand decoded candidates (genes, row by row), as the GA computes it. */
 int vgt_ga_predict(const vgt_model *m, const vgt_settings *s, const vgt_ga_settings *g,
