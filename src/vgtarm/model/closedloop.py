@@ -544,10 +544,9 @@ class CompiledGA:
             **{name: np.zeros(capacity) for name in ("best_cost", "seeded_cost", "wall_time")},
         }
         self._switch_work = np.zeros(2 * self.n_joints + self.n_genes)
-        base = ffi().new("vgt_ga_problem *")
-        for name in ("lower", "upper", "p_ctrl", "q_d", "qd_d", "qdd_d", "tip_d", "tip_offset", "J_d", "H_d"):
-            setattr(base, name, _ptr(self._arrays[name]))
-        base.initial_bits = self._problem.initial_bits
+        base = ffi().new("vgt_ga_problem *", self._problem[0])  # bounds, seeded rows, parameters
+        for name, pointer in self._base.items():  # the reference from sample 0
+            setattr(base, name, pointer)
         work = self._switch_work
         self._switching = ffi().new(
             "vgt_switching *",

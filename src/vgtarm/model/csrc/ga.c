@@ -392,8 +392,8 @@ typedef struct {
     float *coef;         /* (H, 3, nj, nj) -H[k][l][m] for m > l, -H/2 for m = l (0 below), per step  */
     unsigned char *row_used; /* (3, nj) row l of axis k has a nonzero coefficient somewhere in the window */
     float *lut;          /* 8-bit genes: the decoded value of each code, one table per distinct     */
-    int *table_of;       /*   pair of bounds (table_of[gene]), or NULL                               */
-    int *lut_offset;     /* (whole words of genes) 256 * table_of[gene], 0 past the last gene         */
+    int *lut_offset;     /*   pair of bounds: gene gi's table starts at lut[lut_offset[gi]] (padded to */
+                         /*   whole words of genes, 0 past the last gene), or NULL                     */
     int avx2;            /* the CPU gathers (decode_words)                                           */
     long row_length;     /* genes rounded up to whole blocks                                         */
     int threads;         /* threads that predict blocks of candidates (OpenMP), each with a scratch */
@@ -710,22 +710,20 @@ static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *
     x->row_used = calloc((size_t)(3 * nj), 1);
     x->coef = NULL;
     x->lut = NULL;
-    x->table_of = NULL;
     if (g->n_bits == 8 && g->prediction != VGT_PREDICT_EXACT) {
         /* decode_with's arithmetic for every code, once per distinct pair of bounds */
-        x->table_of = malloc(sizeof(int) * (size_t)g->n_genes);
         x->lut = malloc(sizeof(float) * 256 * (size_t)g->n_genes);
         x->lut_offset = calloc((size_t)(g->n_genes + 8), sizeof(int));
-        if (!x->table_of || !x->lut || !x->lut_offset) return VGT_NO_MEMORY;
+        if (!x->lut || !x->lut_offset) return VGT_NO_MEMORY;
         int tables = 0;
         for (int gi = 0; gi < g->n_genes; ++gi) {
             int t = 0;
             while (t < gi && !(pb->lower[t] == pb->lower[gi] && pb->upper[t] == pb->upper[gi])) ++t;
             if (t < gi) {
-                x->table_of[gi] = x->table_of[t];
+                x->lut_offset[gi] = x->lut_offset[t];
                 continue;
             }
-            x->table_of[gi] = tables;
+            x->lut_offset[gi] = 256 * tables;
             for (int code = 0; code < 256; ++code) {
                 double value = pb->lower[gi] + (double)code / 255.0 * (pb->upper[gi] - pb->lower[gi]);
                 value = value < pb->upper[gi] ? value : pb->upper[gi];
@@ -733,7 +731,6 @@ static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *
             }
             ++tables;
         }
-        for (int gi = 0; gi < g->n_genes; ++gi) x->lut_offset[gi] = 256 * x->table_of[gi];
         x->row_length = ((long)g->n_genes + BLOCK - 1) / BLOCK * BLOCK;
 #if defined(__x86_64__) && defined(__GNUC__)
         x->avx2 = __builtin_cpu_supports("avx2");
@@ -789,7 +786,6 @@ static void predictor_free(predictor *x)
     free(x->jac_f);
     free(x->off_f);
     free(x->lut);
-    free(x->table_of);
     free(x->lut_offset);
     for (int t = 0; x->sc && t < x->n_scratch; ++t) {
         scratch *sc = x->sc + t;
