@@ -243,10 +243,13 @@ def test_cli_refuses_what_will_not_fit_with_one_line_and_writes_nothing(tmp_path
 class _Command:
     """A vgtarm command in its own session, its standard error collected as it comes."""
 
-    def __init__(self, argv: list[str], cwd: Path) -> None:
-        command = (
-            [str(SCRIPT)] if SCRIPT.is_file() else [sys.executable, "-c", "from vgtarm.app.cli import main; main()"]
-        )
+    def __init__(self, argv: list[str], cwd: Path, *, module: bool = False) -> None:
+        if module:
+            command = [sys.executable, "-m", "vgtarm"]
+        else:
+            command = (
+                [str(SCRIPT)] if SCRIPT.is_file() else [sys.executable, "-c", "from vgtarm.app.cli import main; main()"]
+            )
         self.child = subprocess.Popen(
             [*command, *argv],
             stdout=subprocess.DEVNULL,
@@ -255,6 +258,8 @@ class _Command:
             start_new_session=True,  # its own process group, like a terminal's foreground job
             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # noqa: PLW1509  (not inherited ignored)
         )
+        self.started = time.monotonic()
+        self.ready_after = 0.0  # s from the start until ``ready()`` of :meth:`interrupt_when`
         self.err = b""
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
@@ -271,13 +276,22 @@ class _Command:
         except OSError:
             return False
 
-    def interrupt_when(self, ready, then: float) -> float:
+    def importing(self) -> bool:
+        """Past the entry point (:mod:`vgtarm._entry`): NumPy's or another installed package's
+        extension is mapped, which only the command line's imports load, after the handler is set."""
+        try:
+            return "/site-packages/" in Path(f"/proc/{self.child.pid}/maps").read_text()
+        except OSError:
+            return False
+
+    def interrupt_when(self, ready, then: float, every: float = 0.05) -> float:
         """Wait until ``ready()`` then ``then`` s more, send Ctrl-C; the time it took to end (s)."""
         deadline = time.monotonic() + 600  # a cold compile cache and a busy machine
         while not ready():
             assert self.child.poll() is None, f"ended before the interrupt: {self.err.decode()}"
             assert time.monotonic() < deadline, "never got to work"
-            time.sleep(0.05)
+            time.sleep(every)
+        self.ready_after = time.monotonic() - self.started
         time.sleep(then)
         assert self.child.poll() is None, f"ended before the interrupt: {self.err.decode()}"
         sent = time.perf_counter()
@@ -303,6 +317,54 @@ def warm(tmp_path_factory) -> Path:
     done = _cli("simulate", "--case", "1", "--duration", "0.002", "-q", cwd=folder)
     assert done.returncode == 0, done.stderr
     return folder
+
+
+LONG_RUN = ["simulate", "--case", "1", "--integrator", "rk4", "--substeps", "200000"]
+
+
+@pytest.mark.parametrize("then", [0.0, 0.05, 0.15, 0.3, 0.6])
+def test_ctrl_c_during_start_up_ends_with_the_one_line(warm, tmp_path, then):
+    """The console script's entry (:mod:`vgtarm._entry`) handles Ctrl-C before the heavy imports.
+
+    Ctrl-C is sent ``then`` s after the entry is known to run (the first installed extension is
+    mapped: the imports of NumPy, CasADi and matplotlib are under way; they take the best part of a
+    second), so from the middle of the imports into the first moments of the command."""
+    assert SCRIPT.is_file(), f"the console script {SCRIPT} is not installed (pip install -e .)"
+    assert "vgtarm._entry" in SCRIPT.read_text(), f"{SCRIPT} is stale: reinstall the package (pip install -e .)"
+    command = _Command(LONG_RUN, tmp_path)
+    took = command.interrupt_when(command.importing, then=then, every=0.002)
+    _assert_interrupted(command, took, f"Ctrl-C {then} s after the imports began ({command.ready_after:.3f} s)")
+    assert command.err == b"vgtarm: interrupted\n"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_ctrl_c_at_once_and_during_python_m_vgtarm(warm, tmp_path):
+    """Before the interpreter runs any of vgtarm's code, Python's own start-up decides.
+
+    A Ctrl-C sent right after the program was started arrives, on this machine, before the
+    interpreter has installed any handler (it takes it about 5-10 ms): the kernel ends the
+    process, with nothing printed, which a shell reports as status 130 too. Then follows Python's
+    ``site`` and the console script's ``import re`` (about 10-20 ms), where a Ctrl-C gives Python's
+    own ``KeyboardInterrupt`` traceback, not from vgtarm's code; that window cannot be hit on
+    purpose and is not asserted. ``python -m vgtarm`` goes through the same entry."""
+    child = subprocess.Popen(
+        [str(SCRIPT), *LONG_RUN],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        cwd=tmp_path,
+        start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # noqa: PLW1509
+    )
+    os.killpg(child.pid, signal.SIGINT)
+    _, err = child.communicate(timeout=ENDS_WITHIN)
+    assert (child.returncode, err) in {(-signal.SIGINT, b""), (130, b"vgtarm: interrupted\n")}, err.decode()
+    command = _Command(LONG_RUN, tmp_path, module=True)
+    took = command.interrupt_when(command.importing, then=0.1, every=0.002)
+    _assert_interrupted(command, took, "python -m vgtarm, start-up + 0.1 s")
+    assert command.err == b"vgtarm: interrupted\n"
+    done = subprocess.run([sys.executable, "-m", "vgtarm", "--version"], capture_output=True, text=True, timeout=60)
+    assert (done.returncode, done.stdout, done.stderr) == (0, f"vgtarm {vgtarm.__version__}\n", "")
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_ctrl_c_ends_a_simulation_inside_a_long_compiled_integration(warm):

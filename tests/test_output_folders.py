@@ -198,6 +198,24 @@ def test_bad_output_files_are_named_in_one_line(tmp_path):
     assert check_output_file(tmp_path / "new" / "ref.csv", "-o") == tmp_path / "new" / "ref.csv"
 
 
+@pytest.mark.parametrize("check", [check_output_file, check_output_folder])
+def test_names_the_system_cannot_look_up_are_one_line_errors(tmp_path, check):
+    """A NUL character (possible only through the API, or a file the user gives) or a name too
+    long for the file system: an InputError naming the flag and the value, never a ValueError."""
+    kind = "file" if check is check_output_file else "folder"
+    with pytest.raises(InputError, match=rf"^-o '.*/a\\x00b': a {kind} name cannot hold a NUL character$"):
+        check(f"{tmp_path}/a\0b", "-o")
+    with pytest.raises(InputError, match=r"^--out 'x\\x00': a"):
+        check(Path("x\0"), "--out")
+    long = tmp_path / ("n" * 300) / "x.csv"
+    too_long = r"^-o .*nnn\.\.\. \(\d+ more characters\): cannot be used \(File name too long\)$"
+    with pytest.raises(InputError, match=too_long):
+        check(long, "-o")
+    with pytest.raises(InputError, match="cannot hold a NUL character"), atomic_folder(tmp_path / "r\0n"):
+        raise AssertionError("the block ran")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_write_errors_name_the_users_path_not_the_temporary(tmp_path):
     target = tmp_path / "run"
     with pytest.raises(FileNotFoundError) as info, atomic_folder(target) as folder:
@@ -218,7 +236,8 @@ def test_a_failed_run_replaces_the_folder_of_an_earlier_run_whole(tmp_path, caps
     capsys.readouterr()
     assert main([*DIVERGING, "--out", str(out)]) == 1
     err = capsys.readouterr().err
-    assert "diverged" in err and f"partial results (up to the failure, success false) written to {out}" in err
+    assert err.count("\n") == 1 and err.startswith("vgtarm: error: diverged at t = ")  # one line, saying where
+    assert err.endswith(f"; partial results (up to the failure, success false) written to {out}\n")
     assert sorted(_listing(out)) == [MANIFEST, "ga_activations.csv", "summary.json", "timeseries.csv"]  # no figure
     summary = json.loads((out / "summary.json").read_text())
     assert summary["success"] is False and 0 < summary["samples_completed"] < summary["samples"]
@@ -307,3 +326,73 @@ def test_a_broken_pipe_that_is_not_standard_output_is_still_an_error():
     )
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
     assert done.returncode == 1 and done.stderr == "vgtarm: error: [Errno 32] Broken pipe\n"
+
+
+# --- the video encoder ----------------------------------------------------------------------
+
+#: Stand-ins for ffmpeg: one that refuses at once, one that reads every frame and then fails.
+FAKE_FFMPEG = {
+    "refuses": (
+        "echo '[libx264 @ 0x55] frame size too large' >&2\n"
+        "echo 'Error initializing output stream 0:0 -- Error while opening encoder' >&2\nexit 1\n",
+        "ffmpeg ended with status 1: Error initializing output stream 0:0 -- Error while opening encoder",
+    ),
+    "disk full at the end": (
+        'cat > /dev/null\nfor last; do :; done\necho "$last: No space left on device" >&2\nexit 1\n',
+        "ffmpeg ended with status 1: {out}: No space left on device",  # its temporary file shown as the user's
+    ),
+}
+
+
+@pytest.fixture(scope="module")
+def saved_run(tmp_path_factory) -> Path:
+    run = tmp_path_factory.mktemp("animate") / "run"
+    assert main([*SHORT, "--out", str(run)]) == 0
+    return run
+
+
+@pytest.mark.parametrize("fake", sorted(FAKE_FFMPEG))
+def test_a_failing_video_encoder_is_one_line_and_leaves_no_file(tmp_path, saved_run, capfd, monkeypatch, fake):
+    """ffmpeg's own messages never reach the terminal; its last one is the reason in vgtarm's line."""
+    pytest.importorskip("imageio_ffmpeg")
+    script, reason = FAKE_FFMPEG[fake]
+    exe = tmp_path / "ffmpeg"
+    exe.write_text("#!/bin/sh\n" + script)
+    exe.chmod(0o755)
+    monkeypatch.setenv("IMAGEIO_FFMPEG_EXE", str(exe))
+    out = tmp_path / "video" / "run.mp4"
+    capfd.readouterr()
+    assert main(["animate", str(saved_run), "--out", str(out), "--fps", "200", "-q"]) == 1
+    captured = capfd.readouterr()
+    assert captured.err == f"vgtarm: error: {out}: {reason.format(out=out)}\n" and captured.out == ""
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["ffmpeg", "video"]
+
+
+def test_ctrl_c_while_a_video_is_encoded_stops_ffmpeg_and_leaves_no_file(tmp_path, saved_run, capfd, monkeypatch):
+    pytest.importorskip("imageio_ffmpeg")
+    from vgtarm.app import animation
+
+    started: list[int] = []
+    start = animation._FfmpegWriter._start
+
+    def recorded(self, height, width):
+        process = start(self, height, width)
+        started.append(process.pid)
+        return process
+
+    show = animation._Scene.show
+
+    def interrupted_at_the_third_frame(self, geometry, k):
+        if len(frames) == 2:
+            raise KeyboardInterrupt
+        frames.append(k)
+        return show(self, geometry, k)
+
+    frames: list[int] = []
+    monkeypatch.setattr(animation._FfmpegWriter, "_start", recorded)
+    monkeypatch.setattr(animation._Scene, "show", interrupted_at_the_third_frame)
+    out = tmp_path / "run.mp4"
+    assert main(["animate", str(saved_run), "--out", str(out), "--fps", "200", "-q"]) == 130
+    assert capfd.readouterr().err == "vgtarm: interrupted\n"
+    assert len(started) == 1 and not Path(f"/proc/{started[0]}").exists()  # killed and reaped
+    assert list(tmp_path.iterdir()) == []

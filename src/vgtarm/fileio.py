@@ -63,7 +63,11 @@ def _user_path(exc: OSError, temporary: Path, target: Path) -> OSError:
             return os.fspath(target) + os.fsdecode(name)[len(prefix) :]
         return name
 
-    exc.filename, exc.filename2 = mapped(exc.filename), mapped(exc.filename2)
+    # assigned only when set: an OSError given a file name of None prints "[Errno None] None: None"
+    if exc.filename is not None:
+        exc.filename = mapped(exc.filename)
+    if exc.filename2 is not None:
+        exc.filename2 = mapped(exc.filename2)
     return exc
 
 
@@ -185,14 +189,34 @@ def _foreign(folder: Path, owned: Collection[str]) -> str | None:
     return None
 
 
+def _named(path: str | os.PathLike[str], what: str, kind: str) -> Path:
+    """``path`` as a :class:`~pathlib.Path`, or :class:`~vgtarm.errors.InputError` if it cannot name
+    anything: empty, or holding a NUL character (which the system refuses in any file name)."""
+    text = os.fspath(path)
+    if text == "":
+        raise InputError(f"{what} '': expected a {kind} name")
+    if "\0" in text:
+        raise InputError(f"{what} {_shown(repr(text))}: a {kind} name cannot hold a NUL character")
+    return Path(text)
+
+
+def _unusable(exc: OSError, path: str | os.PathLike[str], what: str) -> InputError:
+    """One line for a path the system will not even look up (a name too long, a loop of links)."""
+    return InputError(f"{what} {_shown(str(path))}: cannot be used ({exc.strerror or type(exc).__name__})")
+
+
 def check_writable_parent(path: str | os.PathLike[str], what: str = "output") -> None:
     """Raise :class:`~vgtarm.errors.InputError` (one line naming ``path``) unless the nearest
     existing folder above ``path`` is a folder we may write in (missing ones can be created)."""
     shown = _shown(str(path))
-    ancestor = Path(path).absolute().parent
-    while not ancestor.exists() and not ancestor.is_symlink():
-        ancestor = ancestor.parent
-    if not ancestor.is_dir():
+    try:
+        ancestor = _named(path, what, "file").absolute().parent
+        while not ancestor.exists() and not ancestor.is_symlink():
+            ancestor = ancestor.parent
+        is_folder = ancestor.is_dir()
+    except OSError as exc:
+        raise _unusable(exc, path, what) from exc
+    if not is_folder:
         raise InputError(f"{what} {shown}: {_shown(str(ancestor))} is a file, not a folder")
     if not os.access(ancestor, os.W_OK | os.X_OK):
         raise InputError(f"{what} {shown}: cannot write in {_shown(str(ancestor))} (permission denied)")
@@ -219,10 +243,16 @@ def check_output_folder(
 
     Raises :class:`~vgtarm.errors.InputError` with one line naming ``path`` and what is wrong.
     """
-    target = Path(path)
-    shown = _shown(str(path))
-    if os.fspath(path) == "":
-        raise InputError(f"{what} '': expected a folder name")
+    target = _named(path, what, "folder")
+    try:
+        return _check_output_folder(target, _shown(str(path)), what, inputs, owned)
+    except OSError as exc:
+        raise _unusable(exc, path, what) from exc
+
+
+def _check_output_folder(
+    target: Path, shown: str, what: str, inputs: Iterable[str | os.PathLike[str] | None], owned: Collection[str]
+) -> Path:
     if target.is_symlink():
         raise InputError(f"{what} {shown}: is a symbolic link; give the folder itself or a new name")
     if target.exists() and not target.is_dir():
@@ -253,10 +283,14 @@ def check_output_file(
     killed runs are removed (:func:`clean_stale`). Raises :class:`~vgtarm.errors.InputError` with
     one line naming ``path`` and what is wrong.
     """
-    target = Path(path)
-    shown = _shown(str(path))
-    if os.fspath(path) == "":
-        raise InputError(f"{what} '': expected a file name")
+    target = _named(path, what, "file")
+    try:
+        return _check_output_file(target, _shown(str(path)), what, inputs)
+    except OSError as exc:
+        raise _unusable(exc, path, what) from exc
+
+
+def _check_output_file(target: Path, shown: str, what: str, inputs: Iterable[str | os.PathLike[str] | None]) -> Path:
     if target.is_dir():
         raise InputError(f"{what} {shown}: is a folder; give a file name")
     resolved = target.resolve()

@@ -12,13 +12,18 @@ played at ``speed`` simulated seconds per second of video and ``fps`` frames per
 time ``t0 + i * speed / fps``, taken at the sample nearest to it (halves round up), so every frame
 shows a recorded sample exactly and the video lasts ``frames / fps`` seconds.
 
-MP4 is written with imageio and the ffmpeg binary of the ``imageio-ffmpeg`` package (no system
-ffmpeg); GIF, with Pillow alone, is the fallback when that package is missing.
+MP4 is written by the ffmpeg binary of the ``imageio-ffmpeg`` package (no system ffmpeg), fed
+raw frames through a pipe; its messages are kept, so that a failure (a full disk, a broken
+binary) ends in one line naming the output and ffmpeg's reason, and leaves no file. GIF, with
+Pillow alone, is the fallback when that package is missing.
 """
 
 from __future__ import annotations
 
 import math
+import os
+import subprocess
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -28,7 +33,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import InputError
+from ..errors import InputError, cut
 from ..fileio import atomic_path
 from ..memory import check_memory
 from ..model.robot import Robot
@@ -192,20 +197,98 @@ class _Scene:
         return pixels, np.array([xs[-1], ys[-1], zs[-1]], dtype=float) / MM
 
 
-def _writer(path: Path, fps: float) -> Any:
-    import imageio.v2 as imageio
-
+def _writer(path: Path, fps: float, shown: Path) -> Any:
+    """A writer of ``path`` (``append_data``, ``close``, ``abort``); ``shown`` is the user's name for it."""
     if path.suffix.lower() == ".mp4":
         try:
             import imageio_ffmpeg  # noqa: F401
         except ImportError:
             raise InputError(
-                f"{path}: MP4 needs the imageio-ffmpeg package (pip install 'vgtarm[viz]'); or write a .gif"
+                f"{shown}: MP4 needs the imageio-ffmpeg package (pip install 'vgtarm[viz]'); or write a .gif"
             ) from None
-        return imageio.get_writer(
-            path, format="FFMPEG", fps=fps, codec="libx264", quality=7, macro_block_size=16, ffmpeg_log_level="error"
-        )
+        return _FfmpegWriter(path, fps, shown)
     return _GifWriter(path, fps)
+
+
+#: H.264 wants frame sides in multiples of this; other frames are scaled up to the next multiple.
+MACRO_BLOCK = 16
+
+
+class _FfmpegWriter:
+    """H.264 MP4 by the ffmpeg of ``imageio-ffmpeg``, raw RGB frames on its standard input.
+
+    ffmpeg runs in its own session (the terminal's Ctrl-C reaches vgtarm alone, which stops it) and
+    its messages go to a temporary file, not the terminal: a failure, while writing or at the end
+    (ffmpeg's exit status is checked), raises one ``OSError`` line naming the user's file and the
+    last thing ffmpeg said."""
+
+    def __init__(self, path: Path, fps: float, shown: Path) -> None:
+        self.path, self.fps, self.shown = path, fps, shown
+        self.process: subprocess.Popen[bytes] | None = None
+        self.log = tempfile.TemporaryFile()
+
+    def _start(self, height: int, width: int) -> subprocess.Popen[bytes]:
+        import imageio_ffmpeg
+
+        command = [imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-f", "rawvideo", "-vcodec", "rawvideo"]
+        command += ["-s", f"{width}x{height}", "-pix_fmt", "rgb24", "-r", f"{self.fps:.12g}", "-i", "-", "-an"]
+        command += ["-vcodec", "libx264", "-pix_fmt", "yuv420p", "-crf", "15"]
+        padded = [-(-side // MACRO_BLOCK) * MACRO_BLOCK for side in (width, height)]
+        if padded != [width, height]:
+            command += ["-vf", f"scale={padded[0]}:{padded[1]}"]
+        command += ["-v", "error", os.fspath(self.path)]
+        try:
+            return subprocess.Popen(
+                command, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=self.log, start_new_session=True
+            )
+        except OSError as exc:
+            raise OSError(f"{self.shown}: cannot start ffmpeg {cut(command[0], 120)!r} ({exc.strerror})") from None
+
+    def append_data(self, pixels: NDArray[np.uint8]) -> None:
+        if self.process is None:
+            self.process = self._start(*pixels.shape[:2])
+        assert self.process.stdin is not None
+        try:
+            self.process.stdin.write(np.ascontiguousarray(pixels, dtype=np.uint8).tobytes())
+        except OSError:  # ffmpeg has gone (its reason is in its messages)
+            self._failed()
+
+    def close(self) -> None:
+        if self.process is None:
+            raise InputError(f"{self.shown}: no frame to write")
+        assert self.process.stdin is not None
+        try:
+            self.process.stdin.close()
+        except OSError:
+            self._failed()
+        if self.process.wait() != 0:
+            self._failed()
+        self.log.close()
+
+    def abort(self) -> None:
+        """Stop ffmpeg at once (an error or Ctrl-C while the frames are drawn)."""
+        if self.process is not None and self.process.poll() is None:
+            self.process.kill()
+            self.process.wait()
+        self.log.close()
+
+    def _failed(self) -> None:
+        assert self.process is not None
+        try:  # a last frame stuck in the pipe: close it, ffmpeg has ended or ends now
+            self.process.stdin.close()  # type: ignore[union-attr]
+        except OSError:
+            pass
+        try:
+            status = self.process.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            status = self.process.wait()
+        self.log.seek(0)
+        said = [line.strip() for line in self.log.read().decode(errors="replace").splitlines() if line.strip()]
+        self.log.close()
+        reason = said[-1].replace(os.fspath(self.path), os.fspath(self.shown)) if said else "no message"
+        ended = f"ended with status {status}" if status >= 0 else f"was killed by signal {-status}"
+        raise OSError(f"{self.shown}: ffmpeg {ended}: {cut(reason, 160)}")
 
 
 class _GifWriter:
@@ -219,6 +302,9 @@ class _GifWriter:
         from PIL import Image
 
         self.frames.append(Image.fromarray(pixels).quantize(colors=128, method=Image.Quantize.MEDIANCUT))
+
+    def abort(self) -> None:
+        self.frames.clear()
 
     def close(self) -> None:
         first, *rest = self.frames
@@ -288,11 +374,13 @@ def render_animation(
     drawn = np.empty((len(plan), 3))
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as temporary:
-        writer = _writer(temporary, plan.fps)
+        writer = _writer(temporary, plan.fps, path)
         try:
             for i in tqdm(range(len(plan)), desc=f"rendering {path.name}", unit="frame", disable=not progress):
                 pixels, drawn[i] = scene.show(geometries[i], int(plan.samples[i]))
                 writer.append_data(pixels)
-        finally:
-            writer.close()
+        except BaseException:  # an error or Ctrl-C: the encoder stops, the temporary file goes
+            writer.abort()
+            raise
+        writer.close()  # a failure of the encoder at the end is an error too
     return Animation(path=path, plan=plan, drawn_tip=drawn)

@@ -127,9 +127,11 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                     with atomic_folder(args.out, "--out", inputs=[args.config], owned=RUN_FILES) as partial:
                         exc.result.save(partial)  # type: ignore[attr-defined]
                 except (VgtarmError, OSError, ValueError) as failure:
-                    print(f"vgtarm: partial results not written: {failure}", file=sys.stderr)
+                    note = f"partial results not written: {cut(str(failure), 120)}"
                 else:
-                    print(f"partial results (up to the failure, success false) written to {args.out}", file=sys.stderr)
+                    note = f"partial results (up to the failure, success false) written to {cut(str(args.out), 200)}"
+                # one line: the failure (cut so that the note is never cut off), then where its results are
+                raise SimulationError(f"{cut(str(exc), 200)}; {note}", exc.result) from exc
             raise
     summary = result.summary()
     for key in (

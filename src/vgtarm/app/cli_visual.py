@@ -1,6 +1,6 @@
 """``vgtarm draw``, ``vgtarm animate`` and ``vgtarm report``: see the robot.
 
-Registered in :func:`vgtarm.app.cli.build_parser` by :func:`add_parsers`. Plotly, imageio and
+Registered in :func:`vgtarm.app.cli.build_parser` by :func:`add_parsers`. Plotly and
 imageio-ffmpeg (the ``viz`` extra) are imported only when a command needs them.
 """
 

@@ -1,0 +1,91 @@
+"""The ``vgtarm`` program's entry point (the console script and ``python -m vgtarm``).
+
+It imports nothing but the standard library's ``os``, ``signal`` and ``sys`` and installs the
+Ctrl-C handling first, before the command line (:mod:`vgtarm.app.cli`) pulls in NumPy, CasADi and
+matplotlib, which takes the best part of a second. A Ctrl-C at any moment from here on prints the
+one line ``vgtarm: interrupted`` on standard error and ends with status 130, without a traceback:
+
+- during the imports, the import is abandoned (its ``finally`` clauses run; nothing of the
+  command has been written yet) and the program ends;
+- while the command runs, :func:`vgtarm.app.cli.main` handles it, undoing what the command had
+  begun (temporary files and folders, worker processes);
+- after the command has finished, during the interpreter's clean-up, the program ends at once.
+
+What remains is the interpreter's own start-up before this module runs (loading Python, ``site``
+and the console script's ``import re``; about 10-20 ms): a Ctrl-C there is handled by Python
+itself (killed by SIGINT, which a shell reports as status 130 too, or a ``KeyboardInterrupt``
+traceback while ``site`` and ``re`` are imported).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+from types import FrameType
+from typing import NoReturn
+
+#: Exit status of an interrupted command (Ctrl-C): 128 + SIGINT, as a shell reports it.
+INTERRUPTED = 130
+#: The one line an interrupted command prints on standard error.
+MESSAGE = "vgtarm: interrupted"
+
+
+class _State:
+    """Whether a Ctrl-C arrived during start-up (set by the handler; a library may swallow the
+    ``KeyboardInterrupt`` it raises, the flag stays)."""
+
+    interrupted = False
+
+
+def _on_start_up_interrupt(signum: int, frame: FrameType | None) -> None:
+    """SIGINT during the imports: unwind them once; a second Ctrl-C while they unwind is the same."""
+    if _State.interrupted:
+        return
+    _State.interrupted = True
+    raise KeyboardInterrupt
+
+
+def _end_interrupted() -> NoReturn:
+    """Print the one line and end at once with status 130 (no module teardown)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the line is printed once, whatever comes next
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe or stream: nothing more can be shown anyway
+            pass
+    try:
+        os.write(2, f"{MESSAGE}\n".encode())
+    except OSError:  # standard error closed: the status still says it
+        pass
+    os._exit(INTERRUPTED)
+
+
+def _on_late_interrupt(signum: int, frame: FrameType | None) -> None:
+    """SIGINT after the command returned (the interpreter's clean-up can take a second)."""
+    _end_interrupted()
+
+
+def main() -> int:
+    """Run the ``vgtarm`` command line with Ctrl-C handled from the first moment; its exit status."""
+    ours = signal.getsignal(signal.SIGINT) is signal.default_int_handler  # not when started ignoring it
+    if ours:
+        signal.signal(signal.SIGINT, _on_start_up_interrupt)
+    try:
+        from .app import cli
+    except BaseException:  # a KeyboardInterrupt, or whatever a library turned it into
+        if _State.interrupted:
+            _end_interrupted()
+        raise
+    if _State.interrupted:  # a library swallowed the KeyboardInterrupt: the user still asked to stop
+        _end_interrupted()
+    if not ours:
+        return cli.main()
+    try:
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # cli.main handles KeyboardInterrupt
+        try:
+            return cli.main()
+        finally:  # a status, or SystemExit from --help or a usage error
+            signal.signal(signal.SIGINT, _on_late_interrupt)
+    except KeyboardInterrupt:  # between the hand-over and cli.main's own handling, either side
+        _end_interrupted()
