@@ -1,9 +1,9 @@
 """MuJoCo as the plant: the cost of one control period against our compiled loop, same run.
 
 Case 1 with computed force control over its first second (1,000 periods): our compiled loop
-(explicit Euler, one step per period), and MuJoCo stepping the exported model (at least
-``MIN_STEPS`` MuJoCo steps per period, see ``vgtarm.mujoco_bridge.plant``) under the NumPy twin
-of the controller.
+(explicit Euler, one step per period), and MuJoCo stepping the exported model under the NumPy
+twin of the controller, with its default semi-implicit Euler (``MIN_STEPS["Euler"]`` MuJoCo steps
+per period, see ``vgtarm.mujoco_bridge.plant``) and with RK4 at one step per period.
 """
 
 from __future__ import annotations
@@ -25,22 +25,29 @@ def run() -> list[Row]:
     except ImportError:
         print("\n(MuJoCo benchmark skipped: pip install 'vgtarm[mujoco]')")
         return []
+    from vgtarm.mujoco_bridge.plant import MIN_STEPS  # importing the bridge registers the MuJoCo plant
+
     robot = vgtarm.load_robot()
     full = joint_reference(robot, 1)
     ref = JointReference(full.t[:SAMPLES], full.q[:SAMPLES], full.qd[:SAMPLES], full.qdd[:SAMPLES])
     cfc = case_study(1).controller("cfc")
     steps = SAMPLES - 1
     ours = best_time(lambda: simulate(robot, ref, cfc), repeat=3)
-    start = time.perf_counter()
-    run_mj = simulate(robot, ref, cfc, plant_engine="mujoco")
-    mj = time.perf_counter() - start
+    timed = {}
+    for integrator in ("euler", "rk4"):
+        start = time.perf_counter()
+        run_mj = simulate(robot, ref, cfc, integrator=integrator, plant_engine="mujoco")
+        timed[integrator] = (time.perf_counter() - start, run_mj.summary()["max_tip_error_m"])
+    euler_steps = MIN_STEPS["Euler"]
     duration = float(ref.t[-1] - ref.t[0])
     rows = [
-        Row("our compiled loop, case 1 CFC", ours, "period", steps, "MuJoCo plant (same controller)", mj),
-        Row("MuJoCo plant, case 1 CFC", mj, "period", steps, "real time", duration),
+        Row("our compiled loop, case 1 CFC", ours, "period", steps, "MuJoCo plant (Euler)", timed["euler"][0]),
+        Row(f"MuJoCo plant, Euler x{euler_steps}", timed["euler"][0], "period", steps, "real time", duration),
+        Row("MuJoCo plant, RK4 x1", timed["rk4"][0], "period", steps, "real time", duration),
     ]
     print_table("MuJoCo as the plant (case 1, first second)", rows)
-    print(f"max tip error on MuJoCo {run_mj.summary()['max_tip_error_m'] * 1e3:.4f} mm over the first second")
+    for integrator, (_, error) in timed.items():
+        print(f"max tip error on MuJoCo ({integrator}) {error * 1e3:.4f} mm over the first second")
     return rows
 
 

@@ -48,11 +48,12 @@ def cross_validate(robot: Robot, n: int = 1000, seed: int = 0, bridge: MujocoRob
     def note(name: str, value: object) -> None:
         worst[name] = max(worst.get(name, 0.0), float(value))  # type: ignore[arg-type]
 
-    zero = np.zeros(7)
+    joints = len(robot.parameters.q_home)
+    zero = np.zeros(joints)
     for q in random_states(robot, n, seed):
-        qd = rng.uniform(-0.05, 0.05, size=7)
-        qd[6] = rng.uniform(-0.5, 0.5)
-        F = rng.normal(scale=20.0, size=7)
+        qd = rng.uniform(-0.05, 0.05, size=joints)
+        qd[-1] = rng.uniform(-0.5, 0.5)  # the twist
+        F = rng.normal(scale=20.0, size=joints)
         f = rng.normal(scale=10.0, size=3)
         fk = robot.forward_kinematics(q)
         mj.set_state(q, zero)

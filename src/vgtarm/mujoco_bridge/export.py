@@ -7,10 +7,17 @@ and the top of ``v`` and of ``p`` tied to the platform's corner ``B'`` by ``conn
 equalities. Module 2 stands on platform 1 in its ``u1-u3`` plane, mirrored; the twist is a hinge
 on platform 2's ``u3`` axis; the end-effector rides on it; a site ``tip`` marks the tool tip.
 
+The closed legs ``v`` and ``p`` are driven through spatial tendons ``<leg>_leg`` from their foot
+(a site on the module's base body) to their head (a site at ``B'`` on the platform): a tendon's
+length is the leg length, and its motor and viscous friction act on the base and the platform
+directly, so no effort passes through MuJoCo's soft equality constraints. The slide-jointed leg
+bodies are passive followers (no motor, no damping, almost no mass) whose joints still read the
+paper's joint values. The leg ``s`` is on the tree path: its motor and friction are on its slide.
+
 Every body frame is aligned with F0 at the home pose, so joint axes and inertias are written in
 F0 at home; slides have ``ref`` = their home length and the twist ``ref`` = its home angle, so the
 actuated joints' positions are the paper's joint values. What MuJoCo needs that the paper's
-model does not (documented in ``docs/mujoco.md``): a small mass on each leg (the paper's legs are
+model does not (documented in ``docs/mujoco.md``): a tiny mass on each leg (the paper's legs are
 massless), and constraint solver settings that make the loop closures as stiff as MuJoCo allows.
 """
 
@@ -26,11 +33,14 @@ from ..model.robot import Robot
 
 Array = NDArray[np.float64]
 
-#: Mass (kg) and inertia (kg m^2) given to each leg body, which the paper takes as massless: the
-#: compromise between the mass the legs add (about 7e-4 of M) and the softness of the loop closures
-#: through light legs (about 4e-4 of the accelerations); see docs/mujoco.md.
-LEG_MASS = 1e-3
-LEG_INERTIA = 1e-7
+#: Mass (kg) and inertia (kg m^2) of each leg body, which the paper takes as massless: the
+#: lightest MuJoCo solves well, a thousand times its floor ``mjMINVAL`` = 1e-15 in mass and ten
+#: times in inertia (a rod's ``m L^2 / 12`` at L = 0.35 m). The closed legs' efforts act through
+#: tendons, not through the soft loop closures, so all that leaks through those closures is the
+#: legs' own inertia: M and forward dynamics agree with the massless legs to about 1e-12 relative
+#: (docs/mujoco.md).
+LEG_MASS = 1e-12
+LEG_INERTIA = 1e-14
 
 
 @dataclass(frozen=True)
@@ -121,17 +131,28 @@ def _inertial(mass: float, com: Array, inertia: Array) -> str:
     return f'<inertial pos="{_v(com)}" mass="{mass:.17g}" fullinertia="{_v(np.array(full))}"/>'
 
 
-def _leg_inertial() -> str:
-    return f'<inertial pos="0 0 0" mass="{LEG_MASS:g}" diaginertia="{LEG_INERTIA:g} {LEG_INERTIA:g} {LEG_INERTIA:g}"/>'
+def _leg_inertial(mass: float, inertia: float) -> str:
+    return f'<inertial pos="0 0 0" mass="{mass:.17g}" diaginertia="{inertia:.17g} {inertia:.17g} {inertia:.17g}"/>'
 
 
-def to_mjcf(robot: Robot, *, timestep: float = 1e-3, solver_tolerance: float = 1e-12) -> str:
+def to_mjcf(
+    robot: Robot,
+    *,
+    timestep: float = 1e-3,
+    solver_tolerance: float = 1e-12,
+    leg_mass: float = LEG_MASS,
+    leg_inertia: float = LEG_INERTIA,
+) -> str:
     """The robot as an MJCF document (text).
 
     Joints and force actuators are named after the paper (``s1, v1, p1, s2, v2, p2, psi3``;
-    motors, gear 1, control = effort in N or N m, no control limits); passive hinges ``<leg>_base``
-    and ``platform<k>``; the tool tip is the site ``tip``; the keyframe ``home`` is the robot's
-    home pose at rest. Viscous friction is joint damping; gravity is the robot's.
+    motors, gear 1, control = effort in N or N m, no control limits); the motors of the closed
+    legs ``v``, ``p`` drive the tendons ``<leg>_leg``, the others their joints; passive hinges
+    ``<leg>_base`` and ``platform<k>``; the tool tip is the site ``tip``; the keyframe ``home`` is
+    the robot's home pose at rest. Viscous friction is joint damping (``s``, twist) or tendon
+    damping (``v``, ``p``); gravity is the robot's. ``leg_mass`` (kg) and ``leg_inertia``
+    (kg m^2) are given to every leg body (the paper's legs are massless; MuJoCo refuses below
+    1e-15).
     """
     par: RobotParameters = robot.parameters
     g = home_geometry(robot)
@@ -141,28 +162,38 @@ def to_mjcf(robot: Robot, *, timestep: float = 1e-3, solver_tolerance: float = 1
     names = JOINT_NAMES
     bodies = par.bodies
     damping = dict(zip(names, par.viscous, strict=True))
+    # the closed legs v and p of every module (the s leg of each is on the tree path)
+    closed = [n for k in range(len(par.modules)) for n in names[3 * k + 1 : 3 * k + 3]]
 
     def leg(name: str, base: Array, direction: Array, normal: Array, length: float, parent_pos: Array) -> list[str]:
-        """A base hinge body at ``base`` and a rod body sliding along ``direction`` in it."""
+        """A base hinge body at ``base`` and a rod body sliding along ``direction`` in it; the
+        slide of a leg on the tree path (``s``) carries its friction, the closed legs' friction
+        is on their tendons."""
+        friction = "" if name in closed else f' damping="{damping[name]:.17g}"'
         return [
             f'<body name="{name}_base" pos="{_v(base - parent_pos)}">',
-            _leg_inertial(),
+            _leg_inertial(leg_mass, leg_inertia),
             f'<joint name="{name}_base" type="hinge" axis="{_v(normal)}"/>',
             f'<body name="{name}_rod" pos="0 0 0">',
-            _leg_inertial(),
-            f'<joint name="{name}" type="slide" axis="{_v(direction)}" ref="{length:.17g}" '
-            f'damping="{damping[name]:.17g}"/>',
+            _leg_inertial(leg_mass, leg_inertia),
+            f'<joint name="{name}" type="slide" axis="{_v(direction)}" ref="{length:.17g}"{friction}/>',
             f'<geom type="capsule" fromto="0 0 0 {_v(direction * length)}" size="0.006" rgba="0.2 0.6 0.2 1"/>',
         ]
 
     def module(k: int, mod: ModuleHome, parent_pos: Array, platform_xml: list[str]) -> list[str]:
         s, v, p = q[3 * k : 3 * k + 3]
         ln = [f"s{k + 1}", f"v{k + 1}", f"p{k + 1}"]
-        out: list[str] = []
+        # the closed legs' tendons run between these sites: their feet on the module's base
+        # body, their heads at the platform's corner B'
+        out: list[str] = [
+            f'<site name="{ln[1]}_foot" pos="{_v(mod.B - parent_pos)}" size="0.004"/>',
+            f'<site name="{ln[2]}_foot" pos="{_v(mod.A - parent_pos)}" size="0.004"/>',
+        ]
         # leg s carries the platform, hinged at A'
         out += leg(ln[0], mod.A, mod.dir_s, mod.normal, s, parent_pos)
         out += [f'<body name="platform{k + 1}" pos="{_v(mod.A_top - mod.A)}">']
         out += [f'<joint name="platform{k + 1}" type="hinge" axis="{_v(mod.normal)}"/>']
+        out += [f'<site name="{n}_head" pos="{_v(mod.B_top - mod.A_top)}" size="0.004"/>' for n in ln[1:]]
         out += platform_xml
         out += ["</body>", "</body>", "</body>"]
         out += leg(ln[1], mod.B, mod.dir_v, mod.normal, v, parent_pos) + ["</body>", "</body>"]
@@ -202,7 +233,15 @@ def to_mjcf(robot: Robot, *, timestep: float = 1e-3, solver_tolerance: float = 1
                 f'<connect name="close_{leg_name}" body1="{leg_name}_rod" body2="platform{k + 1}" '
                 f'anchor="{_v(top - base)}" solref="{timestep / 50:.6g} 1" solimp="0.99999 0.99999 0.001 0.5 2"/>'
             )
-    actuators = [f'<motor name="{n}" joint="{n}" gear="1"/>' for n in names]
+    tendons = [
+        f'<spatial name="{n}_leg" damping="{damping[n]:.17g}" width="0.004">'
+        f'<site site="{n}_foot"/><site site="{n}_head"/></spatial>'
+        for n in closed
+    ]
+    actuators = [
+        f'<motor name="{n}" tendon="{n}_leg" gear="1"/>' if n in closed else f'<motor name="{n}" joint="{n}" gear="1"/>'
+        for n in names
+    ]
     gravity = _v(np.array(par.gravity))
     return "\n".join(
         [
@@ -218,6 +257,9 @@ def to_mjcf(robot: Robot, *, timestep: float = 1e-3, solver_tolerance: float = 1
             "<equality>",
             *equality,
             "</equality>",
+            "<tendon>",
+            *tendons,
+            "</tendon>",
             "<actuator>",
             *actuators,
             "</actuator>",

@@ -27,13 +27,14 @@ def require_mujoco() -> Any:
 class MujocoRobot:
     """The robot exported to MJCF and loaded in MuJoCo, with our ``q, qd`` mapped onto MuJoCo's
     full state (passive hinges from our closed-form passive angles, their rates from the loop
-    closures' constraint Jacobian)."""
+    closures' constraint Jacobian) and MuJoCo's state read back as our joints (the tree's slides
+    and twist, the closed legs' tendons). ``export`` options go to :func:`to_mjcf`."""
 
-    def __init__(self, robot: Robot, *, timestep: float = 1e-3) -> None:
+    def __init__(self, robot: Robot, *, timestep: float = 1e-3, **export: float) -> None:
         mujoco = require_mujoco()
         self.mujoco = mujoco
         self.robot = robot
-        self.xml = to_mjcf(robot, timestep=timestep)
+        self.xml = to_mjcf(robot, timestep=timestep, **export)
         self.model = mujoco.MjModel.from_xml_string(self.xml)
         self.model.opt.jacobian = mujoco.mjtJacobian.mjJAC_DENSE
         self.data = mujoco.MjData(self.model)
@@ -45,6 +46,18 @@ class MujocoRobot:
         self.home_passive = np.asarray(home_geometry(robot).passive)
         self.effector = self.model.body("end_effector").id
         self.tip_site = self.model.site("tip").id
+        # our joints read from the tree (joint i of MuJoCo) or from a tendon (the closed legs)
+        tendons = {self.model.tendon(i).name: i for i in range(self.model.ntendon)}
+        self.tendon_of = {n: tendons[f"{n}_leg"] for n in JOINT_NAMES if f"{n}_leg" in tendons}
+        self.tree_joints = np.array([i for i, n in enumerate(JOINT_NAMES) if n not in self.tendon_of], dtype=int)
+        self.tendon_joints = np.array([i for i, n in enumerate(JOINT_NAMES) if n in self.tendon_of], dtype=int)
+        self.tree_qpos = np.array([self.qpos_of[JOINT_NAMES[i]] for i in self.tree_joints], dtype=int)
+        self.tree_dofs = np.array([self.dof_of[JOINT_NAMES[i]] for i in self.tree_joints], dtype=int)
+        self.tendons = np.array([self.tendon_of[JOINT_NAMES[i]] for i in self.tendon_joints], dtype=int)
+        site = self.model.site
+        self.tendon_sites = [
+            (site(f"{JOINT_NAMES[i]}_foot").id, site(f"{JOINT_NAMES[i]}_head").id) for i in self.tendon_joints
+        ]
 
     def set_state(self, q: ArrayLike, qd: ArrayLike) -> None:
         """Put MuJoCo at our joint state ``q``, ``qd`` (7,) with the loop closures satisfied."""
@@ -78,8 +91,9 @@ class MujocoRobot:
     def velocity_map(self) -> Array:
         """``T`` (nv, 7): MuJoCo's velocities on the constraint manifold from our ``qd``."""
         J = self.constraint_jacobian()
-        T = np.zeros((self.model.nv, 7))
-        T[self.actuated_dofs] = np.eye(7)
+        joints = len(self.actuated_dofs)
+        T = np.zeros((self.model.nv, joints))
+        T[self.actuated_dofs] = np.eye(joints)
         T[self.passive_dofs] = -np.linalg.lstsq(J[:, self.passive_dofs], J[:, self.actuated_dofs], rcond=None)[0]
         return T
 
@@ -95,15 +109,57 @@ class MujocoRobot:
             d.xfrc_applied[self.effector, 3:] = np.cross(lever, f)
 
     def forward_dynamics(self, q: ArrayLike, qd: ArrayLike, F: ArrayLike, f_tip: ArrayLike | None = None) -> Array:
-        """Joint accelerations (7,) of the actuated joints, computed by MuJoCo."""
+        """Our joint accelerations (7,) computed by MuJoCo (:meth:`joint_accelerations`)."""
         self.set_state(q, qd)
         self.apply(F, f_tip)
         self.mujoco.mj_forward(self.model, self.data)
-        return np.array(self.data.qacc[self.actuated_dofs])
+        return self.joint_accelerations()
+
+    def joint_positions(self) -> Array:
+        """Our joint values (7,) of the current state: the tree's slides and twist, and the closed
+        legs' lengths from their tendons (exact, unlike the followers' slides behind the soft
+        closures)."""
+        d = self.data
+        q = np.empty(len(JOINT_NAMES))
+        q[self.tree_joints] = d.qpos[self.tree_qpos]
+        q[self.tendon_joints] = d.ten_length[self.tendons]
+        return q
+
+    def joint_velocities(self) -> Array:
+        """Our joint velocities (7,) of the current state (as :meth:`joint_positions`)."""
+        d = self.data
+        qd = np.empty(len(JOINT_NAMES))
+        qd[self.tree_joints] = d.qvel[self.tree_dofs]
+        qd[self.tendon_joints] = d.ten_velocity[self.tendons]
+        return qd
+
+    def joint_accelerations(self) -> Array:
+        """Our joint accelerations (7,) from MuJoCo's ``qacc`` of the current state (after
+        ``mj_forward``). A closed leg's is its tendon's, the length ``L = |x_head - x_foot|``
+        differentiated twice: ``L'' = u . (a_head - a_foot) + (|d'|^2 - L'^2) / L`` with ``d`` the
+        foot-to-head vector, ``u = d / L`` and each site's acceleration ``J qacc + Jdot qvel``
+        (the velocity-product term that MuJoCo leaves out of constraint accelerations)."""
+        mujoco, m, d = self.mujoco, self.model, self.data
+        qdd = np.empty(len(JOINT_NAMES))
+        qdd[self.tree_joints] = d.qacc[self.tree_dofs]
+        for j, (foot, head) in zip(self.tendon_joints, self.tendon_sites, strict=True):
+            rel = np.zeros(3)
+            acc = np.zeros(3)
+            for sign, site in ((-1.0, foot), (1.0, head)):
+                jac, jac_dot = np.zeros((3, m.nv)), np.zeros((3, m.nv))
+                mujoco.mj_jacSite(m, d, jac, None, site)
+                mujoco.mj_jacDot(m, d, jac_dot, None, d.site_xpos[site], m.site_bodyid[site])
+                rel += sign * (jac @ d.qvel)
+                acc += sign * (jac @ d.qacc + jac_dot @ d.qvel)
+            delta = d.site_xpos[head] - d.site_xpos[foot]
+            length = float(np.linalg.norm(delta))
+            u = delta / length
+            qdd[j] = u @ acc + (rel @ rel - (u @ rel) ** 2) / length
+        return qdd
 
     def mass_matrix(self, q: ArrayLike) -> Array:
         """MuJoCo's mass matrix reduced to our seven joints, ``T^T M T`` (7, 7)."""
-        self.set_state(q, np.zeros(7))
+        self.set_state(q, np.zeros(len(self.actuated_dofs)))
         full = np.zeros((self.model.nv, self.model.nv))
         self.mujoco.mj_fullM(self.model, self.data, full)
         T = self.velocity_map()

@@ -2,11 +2,13 @@
 
 :class:`MujocoLoop` is the NumPy loop (:class:`vgtarm.simulation.python_loop.PythonLoop`: the
 same controller, observer, sensing, tool force and divergence checks, with the controller's own
-model) whose plant is MuJoCo: the tip and its velocity are read from the site ``tip``, and each
-control period is integrated by MuJoCo with the efforts held and the tool force applied at the
-tip (the cutting force follows the tip velocity at every MuJoCo step), in at least
-:data:`MIN_STEPS` MuJoCo steps per control period. MuJoCo's ``Euler`` is
-semi-implicit, so ``euler`` and ``semi_implicit_euler`` both use it; ``rk4`` uses MuJoCo's RK4.
+model) whose plant is MuJoCo: the tip and its velocity are read from the site ``tip``, the joint
+values from the tree's joints and the closed legs' tendons, and each control period is
+integrated by MuJoCo with the efforts held and the tool force applied at the tip (the cutting
+force follows the tip velocity at every MuJoCo step), in ``max(substeps, MIN_STEPS[...])``
+MuJoCo steps. ``rk4`` uses MuJoCo's RK4; ``euler`` and ``semi_implicit_euler`` use MuJoCo's
+``Euler`` with its implicit damping switched off, which is then exactly our semi-implicit Euler
+(MuJoCo has no explicit Euler).
 """
 
 from __future__ import annotations
@@ -21,10 +23,10 @@ from .model import MujocoRobot
 
 Array = NDArray[np.float64]
 
-#: MuJoCo steps per control period at least: with fewer, the light legs' fast modes against the
-#: soft loop closures make case 2 (Kp = 15000, Kv = 600) diverge (10 steps: at 0.24 s; 50: stable;
-#: docs/mujoco.md).
-MIN_STEPS = 50
+#: MuJoCo steps per control period at least, by MuJoCo integrator: every count is stable, but
+#: (semi-implicit) Euler needs 10 to bring case 1 within 2 % of the converged plant (1 step:
+#: -20 %, 5: -4 %); RK4 is converged at one step (docs/mujoco.md).
+MIN_STEPS = {"Euler": 10, "RK4": 1}
 
 
 class MujocoLoop(PythonLoop):
@@ -51,22 +53,16 @@ class MujocoLoop(PythonLoop):
 
     def _integrate(self, s: LoopSettings, q: Array, qd: Array, F: Array, dist: Array) -> tuple[Array, Array]:
         mujoco, b = self.bridge.mujoco, self.bridge
-        steps = max(s.substeps, MIN_STEPS)
+        integrator = "RK4" if s.integrator == "rk4" else "Euler"
+        steps = max(s.substeps, MIN_STEPS[integrator])
         b.model.opt.timestep = s.dt / steps
         b.model.eq_solref[:, 0] = 2.0 * b.model.opt.timestep  # as stiff as MuJoCo's refsafe allows
-        b.model.opt.integrator = (
-            mujoco.mjtIntegrator.mjINT_RK4 if s.integrator == "rk4" else mujoco.mjtIntegrator.mjINT_EULER
-        )
+        b.model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_EULERDAMP  # Euler: semi-implicit, as ours
+        b.model.opt.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{integrator.upper()}")
         for _ in range(steps):
             mujoco.mj_forward(b.model, b.data)
             _, velocity = self._tip_state(q, qd)
             b.apply(F, self._tool_force(s, velocity, dist))
             mujoco.mj_step(b.model, b.data)
         mujoco.mj_forward(b.model, b.data)
-        return np.array(b.data.qpos[[b.qpos_of[n] for n in self._names]]), np.array(b.data.qvel[b.actuated_dofs])
-
-    @property
-    def _names(self) -> tuple[str, ...]:
-        from ..model.parameters import JOINT_NAMES
-
-        return JOINT_NAMES
+        return b.joint_positions(), b.joint_velocities()
