@@ -103,6 +103,42 @@ def test_decode_matches_numpy_bit_for_bit(lib, n_bits):
     np.testing.assert_array_equal(genes, ga.decode(bits, lower, upper, n_bits))
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_the_predictions_single_precision_decode_is_numpys_rounded_to_float(lib, seed):
+    """The prediction decodes 8-bit genes in float arithmetic (no table look-ups): both code paths
+    give the same floats, each within a few float ulp (of the larger bound) of NumPy's double
+    decode, and the bounds exactly at the end codes. Rows that are not a multiple of the block exercise the
+    unused lanes."""
+    rng = np.random.default_rng(300 + seed)
+    n_genes, rows = int(rng.integers(1, 120)), int(rng.integers(1, 30))
+    lower = rng.uniform(-5e4, 5e4, n_genes) * rng.choice([1e-3, 1.0], n_genes)
+    upper = lower + rng.uniform(0, 3e4, n_genes)
+    upper[0] = lower[0]  # a gene with one value
+    bits = rng.integers(0, 2, size=(rows, n_genes * 8)).astype(np.uint8)
+    bits[0] = 1
+    if rows > 1:
+        bits[1] = 0
+    words = bit_words(n_genes * 8)
+    packed = pack_bits(bits, words)
+    settings = ffi().new("vgt_ga_settings *", {"n_genes": n_genes, "n_bits": 8, "words": words})
+    out = {}
+    for vector in (0, 1):
+        out[vector] = np.full((rows, n_genes), np.nan, dtype=np.float32)
+        status = lib.vgt_ga_decode_single(
+            settings, rows, _u(packed), _d(lower), _d(upper), vector, ffi().cast("float *", out[vector].ctypes.data)
+        )
+        assert status == 0
+    np.testing.assert_array_equal(out[0], out[1])
+    expected = ga.decode(bits, lower, upper, 8).astype(np.float32)
+    ulp = np.spacing(np.maximum(np.abs(lower), np.abs(upper)).astype(np.float32))  # of the gene's range
+    assert np.all(np.abs(out[0].astype(np.float64) - expected) <= 4 * ulp)
+    np.testing.assert_array_equal(out[0][0], upper.astype(np.float32))
+    if rows > 1:
+        np.testing.assert_array_equal(out[0][1], lower.astype(np.float32))
+    settings.n_bits = 5
+    assert lib.vgt_ga_decode_single(settings, rows, _u(packed), _d(lower), _d(upper), 1, ffi().NULL) != 0
+
+
 def test_decode_inside_the_activation_matches_numpy(lib, robot):
     """The activation's 8-bit fast path: its best genes are a decoded code."""
     ref = reference(robot, duration=0.05)

@@ -238,17 +238,46 @@ static double pairwise_sum(const double *a, long n)
 static inline double clean_cost(double c) { return isfinite(c) ? c : INFINITY; }
 
 /* Indices of cost in ascending order, ties in index order, so the order is the same as any
- * stable sort's: binary insertion of (cost, index) pairs for small populations, a bottom-up merge
- * sort for larger ones. */
+ * stable sort's: ranks by counting for populations up to COUNTED (branch-free: a sort's
+ * comparisons of random costs mispredict half the time), a bottom-up merge sort for larger ones. */
 typedef struct {
     double cost;
     long index;
 } keyed;
 
+enum { COUNTED = 64 };
+
+/* order[rank[i]] = i with rank[i] = #{j : c_j < c_i} + #{j < i : c_j == c_i}
+ *                                  = #{j < i : c_j <= c_i} + #{j > i : c_j < c_i},
+ * four costs per comparison (the block holding i compares index by index); the padding is NaN,
+ * which compares false to everything. */
+__attribute__((target_clones("arch=x86-64-v3", "default"))) static void order_by_counting(long n,
+                                                                                        const double *cost,
+                                                                                        long *order)
+{
+    v4 c[COUNTED / 4];
+    double *flat = (double *)c;
+    const long blocks = (n + 3) / 4;
+    for (long i = 0; i < 4 * blocks; ++i) flat[i] = i < n ? clean_cost(cost[i]) : NAN;
+    for (long i = 0; i < n; ++i) {
+        const v4 ci = (v4){0.0} + flat[i];
+        const m4 ii = (m4){0} + i;
+        const long own = i / 4;
+        const m4 j = (m4){0, 1, 2, 3} + 4 * own;
+        m4 count = (c[own] < ci) | ((c[own] == ci) & (j < ii));
+        for (long b = 0; b < own; ++b) count += c[b] <= ci;
+        for (long b = own + 1; b < blocks; ++b) count += c[b] < ci;
+        order[-(count[0] + count[1] + count[2] + count[3])] = i;
+    }
+}
+
 static void stable_order(long n, const double *cost, long *order)
 {
-    keyed small[2 * 64];
-    keyed *a = n <= 64 ? small : malloc(sizeof(keyed) * 2 * (size_t)n);
+    if (n <= COUNTED) {
+        order_by_counting(n, cost, order);
+        return;
+    }
+    keyed *a = malloc(sizeof(keyed) * 2 * (size_t)n);
     if (!a) { /* no memory for the merge: an insertion sort in place */
         for (long i = 0; i < n; ++i) {
             long j = i;
@@ -261,23 +290,6 @@ static void stable_order(long n, const double *cost, long *order)
         return;
     }
     keyed *b = a + n;
-    if (n <= 64) { /* a population of the paper's size: binary insertion (after equal costs) */
-        for (long i = 0; i < n; ++i) {
-            const double c = clean_cost(cost[i]);
-            long lo = 0, hi = i;
-            while (lo < hi) {
-                long mid = (lo + hi) >> 1;
-                if (c < a[mid].cost)
-                    hi = mid;
-                else
-                    lo = mid + 1;
-            }
-            memmove(a + lo + 1, a + lo, sizeof(keyed) * (size_t)(i - lo));
-            a[lo] = (keyed){c, i};
-        }
-        for (long i = 0; i < n; ++i) order[i] = a[i].index;
-        return;
-    }
     for (long i = 0; i < n; ++i) a[i] = (keyed){clean_cost(cost[i]), i};
     for (long width = 1; width < n; width *= 2) {
         for (long lo = 0; lo < n; lo += 2 * width) {
@@ -292,7 +304,7 @@ static void stable_order(long n, const double *cost, long *order)
         b = t;
     }
     for (long i = 0; i < n; ++i) order[i] = a[i].index;
-    if (n > 64) free(a < b ? a : b);
+    free(a < b ? a : b);
 }
 
 /* Rank weights 1/sqrt(r), r = 1..n. */
@@ -309,8 +321,12 @@ static void rank_expectations(long n, const double *cost, long n_parents, double
     while (start < n) {
         long end = start + 1;
         while (end < n && clean_cost(cost[order[end]]) == clean_cost(cost[order[start]])) ++end;
-        double mean = pairwise_sum(weights + start, end - start) / (double)(end - start);
-        for (long r = start; r < end; ++r) shared[r] = mean;
+        if (end - start == 1) { /* a cost of its own: its weight (the mean of one, exactly) */
+            shared[start] = weights[start];
+        } else {
+            double mean = pairwise_sum(weights + start, end - start) / (double)(end - start);
+            for (long r = start; r < end; ++r) shared[r] = mean;
+        }
         start = end;
     }
     for (long r = 0; r < n; ++r) expectation[order[r]] = shared[r];
@@ -391,11 +407,9 @@ typedef struct {
     float *off_f;        /* (H+1, 3) tip offsets of the window                                    */
     float *coef;         /* (H, 3, nj, nj) -H[k][l][m] for m > l, -H/2 for m = l (0 below), per step  */
     unsigned char *row_used; /* (3, nj) row l of axis k has a nonzero coefficient somewhere in the window */
-    float *lut;          /* 8-bit genes: the decoded value of each code, one table per distinct     */
-    int *lut_offset;     /*   pair of bounds: gene gi's table starts at lut[lut_offset[gi]] (padded to */
-                         /*   whole words of genes, 0 past the last gene), or NULL                     */
-    int avx2;            /* the CPU gathers (decode_words)                                           */
-    long row_length;     /* genes rounded up to whole blocks                                         */
+    float *lo, *step, *hi; /* 8-bit genes in the prediction: lo + code * step in single precision, at */
+                           /*   most hi, hi for the top code (see gains_from_bytes)                    */
+    int avx2;            /* the CPU has AVX2 (gains_from_bytes_avx2)                                 */
     int threads;         /* threads that predict blocks of candidates (OpenMP), each with a scratch */
     int n_scratch;       /* scratches allocated (the threads asked for; `threads` may drop to 1)     */
     struct scratch *sc;  /* (n_scratch) */
@@ -404,7 +418,6 @@ typedef struct {
 /* What one thread of the prediction writes. */
 typedef struct scratch {
     vf *K;               /* (2 nj^2) gains of the block, one lane per candidate                     */
-    float *rowbuf;       /* (BLOCK, row_length) decoded genes of a block's candidates                */
     float *far;          /* (BLOCK H, nj) predicted joint errors of the steps outside the region     */
     long *far_at;        /* (BLOCK H) their lane * H + step                                         */
     const double **arg;  /* work arrays of the generated tip function                               */
@@ -520,9 +533,8 @@ __attribute__((target_clones("arch=x86-64-v3", "default"), optimize("fp-contract
     }
 }
 
-/* The gains of up to BLOCK candidates, as the kernel wants them: gene-major, one float per lane.
- * From decoded genes (row by row), or straight from the bit strings `rows[c]` of 8-bit genes,
- * decoded across the lanes with ga._decode's arithmetic (in double, then rounded to float). */
+/* The gains of up to BLOCK candidates, as the kernel wants them: gene-major, one float per lane,
+ * from decoded genes (row by row, rounded to float). */
 static void gains_from_genes(int n_genes, int count, const double *genes, vf *K)
 {
     const vf zero = {0.0f};
@@ -531,74 +543,81 @@ static void gains_from_genes(int n_genes, int count, const double *genes, vf *K)
         for (int gi = 0; gi < n_genes; ++gi) K[gi][c] = (float)genes[(long)c * n_genes + gi];
 }
 
-/* Words `first .. last` (exclusive) of one candidate of 8-bit genes decoded into `out` (8 genes a
- * word) through the decoded value of every code (decode_with's arithmetic, rounded to float): gene
- * gi's value is lut[offset[gi] + code], its code the gi-th byte of the string, most significant
- * first within each 64-bit word. `offset` is padded to whole words, `out` to whole words too. */
-static void decode_words_scalar(const float *lut, const int *offset, int first, int last, const uint64_t *bits,
-                                float *out)
+/* The same from the bit strings rows[0..count) of 8-bit genes (gene gi is byte gi of a string,
+ * most significant first within each 64-bit word), decoded in single precision as
+ * min(lo + code * step, hi), and hi for the top code: within a few float units in the last place
+ * of the larger bound from ga._decode's value (tested), far below what the single-precision
+ * prediction resolves, and with no table look-ups (gathering the values from tables cost as much
+ * as the kernel). Lanes past count get code 0. */
+static void gains_from_bytes_scalar(const predictor *x, int n_genes, int count, const uint64_t *const *rows, vf *K)
 {
-    for (int w = first; w < last; ++w) {
-        uint64_t word = bits[w];
-        for (int b = 0; b < 8; ++b) out[8 * w + b] = lut[offset[8 * w + b] + (int)((word >> (56 - 8 * b)) & 0xFFu)];
-    }
+    for (int gi = 0; gi < n_genes; ++gi)
+        for (int c = 0; c < BLOCK; ++c) {
+            unsigned code = c < count ? (unsigned)((rows[c][gi >> 3] >> (56 - 8 * (gi & 7))) & 0xFFu) : 0u;
+            float value = x->lo[gi] + (float)code * x->step[gi];
+            value = value < x->hi[gi] ? value : x->hi[gi];
+            K[gi][c] = code == 255u ? x->hi[gi] : value;
+        }
 }
 
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <immintrin.h>
-__attribute__((target("avx2"))) static void decode_words_avx2(const float *lut, const int *offset, int first,
-                                                               int last, const uint64_t *bits, float *out)
+/* gains_from_bytes_scalar's arithmetic (multiply, then add: no contraction), eight lanes at a
+ * time: a word of every candidate is loaded once, and a byte shuffle spreads gene b's byte of the
+ * eight words into eight 32-bit lanes. */
+__attribute__((target("avx2"))) static void gains_from_bytes_avx2(const predictor *x, int n_genes, int count,
+                                                                  const uint64_t *const *rows, vf *K)
 {
-    for (int w = first; w < last; ++w) {
-        /* the word's bytes, most significant first, as 8 indices */
-        __m128i bytes = _mm_cvtsi64_si128((long long)__builtin_bswap64(bits[w]));
-        __m256i index = _mm256_add_epi32(_mm256_cvtepu8_epi32(bytes), _mm256_loadu_si256((const __m256i *)(offset + 8 * w)));
-        _mm256_storeu_ps(out + 8 * w, _mm256_i32gather_ps(lut, index, 4));
+    /* in each 128-bit half, byte k of its two words into the low bytes of 32-bit lanes 0, 1 (from
+     * a) or 2, 3 (from b); -128 + k keeps the top bit set, which zeroes the byte */
+    const __m256i pick_a = _mm256_setr_epi8(0, -128, -128, -128, 8, -128, -128, -128, -128, -128, -128, -128, -128,
+                                            -128, -128, -128, 0, -128, -128, -128, 8, -128, -128, -128, -128, -128,
+                                            -128, -128, -128, -128, -128, -128);
+    const __m256i pick_b = _mm256_setr_epi8(-128, -128, -128, -128, -128, -128, -128, -128, 0, -128, -128, -128, 8,
+                                            -128, -128, -128, -128, -128, -128, -128, -128, -128, -128, -128, 0,
+                                            -128, -128, -128, 8, -128, -128, -128);
+    const __m256i top = _mm256_set1_epi32(255);
+    for (int w = 0; w * 8 < n_genes; ++w) {
+        long long q[BLOCK];
+        for (int c = 0; c < BLOCK; ++c) q[c] = c < count ? (long long)rows[c][w] : 0;
+        /* lanes 0..7 of the result are candidates 0..7: the halves hold candidates 0, 1 | 4, 5 of
+         * a and 2, 3 | 6, 7 of b */
+        const __m256i a = _mm256_setr_epi64x(q[0], q[1], q[4], q[5]), b = _mm256_setr_epi64x(q[2], q[3], q[6], q[7]);
+        const int genes = n_genes - 8 * w < 8 ? n_genes - 8 * w : 8;
+        for (int g = 0; g < genes; ++g) {
+            const int gi = 8 * w + g;
+            const __m256i k = _mm256_set1_epi8((char)(7 - g)); /* gene g is the word's byte 7 - g */
+            const __m256i code = _mm256_or_si256(_mm256_shuffle_epi8(a, _mm256_add_epi8(pick_a, k)),
+                                                 _mm256_shuffle_epi8(b, _mm256_add_epi8(pick_b, k)));
+            const __m256 hi = _mm256_set1_ps(x->hi[gi]);
+            __m256 value = _mm256_add_ps(_mm256_set1_ps(x->lo[gi]),
+                                         _mm256_mul_ps(_mm256_cvtepi32_ps(code), _mm256_set1_ps(x->step[gi])));
+            value = _mm256_min_ps(value, hi);
+            value = _mm256_blendv_ps(value, hi, _mm256_castsi256_ps(_mm256_cmpeq_epi32(code, top)));
+            _mm256_store_ps((float *)&K[gi], value);
+        }
     }
 }
 #endif
 
-static void decode_words(const predictor *x, int first, int last, const uint64_t *bits, float *out)
+static void gene_tables(predictor *x, int n_genes, const double *lower, const double *upper)
+{
+    for (int gi = 0; gi < n_genes; ++gi) {
+        x->lo[gi] = (float)lower[gi];
+        x->step[gi] = (float)((upper[gi] - lower[gi]) / 255.0);
+        x->hi[gi] = (float)upper[gi];
+    }
+}
+
+static void gains_from_bytes(const predictor *x, int n_genes, int count, const uint64_t *const *rows, vf *K)
 {
 #if defined(__x86_64__) && defined(__GNUC__)
     if (x->avx2) {
-        decode_words_avx2(x->lut, x->lut_offset, first, last, bits, out);
+        gains_from_bytes_avx2(x, n_genes, count, rows, K);
         return;
     }
 #endif
-    decode_words_scalar(x->lut, x->lut_offset, first, last, bits, out);
-}
-
-/* K of a block from up to BLOCK rows of decoded float genes (each padded to a multiple of BLOCK
- * genes): 8 x 8 transposes, genes of 8 candidates to 8 lanes of each gene. */
-static void gains_from_rows(int n_genes, int count, const float *const *rows, vf *K)
-{
-    const vf zero = {0.0f};
-    for (int g0 = 0; g0 < n_genes; g0 += BLOCK) {
-        vf r[BLOCK];
-        for (int c = 0; c < BLOCK; ++c) {
-            if (c < count)
-                memcpy(&r[c], rows[c] + g0, sizeof(vf));
-            else
-                r[c] = zero;
-        }
-        vf t[BLOCK], u[BLOCK], o[BLOCK];
-        for (int c = 0; c < BLOCK; c += 2) {
-            t[c] = __builtin_shufflevector(r[c], r[c + 1], 0, 8, 1, 9, 4, 12, 5, 13);
-            t[c + 1] = __builtin_shufflevector(r[c], r[c + 1], 2, 10, 3, 11, 6, 14, 7, 15);
-        }
-        for (int c = 0; c < BLOCK; c += 4)
-            for (int h = 0; h < 2; ++h) {
-                u[c + 2 * h] = __builtin_shufflevector(t[c + h], t[c + h + 2], 0, 1, 8, 9, 4, 5, 12, 13);
-                u[c + 2 * h + 1] = __builtin_shufflevector(t[c + h], t[c + h + 2], 2, 3, 10, 11, 6, 7, 14, 15);
-            }
-        for (int i = 0; i < 4; ++i) {
-            o[i] = __builtin_shufflevector(u[i], u[i + 4], 0, 1, 2, 3, 8, 9, 10, 11);
-            o[i + 4] = __builtin_shufflevector(u[i], u[i + 4], 4, 5, 6, 7, 12, 13, 14, 15);
-        }
-        int n = n_genes - g0 < BLOCK ? n_genes - g0 : BLOCK;
-        for (int i = 0; i < n; ++i) K[g0 + i] = o[i];
-    }
+    gains_from_bytes_scalar(x, n_genes, count, rows, K);
 }
 
 /* Exact prediction of the candidates listed in `which` (all when which is NULL). */
@@ -636,17 +655,10 @@ static int predict_one_block(const vgt_ga_settings *g, const vgt_model *m, const
     double sum[BLOCK];
     long n_far = 0;
     int seen[BLOCK] = {0};
-    if (genes) {
+    if (genes)
         gains_from_genes(g->n_genes, count, genes + c * g->n_genes, sc->K);
-    } else { /* decoded rows, transposed; lanes without a candidate get zero gains, unused */
-        const float *decoded[BLOCK];
-        for (int k = 0; k < count; ++k) {
-            float *row = sc->rowbuf + (long)k * x->row_length;
-            decode_words(x, 0, (int)(x->row_length / 8), rows[c + k], row);
-            decoded[k] = row;
-        }
-        gains_from_rows(g->n_genes, count, decoded, sc->K);
-    }
+    else
+        gains_from_bytes(x, g->n_genes, count, rows + c, sc->K);
     predict_block(x, count, sc->K, sum, sc->far, sc->far_at, &n_far);
     /* the steps outside the trust region: the exact forward kinematics of the predicted joints */
     for (long f = 0; f < n_far; ++f) {
@@ -709,29 +721,12 @@ static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *
     x->off_f = malloc(sizeof(float) * (size_t)((g->horizon + 1) * 3));
     x->row_used = calloc((size_t)(3 * nj), 1);
     x->coef = NULL;
-    x->lut = NULL;
     if (g->n_bits == 8 && g->prediction != VGT_PREDICT_EXACT) {
-        /* decode_with's arithmetic for every code, once per distinct pair of bounds */
-        x->lut = malloc(sizeof(float) * 256 * (size_t)g->n_genes);
-        x->lut_offset = calloc((size_t)(g->n_genes + 8), sizeof(int));
-        if (!x->lut || !x->lut_offset) return VGT_NO_MEMORY;
-        int tables = 0;
-        for (int gi = 0; gi < g->n_genes; ++gi) {
-            int t = 0;
-            while (t < gi && !(pb->lower[t] == pb->lower[gi] && pb->upper[t] == pb->upper[gi])) ++t;
-            if (t < gi) {
-                x->lut_offset[gi] = x->lut_offset[t];
-                continue;
-            }
-            x->lut_offset[gi] = 256 * tables;
-            for (int code = 0; code < 256; ++code) {
-                double value = pb->lower[gi] + (double)code / 255.0 * (pb->upper[gi] - pb->lower[gi]);
-                value = value < pb->upper[gi] ? value : pb->upper[gi];
-                x->lut[tables * 256 + code] = (float)(code == 255 ? pb->upper[gi] : value);
-            }
-            ++tables;
-        }
-        x->row_length = ((long)g->n_genes + BLOCK - 1) / BLOCK * BLOCK;
+        x->lo = malloc(sizeof(float) * (size_t)g->n_genes);
+        x->step = malloc(sizeof(float) * (size_t)g->n_genes);
+        x->hi = malloc(sizeof(float) * (size_t)g->n_genes);
+        if (!x->lo || !x->step || !x->hi) return VGT_NO_MEMORY;
+        gene_tables(x, g->n_genes, pb->lower, pb->upper);
 #if defined(__x86_64__) && defined(__GNUC__)
         x->avx2 = __builtin_cpu_supports("avx2");
 #endif
@@ -743,14 +738,13 @@ static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *
     for (int t = 0; t < x->n_scratch; ++t) {
         scratch *sc = x->sc + t;
         sc->K = aligned_alloc(sizeof(vf), sizeof(vf) * (size_t)(2 * nj * nj));
-        sc->rowbuf = malloc(sizeof(float) * (size_t)(BLOCK * x->row_length + 1));
         sc->far = malloc(sizeof(float) * (size_t)(BLOCK * (g->horizon + 1) * nj));
         sc->far_at = malloc(sizeof(long) * (size_t)(BLOCK * (g->horizon + 1)));
         sc->arg = malloc(sizeof(double *) * (size_t)(m->tip.sz_arg > 2 ? m->tip.sz_arg : 2));
         sc->res = malloc(sizeof(double *) * (size_t)(m->tip.sz_res > 1 ? m->tip.sz_res : 1));
         sc->iw = malloc(sizeof(vgt_int) * (size_t)(m->tip.sz_iw + 1));
         sc->w = malloc(sizeof(double) * (size_t)(m->tip.sz_w + 1));
-        if (!sc->K || !sc->rowbuf || !sc->far || !sc->far_at || !sc->arg || !sc->res || !sc->iw || !sc->w)
+        if (!sc->K || !sc->far || !sc->far_at || !sc->arg || !sc->res || !sc->iw || !sc->w)
             return VGT_NO_MEMORY;
     }
     if (g->prediction != VGT_PREDICT_EXACT) {
@@ -785,12 +779,12 @@ static void predictor_free(predictor *x)
     free(x->s);
     free(x->jac_f);
     free(x->off_f);
-    free(x->lut);
-    free(x->lut_offset);
+    free(x->lo);
+    free(x->step);
+    free(x->hi);
     for (int t = 0; x->sc && t < x->n_scratch; ++t) {
         scratch *sc = x->sc + t;
         free(sc->K);
-        free(sc->rowbuf);
         free(sc->far);
         free(sc->far_at);
         free(sc->arg);
@@ -810,6 +804,39 @@ int vgt_ga_predict(const vgt_model *m, const vgt_settings *s, const vgt_ga_setti
     int status = predictor_init(&x, m, s, g, pb);
     if (status == VGT_DONE) status = predict(m, s, g, &x, n_cand, genes, NULL, cost);
     predictor_free(&x);
+    return status;
+}
+
+int vgt_ga_decode_single(const vgt_ga_settings *g, long rows, const uint64_t *bits, const double *lower,
+                         const double *upper, int vector, float *genes)
+{
+    if (g->n_bits != 8) return VGT_FUNCTION_FAILED;
+    const int n = g->n_genes;
+    predictor x;
+    memset(&x, 0, sizeof x);
+    x.lo = malloc(sizeof(float) * (size_t)n);
+    x.step = malloc(sizeof(float) * (size_t)n);
+    x.hi = malloc(sizeof(float) * (size_t)n);
+    vf *K = aligned_alloc(sizeof(vf), sizeof(vf) * (size_t)n);
+    int status = x.lo && x.step && x.hi && K ? VGT_DONE : VGT_NO_MEMORY;
+    if (status == VGT_DONE) {
+        gene_tables(&x, n, lower, upper);
+#if defined(__x86_64__) && defined(__GNUC__)
+        x.avx2 = vector && __builtin_cpu_supports("avx2");
+#endif
+        for (long c = 0; c < rows; c += BLOCK) {
+            const uint64_t *block[BLOCK];
+            int count = rows - c < BLOCK ? (int)(rows - c) : BLOCK;
+            for (int k = 0; k < count; ++k) block[k] = bits + (c + k) * g->words;
+            gains_from_bytes(&x, n, count, block, K);
+            for (int k = 0; k < count; ++k)
+                for (int gi = 0; gi < n; ++gi) genes[(c + k) * n + gi] = K[gi][k];
+        }
+    }
+    free(x.lo);
+    free(x.step);
+    free(x.hi);
+    free(K);
     return status;
 }
 
@@ -904,9 +931,14 @@ int vgt_ga_activation(const vgt_model *m, const vgt_settings *s, const vgt_ga_se
             for (int w = 0; w < W; ++w) row[w] = valid[w] ? rng_next(&rng) & valid[w] : 0;
         }
     }
-    vgt_ga_decode(g, P, pop, pb->lower, pb->upper, genes);
     double fastest_per_block = INFINITY;
-    status = predict_watched(m, s, g, &x, P, genes, NULL, cost, &fastest_per_block);
+    if (from_bytes) { /* every prediction decodes the same way, straight from the bits */
+        for (int k = 0; k < P; ++k) fresh_rows[k] = pop + (long)k * W;
+        status = predict_watched(m, s, g, &x, P, NULL, fresh_rows, cost, &fastest_per_block);
+    } else {
+        vgt_ga_decode(g, P, pop, pb->lower, pb->upper, genes);
+        status = predict_watched(m, s, g, &x, P, genes, NULL, cost, &fastest_per_block);
+    }
     if (status != VGT_DONE) goto done;
     for (int k = 0; k < P; ++k) cost[k] = clean_cost(cost[k]);
     out->evaluations = P;
@@ -943,7 +975,14 @@ int vgt_ga_activation(const vgt_model *m, const vgt_settings *s, const vgt_ga_se
         }
         /* bit-flip mutation over every child's bits */
         long n_flips = mutation_positions(&rng, (long)C * L, g->p_mutation, max_flips, flips);
-        for (long f = 0; f < n_flips; ++f) flip_bit(children + (flips[f] / L) * W, flips[f] % L);
+        /* the positions ascend: follow the child they fall in instead of dividing each by L */
+        for (long f = 0, child = 0, child_start = 0; f < n_flips; ++f) {
+            while (flips[f] >= child_start + L) {
+                ++child;
+                child_start += L;
+            }
+            flip_bit(children + child * W, flips[f] - child_start);
+        }
         /* children equal to a parent keep its cost; the others are predicted */
         long n_fresh = 0;
         for (int i = 0; i < C; ++i) {

@@ -228,6 +228,11 @@ void vgt_ga_sus(long n, const double *expectation, long n_select, double u, long
 void vgt_ga_crossover(int words, long rows, uint64_t *bits, const unsigned char *crossed,
                       const uint64_t *masks);
 void vgt_ga_flip(int words, uint64_t *bits, long n_flips, const long *positions);
+/* 8-bit genes decoded as the prediction decodes them (single precision, into `genes`, rows x
+ * g->n_genes), with the vector path when `vector` is nonzero and the CPU has AVX2;
+ * VGT_FUNCTION_FAILED unless the genes have 8 bits. */
+int vgt_ga_decode_single(const vgt_ga_settings *g, long rows, const uint64_t *bits, const double *lower,
+                         const double *upper, int vector, float *genes);
 
 /* The GA's generator (xoshiro256**, seeded through splitmix64), exported for the tests. */
 void vgt_rng_uniform(uint64_t seed, long n, double *out);
