@@ -26,7 +26,7 @@ from ..ik import CSV_COLUMNS, write_csv
 from ..model.parameters import JOINT_NAMES, JOINT_UNITS
 from ..model.robot import load_robot
 from ..paths import Path as DesiredPath
-from . import cli_mujoco, cli_study, cli_visual
+from . import cli_mujoco, cli_stack, cli_study, cli_visual
 
 
 def _format_vector(values: Sequence[float] | np.ndarray, digits: int = 6) -> str:
@@ -487,6 +487,7 @@ def build_parser() -> argparse.ArgumentParser:
     cli_mujoco.add_parsers(sub)  # export mjcf, check mujoco
     cli_visual.add_parsers(sub)  # draw, animate, report
     cli_study.add_parsers(sub)  # study init, run, report
+    cli_stack.add_parsers(sub)  # convert-robot
     _accept_negative_numbers(parser)
 
     return parser

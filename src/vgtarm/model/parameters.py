@@ -316,9 +316,14 @@ def _join(where: str, key: str) -> str:
 
 
 def _fail(p: RobotParameters, field_name: str, value: object, expected: str) -> NoReturn:
+    fail_field(p.source, field_name, value, expected)
+
+
+def fail_field(source: str, field_name: str, value: object, expected: str) -> NoReturn:
+    """Raise the one-line :class:`ConfigError` of a bad field of the file ``source``."""
     limit = _ARRAY_LENGTH if isinstance(value, list | tuple) else None
     text = shown(value) if limit is None else shown(value, limit)
-    raise ConfigError(f"{cut(str(p.source), _SOURCE_LENGTH)}: field '{field_name}' = {text}: expected {expected}")
+    raise ConfigError(f"{cut(str(source), _SOURCE_LENGTH)}: field '{field_name}' = {text}: expected {expected}")
 
 
 def _finite(values: Sequence[float], bound: float = math.inf) -> bool:
@@ -420,29 +425,36 @@ def _validate(p: RobotParameters) -> None:
 
 
 def _validate_body(p: RobotParameters, body: Body) -> None:
-    where = f"bodies.{body.name}"
+    check_body(p.source, f"bodies.{body.name}", body)
+
+
+def check_body(source: str, where: str, body: Body) -> None:
+    """Check a body's mass, centre of mass and inertia (positive definite, triangle inequality of the
+    principal moments); a bad value raises :class:`ConfigError` naming ``<where>.mass``, ``.com`` or
+    ``.inertia`` in the file ``source``."""
     if not (math.isfinite(body.mass) and 0.0 < body.mass <= MAX_MASS):
-        _fail(p, f"{where}.mass", body.mass, f"a positive mass <= {MAX_MASS:g} (kg)")
+        fail_field(source, f"{where}.mass", body.mass, f"a positive mass <= {MAX_MASS:g} (kg)")
     if len(body.com) != 3 or not _finite(body.com, MAX_LENGTH):
-        _fail(p, f"{where}.com", list(body.com), f"a 3-vector with entries within +-{MAX_LENGTH:g} (m)")
+        fail_field(source, f"{where}.com", list(body.com), f"a 3-vector with entries within +-{MAX_LENGTH:g} (m)")
     inertia = np.array(body.inertia, dtype=float)
     if inertia.shape != (3, 3) or not (np.isfinite(inertia).all() and np.abs(inertia).max() <= MAX_INERTIA):
-        _fail(p, f"{where}.inertia", body.inertia, f"a 3x3 matrix with entries within +-{MAX_INERTIA:g} (kg m^2)")
+        expected = f"a 3x3 matrix with entries within +-{MAX_INERTIA:g} (kg m^2)"
+        fail_field(source, f"{where}.inertia", body.inertia, expected)
     scale = float(np.abs(inertia).max())
     tol = _INERTIA_RELATIVE_TOLERANCE * max(scale, 1e-300)
     if not np.allclose(inertia, inertia.T, rtol=0.0, atol=tol):
-        _fail(p, f"{where}.inertia", inertia.tolist(), "a symmetric matrix")
+        fail_field(source, f"{where}.inertia", inertia.tolist(), "a symmetric matrix")
     moments = np.linalg.eigvalsh(inertia)
     if not moments[0] > 0.0:
-        _fail(
-            p,
+        fail_field(
+            source,
             f"{where}.inertia",
             inertia.tolist(),
             f"a positive definite matrix (principal moments {moments.tolist()})",
         )
     if moments[0] + moments[1] < moments[2] * (1.0 - _INERTIA_RELATIVE_TOLERANCE):
-        _fail(
-            p,
+        fail_field(
+            source,
             f"{where}.inertia",
             inertia.tolist(),
             "principal moments that satisfy the triangle inequality I1 + I2 >= I3 "
