@@ -330,6 +330,34 @@ def test_trust_region_falls_back_to_the_exact_map(lib, robot):
     assert np.max(np.abs(far[ok] - exact[ok]) / exact[ok]) > 1e-3  # why the fallback exists
 
 
+def test_trust_region_counts_only_the_joints_that_move_the_tip(lib, robot):
+    """The twist does not move the tip, so the tip map is exact in it: a large twist error alone
+    keeps a candidate inside the region (the same cost as the map without a region, bit for bit),
+    and the cost still agrees with the exact prediction."""
+    ref = reference(robot, duration=0.1)
+    scm = SwitchingControl.with_gains(5000.0, 300.0, kp_bounds=(0, 15000), kv_bounds=(0, 600), exact_above=1e-3)
+    compiled = _ga(robot, ref, scm)
+    n = len(ref.q[0])
+    rng = np.random.default_rng(12)
+    diagonal = np.zeros((6, 2, n, n))  # decoupled gains: the twist's error stays in the twist
+    for c in range(6):
+        for m in range(2):
+            diagonal[c, m][np.diag_indices(n)] = rng.uniform(0.2, 1.0, n) * (5000.0 if m == 0 else 300.0)
+    genes = diagonal.reshape(6, -1)
+    k = 20
+    twist = n - 1
+    assert np.all(robot.tip_jacobian(ref.q[k : k + 21])[:, :, twist] == 0.0)
+    q0 = ref.q[k].copy()
+    q0[twist] += 0.3  # rad: far outside a 1 mm region if it counted
+    inside = compiled.predict(k, q0, ref.qd[k], genes)
+    compiled._ga.exact_above = 0.0
+    never = compiled.predict(k, q0, ref.qd[k], genes)
+    np.testing.assert_array_equal(inside, never)
+    compiled._ga.prediction = PREDICTIONS["exact"]
+    exact = compiled.predict(k, q0, ref.qd[k], genes)
+    assert_close(inside, exact, rtol=1e-4, atol=1e-12)
+
+
 # ---------------------------------------------------------------------------------------------
 # Whole activations and runs
 # ---------------------------------------------------------------------------------------------

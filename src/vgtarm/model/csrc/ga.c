@@ -407,6 +407,8 @@ typedef struct {
     float *off_f;        /* (H+1, 3) tip offsets of the window                                    */
     float *coef;         /* (H, 3, nj, nj) -H[k][l][m] for m > l, -H/2 for m = l (0 below), per step  */
     unsigned char *row_used; /* (3, nj) row l of axis k has a nonzero coefficient somewhere in the window */
+    int *moves;          /* (nj) -1 if joint i moves the tip somewhere in the window (a nonzero in its  */
+                         /*   column of J or its row of H), else 0: only these count for the region   */
     float *lo, *step, *hi; /* 8-bit genes in the prediction: lo + code * step in single precision, at */
                            /*   most hi, hi for the top code (see gains_from_bytes)                    */
     int avx2;            /* the CPU has AVX2 (gains_from_bytes_avx2)                                 */
@@ -480,7 +482,7 @@ static inline __attribute__((always_inline)) void block_kernel(const predictor *
         _Pragma("GCC unroll 16") for (int i = 0; i < nj; ++i) {
             E[i] = E[i] + dt * Ed[i] + r[i];
             Ed[i] = Ed[i] - dt * a[i] + s[i];
-            norm2 += E[i] * E[i];
+            norm2 += (vf)((vi)(E[i] * E[i]) & x->moves[i]);
         }
         const float *J = x->jac_f + (j + 1) * 3 * nj, *off = x->off_f + (j + 1) * 3;
         vf t[3];
@@ -720,6 +722,7 @@ static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *
     x->jac_f = malloc(sizeof(float) * (size_t)((g->horizon + 1) * 3 * nj));
     x->off_f = malloc(sizeof(float) * (size_t)((g->horizon + 1) * 3));
     x->row_used = calloc((size_t)(3 * nj), 1);
+    x->moves = calloc((size_t)nj, sizeof(int));
     x->coef = NULL;
     if (g->n_bits == 8 && g->prediction != VGT_PREDICT_EXACT) {
         x->lo = malloc(sizeof(float) * (size_t)g->n_genes);
@@ -731,7 +734,7 @@ static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *
         x->avx2 = __builtin_cpu_supports("avx2");
 #endif
     }
-    if (!x->r || !x->s || !x->jac_f || !x->off_f || !x->row_used) return VGT_NO_MEMORY;
+    if (!x->r || !x->s || !x->jac_f || !x->off_f || !x->row_used || !x->moves) return VGT_NO_MEMORY;
     x->sc = calloc((size_t)x->threads, sizeof(scratch));
     if (!x->sc) return VGT_NO_MEMORY;
     x->n_scratch = x->threads;
@@ -761,8 +764,13 @@ static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *
                             double h = pb->H_d[(j * 3 + k) * nn + l * nj + m];
                             x->coef[((j - 1) * 3 + k) * nn + l * nj + m] = (float)((l == m ? -0.5 : -1.0) * h);
                             x->row_used[k * nj + l] |= h != 0.0;
+                            if (h != 0.0) x->moves[l] = x->moves[m] = -1;
                         }
         }
+        /* the tip map is exact in the joints that do not move the tip (the twist of the paper's
+         * robot, whose axis holds the tip): their errors do not count for the trust region */
+        for (long i = 0; i < (g->horizon + 1) * 3 * nj; ++i)
+            if (pb->J_d[i] != 0.0) x->moves[i % nj] = -1;
     }
     for (long j = 0; j < g->horizon; ++j)
         for (int i = 0; i < nj; ++i) {
@@ -794,6 +802,7 @@ static void predictor_free(predictor *x)
     }
     free(x->sc);
     free(x->row_used);
+    free(x->moves);
     free(x->coef);
 }
 
