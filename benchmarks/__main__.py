@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import sys
 
-from . import bench_ga, bench_ik, bench_model, bench_mujoco, bench_sim, bench_study
-from .common import machine
+from vgtarm._entry import single_threaded_blas
+
+single_threaded_blas()  # as the vgtarm command does, before NumPy is imported
+
+from . import bench_ga, bench_ik, bench_model, bench_mujoco, bench_sim, bench_study  # noqa: E402
+from .common import machine  # noqa: E402
 
 MODULES = {
     "model": bench_model,

@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
-import numpy as np
-import pytest
+from vgtarm._entry import single_threaded_blas
 
-import vgtarm
-from vgtarm.model.assembly import triangle_margins
+single_threaded_blas()  # as the vgtarm command does, before NumPy is imported
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+import vgtarm  # noqa: E402
+from vgtarm.model.assembly import triangle_margins  # noqa: E402
 
 #: Step of central finite differences: about eps**(1/3), the best balance of truncation and
 #: round-off for first derivatives.

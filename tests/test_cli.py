@@ -58,6 +58,16 @@ def test_bad_usage_exits_2(capsys):
     assert info.value.code == 2
 
 
+@pytest.mark.parametrize("options", [["--force"], ["--controll", "scm"]])
+def test_abbreviated_options_are_refused(capsys, options):
+    """An abbreviation is a usage error, not a guess: ``--force`` once ran ``--force-sensor``."""
+    option = options[0]
+    with pytest.raises(SystemExit) as info:
+        main(["simulate", "--case", "2", *options])
+    assert info.value.code == 2
+    assert f"unrecognized arguments: {option}" in capsys.readouterr().err
+
+
 def test_simulate_writes_summary_timeseries_and_figure(capsys, tmp_path):
     out_dir = tmp_path / "run"
     status, out, _ = run(

@@ -66,8 +66,27 @@ def _on_late_interrupt(signum: int, frame: FrameType | None) -> None:
     _end_interrupted()
 
 
+#: Thread counts of NumPy's BLAS, set to one unless the user set them (see single_threaded_blas).
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def single_threaded_blas() -> None:
+    """Ask NumPy's BLAS for one thread, unless the environment already says otherwise; only
+    effective before NumPy is imported.
+
+    vgtarm's matrices are small, so BLAS threads never pay; but once a NumPy call has woken them,
+    OpenBLAS's threads spin for a while, and on a small machine they take the cores the compiled
+    loop and the GA's threads need (case 2 with the tool force under switching control: 1.92 s with
+    spinning BLAS threads, 1.49 s without, in the same benchmark). :func:`vgtarm.simulate` also limits
+    BLAS to one thread while it runs (threadpoolctl), but that cannot stop threads already spinning.
+    """
+    for name in BLAS_THREAD_VARIABLES:
+        os.environ.setdefault(name, "1")
+
+
 def main() -> int:
     """Run the ``vgtarm`` command line with Ctrl-C handled from the first moment; its exit status."""
+    single_threaded_blas()
     ours = signal.getsignal(signal.SIGINT) is signal.default_int_handler  # not when started ignoring it
     if ours:
         signal.signal(signal.SIGINT, _on_start_up_interrupt)

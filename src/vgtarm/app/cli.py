@@ -15,7 +15,7 @@ import select
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import NoReturn
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -375,7 +375,12 @@ def _add_config(parser: argparse.ArgumentParser) -> None:
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse whose usage errors echo a user's text escaped and cut (subcommands inherit it)."""
+    """argparse whose usage errors echo a user's text escaped and cut, and which takes no
+    abbreviated options (``--force`` silently meant ``--force-sensor``); subcommands inherit it."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
         self.print_usage(sys.stderr)

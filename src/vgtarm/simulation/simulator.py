@@ -108,6 +108,9 @@ def _blas_on_one_thread(function: Callable[_P, _R]) -> Callable[_P, _R]:
     spin for a while after each call, and on a small machine they take the cores that the compiled
     loop and the GA's threads need: on 2 cores, case 1 under switching control took 58 ms instead
     of 45 (median of 15), and a GA activation could wait for a spinning thread for milliseconds.
+    Threads that a NumPy call woke before the run may still spin for a while; the ``vgtarm``
+    command therefore also asks for one BLAS thread before NumPy loads
+    (:func:`vgtarm._entry.single_threaded_blas`).
     """
 
     @functools.wraps(function)
