@@ -692,8 +692,10 @@ static int predict(const vgt_model *m, const vgt_settings *s, const vgt_ga_setti
     const int threads = x->threads < n_blocks ? x->threads : (int)n_blocks;
     int failed = 0;
     /* the blocks are independent (each candidate's cost depends on its own lane only), so any
-     * split between threads gives the same costs bit for bit */
-#pragma omp parallel for num_threads(threads) schedule(static) if (threads > 1) reduction(| : failed)
+     * split between threads gives the same costs bit for bit; they are handed out one at a time,
+     * so that a thread the system holds back delays only the block it has (and blocks with many
+     * exact steps even out) */
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 1) if (threads > 1) reduction(| : failed)
     for (long b = 0; b < n_blocks; ++b) {
 #ifdef _OPENMP
         scratch *sc = x->sc + omp_get_thread_num();
