@@ -330,6 +330,28 @@ def test_trust_region_falls_back_to_the_exact_map(lib, robot):
     assert np.max(np.abs(far[ok] - exact[ok]) / exact[ok]) > 1e-3  # why the fallback exists
 
 
+def test_tip_derivatives_are_computed_in_c_for_the_rows_a_window_needs(lib, robot):
+    """The GA computes a window's tip offsets, Jacobians and Hessians row by row when first needed:
+    only those rows, equal to the model's batch evaluation (another route into the same
+    generated functions), and not again for an overlapping window."""
+    ref = reference(robot, duration=0.2)
+    scm = SwitchingControl.with_gains(5000.0, 300.0, ga=GAOptions(max_generations=2))
+    compiled = _ga(robot, ref, scm)
+    k, h = 30, scm.horizon
+    compiled.activate(k, ref.q[k] + 1e-4, ref.qd[k], seed=1)
+    window = np.arange(k, k + h + 1)
+    np.testing.assert_array_equal(np.flatnonzero(compiled._ready), window)
+    q_d = ref.q[window]
+    np.testing.assert_array_equal(compiled._arrays["J_d"][window], robot.tip_jacobian(q_d))
+    np.testing.assert_array_equal(compiled._arrays["H_d"][window], robot.tip_hessian(q_d))
+    tip_d = compiled._arrays["tip_d"][window]
+    assert_close(compiled._arrays["tip_offset"][window], tip_d - robot.tip_position(q_d), rtol=0, atol=1e-15)
+    compiled._arrays["J_d"][k] = np.nan  # computed once: a ready row is not recomputed
+    compiled.activate(k + 5, ref.q[k + 5] + 1e-4, ref.qd[k + 5], seed=1)
+    np.testing.assert_array_equal(np.flatnonzero(compiled._ready), np.arange(k, k + 5 + h + 1))
+    assert np.isnan(compiled._arrays["J_d"][k]).all()
+
+
 def test_trust_region_counts_only_the_joints_that_move_the_tip(lib, robot):
     """The twist does not move the tip, so the tip map is exact in it: a large twist error alone
     keeps a candidate inside the region (the same cost as the map without a region, bit for bit),

@@ -41,7 +41,7 @@ INTEGRATOR_CODES = {name.removeprefix("VGT_").lower(): code for name, code in en
 OBSERVER_CODES = {name.removeprefix("VGT_OBSERVER_").lower(): code for name, code in enum("vgt_observer").items()}
 
 #: The generated functions the loop calls, by field of ``vgt_model``.
-_MODEL_FIELDS = ("cfc", "fd", "tip_state", "tip", "id", "jac")
+_MODEL_FIELDS = ("cfc", "fd", "tip_state", "tip", "id", "jac", "tip_hessian")
 
 
 def _ptr(array: Array) -> Any:
@@ -257,7 +257,6 @@ class ClosedLoopDriver:
             if key not in self._settings:
                 self._settings[key] = one.struct(arrays.n_joints, arrays.n_margins)
             structs.append(self._settings[key])
-        ga.ensure_window(k0, k1 - 1)
         kp = np.ascontiguousarray(Kp, dtype=np.float64)
         kv = np.ascontiguousarray(Kv, dtype=np.float64)
         stop = ffi().new("long *")
@@ -389,9 +388,9 @@ class CompiledGA:
         exact_above: joint-error norm above which a candidate is predicted exactly (0: never).
         p_ctrl: the controller's parameter vector.
         q_d, qd_d, qdd_d: ``(N, n)`` joint reference; ``tip_d`` ``(N, 3)`` desired tip.
-        derivatives: maps a slice of rows of the reference to ``tip_d - P^(q_d)`` ``(m, 3)``, the
-            model's tip Jacobian ``(m, 3, n)`` and (with ``quadratic``) Hessian ``(m, 3, n, n)`` at
-            ``q_d``; called for blocks of rows as activations first need them.
+        quadratic: whether the prediction needs the tip Hessian. The tip offsets ``tip_d - P^(q_d)``
+            and the model's tip Jacobian and Hessian at ``q_d`` are computed in C, row by row, the
+            first time an activation's window needs them (``ensure_rows`` in ``csrc/ga.c``).
         threads: threads that predict a generation's candidates (default :func:`ga_threads`);
             any count gives the same activation bit for bit.
     """
@@ -418,7 +417,6 @@ class CompiledGA:
         qd_d: Array,
         qdd_d: Array,
         tip_d: Array,
-        derivatives: Callable[[slice], tuple[Array, Array, Array | None]],
         quadratic: bool,
         threads: int | None = None,
     ) -> None:
@@ -445,9 +443,7 @@ class CompiledGA:
                 H_d=np.zeros((n, 3, n_joints, n_joints) if quadratic else 1),
             ).items()
         }
-        self._derivatives = derivatives
-        self._quadratic = quadratic
-        self._ready = np.zeros(-(-n // self.BLOCK), dtype=bool)
+        self._ready = np.zeros(n, dtype=np.uint8)  # rows whose tip derivatives ga.c has computed
         self._initial = pack_bits(np.atleast_2d(initial_bits), words)
         self._settings = ffi().new("vgt_settings *", {"n_joints": n_joints, "dt": dt})
         self._ga = ffi().new(
@@ -480,34 +476,15 @@ class CompiledGA:
         self._problem.qd0 = ffi().cast("double *", self._state[1:2].ctypes.data)
         self._base = {name: _ptr(self._arrays[name]) for name in ("q_d", "qd_d", "qdd_d", "tip_d", "tip_offset", "J_d")}
         self._base["H_d"] = _ptr(self._arrays["H_d"])
+        self._base["ready"] = ffi().cast("unsigned char *", self._ready.ctypes.data)
         self._row = {"q_d": n_joints, "qd_d": n_joints, "qdd_d": n_joints, "tip_d": 3, "tip_offset": 3}
         self._row["J_d"] = 3 * n_joints
         self._row["H_d"] = 3 * n_joints * n_joints if quadratic else 0
-
-    #: Rows of the reference whose tip derivatives are evaluated together.
-    BLOCK = 256
-
-    def _ensure(self, first: int, last: int) -> None:
-        """Evaluate the tip derivatives of the blocks that hold rows ``first .. last``."""
-        for block in range(first // self.BLOCK, last // self.BLOCK + 1):
-            if self._ready[block]:
-                continue
-            rows = slice(block * self.BLOCK, min((block + 1) * self.BLOCK, self.n))
-            offset, J, H = self._derivatives(rows)
-            self._arrays["tip_offset"][rows] = offset
-            self._arrays["J_d"][rows] = J
-            if self._quadratic and H is not None:
-                self._arrays["H_d"][rows] = H
-            self._ready[block] = True
-
-    def ensure_window(self, first: int, last: int) -> None:
-        """Make the tip derivatives of every window starting at samples ``first .. last`` ready."""
-        self._ensure(first, min(last + self.horizon, self.n - 1))
+        self._row["ready"] = 1
 
     def _window(self, k: int, q0: Array, qd0: Array) -> int:
         """Point the problem at samples ``k .. k+h``; returns the horizon ``h`` left."""
         horizon = min(self.horizon, self.n - 1 - k)
-        self._ensure(k, k + horizon)
         self._state[0], self._state[1] = q0, qd0
         for name, base in self._base.items():
             setattr(self._problem, name, base + k * self._row[name])

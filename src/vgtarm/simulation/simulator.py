@@ -523,11 +523,6 @@ def _compiled_ga(
         qd_d=inp["qd_d"],
         qdd_d=inp["qdd_d"],
         tip_d=inp["tip_d"],
-        derivatives=lambda rows: (
-            inp["tip_d"][rows] - model.tip_position(q_d[rows]),
-            model.tip_jacobian(q_d[rows]),
-            model.tip_hessian(q_d[rows]) if quadratic else None,
-        ),
         quadratic=quadratic,
     )
 

@@ -707,6 +707,50 @@ static int predict(const vgt_model *m, const vgt_settings *s, const vgt_ga_setti
     return failed ? VGT_FUNCTION_FAILED : VGT_DONE;
 }
 
+/* The tip derivatives of the window's rows that are not ready yet (pb->ready), from the model's
+ * generated functions at q_d with the controller's parameters: each row of a run is computed the
+ * first time a window needs it, so a run with few activations computes few rows. */
+static int ensure_rows(const vgt_model *m, const vgt_ga_problem *pb, int nj, long rows, int quadratic)
+{
+    if (!pb->ready) return VGT_DONE;
+    const vgt_call *calls[3] = {&m->tip, &m->jac, &m->tip_hessian};
+    vgt_int sz_arg = 2, sz_res = 2, sz_iw = 1, sz_w = 1;
+    for (int f = 0; f < 3; ++f) {
+        if (calls[f]->sz_arg > sz_arg) sz_arg = calls[f]->sz_arg;
+        if (calls[f]->sz_res > sz_res) sz_res = calls[f]->sz_res;
+        if (calls[f]->sz_iw > sz_iw) sz_iw = calls[f]->sz_iw;
+        if (calls[f]->sz_w > sz_w) sz_w = calls[f]->sz_w;
+    }
+    const double **arg = malloc(sizeof(double *) * (size_t)sz_arg);
+    double **res = malloc(sizeof(double *) * (size_t)sz_res);
+    vgt_int *iw = malloc(sizeof(vgt_int) * (size_t)sz_iw);
+    double *w = malloc(sizeof(double) * (size_t)(sz_w + 3 * nj));
+    int status = arg && res && iw && w ? VGT_DONE : VGT_NO_MEMORY;
+    for (long j = 0; j < rows && status == VGT_DONE; ++j) {
+        if (pb->ready[j]) continue;
+        double tip[3], *angular = w + sz_w;
+        arg[0] = pb->q_d + (long)nj * j;
+        arg[1] = pb->p_ctrl;
+        res[0] = tip;
+        if (m->tip.f(arg, res, iw, w, 0)) status = VGT_FUNCTION_FAILED;
+        res[0] = pb->J_d + 3L * nj * j;
+        res[1] = angular;
+        if (status == VGT_DONE && m->jac.f(arg, res, iw, w, 0)) status = VGT_FUNCTION_FAILED;
+        if (status == VGT_DONE && quadratic) {
+            res[0] = pb->H_d + 3L * nj * nj * j;
+            if (m->tip_hessian.f(arg, res, iw, w, 0)) status = VGT_FUNCTION_FAILED;
+        }
+        if (status != VGT_DONE) break;
+        for (int k = 0; k < 3; ++k) pb->tip_offset[3 * j + k] = pb->tip_d[3 * j + k] - tip[k];
+        pb->ready[j] = 1;
+    }
+    free((void *)arg);
+    free(res);
+    free(iw);
+    free(w);
+    return status;
+}
+
 static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *s, const vgt_ga_settings *g,
                           const vgt_ga_problem *pb)
 {
@@ -753,6 +797,8 @@ static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *
             return VGT_NO_MEMORY;
     }
     if (g->prediction != VGT_PREDICT_EXACT) {
+        int status = ensure_rows(m, pb, nj, g->horizon + 1, x->quadratic);
+        if (status != VGT_DONE) return status;
         for (long i = 0; i < (g->horizon + 1) * 3 * nj; ++i) x->jac_f[i] = (float)pb->J_d[i];
         for (long i = 0; i < (g->horizon + 1) * 3; ++i) x->off_f[i] = (float)pb->tip_offset[i];
         if (x->quadratic) {
@@ -1121,6 +1167,7 @@ int vgt_simulate_switching(const vgt_model *m, const vgt_settings *s, const vgt_
             pb.tip_offset = base->tip_offset + 3 * k;
             pb.J_d = base->J_d + 3L * nj * k;
             if (g.prediction == VGT_PREDICT_QUADRATIC) pb.H_d = base->H_d + 3L * nn * k;
+            if (base->ready) pb.ready = base->ready + k;
             g.horizon = horizon;
             /* after a stall (a busy machine, see predict_watched) a spell of activations on one
              * thread, doubling while stalls repeat: a rare hiccup costs a few activations' threads,

@@ -25,6 +25,7 @@ typedef struct {
     vgt_call tip;       /* q, p -> tip                                      */
     vgt_call id;        /* q, qd, qdd, f, p -> F (inverse dynamics)         */
     vgt_call jac;       /* q, p -> J_P, J_W                                 */
+    vgt_call tip_hessian; /* q, p -> H (3, nj, nj), row-major: tip Hessian  */
 } vgt_model;
 
 /* What the controller adds to computed force control to cancel external efforts. */
@@ -161,9 +162,12 @@ typedef struct {
     const double *q0, *qd0;                 /* (nj) state at sample k                          */
     const double *q_d, *qd_d, *qdd_d;       /* (H+1, nj) reference                             */
     const double *tip_d;                    /* (H+1, 3) desired tip                            */
-    const double *tip_offset;               /* (H+1, 3) tip_d - P^(q_d) (zero for exact kinematics) */
-    const double *J_d;                      /* (H+1, 3, nj) tip Jacobian of the model at q_d   */
-    const double *H_d;                      /* (H+1, 3, nj, nj) tip Hessian at q_d (QUADRATIC) */
+    double *tip_offset;                     /* (H+1, 3) tip_d - P^(q_d) (zero for exact kinematics) */
+    double *J_d;                            /* (H+1, 3, nj) tip Jacobian of the model at q_d   */
+    double *H_d;                            /* (H+1, 3, nj, nj) tip Hessian at q_d (QUADRATIC) */
+    unsigned char *ready;                   /* (H+1) 1 where the three rows above are computed: */
+                                            /* the GA computes the others when it needs them   */
+                                            /* and sets the flag (NULL: all given)              */
 } vgt_ga_problem;
 
 typedef struct {
