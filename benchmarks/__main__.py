@@ -8,7 +8,7 @@ from vgtarm._entry import single_threaded_blas
 
 single_threaded_blas()  # as the vgtarm command does, before NumPy is imported
 
-from . import bench_ga, bench_ik, bench_model, bench_mujoco, bench_sim, bench_study  # noqa: E402
+from . import bench_ga, bench_ik, bench_model, bench_mujoco, bench_reproduce, bench_sim, bench_study  # noqa: E402
 from .common import machine  # noqa: E402
 
 MODULES = {
@@ -18,6 +18,7 @@ MODULES = {
     "ik": bench_ik,
     "study": bench_study,
     "mujoco": bench_mujoco,
+    "reproduce": bench_reproduce,
 }
 
 

@@ -18,8 +18,10 @@ from vgtarm.app.geometry import mechanism_geometry
 from vgtarm.app.html_report import (
     PLOTLY_JS,
     decimate_min_max,
+    figure_errors,
     load_runs,
     mechanism_traces,
+    page_figures,
     runs_from_reproduction,
     write_html_report,
 )
@@ -103,6 +105,59 @@ def test_min_max_decimation_keeps_peaks_ends_and_order():
     np.testing.assert_array_equal(decimate_min_max(t[:100], y[:100], 500), np.arange(100))
     with pytest.raises(InputError, match="max_points = 2"):
         decimate_min_max(t, y, 2)
+
+
+def _decimate_min_max_loop(y: np.ndarray, max_points: int) -> np.ndarray:
+    """The first implementation of :func:`decimate_min_max`, one bucket at a time: the reference."""
+    n = len(y)
+    if n <= max_points:
+        return np.arange(n)
+    buckets = (max_points - 2) // 2
+    edges = np.linspace(1, n - 1, buckets + 1).astype(np.int64)
+    keep = [0, n - 1]
+    finite = np.where(np.isfinite(y), y, np.nan)
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        chunk = finite[lo:hi]
+        if hi <= lo or np.isnan(chunk).all():
+            continue
+        keep += [lo + int(np.nanargmin(chunk)), lo + int(np.nanargmax(chunk))]
+    return np.unique(np.array(keep, dtype=np.int64))
+
+
+@pytest.mark.parametrize("n", [0, 1, 4, 5, 9, 10, 11, 37, 500, 501, 1203, 20_011])
+@pytest.mark.parametrize("max_points", [4, 5, 10, 101, 1200])
+def test_min_max_decimation_equals_the_loop_over_buckets(n, max_points):
+    """The vectorised buckets give the loop's indices on data with NaN, inf, ties and -0.0."""
+    rng = np.random.default_rng(n * 7919 + max_points)
+    for trial in range(4):
+        y = rng.standard_normal(n)
+        if trial >= 1:  # ties, signed zeros and runs of non-finite samples (whole buckets of them)
+            y = np.round(y, 1) * (1 - 2 * (rng.random(n) < 0.5))
+            y[rng.random(n) < 0.1] = np.nan
+            y[rng.random(n) < 0.05] = np.inf
+            y[rng.random(n) < 0.05] = -np.inf
+            if n > 20:
+                start = int(rng.integers(0, n - 20))
+                y[start : start + 20] = [np.nan, np.inf, -np.inf, -0.0][trial]
+        if trial == 3 and n:
+            y[:] = np.nan
+        expected = _decimate_min_max_loop(y, max_points)
+        index = decimate_min_max(np.arange(n, dtype=float), y, max_points)
+        np.testing.assert_array_equal(index, expected, err_msg=f"trial {trial}")
+        assert index.dtype == np.int64 or n <= max_points
+
+
+def test_page_figures_are_what_plotlys_validation_makes_of_them(robot, runs):
+    """The page writes its figures as plain dicts (no per-property validation): Plotly's validation
+    would change nothing in them, template, typed arrays and animation frames included."""
+    figures = page_figures(robot, runs_from_reproduction(runs), max_points=300, max_frames=5)
+    assert [div for div, _, _ in figures] == ["tip-error", "efforts", "paths", "mechanism-1"]
+    for div, _, figure in figures:
+        assert figure_errors(figure) == [], div
+    assert len(figures[-1][2]["frames"]) == 5
+    # and the check sees a difference: a NumPy array Plotly would write as a typed array, no template
+    wrong = figure_errors({"data": [{"type": "scatter", "x": np.arange(3.0)}], "layout": {}})
+    assert any(w.startswith("figure.data[0].x:") for w in wrong) and any("template" in w for w in wrong)
 
 
 def test_page_mechanism_traces_are_the_drawn_geometry(robot):

@@ -179,16 +179,17 @@ def test_efforts_forces_and_twin_torque(scm: SimulationResult) -> None:
     assert len(twins) == 1
     assert len(twins[0].get_lines()) == 1
     assert "N m" in twins[0].get_ylabel()
-    assert len(ax.patches) == 1  # one shaded GA span (samples 40-59)
-    x0, x1 = ax.patches[0].get_extents().x0, ax.patches[0].get_extents().x1
-    assert x1 > x0
+    (shading,) = ax.collections  # the GA spans, one full-height bar each: samples 40-59
+    (bar,) = shading.get_paths()
+    np.testing.assert_allclose([bar.vertices[:, 0].min(), bar.vertices[:, 0].max()], scm.t[[40, 60]], rtol=1e-12)
+    assert shading.get_transform().contains_branch_seperately(ax.transData) == (True, False)  # y: the axes' height
 
 
 def test_efforts_subset_of_joints(cfc: SimulationResult) -> None:
     ax = plot_efforts(cfc, joints=["s1", "p2"])
     assert [line.get_label() for line in ax.get_lines()] == ["F_s1", "F_p2"]
     assert len(ax.figure.axes) == 1  # no twist, no twin axis
-    assert len(ax.patches) == 0  # no GA span
+    assert not ax.collections and not ax.patches  # no GA span
 
 
 def test_joint_errors_units(scm: SimulationResult) -> None:

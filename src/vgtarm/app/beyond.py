@@ -93,45 +93,58 @@ def run_beyond(
     robot: Robot, reference: JointReference, folder: Path, *, seed: int, integrator: str, substeps: int
 ) -> dict[BeyondRun, SimulationResult]:
     """Run every :func:`beyond_runs` run on case 2's ``reference`` and save it under ``folder``."""
-    results: dict[BeyondRun, SimulationResult] = {}
-    for spec in beyond_runs():
-        options = dict(spec.options)
-        if spec.realistic:
-            options.update(
-                encoder_resolution=ENCODER_RESOLUTION, controller_model=robot.parameters.scaled(mass=MODEL_MASS)
+    return {
+        spec: run_beyond_one(robot, spec, reference, folder, seed=seed, integrator=integrator, substeps=substeps)
+        for spec in beyond_runs()
+    }
+
+
+def run_beyond_one(
+    robot: Robot,
+    spec: BeyondRun,
+    reference: JointReference,
+    folder: Path,
+    *,
+    seed: int,
+    integrator: str,
+    substeps: int,
+) -> SimulationResult:
+    """Run ``spec`` on case 2's ``reference`` and save it under ``folder``; a run that fails with
+    :class:`~vgtarm.errors.SimulationError` is kept (its samples up to the failure) and saved too."""
+    options = dict(spec.options)
+    if spec.realistic:
+        options.update(encoder_resolution=ENCODER_RESOLUTION, controller_model=robot.parameters.scaled(mass=MODEL_MASS))
+    try:
+        if spec.force is not None:
+            result = simulate(
+                robot,
+                reference,
+                case_study(2).controller(spec.controller),
+                external_force=spec.force,
+                seed=seed,
+                integrator=integrator,
+                substeps=substeps,
+                metadata={"case": 2},
+                **options,
             )
-        try:
-            if spec.force is not None:
-                result = simulate(
-                    robot,
-                    reference,
-                    case_study(2).controller(spec.controller),
-                    external_force=spec.force,
-                    seed=seed,
-                    integrator=integrator,
-                    substeps=substeps,
-                    metadata={"case": 2},
-                    **options,
-                )
-            else:
-                result = run_case(
-                    robot,
-                    2,
-                    controller=spec.controller,
-                    external_force=True,
-                    integrator=integrator,
-                    substeps=substeps,
-                    seed=seed,
-                    reference=reference,
-                    **options,
-                )
-        except SimulationError as error:  # a finding, not a failure of the report: keep the samples
-            if not isinstance(error.result, SimulationResult):
-                raise
-            result = error.result
-        result.save(folder / spec.folder)
-        results[spec] = result
-    return results
+        else:
+            result = run_case(
+                robot,
+                2,
+                controller=spec.controller,
+                external_force=True,
+                integrator=integrator,
+                substeps=substeps,
+                seed=seed,
+                reference=reference,
+                **options,
+            )
+    except SimulationError as error:  # a finding, not a failure of the report: keep the samples
+        if not isinstance(error.result, SimulationResult):
+            raise
+        result = error.result
+    result.save(folder / spec.folder)
+    return result
 
 
 def _mm(value: float | None) -> str:

@@ -16,7 +16,9 @@ Light enough to open at once:
 
 from __future__ import annotations
 
+import base64
 import html
+import json
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -26,6 +28,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .. import errors
 from ..errors import InputError
 from ..fileio import atomic_write_text
 from ..model.parameters import EFFORT_UNITS, JOINT_NAMES
@@ -87,15 +90,21 @@ def decimate_min_max(t: ArrayLike, y: ArrayLike, max_points: int = MAX_POINTS) -
     if n <= max_points:
         return np.arange(n)
     buckets = (max_points - 2) // 2
+    # bucket k holds samples edges[k] .. edges[k + 1] - 1, at least 2 of them as n > max_points
     edges = np.linspace(1, n - 1, buckets + 1).astype(np.int64)
-    keep = [0, n - 1]
-    finite = np.where(np.isfinite(ya), ya, np.nan)
-    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
-        chunk = finite[lo:hi]
-        if hi <= lo or np.isnan(chunk).all():
-            continue
-        keep += [lo + int(np.nanargmin(chunk)), lo + int(np.nanargmax(chunk))]
-    return np.unique(np.array(keep, dtype=np.int64))
+    inner = ya[edges[0] : edges[-1]]
+    starts = edges[:-1] - edges[0]
+    bucket = np.repeat(np.arange(buckets), np.diff(edges))
+    index = np.arange(edges[0], edges[-1])
+    finite = np.isfinite(inner)  # non-finite samples never count (as NaN for nanargmin/nanargmax)
+    low, high = np.where(finite, inner, np.inf), np.where(finite, inner, -np.inf)
+    smallest, largest = np.minimum.reduceat(low, starts), np.maximum.reduceat(high, starts)
+    # the first index of each bucket's extreme: the smallest index whose value equals it
+    first_min = np.minimum.reduceat(np.where(low == smallest[bucket], index, n), starts)
+    first_max = np.minimum.reduceat(np.where(high == largest[bucket], index, n), starts)
+    known = np.isfinite(smallest)  # a bucket of only non-finite samples gives nothing
+    keep = np.concatenate(([0, n - 1], first_min[known], first_max[known]))
+    return np.unique(keep.astype(np.int64))
 
 
 def _series(result: SimulationResult, y: Array, max_points: int) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
@@ -104,65 +113,103 @@ def _series(result: SimulationResult, y: Array, max_points: int) -> tuple[NDArra
     return result.t[index].astype(np.float32), y[index].astype(np.float32)
 
 
-def _error_figure(runs: Sequence[ReportRun], max_points: int) -> Any:
-    import plotly.graph_objects as go
+def typed_array(values: ArrayLike, dtype: type[np.floating[Any]] = np.float32) -> dict[str, str]:
+    """``values`` as a plotly.js typed array (``{"dtype": "f4", "bdata": <base64>}``, little-endian),
+    the form in which Plotly writes a NumPy array into a page."""
+    array = np.ascontiguousarray(values, dtype=np.dtype(dtype).newbyteorder("<")).ravel()
+    return {"dtype": f"f{array.itemsize}", "bdata": base64.b64encode(array.tobytes()).decode("ascii")}
 
-    fig = go.Figure()
+
+def _template(name: str = "plotly_white") -> dict[str, Any]:
+    """The layout template ``name`` as Plotly writes it into a figure."""
+    import plotly.io as pio
+
+    return dict(pio.templates[name].to_plotly_json())
+
+
+def _layout(layout: dict[str, Any]) -> dict[str, Any]:
+    """A figure's layout with Plotly's ``plotly_white`` template, ready for the page.
+
+    The page's figures are plain dicts, written without Plotly's per-property validation (most of
+    the page's time went there); :func:`figure_errors` checks them with that validation."""
+    return {"template": _template(), **layout}
+
+
+def figure_errors(figure: dict[str, Any]) -> list[str]:
+    """Where Plotly's validation would change the figure ``figure`` (a dict of the page): the paths
+    of the entries that differ between it and ``plotly.graph_objects.Figure(figure)``; empty when
+    the figure is valid as written. For tests: it costs what the dicts save."""
+    import plotly.graph_objects as go
+    import plotly.io as pio
+
+    written = json.loads(pio.to_json(figure, validate=False))
+    validated = json.loads(pio.to_json(go.Figure(figure), validate=False))
+    return _differences(written, validated, "figure")
+
+
+def _differences(a: Any, b: Any, where: str) -> list[str]:
+    if isinstance(a, dict) and isinstance(b, dict):
+        keys = sorted(set(a) | set(b))
+        return [d for k in keys for d in _differences(a.get(k, "<missing>"), b.get(k, "<missing>"), f"{where}.{k}")]
+    if isinstance(a, list) and isinstance(b, list) and len(a) == len(b):
+        return [d for i, (x, y) in enumerate(zip(a, b, strict=True)) for d in _differences(x, y, f"{where}[{i}]")]
+    return [] if a == b else [f"{where}: {errors.cut(repr(a))} written, {errors.cut(repr(b))} validated"]
+
+
+def _error_figure(runs: Sequence[ReportRun], max_points: int) -> dict[str, Any]:
+    data = []
     for i, run in enumerate(runs):
         t, e = _series(run.result, run.result.tip_error * MM, max_points)
-        fig.add_trace(
-            go.Scatter(x=t, y=e, name=run.label, mode="lines", line={"color": COLOURS[i % len(COLOURS)], "width": 1.2})
-        )
-    fig.update_layout(
-        title="Tip error |P(q_d) - P(q)| (click a legend entry to hide or show a run; drag to zoom)",
-        xaxis_title="time (s)",
-        yaxis={"title": "tip error (mm)", "type": "log", "exponentformat": "power"},
-        height=480,
-        template="plotly_white",
-        legend={"font": {"size": 10}},
+        data.append(
+            {"type": "scatter", "x": typed_array(t), "y": typed_array(e), "name": run.label, "mode": "lines",
+             "line": {"color": COLOURS[i % len(COLOURS)], "width": 1.2}}
+        )  # fmt: skip
+    layout = _layout(
+        {
+            "title": {"text": "Tip error |P(q_d) - P(q)| (click a legend entry to hide or show a run; drag to zoom)"},
+            "xaxis": {"title": {"text": "time (s)"}},
+            "yaxis": {"title": {"text": "tip error (mm)"}, "type": "log", "exponentformat": "power"},
+            "height": 480,
+            "legend": {"font": {"size": 10}},
+        }
     )
-    return fig
+    return {"data": data, "layout": layout}
 
 
-def _effort_figure(runs: Sequence[ReportRun], max_points: int) -> Any:
-    import plotly.graph_objects as go
+def _effort_figure(runs: Sequence[ReportRun], max_points: int) -> dict[str, Any]:
     from plotly.subplots import make_subplots
 
     n = runs[0].result.effort.shape[1]
-    fig = make_subplots(rows=n, cols=1, shared_xaxes=True, vertical_spacing=0.012)
+    # the panels' axes as Plotly's subplots lay them out (a figure without traces is cheap to build)
+    grid = make_subplots(rows=n, cols=1, shared_xaxes=True, vertical_spacing=0.012)
+    for j in range(n):
+        grid.update_yaxes(title_text=f"{JOINT_NAMES[j]} ({EFFORT_UNITS[j]})", title_font={"size": 10}, row=j + 1, col=1)
+    grid.update_xaxes(title_text="time (s)", row=n, col=1)
+    axes = grid.to_plotly_json()["layout"]
+    data = []
     for i, run in enumerate(runs):
         colour = COLOURS[i % len(COLOURS)]
         for j in range(n):
             t, f = _series(run.result, run.result.effort[:, j], max_points)
-            fig.add_trace(
-                go.Scatter(
-                    x=t,
-                    y=f,
-                    name=run.label,
-                    legendgroup=run.label,
-                    showlegend=j == 0,
-                    mode="lines",
-                    line={"color": colour, "width": 1.0},
-                ),
-                row=j + 1,
-                col=1,
-            )
-    for j in range(n):
-        fig.update_yaxes(title_text=f"{JOINT_NAMES[j]} ({EFFORT_UNITS[j]})", title_font={"size": 10}, row=j + 1, col=1)
-    fig.update_xaxes(title_text="time (s)", row=n, col=1)
-    fig.update_layout(
-        title="Actuator efforts (legend toggles a run in every panel)",
-        height=150 * n + 120,
-        template="plotly_white",
-        legend={"font": {"size": 10}},
+            suffix = "" if j == 0 else str(j + 1)
+            data.append(
+                {"type": "scatter", "x": typed_array(t), "y": typed_array(f), "name": run.label,
+                 "legendgroup": run.label, "showlegend": j == 0, "mode": "lines",
+                 "line": {"color": colour, "width": 1.0}, "xaxis": "x" + suffix, "yaxis": "y" + suffix}
+            )  # fmt: skip
+    layout = _layout(
+        {
+            **{key: value for key, value in axes.items() if key != "template"},
+            "title": {"text": "Actuator efforts (legend toggles a run in every panel)"},
+            "height": 150 * n + 120,
+            "legend": {"font": {"size": 10}},
+        }
     )
-    return fig
+    return {"data": data, "layout": layout}
 
 
-def _path_figure(runs: Sequence[ReportRun], max_points: int) -> Any:
-    import plotly.graph_objects as go
-
-    fig = go.Figure()
+def _path_figure(runs: Sequence[ReportRun], max_points: int) -> dict[str, Any]:
+    data: list[dict[str, Any]] = []
     shown_desired: set[int] = set()
     for i, run in enumerate(runs):
         r = run.result
@@ -172,30 +219,34 @@ def _path_figure(runs: Sequence[ReportRun], max_points: int) -> Any:
             shown_desired.add(run.spec.case)
             d = (r.tip_desired[index] * MM).astype(np.float32)
             name = f"case {run.spec.case}: desired" if run.spec.case else f"{run.label}: desired"
-            fig.add_trace(
-                go.Scatter3d(
-                    x=d[:, 0], y=d[:, 1], z=d[:, 2], name=name, mode="lines", line={"color": "black", "width": 3}
-                )
-            )
+            data.append(
+                {"type": "scatter3d", **_xyz(d), "name": name, "mode": "lines",
+                 "line": {"color": "black", "width": 3}}
+            )  # fmt: skip
         a = (r.tip[index] * MM).astype(np.float32)
-        fig.add_trace(
-            go.Scatter3d(
-                x=a[:, 0],
-                y=a[:, 1],
-                z=a[:, 2],
-                name=run.label,
-                mode="lines",
-                line={"color": COLOURS[i % len(COLOURS)], "width": 2},
-            )
-        )
-    fig.update_layout(
-        title="Desired and actual tip paths (mm; drag to rotate)",
-        scene={"xaxis_title": "x (mm)", "yaxis_title": "y (mm)", "zaxis_title": "z (mm)", "aspectmode": "data"},
-        height=620,
-        template="plotly_white",
-        legend={"font": {"size": 10}},
+        data.append(
+            {"type": "scatter3d", **_xyz(a), "name": run.label, "mode": "lines",
+             "line": {"color": COLOURS[i % len(COLOURS)], "width": 2}}
+        )  # fmt: skip
+    layout = _layout(
+        {
+            "title": {"text": "Desired and actual tip paths (mm; drag to rotate)"},
+            "scene": {
+                "xaxis": {"title": {"text": "x (mm)"}},
+                "yaxis": {"title": {"text": "y (mm)"}},
+                "zaxis": {"title": {"text": "z (mm)"}},
+                "aspectmode": "data",
+            },
+            "height": 620,
+            "legend": {"font": {"size": 10}},
+        }
     )
-    return fig
+    return {"data": data, "layout": layout}
+
+
+def _xyz(points: NDArray[np.floating[Any]], dtype: type[np.floating[Any]] = np.float32) -> dict[str, dict[str, str]]:
+    """``x``, ``y``, ``z`` of a trace from points (M, 3), as typed arrays."""
+    return {axis: typed_array(points[:, k], dtype) for k, axis in enumerate("xyz")}
 
 
 def _polylines(pairs: Sequence[tuple[Array, Array]]) -> tuple[list[float | None], ...]:
@@ -268,7 +319,7 @@ def mechanism_traces(geometry: MechanismGeometry) -> list[dict[str, Any]]:
          "line": {"width": 2, "color": "#777777", "dash": "dash"}, "hoverinfo": "skip"},
         {"type": "scatter3d", "mode": "lines", "name": "end-effector (twist)", "x": ex, "y": ey, "z": ez,
          "line": {"width": 8, "color": "#6a3d9a"}, "hoverinfo": "skip"},
-        {"type": "mesh3d", "name": "plates", "x": vertices[:, 0], "y": vertices[:, 1], "z": vertices[:, 2],
+        {"type": "mesh3d", "name": "plates", **_xyz(vertices, np.float64),
          "i": i_, "j": j_, "k": k_, "color": "#6baed6", "opacity": 0.35, "hoverinfo": "skip"},
     ]  # fmt: skip
     for i, colour_name in enumerate(("#d62728", "#2ca02c", "#1f77b4")):
@@ -294,11 +345,11 @@ def _status(result: SimulationResult, k: int) -> str:
     return text
 
 
-def mechanism_figure(robot: Robot, run: ReportRun, *, max_frames: int = MAX_FRAMES, fps: float = 10.0) -> Any:
+def mechanism_figure(
+    robot: Robot, run: ReportRun, *, max_frames: int = MAX_FRAMES, fps: float = 10.0
+) -> dict[str, Any]:
     """The mechanism along ``run`` with a play button and a time slider (at most ``max_frames``
     frames at evenly spaced completed samples; playing at ``fps`` frames per second)."""
-    import plotly.graph_objects as go
-
     r = run.result
     n = r.completed
     samples = np.unique(np.linspace(0, n - 1, min(n, max_frames)).round().astype(np.int64))
@@ -307,98 +358,98 @@ def mechanism_figure(robot: Robot, run: ReportRun, *, max_frames: int = MAX_FRAM
     index = decimate_min_max(r.t[:n], r.tip_error[:n], MAX_POINTS)
     d, a = r.tip_desired[index] * MM, r.tip[index] * MM
     static = [
-        go.Scatter3d(x=d[:, 0], y=d[:, 1], z=d[:, 2], mode="lines", name="desired tip path",
-                     line={"color": "#1f77b4", "width": 3, "dash": "dash"}, hoverinfo="skip"),
-        go.Scatter3d(x=a[:, 0], y=a[:, 1], z=a[:, 2], mode="lines", name="actual tip path",
-                     line={"color": "#ff7f0e", "width": 3}, hoverinfo="skip"),
+        {"type": "scatter3d", **_xyz(d, np.float64), "mode": "lines", "name": "desired tip path",
+         "line": {"color": "#1f77b4", "width": 3, "dash": "dash"}, "hoverinfo": "skip"},
+        {"type": "scatter3d", **_xyz(a, np.float64), "mode": "lines", "name": "actual tip path",
+         "line": {"color": "#ff7f0e", "width": 3}, "hoverinfo": "skip"},
     ]  # fmt: skip
     moving = list(range(len(static), len(static) + len(first)))
     points = np.concatenate([g.points() for g in geometries]) * MM
     lo, hi = points.min(axis=0), points.max(axis=0)
     pad = 0.05 * float((hi - lo).max())
     frames = [
-        go.Frame(
-            name=str(i),
-            data=mechanism_traces(g),
-            traces=moving,
-            layout={"title": {"text": f"{run.label}: {_status(r, int(k))}"}},
-        )
+        {
+            "name": str(i),
+            "data": mechanism_traces(g),
+            "traces": moving,
+            "layout": {"title": {"text": f"{run.label}: {_status(r, int(k))}"}},
+        }
         for i, (g, k) in enumerate(zip(geometries, samples, strict=True))
     ]
-    fig = go.Figure(data=[*static, *first], frames=frames)
     step_ms = 1000.0 / fps
-    fig.update_layout(
-        title=f"{run.label}: {_status(r, int(samples[0]))}",
-        height=720,
-        template="plotly_white",
-        scene={
-            "xaxis": {"title": "x (mm)", "range": [lo[0] - pad, hi[0] + pad]},
-            "yaxis": {"title": "y (mm)", "range": [lo[1] - pad, hi[1] + pad]},
-            "zaxis": {"title": "z (mm)", "range": [lo[2] - pad, hi[2] + pad]},
-            "aspectmode": "manual",
-            "aspectratio": dict(zip("xyz", (hi - lo + 2 * pad) / float((hi - lo + 2 * pad).max()), strict=True)),
-            "camera": {"eye": {"x": 0.95, "y": -1.05, "z": 0.45}, "center": {"x": 0, "y": 0, "z": -0.05}},
-        },
-        margin={"l": 0, "r": 0, "t": 60, "b": 0},
-        legend={"font": {"size": 10}, "x": 0.0, "y": 1.0},
-        updatemenus=[
-            {
-                "type": "buttons",
-                "direction": "left",
-                "x": 0.0,
-                "y": 0.0,
-                "xanchor": "left",
-                "yanchor": "top",
-                "pad": {"t": 40},
-                "buttons": [
-                    {
-                        "label": "\u25b6 Play",
-                        "method": "animate",
-                        "args": [
-                            None,
-                            {
-                                "frame": {"duration": step_ms, "redraw": True},
-                                "fromcurrent": True,
-                                "transition": {"duration": 0},
-                                "mode": "immediate",
-                            },
-                        ],
-                    },
-                    {
-                        "label": "\u275a\u275a Pause",
-                        "method": "animate",
-                        "args": [[None], {"frame": {"duration": 0, "redraw": False}, "mode": "immediate"}],
-                    },
-                ],
-            }
-        ],
-        sliders=[
-            {
-                "active": 0,
-                "x": 0.16,
-                "len": 0.84,
-                "y": 0.0,
-                "pad": {"t": 30},
-                "currentvalue": {"prefix": "t = ", "suffix": " s"},
-                "steps": [
-                    {
-                        "label": f"{r.t[k]:.2f}",
-                        "method": "animate",
-                        "args": [
-                            [str(i)],
-                            {
-                                "frame": {"duration": 0, "redraw": True},
-                                "mode": "immediate",
-                                "transition": {"duration": 0},
-                            },
-                        ],
-                    }
-                    for i, k in enumerate(samples)
-                ],
-            }
-        ],
+    layout = _layout(
+        dict(
+            title={"text": f"{run.label}: {_status(r, int(samples[0]))}"},
+            height=720,
+            scene={
+                "xaxis": {"title": {"text": "x (mm)"}, "range": [lo[0] - pad, hi[0] + pad]},
+                "yaxis": {"title": {"text": "y (mm)"}, "range": [lo[1] - pad, hi[1] + pad]},
+                "zaxis": {"title": {"text": "z (mm)"}, "range": [lo[2] - pad, hi[2] + pad]},
+                "aspectmode": "manual",
+                "aspectratio": dict(zip("xyz", (hi - lo + 2 * pad) / float((hi - lo + 2 * pad).max()), strict=True)),
+                "camera": {"eye": {"x": 0.95, "y": -1.05, "z": 0.45}, "center": {"x": 0, "y": 0, "z": -0.05}},
+            },
+            margin={"l": 0, "r": 0, "t": 60, "b": 0},
+            legend={"font": {"size": 10}, "x": 0.0, "y": 1.0},
+            updatemenus=[
+                {
+                    "type": "buttons",
+                    "direction": "left",
+                    "x": 0.0,
+                    "y": 0.0,
+                    "xanchor": "left",
+                    "yanchor": "top",
+                    "pad": {"t": 40},
+                    "buttons": [
+                        {
+                            "label": "\u25b6 Play",
+                            "method": "animate",
+                            "args": [
+                                None,
+                                {
+                                    "frame": {"duration": step_ms, "redraw": True},
+                                    "fromcurrent": True,
+                                    "transition": {"duration": 0},
+                                    "mode": "immediate",
+                                },
+                            ],
+                        },
+                        {
+                            "label": "\u275a\u275a Pause",
+                            "method": "animate",
+                            "args": [[None], {"frame": {"duration": 0, "redraw": False}, "mode": "immediate"}],
+                        },
+                    ],
+                }
+            ],
+            sliders=[
+                {
+                    "active": 0,
+                    "x": 0.16,
+                    "len": 0.84,
+                    "y": 0.0,
+                    "pad": {"t": 30},
+                    "currentvalue": {"prefix": "t = ", "suffix": " s"},
+                    "steps": [
+                        {
+                            "label": f"{r.t[k]:.2f}",
+                            "method": "animate",
+                            "args": [
+                                [str(i)],
+                                {
+                                    "frame": {"duration": 0, "redraw": True},
+                                    "mode": "immediate",
+                                    "transition": {"duration": 0},
+                                },
+                            ],
+                        }
+                        for i, k in enumerate(samples)
+                    ],
+                }
+            ],
+        )
     )
-    return fig
+    return {"data": [*static, *first], "layout": layout, "frames": frames}
 
 
 def write_plotly_js(folder: str | Path) -> Path:
@@ -426,21 +477,14 @@ td:nth-child(-n+5) { text-align: left; }
 """
 
 
-def render_html(
-    robot: Robot,
-    runs: Sequence[ReportRun],
-    *,
-    title: str = "vgtarm: runs",
-    intro: str = "",
-    max_points: int = MAX_POINTS,
-    max_frames: int = MAX_FRAMES,
-) -> str:
-    """The page's HTML (it expects ``plotly.min.js`` beside it)."""
-    import plotly.io as pio
-
+def page_figures(
+    robot: Robot, runs: Sequence[ReportRun], *, max_points: int = MAX_POINTS, max_frames: int = MAX_FRAMES
+) -> list[tuple[str, str, dict[str, Any]]]:
+    """The page's figures as ``(div id, heading, Plotly figure dict)``: tip error, efforts, 3-D
+    paths, then the mechanism along the first run of each case study."""
     if not runs:
         raise InputError("runs: expected at least one run to report")
-    figures: list[tuple[str, str, Any]] = [
+    figures: list[tuple[str, str, dict[str, Any]]] = [
         ("tip-error", "Tip error", _error_figure(runs, max_points)),
         ("efforts", "Actuator efforts", _effort_figure(runs, max_points)),
         ("paths", "Tip paths in 3-D", _path_figure(runs, max_points)),
@@ -457,6 +501,22 @@ def render_html(
                 mechanism_figure(robot, run, max_frames=max_frames),
             )
         )
+    return figures
+
+
+def render_html(
+    robot: Robot,
+    runs: Sequence[ReportRun],
+    *,
+    title: str = "vgtarm: runs",
+    intro: str = "",
+    max_points: int = MAX_POINTS,
+    max_frames: int = MAX_FRAMES,
+) -> str:
+    """The page's HTML (it expects ``plotly.min.js`` beside it)."""
+    import plotly.io as pio
+
+    figures = page_figures(robot, runs, max_points=max_points, max_frames=max_frames)
     header = "".join(f"<th>{html.escape(c)}</th>" for c in TABLE_COLUMNS)
     rows = []
     for run in runs:
@@ -477,7 +537,9 @@ def render_html(
     ]
     config = {"displaylogo": False, "responsive": True}
     for div_id, heading, fig in figures:
-        body = pio.to_html(fig, include_plotlyjs=False, full_html=False, div_id=div_id, auto_play=False, config=config)
+        body = pio.to_html(
+            fig, validate=False, include_plotlyjs=False, full_html=False, div_id=div_id, auto_play=False, config=config
+        )
         parts.append(f'<div class="plot"><h2>{html.escape(heading)}</h2>{body}</div>')
     parts.append("</body></html>")
     return "\n".join(parts) + "\n"

@@ -451,6 +451,15 @@ def _ga_strip(ax: Axes, bars: list[tuple[str, list[tuple[float, float]], str]], 
 def _shade_ga(ax: Axes, result: SimulationResult) -> bool:
     """Shade the spans of ``result`` in GA mode on ``ax``; whether there were any."""
     spans = _spans(result.t, result.mode == MODE_GA)
-    for start, width in spans:
-        ax.axvspan(start, start + width, facecolor=_GA_COLOR, edgecolor=_GA_COLOR, alpha=0.2, lw=0.6, zorder=0)
+    if spans:  # one collection of full-height bars (thousands of activations make hundreds of spans)
+        ax.broken_barh(
+            spans,
+            (0.0, 1.0),
+            transform=ax.get_xaxis_transform(),
+            facecolors=_GA_COLOR,
+            edgecolors=_GA_COLOR,
+            alpha=0.2,
+            linewidth=0.6,
+            zorder=0,
+        )
     return bool(spans)

@@ -7,21 +7,28 @@ folder per run, the figures, and ``report.md``.
 
 from __future__ import annotations
 
+import heapq
+import itertools
 import time
 from collections.abc import Callable, Iterable
+from concurrent.futures import FIRST_COMPLETED, Future, wait
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
 
+from ..errors import InputError, shown
 from ..fileio import atomic_folder, atomic_write_text
 from ..model.robot import Robot
 from ..simulation import JointReference, SimulationResult
-from .beyond import beyond_figure, beyond_section, run_beyond
+from ..simulation.result import MODE_GA
+from .beyond import BeyondRun, beyond_figure, beyond_runs, beyond_section, run_beyond_one
 from .cases import PAPER_RESULTS, case_study, joint_reference, run_case
 from .plotting import plot_efforts, plot_path_3d, plot_tip_error, save_figure
+from .pool import Inline, Workers
 
 
 @dataclass(frozen=True)
@@ -86,6 +93,7 @@ def reproduce(
     beyond_paper: bool = True,
     seeds: int | None = None,
     config: str | Path | None = None,
+    workers: int = 1,
 ) -> Reproduction:
     """Run the paper's combinations, save every run, the figures, ``report.md`` and the interactive
     ``report.html`` (with ``plotly.min.js`` beside it) into ``out``; with ``beyond_paper`` also the
@@ -94,10 +102,18 @@ def reproduce(
     (:func:`.seeds.seed_section`, a study run on a local Dask cluster into ``out/seeds``; ``config``:
     the robot file ``robot`` was loaded from, for the study's workers).
 
+    With ``workers`` > 1 the runs and the figures are made by that many worker processes (the
+    command line takes :func:`.pool.default_workers`), each run bit for bit as it would be made
+    here (:mod:`.pool`; only the runs' wall times differ). The workers are fresh interpreters
+    (``spawn``) that import the calling program's main module: a script must start its work under
+    ``if __name__ == "__main__":``. With 1 (the default) everything is made here, in turn.
+
     ``out`` is written as one unit (:func:`vgtarm.fileio.atomic_folder`): into a temporary sibling
     that replaces an earlier reproduction whole when everything is written; an error or Ctrl-C
     leaves the earlier folder as it was. A folder holding files vgtarm did not write is refused."""
     start = time.perf_counter()
+    if not (isinstance(workers, int) and not isinstance(workers, bool) and workers >= 1):
+        raise InputError(f"workers = {shown(workers)}: expected a whole number of processes >= 1")
     with atomic_folder(out, "out", inputs=[config], owned=REPRODUCE_FILES) as folder:
         results = _reproduce_into(
             robot,
@@ -111,8 +127,17 @@ def reproduce(
             seeds=seeds,
             config=config,
             start=start,
+            workers=workers,
         )
     return Reproduction(results, Path(out) / "report.md", time.perf_counter() - start)
+
+
+def _pool(robot: Robot, workers: int) -> Inline | Workers:
+    """Worker processes, or this process alone for one worker or a robot without compiled code
+    (whose runs are too slow to share, and whose warning each worker would repeat)."""
+    if workers <= 1 or robot.backend.kind != "compiled":
+        return Inline(robot)
+    return Workers(workers, robot.parameters, robot.backend.kind)
 
 
 def _reproduce_into(
@@ -128,41 +153,70 @@ def _reproduce_into(
     seeds: int | None,
     config: str | Path | None,
     start: float,
+    workers: int,
 ) -> dict[RunSpec, SimulationResult]:
     """The work of :func:`reproduce`, written into the (temporary) folder ``folder``."""
-    references: dict[tuple[int, str], JointReference] = {}
+    options = {"seed": seed, "integrator": integrator, "substeps": substeps}
+    specs = list(dict.fromkeys(specs))
+    extra = beyond_runs() if beyond_paper else []
+    plan = figure_plan(specs)
     results: dict[RunSpec, SimulationResult] = {}
-    for i, spec in enumerate(specs):
-        if progress:
-            progress(spec.label + f", case {spec.case}", i, len(specs))
-        key = (spec.case, spec.rates)
-        if key not in references:
-            references[key] = joint_reference(robot, spec.case, rates=spec.rates)
-        result = run_case(
-            robot,
-            spec.case,
-            controller=spec.controller,
-            external_force=spec.external_force,
-            integrator=integrator,
-            substeps=substeps,
-            seed=seed,
-            rates=spec.rates,
-            reference=references[key],
-        )
-        result.save(folder / spec.folder)
-        results[spec] = result
-    if progress:
-        progress("figures and report", len(specs), len(specs))
-    figures = _figures(results, folder)
-    beyond: list[str] = []
-    if beyond_paper:
-        if progress:
-            progress("beyond the paper: observer and sensing", len(specs), len(specs))
-        key = (2, "exact")
-        if key not in references:
-            references[key] = joint_reference(robot, 2)
-        extra = run_beyond(robot, references[key], folder, seed=seed, integrator=integrator, substeps=substeps)
-        beyond = beyond_section(extra, beyond_figure(extra, folder))
+    beyond_results: dict[BeyondRun, SimulationResult] = {}
+    figures: dict[str, str] = {}
+    beyond_figure_name: list[str] = []
+    with _pool(robot, workers) as pool:
+        tasks = _Tasks(pool)
+
+        def paper_done(spec: RunSpec, result: SimulationResult) -> None:
+            results[spec] = result
+            if progress:
+                progress(f"{spec.label}, case {spec.case}", len(results), len(specs))
+            for p in plan:  # a figure as soon as its runs are made
+                if spec in p.specs and all(s in results for s in p.specs):
+                    runs = {s: results[s] for s in p.specs}
+                    tasks.add(_figure_cost(p, runs), _draw, (p, runs, folder), partial(figures.__setitem__, p.caption))
+
+        def beyond_done(spec: BeyondRun, result: SimulationResult) -> None:
+            beyond_results[spec] = result
+            if len(beyond_results) == len(extra):  # drawn here: its 14 runs need not travel to a worker
+                beyond_figure_name.append(beyond_figure({b: beyond_results[b] for b in extra}, folder))  # in order
+
+        # the references once, here; then the runs, the longest first (switching control), and
+        # each figure as soon as its runs are made
+        keys = sorted({(s.case, s.rates) for s in specs} | ({(2, "exact")} if beyond_paper else set()))
+        references = {key: joint_reference(robot, key[0], rates=key[1]) for key in keys}
+        for spec in specs:
+            args = (spec, references[(spec.case, spec.rates)], folder, options)
+            tasks.add(_cost(spec.controller, spec.external_force), _paper_run, args, partial(paper_done, spec))
+        for other in extra:
+            inputs = (other, references[(2, "exact")], folder, options)
+            tasks.add(_cost(other.controller, True), _beyond_run, inputs, partial(beyond_done, other))
+        page: list[Path] = []
+
+        def write_page() -> None:
+            if progress:
+                progress("figures and report", len(specs), len(specs))
+            from .html_report import runs_from_reproduction, write_html_report  # it imports this module
+
+            page.append(
+                write_html_report(
+                    robot,
+                    runs_from_reproduction({spec: results[spec] for spec in specs}),
+                    folder,
+                    title="vgtarm: the paper's case studies reproduced",
+                    intro=f"The interactive companion of report.md (seed {seed}, integrator {integrator}).",
+                )
+            )
+
+        while tasks.busy():
+            if not page and len(results) == len(specs):  # the page here, while the workers draw
+                write_page()
+            tasks.step()
+        if not page:
+            write_page()
+    results = {spec: results[spec] for spec in specs}
+    figures = {p.caption: figures[p.caption] for p in plan}
+    beyond = beyond_section({b: beyond_results[b] for b in extra}, beyond_figure_name[0]) if extra else []
     text = render_report(
         results, figures, seed=seed, integrator=integrator, substeps=substeps, wall_time_s=time.perf_counter() - start
     )
@@ -177,64 +231,145 @@ def _reproduce_into(
         text += "\n" + "\n".join(section)
         text += "\n"
     atomic_write_text(folder / "report.md", text)
-    from .html_report import runs_from_reproduction, write_html_report  # it imports this module's table
-
-    write_html_report(
-        robot,
-        runs_from_reproduction(results),
-        folder,
-        title="vgtarm: the paper's case studies reproduced",
-        intro=f"The interactive companion of report.md (seed {seed}, integrator {integrator}).",
-    )
     return results
+
+
+class _Tasks:
+    """Tasks handed to a pool, the costliest ready one first, at most one waiting per worker beyond
+    those running (so a figure whose runs are made goes before the cheap runs still waiting)."""
+
+    def __init__(self, pool: Inline | Workers) -> None:
+        self.pool = pool
+        self.ready: list[tuple[int, int, Callable[..., Any], tuple[Any, ...], Callable[[Any], None]]] = []
+        self.running: dict[Future[Any], Callable[[Any], None]] = {}
+        self.limit = 1 if isinstance(pool, Inline) else pool.count + 1
+        self.order = itertools.count()  # among equal costs, first added first
+
+    def add(self, cost: int, fn: Callable[..., Any], args: tuple[Any, ...], done: Callable[[Any], None]) -> None:
+        """Run ``fn(robot, *args)`` (cost: a rough rank of its time), then ``done(result)`` here."""
+        heapq.heappush(self.ready, (-cost, next(self.order), fn, args, done))
+
+    def busy(self) -> bool:
+        return bool(self.ready or self.running)
+
+    def step(self) -> None:
+        """Hand out ready tasks, wait for one to finish and take its result (raising its error)."""
+        while self.ready and len(self.running) < self.limit:
+            _, _, fn, args, done = heapq.heappop(self.ready)
+            self.running[self.pool.submit(fn, *args)] = done
+        finished, _ = wait(self.running, return_when=FIRST_COMPLETED)
+        for future in finished:
+            self.running.pop(future)(future.result())
+
+
+def _cost(controller: str, external_force: bool) -> int:
+    """A rough rank of a run's cost, to start the long ones first: switching control under the tool
+    force runs the GA thousands of times."""
+    return 20 if controller == "scm" and external_force else 2 if controller == "scm" else 1
+
+
+def _figure_cost(plan: FigurePlan, results: dict[RunSpec, SimulationResult]) -> int:
+    """A rough rank of a figure's drawing time on the scale of :func:`_cost` (about 0.1 s a unit):
+    the efforts of a run with many GA spans, and the 3-D paths, cost most."""
+    spans = sum(int(np.count_nonzero(np.diff(r.mode == MODE_GA))) for r in results.values()) // 2
+    return 3 + (3 if plan.kind == "path" else 0) + min(spans // 100, 4)
+
+
+def _paper_run(
+    robot: Robot, spec: RunSpec, reference: JointReference, folder: Path, options: dict[str, Any]
+) -> SimulationResult:
+    """One run of the paper's, saved into ``folder / spec.folder`` (in a worker or here)."""
+    result = run_case(
+        robot,
+        spec.case,
+        controller=spec.controller,
+        external_force=spec.external_force,
+        rates=spec.rates,
+        reference=reference,
+        **options,
+    )
+    result.save(folder / spec.folder)
+    return result
+
+
+def _beyond_run(
+    robot: Robot, spec: BeyondRun, reference: JointReference, folder: Path, options: dict[str, Any]
+) -> SimulationResult:
+    return run_beyond_one(robot, spec, reference, folder, **options)
+
+
+def _draw(robot: Robot, plan: FigurePlan, results: dict[RunSpec, SimulationResult], folder: Path) -> str:
+    return draw_figure(plan, results, folder)
+
+
+@dataclass(frozen=True)
+class FigurePlan:
+    """One figure of the report: its caption, file name, kind (``path``, ``error`` or ``efforts``),
+    the runs it shows, and for ``error`` the reference rates."""
+
+    caption: str
+    name: str
+    kind: str
+    case: int
+    specs: tuple[RunSpec, ...]
+    rates: str = "exact"
+
+
+def figure_plan(specs: Iterable[RunSpec]) -> list[FigurePlan]:
+    """The figures like the paper's Figs. 4-9 for the runs ``specs``, in the report's order."""
+    chosen = list(specs)
+    plan: list[FigurePlan] = []
+    for case in sorted({s.case for s in chosen}):
+        exact = tuple(s for s in chosen if s.case == case and s.rates == "exact")
+        every = [s for s in chosen if s.case == case]
+        if exact:
+            caption = f"Case {case}: desired and actual tip paths (paper Fig. {4 if case == 1 else 7})"
+            plan.append(FigurePlan(caption, f"case{case}_path.png", "path", case, exact))
+        for rates, suffix in (("exact", ""), ("finite_difference", "_fd")):
+            shown_runs = tuple(s for s in every if s.rates == rates)
+            if shown_runs:
+                caption = (
+                    f"Case {case}: tip error, {rates.replace('_', '-')} rates (paper Fig. {5 if case == 1 else 8})"
+                )
+                plan.append(FigurePlan(caption, f"case{case}_error{suffix}.png", "error", case, shown_runs, rates))
+        for spec in exact:
+            caption = f"Case {case}, {spec.label}: actuator efforts (paper Fig. {6 if case == 1 else 9})"
+            plan.append(FigurePlan(caption, f"{spec.folder}_efforts.png", "efforts", case, (spec,)))
+    return plan
+
+
+def draw_figure(plan: FigurePlan, results: dict[RunSpec, SimulationResult], folder: Path) -> str:
+    """Draw the figure ``plan`` of ``results`` (which hold its runs) into ``folder``; its file name."""
+    runs = [results[s] for s in plan.specs]
+    labels = [s.label for s in plan.specs]
+    if plan.kind == "path":
+        fig = Figure(figsize=(7, 6), layout="constrained")
+        plot_path_3d(
+            runs,
+            labels=labels,
+            ax=fig.add_subplot(projection="3d"),
+            title=f"Case {plan.case}: desired and actual tip paths",
+        )
+    elif plan.kind == "error":
+        fig = Figure(figsize=(9, 4.8), layout="constrained")
+        plot_tip_error(
+            runs,
+            labels=labels,
+            ax=fig.add_subplot(),
+            threshold=case_study(plan.case).threshold,
+            log=True,
+            title=f"Case {plan.case}: absolute tip error ({plan.rates.replace('_', '-')} reference rates)",
+        )
+    else:
+        fig = Figure(figsize=(9, 4.8), layout="constrained")
+        plot_efforts(runs[0], ax=fig.add_subplot(), title=f"Case {plan.case}, {labels[0]}: actuator efforts")
+    save_figure(fig, folder / plan.name)
+    return plan.name
 
 
 def _figures(results: dict[RunSpec, SimulationResult], folder: Path) -> dict[str, str]:
     """Figures like the paper's Figs. 4-9; returns {caption: file name}."""
-    made: dict[str, str] = {}
-    for case in sorted({s.case for s in results}):
-        exact = [(s, r) for s, r in results.items() if s.case == case and s.rates == "exact"]
-        every = [(s, r) for s, r in results.items() if s.case == case]
-        if exact:
-            fig = Figure(figsize=(7, 6), layout="constrained")
-            ax = fig.add_subplot(projection="3d")
-            plot_path_3d(
-                [r for _, r in exact],
-                labels=[s.label for s, _ in exact],
-                ax=ax,
-                title=f"Case {case}: desired and actual tip paths",
-            )
-            made[f"Case {case}: desired and actual tip paths (paper Fig. {4 if case == 1 else 7})"] = _save(
-                fig, folder, f"case{case}_path.png"
-            )
-        for rates, suffix in (("exact", ""), ("finite_difference", "_fd")):
-            chosen = [(s, r) for s, r in every if s.rates == rates]
-            if not chosen:
-                continue
-            fig = Figure(figsize=(9, 4.8), layout="constrained")
-            plot_tip_error(
-                [r for _, r in chosen],
-                labels=[s.label for s, _ in chosen],
-                ax=fig.add_subplot(),
-                threshold=case_study(case).threshold,
-                log=True,
-                title=f"Case {case}: absolute tip error ({rates.replace('_', '-')} reference rates)",
-            )
-            made[f"Case {case}: tip error, {rates.replace('_', '-')} rates (paper Fig. {5 if case == 1 else 8})"] = (
-                _save(fig, folder, f"case{case}_error{suffix}.png")
-            )
-        for spec, result in exact:
-            fig = Figure(figsize=(9, 4.8), layout="constrained")
-            plot_efforts(result, ax=fig.add_subplot(), title=f"Case {case}, {spec.label}: actuator efforts")
-            made[f"Case {case}, {spec.label}: actuator efforts (paper Fig. {6 if case == 1 else 9})"] = _save(
-                fig, folder, f"{spec.folder}_efforts.png"
-            )
-    return made
-
-
-def _save(fig: Figure, folder: Path, name: str) -> str:
-    save_figure(fig, folder / name)
-    return name
+    return {p.caption: draw_figure(p, results, folder) for p in figure_plan(results)}
 
 
 def _mm(value: float | None) -> str:
