@@ -4,11 +4,20 @@
 same controller, observer, sensing, tool force and divergence checks, with the controller's own
 model) whose plant is MuJoCo: the tip and its velocity are read from the site ``tip``, the joint
 values from the tree's joints and the closed legs' tendons, and each control period is
-integrated by MuJoCo with the efforts held and the tool force applied at the tip (the cutting
-force follows the tip velocity at every MuJoCo step), in ``max(substeps, MIN_STEPS[...])``
-MuJoCo steps. ``rk4`` uses MuJoCo's RK4; ``euler`` and ``semi_implicit_euler`` use MuJoCo's
-``Euler`` with its implicit damping switched off, which is then exactly our semi-implicit Euler
-(MuJoCo has no explicit Euler).
+integrated in MuJoCo's own coordinates with the efforts held and the tool force applied at the
+tip (the cutting force follows the tip velocity at every step), in ``substeps`` steps, by the
+same kind of integrator as ours:
+
+- ``euler`` (explicit, the paper's and our default): MuJoCo has none, so each step asks MuJoCo
+  for the accelerations at the current state (``mj_forward``) and moves the state itself,
+  ``qpos += h qvel`` (``mj_integratePos``, with the velocity at the start of the step), then
+  ``qvel += h qacc``;
+- ``semi_implicit_euler``: MuJoCo's ``Euler`` with its implicit damping switched off
+  (``eulerdamp``), which is then exactly our semi-implicit Euler (velocity first);
+- ``rk4``: MuJoCo's ``RK4``.
+
+MuJoCo steps its tree coordinates where we step our joints, so at the same integration the runs
+differ by the integrators' own error, ``O(h^2)`` per step (docs/mujoco.md).
 """
 
 from __future__ import annotations
@@ -16,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from ..errors import InputError, shown
 from ..model.closedloop import LoopArrays, LoopSettings
 from ..model.robot import Robot
 from ..simulation.python_loop import PythonLoop
@@ -23,10 +33,8 @@ from .model import MujocoRobot
 
 Array = NDArray[np.float64]
 
-#: MuJoCo steps per control period at least, by MuJoCo integrator: every count is stable, but
-#: (semi-implicit) Euler needs 10 to bring case 1 within 2 % of the converged plant (1 step:
-#: -20 %, 5: -4 %); RK4 is converged at one step (docs/mujoco.md).
-MIN_STEPS = {"Euler": 10, "RK4": 1}
+#: Our integrators and MuJoCo's that step them: ``None`` is explicit Euler, done here.
+MUJOCO_INTEGRATOR = {"euler": None, "semi_implicit_euler": "mjINT_EULER", "rk4": "mjINT_RK4"}
 
 
 class MujocoLoop(PythonLoop):
@@ -40,6 +48,10 @@ class MujocoLoop(PythonLoop):
     def simulate(
         self, settings: LoopSettings, arrays: LoopArrays, Kp: Array, Kv: Array, k0: int, k1: int
     ) -> tuple[int, int]:
+        if settings.integrator not in MUJOCO_INTEGRATOR:  # here: the loop reads a ValueError as a wreck
+            raise InputError(
+                f"integrator = {shown(settings.integrator)}: the MuJoCo plant runs {sorted(MUJOCO_INTEGRATOR)}"
+            )
         if k0 == 0 or not self._started:  # MuJoCo's state is the loop's at sample k0 afterwards
             self.bridge.set_state(arrays.q[k0], arrays.qd[k0])
             self._started = True
@@ -53,16 +65,28 @@ class MujocoLoop(PythonLoop):
 
     def _integrate(self, s: LoopSettings, q: Array, qd: Array, F: Array, dist: Array) -> tuple[Array, Array]:
         mujoco, b = self.bridge.mujoco, self.bridge
-        integrator = "RK4" if s.integrator == "rk4" else "Euler"
-        steps = max(s.substeps, MIN_STEPS[integrator])
-        b.model.opt.timestep = s.dt / steps
-        b.model.eq_solref[:, 0] = 2.0 * b.model.opt.timestep  # as stiff as MuJoCo's refsafe allows
-        b.model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_EULERDAMP  # Euler: semi-implicit, as ours
-        b.model.opt.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{integrator.upper()}")
+        m, d = b.model, b.data
+        steps = max(s.substeps, 1)
+        h = s.dt / steps
+        m.opt.timestep = h
+        m.eq_solref[:, 0] = 2.0 * h  # as stiff as MuJoCo's refsafe allows
+        m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_EULERDAMP  # Euler: semi-implicit, as ours
+        theirs = MUJOCO_INTEGRATOR[s.integrator]
+        explicit = theirs is None
+        if theirs is not None:
+            m.opt.integrator = getattr(mujoco.mjtIntegrator, theirs)
         for _ in range(steps):
-            mujoco.mj_forward(b.model, b.data)
+            mujoco.mj_forward(m, d)
             _, velocity = self._tip_state(q, qd)
             b.apply(F, self._tool_force(s, velocity, dist))
-            mujoco.mj_step(b.model, b.data)
-        mujoco.mj_forward(b.model, b.data)
+            if explicit:
+                # the efforts and the tool force enter at the acceleration stage only
+                mujoco.mj_forwardSkip(m, d, mujoco.mjtStage.mjSTAGE_VEL, 1)
+                qvel = d.qvel.copy()
+                d.qvel += h * d.qacc
+                mujoco.mj_integratePos(m, d.qpos, qvel, h)
+                d.time += h
+            else:
+                mujoco.mj_step(m, d)
+        mujoco.mj_forward(m, d)
         return b.joint_positions(), b.joint_velocities()
