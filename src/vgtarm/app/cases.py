@@ -2,6 +2,18 @@
 
 All values come from ``shared/spec/mechanism.md``: the paper gives the shapes of the paths and
 the gains, the spec fixes the path parameters (assumptions) and the GA bounds.
+
+**On a robot other than the paper's** (a stack of modules, issue 13) the case paths are moved and
+scaled to it (:func:`path_placement`): a path point ``x`` becomes ``c + s (x - c0)``, where ``c0 =
+(0, 0, 0.66) m`` is the paper robot's home tip (the centre of case 1), ``c`` the robot's home tip
+and ``s = reach / 0.66 m`` with the robot's **reach** defined as the distance from the base origin
+(F0) to its tip at home, ``|P(q_home)|`` (0.66 m for the paper's robot). Velocities and
+accelerations scale by ``s`` too (same timing). A robot whose home tip lies within 1e-9 m of
+``c0`` (the paper's robot, or a copy of it as a stack) gets the paths unchanged. The summary of a
+run records the centre and the scale (``path_centre_m``, ``path_scale``).
+
+The case gains are scalars: each case's ``Kp`` and ``Kv`` apply to every joint of the robot
+(``Kp I``, ``Kv I`` of its size), as the paper's 7x7 diagonal gains do: legs and twists alike.
 """
 
 from __future__ import annotations
@@ -16,8 +28,9 @@ from .. import paths
 from ..control import ComputedForceControl, SwitchingControl
 from ..errors import InputError, shown
 from ..ga import GAOptions
-from ..model.parameters import RobotParameters
+from ..model.parameters import N_JOINTS, RobotParameters
 from ..model.robot import Robot
+from ..model.stack import Stack
 from ..simulation import ExternalForce, JointReference, SimulationResult, simulate
 
 CONTROLLERS = ("cfc", "scm")
@@ -42,11 +55,12 @@ class CaseStudy:
         return self.path_factory(dt)
 
     def controller(
-        self, name: str, *, horizon: int = 20, ga: GAOptions | None = None
+        self, name: str, *, horizon: int = 20, ga: GAOptions | None = None, n_joints: int = N_JOINTS
     ) -> ComputedForceControl | SwitchingControl:
-        """``"cfc"``: computed force control with the case's gains; ``"scm"``: the switching method."""
+        """``"cfc"``: computed force control with the case's gains (the same on each of the robot's
+        ``n_joints`` joints); ``"scm"``: the switching method (the paper's 7 joints)."""
         if name == "cfc":
-            return ComputedForceControl.with_gains(self.kp, self.kv)
+            return ComputedForceControl.with_gains(self.kp, self.kv, n_joints)
         if name == "scm":
             return SwitchingControl.with_gains(
                 self.kp,
@@ -109,6 +123,60 @@ def case_study(number: int) -> CaseStudy:
     return CASES[number]
 
 
+#: Home tip of the paper's robot (m): the centre of case 1, around which both case paths are laid.
+PAPER_HOME_TIP = (0.0, 0.0, 0.66)
+#: A robot whose home tip is this close (m) to :data:`PAPER_HOME_TIP` gets the case paths unchanged.
+SAME_TIP_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class PathPlacement:
+    """Where the case paths go on a robot: ``x -> centre + scale (x - PAPER_HOME_TIP)``.
+
+    ``centre`` (m) is the robot's home tip; ``scale`` its reach over the paper robot's (module
+    docstring); ``reach`` (m) the distance from the base origin to its home tip.
+    """
+
+    centre: tuple[float, float, float]
+    scale: float
+    reach: float
+
+    def apply(self, path: paths.Path) -> paths.Path:
+        """The path moved and scaled (timing unchanged)."""
+        c0, c = np.array(PAPER_HOME_TIP), np.array(self.centre)
+        return paths.Path(
+            path.name,
+            path.t,
+            c + self.scale * (path.position - c0),
+            self.scale * path.velocity,
+            self.scale * path.acceleration,
+        )
+
+    def metadata(self) -> dict[str, Any]:
+        """The summary entries of the placement."""
+        return {"path_centre_m": list(self.centre), "path_scale": self.scale, "path_reach_m": self.reach}
+
+
+def path_placement(robot: Robot) -> PathPlacement | None:
+    """How the case paths are placed on ``robot``; ``None`` for the paper's robot (home tip within
+    :data:`SAME_TIP_TOLERANCE` of :data:`PAPER_HOME_TIP`: the paths are used as they are)."""
+    tip = robot.tip_position(robot.parameters.home)
+    if float(np.linalg.norm(tip - np.array(PAPER_HOME_TIP))) <= SAME_TIP_TOLERANCE:
+        return None
+    reach = float(np.linalg.norm(tip))
+    if not reach > 0.0:
+        raise InputError(f"robot {shown(robot.parameters.name)}: its tip at home is at the base origin (no reach)")
+    scale = reach / float(np.linalg.norm(PAPER_HOME_TIP))
+    return PathPlacement((float(tip[0]), float(tip[1]), float(tip[2])), scale, reach)
+
+
+def case_path(robot: Robot, number: int, dt: float = 1e-3) -> paths.Path:
+    """The desired tip path of case ``number`` placed on ``robot`` (:func:`path_placement`)."""
+    path = case_study(number).path(dt)
+    placement = path_placement(robot)
+    return path if placement is None else placement.apply(path)
+
+
 def joint_reference(
     robot: Robot,
     number: int,
@@ -120,7 +188,7 @@ def joint_reference(
 ) -> JointReference:
     """The case's joint reference from the redundancy-resolving inverse kinematics; with
     ``duration`` (s) only its first ``duration`` seconds (:func:`truncate_reference`)."""
-    ik = robot.inverse_kinematics(case_study(number).path(dt), solver=solver, rates=rates)
+    ik = robot.inverse_kinematics(case_path(robot, number, dt), solver=solver, rates=rates)
     reference = JointReference.of(ik, name=f"case {number}")
     return reference if duration is None else truncate_reference(reference, duration)
 
@@ -153,7 +221,7 @@ def run_case(
     dt: float = 1e-3,
     horizon: int = 20,
     ga: GAOptions | None = None,
-    controller_model: RobotParameters | None = None,
+    controller_model: RobotParameters | Stack | None = None,
     reference: JointReference | None = None,
     progress: Callable[[int, int], None] | None = None,
     **options: Any,
@@ -166,10 +234,18 @@ def run_case(
     case = case_study(number)
     ref = reference if reference is not None else joint_reference(robot, number, dt=dt, rates=rates)
     metadata: dict[str, Any] = {"case": number, "case_title": case.title}
+    placement = path_placement(robot)
+    if placement is not None:
+        metadata.update(placement.metadata())
+    if controller == "scm" and robot.n_joints != N_JOINTS:
+        raise InputError(
+            f"controller = 'scm': the switching control method runs on the paper's {N_JOINTS}-joint robot only "
+            f"so far; robot {shown(robot.parameters.name)} has {robot.n_joints} joints (use 'cfc')"
+        )
     return simulate(
         robot,
         ref,
-        case.controller(controller, horizon=horizon, ga=ga),
+        case.controller(controller, horizon=horizon, ga=ga, n_joints=robot.n_joints),
         controller_model=controller_model,
         external_force=case.external_force if external_force else None,
         integrator=integrator,

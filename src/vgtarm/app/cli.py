@@ -36,6 +36,10 @@ def _format_vector(values: Sequence[float] | np.ndarray, digits: int = 6) -> str
 def cmd_describe(args: argparse.Namespace) -> int:
     """Print the robot: dimensions, limits, home pose, tip at home, mass-matrix eigenvalues."""
     robot = load_robot(args.config)
+    if robot.is_stack:
+        from .cli_stack import describe_stack
+
+        return describe_stack(robot)
     p = robot.parameters
     home = p.home
     fk = robot.forward_kinematics(home)
@@ -63,9 +67,14 @@ def cmd_fk(args: argparse.Namespace) -> int:
     """Print passive angles, platform centres, tip position and orientation of one configuration."""
     robot = load_robot(args.config)
     q = np.array(args.q, dtype=float)
+    if q.shape != (robot.n_joints,):
+        raise InputError(
+            f"Q: expected {robot.n_joints} joint values ({' '.join(robot.joint_names)}), got {len(args.q)}"
+        )
     fk = robot.forward_kinematics(q)
-    print("q          " + ", ".join(f"{n} = {v:.10g} {u}" for n, v, u in zip(JOINT_NAMES, q, JOINT_UNITS, strict=True)))
-    for k in range(2):
+    names, units = robot.joint_names, robot.joint_units
+    print("q          " + ", ".join(f"{n} = {v:.10g} {u}" for n, v, u in zip(names, q, units, strict=True)))
+    for k in range(robot.n_modules):
         alpha, beta, gamma, theta = fk.passive[k]
         print(f"module {k + 1}   alpha = {alpha:.8f}, beta = {beta:.8f}, gamma = {gamma:.8f}, theta = {theta:.8f} rad")
         print(f"           platform centre O{k + 1} = {_format_vector(fk.platform_position[k], 10)} m")
@@ -155,7 +164,11 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         "rms_force_n",
         "ga_activations",
         "ga_time_s",
+        "path_centre_m",
+        "path_scale",
     ):
+        if key not in summary:  # the path placement: only on a robot other than the paper's
+            continue
         value = summary[key]
         text = f"{value:.6g}" if isinstance(value, float) else str(value)
         print(f"{key:<34} {text}")
@@ -171,6 +184,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     """Run every combination the paper reports and write report.md."""
     from tqdm import tqdm
 
+    from .pool import default_workers
     from .report import REPRODUCE_FILES, paper_runs, reproduce
 
     check_output_folder(args.out, "--out", inputs=[args.config], owned=REPRODUCE_FILES)  # before the work
@@ -191,6 +205,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
             progress=progress,
             seeds=args.seeds,
             config=args.config,
+            workers=args.workers or default_workers(),
         )
     print(f"{'run':<26} {'max (mm)':>10} {'after 0.2 s (mm)':>17} {'GA':>5} {'wall (s)':>9}")
     for spec, result in made.results.items():
@@ -332,6 +347,11 @@ def cmd_ik(args: argparse.Namespace) -> int:
     path = _ik_path(args)
     _check_ik_memory(args, path)
     robot = load_robot(args.config)
+    if args.case is not None and robot.is_stack:  # the case paths placed on the robot (app/cases.py)
+        from .cases import path_placement
+
+        placement = path_placement(robot)
+        path = path if placement is None else placement.apply(path)
     result = robot.inverse_kinematics(path, solver=args.solver, rates=args.rates, pose="hold" if args.pose else None)
     if not result.success:
         raise UnreachableError(f"inverse kinematics did not verify every sample: {result.message}; nothing written")
@@ -353,11 +373,11 @@ def cmd_ik(args: argparse.Namespace) -> int:
     print(f"Phi        largest {samples.phi[largest]:.6g} at t = {result.t[largest]:.6g} s")
     print("limits     closest approach to each joint limit over the path")
     below, above = result.limit_clearance()
-    for i, name in enumerate(JOINT_NAMES):
+    for i, name in enumerate(robot.joint_names):
         side, gap = ("min", below[i]) if below[i] <= above[i] else ("max", above[i])
         column = result.q[:, i] - result.lower[i] if side == "min" else result.upper[i] - result.q[:, i]
         when = result.t[int(np.argmin(column))]
-        print(f"           {name:<5} {gap:.6g} {JOINT_UNITS[i]} from its {side} at t = {when:.6g} s")
+        print(f"           {name:<5} {gap:.6g} {robot.joint_units[i]} from its {side} at t = {when:.6g} s")
     if args.output is not None:
         columns = f"{', '.join(CSV_COLUMNS[:4])}, joints, rates, accelerations"
         print(f"output     {args.output} ({len(result)} rows: {columns})")
@@ -402,7 +422,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     fk = sub.add_parser("fk", help="forward kinematics of one configuration")
     fk.add_argument(
-        "q", nargs=7, type=float, metavar="Q", help=f"joint values in the order {' '.join(JOINT_NAMES)} (m, rad)"
+        "q",
+        nargs="+",
+        type=float,
+        metavar="Q",
+        help=f"joint values in the order {' '.join(JOINT_NAMES)} (m, rad); a stack: one per joint, in its order",
     )
     _add_config(fk)
     fk.set_defaults(run=cmd_fk)
@@ -471,6 +495,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         metavar="N",
         help="also run everything with seeds 0..N-1 on Dask and report mean and spread (needs the study extra)",
+    )
+    again.add_argument(
+        "--workers",
+        type=_positive_int,
+        default=None,
+        metavar="N",
+        help="worker processes for the runs and figures (default: the CPUs, at most 4; 1: all in this process)",
     )
     _add_run_options(again)
     _add_config(again)

@@ -12,10 +12,49 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from ..errors import cut
+import numpy as np
+
+from ..errors import cut, escape
 from ..fileio import atomic_write_text, check_output_file
 from ..model.parameters import load_parameters
-from ..model.stack import stack_from_parameters, stack_to_toml
+from ..model.robot import Robot
+from ..model.stack import Stack, stack_from_parameters, stack_to_toml
+
+
+def _vector(values: object, digits: int = 6) -> str:
+    return "[" + ", ".join(f"{float(v):.{digits}g}" for v in values) + "]"  # type: ignore[attr-defined]
+
+
+def describe_stack(robot: Robot) -> int:
+    """``vgtarm describe`` of a stack: modules, joints, bodies, tip and reach at home, mass matrix."""
+    stack = robot.parameters
+    assert isinstance(stack, Stack)
+    home = stack.home
+    tip = robot.tip_position(home)
+    eigenvalues = np.linalg.eigvalsh(robot.mass_matrix(home))
+    print(f"robot      {escape(stack.name)}")  # a name from a user's file never drives the terminal
+    print(f"source     {escape(stack.source)}")
+    print(
+        f"model      {robot.backend.kind} CasADi functions, a stack of {stack.n_modules} modules, "
+        f"{stack.n_joints} joints"
+    )
+    for k, module in enumerate(stack.modules, start=1):
+        twist = "" if module.twist is None else f", then twist psi{k + 1} (height {module.twist.height:g} m)"
+        print(f"module {k:<3} b = {module.b:g} m, d = {module.d:g} m, plane {module.plane:g} deg{twist}")
+    print("joints     name   min        max        home")
+    for i, name in enumerate(stack.joint_names):
+        print(
+            f"           {name:<6} {stack.q_min[i]:<10.6g} {stack.q_max[i]:<10.6g} {home[i]:.10g} "
+            f"{stack.joint_units[i]}"
+        )
+    for name, body in zip(stack.body_names, stack.bodies, strict=True):
+        print(f"body       {name:<13} mass {body.mass:g} kg, com {_vector(body.com)} m")
+    print(f"tool       {_vector(stack.tool)} m from the last mount point")
+    print(f"friction   {_vector(stack.viscous)} (N s/m legs; N m s/rad twists)")
+    print(f"gravity    {_vector(stack.gravity)} m/s^2")
+    print(f"tip @ home {_vector(tip, 10)} m; reach {float(np.linalg.norm(tip)):.6g} m")
+    print(f"M @ home   eigenvalues {_vector(eigenvalues, 5)} (kg, kg m^2)")
+    return 0
 
 
 def cmd_convert_robot(args: argparse.Namespace) -> int:

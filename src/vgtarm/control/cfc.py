@@ -8,6 +8,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError, shown
+from ..model.parameters import N_JOINTS
 from ..model.robot import Robot
 from .gains import Gains
 from .law import computed_force
@@ -31,9 +32,10 @@ class ComputedForceControl:
             raise InputError(f"gains = {shown(self.gains)}: expected Gains (use ComputedForceControl.with_gains)")
 
     @classmethod
-    def with_gains(cls, Kp: ArrayLike, Kv: ArrayLike) -> ComputedForceControl:
-        """Controller with gains from scalars (times the identity), diagonals or matrices."""
-        return cls(Gains.of(Kp, Kv))
+    def with_gains(cls, Kp: ArrayLike, Kv: ArrayLike, n_joints: int = N_JOINTS) -> ComputedForceControl:
+        """Controller of a robot with ``n_joints`` joints (default the paper's 7) with gains from
+        scalars (times the identity), diagonals or matrices."""
+        return cls(Gains.of(Kp, Kv, n_joints))
 
     def effort(
         self,
@@ -45,7 +47,7 @@ class ComputedForceControl:
         qdd_d: ArrayLike,
         gains: Gains | None = None,
     ) -> Array:
-        """Actuator efforts ``(..., 7)`` for states and references ``(..., 7)`` (eq. 20)."""
+        """Actuator efforts ``(..., n)`` for states and references ``(..., n)`` (eq. 20)."""
         g = gains or self.gains
         e = np.asarray(q_d, dtype=float) - np.asarray(q, dtype=float)
         e_dot = np.asarray(qd_d, dtype=float) - np.asarray(qd, dtype=float)

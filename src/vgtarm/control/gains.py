@@ -8,24 +8,27 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError, shown
+from ..model.parameters import N_JOINTS
 
 Array = NDArray[np.float64]
 
 
-def gain_matrix(value: ArrayLike, name: str) -> Array:
-    """A 7x7 gain matrix from a scalar (times the identity), 7 diagonal entries or a 7x7 matrix."""
+def gain_matrix(value: ArrayLike, name: str, n: int = N_JOINTS) -> Array:
+    """An n x n gain matrix (n joints, default the paper's 7) from a scalar (times the identity: the
+    same gain on every joint), n diagonal entries or an n x n matrix."""
+    expected = f"a number, {n} numbers or a {n}x{n} matrix"
     if isinstance(value, str | bytes) or value is None:
-        raise InputError(f"{name} must be a number, 7 numbers or a 7x7 matrix, got {shown(value)}")
+        raise InputError(f"{name} must be {expected}, got {shown(value)}")
     try:
         array = np.asarray(value, dtype=float)
     except (TypeError, ValueError, OverflowError):
-        raise InputError(f"{name} must be a number, 7 numbers or a 7x7 matrix, got {shown(value)}") from None
+        raise InputError(f"{name} must be {expected}, got {shown(value)}") from None
     if array.ndim == 0:
-        array = float(array) * np.eye(7)
-    elif array.shape == (7,):
+        array = float(array) * np.eye(n)
+    elif array.shape == (n,):
         array = np.diag(array)
-    elif array.shape != (7, 7):
-        raise InputError(f"{name} must be a number, 7 numbers or a 7x7 matrix, got shape {array.shape}")
+    elif array.shape != (n, n):
+        raise InputError(f"{name} must be {expected}, got shape {array.shape}")
     if not np.isfinite(array).all():
         i, j = (int(k) for k in np.argwhere(~np.isfinite(array))[0])
         raise InputError(f"{name} must be finite, got {name}[{i}, {j}] = {float(array[i, j])!r}")
@@ -36,15 +39,21 @@ def gain_matrix(value: ArrayLike, name: str) -> Array:
 
 @dataclass(frozen=True, eq=False)
 class Gains:
-    """Position and velocity gains ``Kp``, ``Kv`` (7x7, 1/s^2 and 1/s) of eq. 19."""
+    """Position and velocity gains ``Kp``, ``Kv`` (n x n, 1/s^2 and 1/s) of eq. 19."""
 
     Kp: Array
     Kv: Array
 
     @classmethod
-    def of(cls, Kp: ArrayLike, Kv: ArrayLike) -> Gains:
-        """Gains from scalars, diagonals or full matrices."""
-        return cls(gain_matrix(Kp, "Kp"), gain_matrix(Kv, "Kv"))
+    def of(cls, Kp: ArrayLike, Kv: ArrayLike, n: int = N_JOINTS) -> Gains:
+        """Gains of a robot with ``n`` joints (default the paper's 7) from scalars, diagonals or full
+        matrices."""
+        return cls(gain_matrix(Kp, "Kp", n), gain_matrix(Kv, "Kv", n))
+
+    @property
+    def n(self) -> int:
+        """Number of joints the gains are for."""
+        return int(self.Kp.shape[0])
 
 
 def real_number(name: str, value: object, expected: str, *, minimum: float = 0.0, strict: bool = True) -> float:

@@ -70,7 +70,7 @@ def approach(problem: IKProblem, task: Task, state: BatchState, i: int, q_start:
         rotations = Slerp([0.0, 1.0], ends)(s).as_matrix().reshape(pieces, 9)
         rotations[-1] = task.rotation[i]
     line = task.with_targets(points, rotations)
-    sub = BatchState.empty(pieces, task.m, state.mu.shape[1])
+    sub = BatchState.empty(pieces, task.m, state.mu.shape[1], state.q.shape[1])
     start = _rest_start(q_start, task.m, state.mu.shape[1])
     newton.solve_in_order(problem, line, sub, np.arange(pieces, dtype=np.intp), start, settings.newton)
     state.iterations[i] += int(sub.iterations.sum())
@@ -97,6 +97,7 @@ def _start_level(problem: IKProblem, task: Task, state: BatchState, new: Index) 
     Joints and equality multipliers are interpolated with their exact first and second
     derivatives; inequality multipliers linearly (they are kinked where the active set changes).
     """
+    nj = problem.n
     known = np.flatnonzero(state.converged & state.rates_ready)
     if known.size < 2:
         nearest = known[0] if known.size else 0
@@ -111,11 +112,11 @@ def _start_level(problem: IKProblem, task: Task, state: BatchState, new: Index) 
         np.concatenate([state.qdd[known], state.lam_dd[known]], axis=1),
         t,
     )
-    q = both[:, :7]
+    q = both[:, :nj]
     bad = ~problem.assemblable(q, 0.5 * problem.margin)
     if bad.any():
         q[bad] = linear(tk, state.q[known], t[bad])
-    state.q[new], state.lam[new] = q, both[:, 7:]
+    state.q[new], state.lam[new] = q, both[:, nj:]
     known_mu = state.mu[known]
     if known_mu.any():
         mu = np.maximum(linear(tk, known_mu, t), 0.0)

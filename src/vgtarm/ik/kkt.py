@@ -1,11 +1,11 @@
 """The fixed-size KKT system of the active-set (semismooth) Newton method, for a batch of samples.
 
-Per sample the unknowns are the joint step ``dq`` (7), the new equality multipliers ``lam`` (m)
+Per sample the unknowns are the joint step ``dq`` (``nj``, the joints), the new equality multipliers ``lam`` (m)
 and the new multipliers of the kept triangle rows ``mu_g`` (k); the multipliers of active joint
-limits are eliminated. Every sample's matrix has the same size ``7 + m + k`` whatever its active
-set, so the whole batch is one ``numpy.linalg.solve`` on an ``(n, 7 + m + k, 7 + m + k)`` array:
+limits are eliminated. Every sample's matrix has the same size ``nj + m + k`` whatever its active
+set, so the whole batch is one ``numpy.linalg.solve`` on an ``(n, nj + m + k, nj + m + k)`` array:
 
-- row ``i < 7`` of a joint whose limit is active is replaced by ``dq_i = bound_i - q_i``; the
+- row ``i < nj`` of a joint whose limit is active is replaced by ``dq_i = bound_i - q_i``; the
   other rows are the linearised stationarity ``W dq + J^T lam - G^T mu_g = -grad Phi``, with
   ``W = grad^2 Phi + d^2(lam^T c)/dq^2``;
 - the ``m`` rows ``J dq = -(c - c_d)``;
@@ -15,7 +15,7 @@ set, so the whole batch is one ``numpy.linalg.solve`` on an ``(n, 7 + m + k, 7 +
 The multiplier of an active limit then follows from its stationarity row (:func:`bound_multipliers`).
 The same matrix, evaluated at the solution, gives the exact rates (:mod:`vgtarm.ik.rates`).
 
-Inequality multipliers ``mu`` ``(n, 14 + k)`` and active flags are stored in the order of
+Inequality multipliers ``mu`` ``(n, 2 nj + k)`` and active flags are stored in the order of
 :attr:`IKProblem.constraint_labels`: lower limits, upper limits, triangle rows; every ``mu >= 0``.
 
 Multipliers and active sets of solutions found by other solvers (SLSQP, IPOPT), batched.
@@ -52,61 +52,65 @@ Mask = NDArray[np.bool_]
 
 
 def hessian(problem: IKProblem, H: Array) -> Array:
-    """``W = grad^2 Phi + H``, ``(n, 7, 7)``, for the constraint Hessian ``H`` ``(n, 7, 7)``."""
+    """``W = grad^2 Phi + H``, ``(n, nj, nj)``, for the constraint Hessian ``H`` ``(n, nj, nj)``."""
+    nj = problem.n
     W = H.copy()
-    W[:, np.arange(7), np.arange(7)] += problem.weight
+    W[:, np.arange(nj), np.arange(nj)] += problem.weight
     return W
 
 
 def kkt_matrix(problem: IKProblem, W: Array, J: Array, active: Mask) -> Array:
-    """The condensed KKT matrix ``(n, 7 + m + k, 7 + m + k)`` for the active sets ``active`` ``(n, 14 + k)``."""
+    """The condensed KKT matrix ``(n, nj + m + k, nj + m + k)`` for the active sets ``active`` ``(n, 2 nj + k)``."""
+    nj = problem.n
     n, m = J.shape[0], J.shape[1]
     k = problem.n_triangle
-    size = 7 + m + k
+    size = nj + m + k
     K = np.zeros((n, size, size))
-    K[:, :7, :7] = W
-    K[:, :7, 7 : 7 + m] = J.transpose(0, 2, 1)
-    K[:, :7, 7 + m :] = -problem.G.T
-    K[:, 7 : 7 + m, :7] = J
-    box = active[:, :7] | active[:, 7:14]
+    K[:, :nj, :nj] = W
+    K[:, :nj, nj : nj + m] = J.transpose(0, 2, 1)
+    K[:, :nj, nj + m :] = -problem.G.T
+    K[:, nj : nj + m, :nj] = J
+    box = active[:, :nj] | active[:, nj : 2 * nj]
     rows_n, rows_i = np.nonzero(box)
     K[rows_n, rows_i, :] = 0.0
     K[rows_n, rows_i, rows_i] = 1.0
     for row in range(k):
-        on = active[:, 14 + row]
-        K[on, 7 + m + row, :7] = problem.G[row]
-        K[~on, 7 + m + row, 7 + m + row] = 1.0
+        on = active[:, 2 * nj + row]
+        K[on, nj + m + row, :nj] = problem.G[row]
+        K[~on, nj + m + row, nj + m + row] = 1.0
     return K
 
 
 def newton_rhs(problem: IKProblem, q: Array, residual: Array, active: Mask) -> Array:
-    """Right-hand side ``(n, 7 + m + k)`` of the Newton step at ``q`` with equality residual ``residual``."""
+    """Right-hand side ``(n, nj + m + k)`` of the Newton step at ``q`` with equality residual ``residual``."""
+    nj = problem.n
     n, m = residual.shape
     k = problem.n_triangle
-    rhs = np.zeros((n, 7 + m + k))
-    rhs[:, :7] = -problem.phi_gradient(q)
-    lower, upper = active[:, :7], active[:, 7:14]
-    rhs[:, :7] = np.where(lower, problem.lower - q, rhs[:, :7])
-    rhs[:, :7] = np.where(upper, problem.upper - q, rhs[:, :7])
-    rhs[:, 7 : 7 + m] = -residual
+    rhs = np.zeros((n, nj + m + k))
+    rhs[:, :nj] = -problem.phi_gradient(q)
+    lower, upper = active[:, :nj], active[:, nj : 2 * nj]
+    rhs[:, :nj] = np.where(lower, problem.lower - q, rhs[:, :nj])
+    rhs[:, :nj] = np.where(upper, problem.upper - q, rhs[:, :nj])
+    rhs[:, nj : nj + m] = -residual
     if k:
         slack = rows_times(q, problem.G) + problem.h - problem.margin
-        rhs[:, 7 + m :] = np.where(active[:, 14:], -slack, 0.0)
+        rhs[:, nj + m :] = np.where(active[:, 2 * nj :], -slack, 0.0)
     return rhs
 
 
 def rates_rhs(problem: IKProblem, rhs_kkt: Array, active: Mask) -> Array:
-    """Right-hand side ``(n, 7 + m + k)`` of a rate system from the path derivative of the KKT residual.
+    """Right-hand side ``(n, nj + m + k)`` of a rate system from the path derivative of the KKT residual.
 
-    ``rhs_kkt`` ``(n, 7 + m)`` is minus the derivative of ``[grad L; c - c_d]``; rows of active
+    ``rhs_kkt`` ``(n, nj + m)`` is minus the derivative of ``[grad L; c - c_d]``; rows of active
     limits and triangle rows stay zero (the active constraints do not move), as do the
     multipliers of inactive rows.
     """
+    nj = problem.n
     n, size = rhs_kkt.shape
     rhs = np.zeros((n, size + problem.n_triangle))
     rhs[:, :size] = rhs_kkt
-    box = active[:, :7] | active[:, 7:14]
-    rhs[:, :7][box] = 0.0
+    box = active[:, :nj] | active[:, nj : 2 * nj]
+    rhs[:, :nj][box] = 0.0
     return rhs
 
 
@@ -130,20 +134,21 @@ def solve(K: Array, rhs: Array) -> tuple[Array, Mask]:
 
 
 def stationarity(problem: IKProblem, q: Array, J: Array, lam: Array, mu: Array) -> Array:
-    """Gradient of the Lagrangian ``grad Phi + J^T lam - A^T mu`` ``(n, 7)`` (``A`` = inequality rows)."""
+    """Gradient of the Lagrangian ``grad Phi + J^T lam - A^T mu`` ``(n, nj)`` (``A`` = inequality rows)."""
     return problem.phi_gradient(q) + np.einsum("nmi,nm->ni", J, lam) - rows_times(mu, problem.A.T)
 
 
 def bound_multipliers(problem: IKProblem, q: Array, W: Array, J: Array, x: Array, active: Mask) -> Array:
-    """All inequality multipliers ``(n, 14 + k)`` after a step ``x = (dq, lam, mu_g)`` of the condensed system."""
+    """All inequality multipliers ``(n, 2 nj + k)`` after a step ``x = (dq, lam, mu_g)`` of the condensed system."""
+    nj = problem.n
     m = J.shape[1]
-    dq, lam, mu_g = x[:, :7], x[:, 7 : 7 + m], x[:, 7 + m :]
+    dq, lam, mu_g = x[:, :nj], x[:, nj : nj + m], x[:, nj + m :]
     r = problem.phi_gradient(q) + np.einsum("nij,nj->ni", W, dq) + np.einsum("nmi,nm->ni", J, lam)
     r -= rows_times(mu_g, problem.G.T)
     mu = np.zeros(active.shape)
-    mu[:, :7] = np.where(active[:, :7], r, 0.0)
-    mu[:, 7:14] = np.where(active[:, 7:14], -r, 0.0)
-    mu[:, 14:] = np.where(active[:, 14:], mu_g, 0.0)
+    mu[:, :nj] = np.where(active[:, :nj], r, 0.0)
+    mu[:, nj : 2 * nj] = np.where(active[:, nj : 2 * nj], -r, 0.0)
+    mu[:, 2 * nj :] = np.where(active[:, 2 * nj :], mu_g, 0.0)
     return mu
 
 
@@ -164,7 +169,7 @@ def predict_active(problem: IKProblem, q: Array, mu: Array, active: Mask, tolera
 def estimate_multipliers(
     problem: IKProblem, q: Array, J: Array, active_tolerance: float
 ) -> tuple[Array, Array, NDArray[np.bool_]]:
-    """``lam`` ``(n, m)``, ``mu`` ``(n, 14 + k)`` and active flags of solutions ``q`` ``(n, 7)``."""
+    """``lam`` ``(n, m)``, ``mu`` ``(n, 2 nj + k)`` and active flags of solutions ``q`` ``(n, nj)``."""
     n, m = J.shape[0], J.shape[1]
     active = problem.slacks(q) <= active_tolerance
     A = problem.A
@@ -199,19 +204,20 @@ def ldl_pivots(M: Array) -> Array:
     A = np.array(M, dtype=float, copy=True)
     r = A.shape[-1]
     pivots = np.empty(A.shape[:-1])
-    for j in range(r):
-        d = A[:, j, j]
-        pivots[:, j] = d
-        safe = np.where(d > 0, d, 1.0)
-        column = A[:, j + 1 :, j] / safe[:, None]
-        A[:, j + 1 :, j + 1 :] -= column[:, :, None] * A[:, j, j + 1 :][:, None, :]
+    with np.errstate(over="ignore", invalid="ignore"):  # after a bad pivot (large r): arbitrary values
+        for j in range(r):
+            d = A[:, j, j]
+            pivots[:, j] = d
+            safe = np.where(d > 0, d, 1.0)
+            column = A[:, j + 1 :, j] / safe[:, None]
+            A[:, j + 1 :, j + 1 :] -= column[:, :, None] * A[:, j, j + 1 :][:, None, :]
     return pivots
 
 
 def reduced_curvature(problem: IKProblem, W: Array, J: Array, active: NDArray[np.bool_]) -> Array:
     """A certificate ``(n,)`` of the second-order condition: positive exactly when it is verified.
 
-    ``W`` ``(n, 7, 7)`` is the Hessian of the Lagrangian, ``J`` the task Jacobian and ``active``
+    ``W`` ``(n, nj, nj)`` is the Hessian of the Lagrangian, ``J`` the task Jacobian and ``active``
     the active inequalities. Per sample, in order of cost: the Gershgorin lower bound of the
     smallest eigenvalue of ``W`` (when positive, every restriction of ``W`` is positive definite);
     else the smallest ``LDL^T`` pivot of ``W``; else the smallest pivot of ``P W P + c (I - P)``
@@ -219,6 +225,7 @@ def reduced_curvature(problem: IKProblem, W: Array, J: Array, active: NDArray[np
     positive definite exactly when the reduced Hessian is. Values are divided by the mean cost
     weight ``c``.
     """
+    nj = problem.n
     scale = float(problem.weight.mean())
     diagonal = np.diagonal(W, axis1=1, axis2=2)
     certificate = (diagonal - (np.abs(W).sum(axis=2) - np.abs(diagonal))).min(axis=1) / scale
@@ -231,15 +238,19 @@ def reduced_curvature(problem: IKProblem, W: Array, J: Array, active: NDArray[np
         return certificate
     n, m = need.size, J.shape[1]
     k = problem.n_triangle
-    rows = np.zeros((n, m + 14 + k, 7))
+    rows = np.zeros((n, m + 2 * nj + k, nj))
     rows[:, :m] = J[need]
     rows[:, m:] = np.where(active[need][:, :, None], problem.A, 0.0)
     gram = rows @ rows.transpose(0, 2, 1)
     unused = ~np.concatenate([np.ones((n, m), dtype=bool), active[need]], axis=1)
     idx_n, idx_r = np.nonzero(unused)
     gram[idx_n, idx_r, idx_r] = 1.0  # rows of inactive constraints are zero: keep the Gram matrix regular
-    projector = np.eye(7) - rows.transpose(0, 2, 1) @ np.linalg.solve(gram, rows)
-    M = projector @ W[need] @ projector + scale * (np.eye(7) - projector)
+    try:
+        through = np.linalg.solve(gram, rows)
+    except np.linalg.LinAlgError:  # dependent task rows (a planar robot's tip: one row is zero)
+        through = np.linalg.pinv(gram, hermitian=True) @ rows
+    projector = np.eye(nj) - rows.transpose(0, 2, 1) @ through
+    M = projector @ W[need] @ projector + scale * (np.eye(nj) - projector)
     certificate[need] = ldl_pivots(M).min(axis=1) / scale
     return certificate
 

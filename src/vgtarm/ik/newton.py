@@ -103,6 +103,7 @@ def iterate(
     (:meth:`Task.evaluate_with_rates`); they are kept for samples that converge with no active
     inequality (``rates_ready``), whose KKT matrix is the one the compiled call assumes.
     """
+    nj = problem.n
     working = np.asarray(idx, dtype=np.intp)
     state.converged[working] = False
     state.rates_ready[working] = False
@@ -133,16 +134,16 @@ def iterate(
         if not solvable.all():
             working, q, W, J, x, active = (a[solvable] for a in (working, q, W, J, x, active))  # type: ignore[assignment]
         m = J.shape[1]
-        dq = x[:, :7]
+        dq = x[:, :nj]
         mu_new = kkt.bound_multipliers(problem, q, W, J, x, active)
         alpha = _step_length(problem, q, dq, settings.max_step)[:, None]
         q_new = q + alpha * dq
         full = alpha[:, 0] == 1.0
-        lower, upper = active[:, :7] & full[:, None], active[:, 7:14] & full[:, None]
+        lower, upper = active[:, :nj] & full[:, None], active[:, nj : 2 * nj] & full[:, None]
         q_new = np.where(lower, problem.lower, np.where(upper, problem.upper, q_new))
         lam_old, mu_old = state.lam[working], state.mu[working]
         state.q[working] = q_new
-        state.lam[working] = lam_old + alpha * (x[:, 7 : 7 + m] - lam_old)
+        state.lam[working] = lam_old + alpha * (x[:, nj : nj + m] - lam_old)
         state.mu[working] = mu_old + alpha * (mu_new - mu_old)
         state.active[working] = active
         state.iterations[working] += 1

@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import InputError
+from ..model.parameters import N_JOINTS
 from .problem import DEFAULT_MARGIN
 
 
@@ -67,7 +68,7 @@ class IKOptions:
 
     Attributes:
         margin: Assembly margin (m): every triangle inequality holds with at least this slack.
-        initial_guess: ``(7,)`` start pose of the continuation (default: the robot's home pose).
+        initial_guess: ``(n,)`` start pose of the continuation (default: the robot's home pose).
         tol_primal: Newton stopping test on the equality residual (m; rad-like for orientation).
         tol_stationarity: Newton stopping test on the Lagrangian gradient.
         max_iterations: Newton steps per sample before it counts as failed.
@@ -94,8 +95,9 @@ class IKOptions:
     accept_stationarity: float = 1e-6
 
     @classmethod
-    def from_keywords(cls, options: dict[str, Any]) -> IKOptions:
-        """Build from keyword arguments; unknown names and bad values raise :class:`InputError`."""
+    def from_keywords(cls, options: dict[str, Any], n_joints: int = N_JOINTS) -> IKOptions:
+        """Build from keyword arguments for a robot of ``n_joints`` joints; unknown names and bad values
+        raise :class:`InputError`."""
         valid = [f.name for f in fields(cls)]
         unknown = sorted(set(options) - set(valid))
         if unknown:
@@ -119,9 +121,13 @@ class IKOptions:
             try:
                 guess = np.array(values["initial_guess"], dtype=float)
             except (TypeError, ValueError):
-                raise InputError(f"initial_guess must be 7 joint values, got {values['initial_guess']!r}") from None
-            if guess.shape != (7,) or not np.isfinite(guess).all():
-                raise InputError(f"initial_guess must be 7 finite joint values, got {values['initial_guess']!r}")
+                raise InputError(
+                    f"initial_guess must be {n_joints} joint values, got {values['initial_guess']!r}"
+                ) from None
+            if guess.shape != (n_joints,) or not np.isfinite(guess).all():
+                raise InputError(
+                    f"initial_guess must be {n_joints} finite joint values, got {values['initial_guess']!r}"
+                )
             values["initial_guess"] = guess
         return cls(**values)
 

@@ -1,14 +1,15 @@
 """The optimisation problem of one inverse-kinematics sample (paper eq. 12), as plain arrays.
 
 ``min Phi(q) = (1/n) sum_i ((q_i - q_i*) / (q_i,max - q_i,min))^2`` with ``q* `` the middle of the
-joint range and ``n = 7``, subject to the task's equality constraints (tip point, optionally the
+joint range and ``n`` the number of joints (7 for the paper's robot, any for a stack), subject to
+the task's equality constraints (tip point, optionally the
 orientation), the joint limits ``q_min <= q <= q_max`` and assemblability with a margin: the
 triangle inequalities of the truss are linear in ``q`` (:func:`vgtarm.assembly.linear_form`), and
 every sample must satisfy ``G q + h >= margin``. Rows that the joint limits already imply with
 that margin are dropped, so the active-set systems stay small (for the reference robot only the two
 ``s + 2d > p`` rows remain).
 
-Inequalities are ordered: 7 lower limits, 7 upper limits, then the kept triangle rows.
+Inequalities are ordered: n lower limits, n upper limits, then the kept triangle rows.
 
 The equality constraints of a path, evaluated through the compiled model.
 
@@ -30,9 +31,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import InputError
-from ..model.assembly import TRIANGLE_INEQUALITIES, linear_form
-from ..model.parameters import JOINT_NAMES, RobotParameters
+from ..model.assembly import TRIANGLE_INEQUALITIES
+from ..model.parameters import JOINT_NAMES, N_JOINTS, RobotParameters
 from ..model.robot import Robot
+from ..model.stack import Stack
 
 Array = NDArray[np.float64]
 
@@ -68,17 +70,17 @@ class IKProblem:
     """Cost, joint limits and linear inequalities of the redundancy resolution.
 
     Attributes:
-        lower, upper: ``(7,)`` joint limits (m, rad).
-        centre: ``(7,)`` middle of each range ``q*``.
-        weight: ``(7,)`` diagonal of the constant Hessian of ``Phi``: ``2 / (7 (q_max - q_min)^2)``.
-        G, h: ``(k, 7)``, ``(k,)`` kept triangle rows; the constraint is ``G q + h >= margin``.
-        G_all, h_all: ``(12, 7)``, ``(12,)`` every triangle row (margins ``G_all q + h_all``),
-            used to keep iterates assemblable.
+        lower, upper: ``(n,)`` joint limits (m, rad).
+        centre: ``(n,)`` middle of each range ``q*``.
+        weight: ``(n,)`` diagonal of the constant Hessian of ``Phi``: ``2 / (n (q_max - q_min)^2)``.
+        G, h: ``(k, n)``, ``(k,)`` kept triangle rows; the constraint is ``G q + h >= margin``.
+        G_all, h_all: ``(6 m, n)``, ``(6 m,)`` every triangle row of the ``m`` modules (margins
+            ``G_all q + h_all``), used to keep iterates assemblable.
         margin: Assembly margin (m).
         triangle_labels: ``(k,)`` names of the kept rows.
-        A, b: ``(14 + k, 7)``, ``(14 + k,)`` every inequality as ``A q + b >= 0``, in the order of
+        A, b: ``(2 n + k, n)``, ``(2 n + k,)`` every inequality as ``A q + b >= 0``, in the order of
             :attr:`constraint_labels`.
-        active_scale: ``(14 + k,)`` factor ``c`` of the active-set rule ``mu - c * slack > 0``
+        active_scale: ``(2 n + k,)`` factor ``c`` of the active-set rule ``mu - c * slack > 0``
             (the cost curvature of the joint the row moves), so that multipliers and slacks compare.
     """
 
@@ -95,9 +97,15 @@ class IKProblem:
     A: Array
     b: Array
     active_scale: Array
+    joint_names: tuple[str, ...] = JOINT_NAMES
+
+    @property
+    def n(self) -> int:
+        """Number of joints."""
+        return int(self.lower.shape[0])
 
     @classmethod
-    def from_parameters(cls, parameters: RobotParameters, margin: float = DEFAULT_MARGIN) -> IKProblem:
+    def from_parameters(cls, parameters: RobotParameters | Stack, margin: float = DEFAULT_MARGIN) -> IKProblem:
         """The problem of a robot, keeping the triangle rows that the joint limits do not imply."""
         if isinstance(margin, bool) or not isinstance(margin, int | float) or not math.isfinite(margin) or margin <= 0:
             raise InputError(
@@ -105,7 +113,8 @@ class IKProblem:
                 "its kinematics are not differentiable)"
             )
         lower, upper = parameters.lower, parameters.upper
-        G_all, h_all = linear_form(parameters.b, parameters.d)
+        G_all, h_all = parameters.margin_form()
+        n = lower.shape[0]
         # Smallest value of each row over the box: the row is implied when it is >= margin.
         smallest = np.where(G_all > 0, G_all * lower, G_all * upper).sum(axis=1) + h_all
         keep = smallest < margin
@@ -113,7 +122,7 @@ class IKProblem:
             f"module {row // 6 + 1}: {TRIANGLE_INEQUALITIES[row % 6]}" for row in np.flatnonzero(keep).tolist()
         )
         G, h = G_all[keep], h_all[keep]
-        weight = 2.0 / (7.0 * (upper - lower) ** 2)
+        weight = 2.0 / (n * (upper - lower) ** 2)
         return cls(
             lower=lower,
             upper=upper,
@@ -125,9 +134,10 @@ class IKProblem:
             h_all=h_all,
             margin=float(margin),
             triangle_labels=labels,
-            A=np.concatenate([np.eye(7), -np.eye(7), G]),
+            A=np.concatenate([np.eye(n), -np.eye(n), G]),
             b=np.concatenate([-lower, upper, h - margin]),
             active_scale=np.concatenate([weight, weight, np.abs(G) @ weight / np.abs(G).sum(axis=1)]),
+            joint_names=parameters.joint_names,
         )
 
     @property
@@ -137,34 +147,34 @@ class IKProblem:
 
     @property
     def constraint_labels(self) -> tuple[str, ...]:
-        """Names of the ``14 + k`` inequalities, in their order."""
+        """Names of the ``2 n + k`` inequalities, in their order."""
         return (
-            tuple(f"{name} >= min" for name in JOINT_NAMES)
-            + tuple(f"{name} <= max" for name in JOINT_NAMES)
+            tuple(f"{name} >= min" for name in self.joint_names)
+            + tuple(f"{name} <= max" for name in self.joint_names)
             + tuple(f"{label} (margin {self.margin:g} m)" for label in self.triangle_labels)
         )
 
     def phi(self, q: Array) -> Array:
-        """The cost ``Phi(q)`` of eq. 12, ``(...,)`` for ``q`` of shape ``(..., 7)``."""
+        """The cost ``Phi(q)`` of eq. 12, ``(...,)`` for ``q`` of shape ``(..., n)``."""
         return np.asarray(0.5 * ((q - self.centre) ** 2 * self.weight).sum(axis=-1))
 
     def phi_gradient(self, q: Array) -> Array:
-        """``dPhi/dq``, ``(..., 7)``."""
+        """``dPhi/dq``, ``(..., n)``."""
         return np.asarray(self.weight * (q - self.centre))
 
     def slacks(self, q: Array) -> Array:
-        """Values of the ``14 + k`` inequalities (all ``>= 0`` when feasible), ``(..., 14 + k)`` (m, rad)."""
-        flat = np.reshape(q, (-1, 7))
+        """Values of the ``2 n + k`` inequalities (all ``>= 0`` when feasible), ``(..., 2 n + k)`` (m, rad)."""
+        flat = np.reshape(q, (-1, self.n))
         return (rows_times(flat, self.A) + self.b).reshape(np.shape(q)[:-1] + (self.b.shape[0],))
 
     def assemblable(self, q: Array, margin: float = 0.0) -> NDArray[np.bool_]:
-        """Whether every triangle row of ``q`` ``(..., 7)`` exceeds ``margin``."""
-        flat = np.reshape(q, (-1, 7))
+        """Whether every triangle row of ``q`` ``(..., n)`` exceeds ``margin``."""
+        flat = np.reshape(q, (-1, self.n))
         inside = (rows_times(flat, self.G_all) + self.h_all > margin).all(axis=-1)
         return np.asarray(inside.reshape(np.shape(q)[:-1]))
 
     def feasible(self, q: Array, tolerance: float = 1e-12) -> NDArray[np.bool_]:
-        """Whether ``q`` ``(..., 7)`` satisfies every inequality to ``tolerance``."""
+        """Whether ``q`` ``(..., n)`` satisfies every inequality to ``tolerance``."""
         return np.asarray((self.slacks(q) >= -tolerance).all(axis=-1))
 
 
@@ -250,7 +260,7 @@ class Task:
         )
 
     def forward(self, q: Array) -> tuple[Array, Array]:
-        """Tip point ``(n, 3)`` and row-major end-effector orientation ``(n, 9)`` of ``q`` ``(n, 7)``."""
+        """Tip point ``(n, 3)`` and row-major end-effector orientation ``(n, 9)`` of ``q`` ``(n, joints)``."""
         out = self._evaluate("fk", {"q": q}, q.shape[0])
         return out["tip"], out["C03"]
 
@@ -263,11 +273,11 @@ class Task:
         return {"w" + suffix: self.angular_velocity[idx], "a" + suffix: self.angular_acceleration[idx]}
 
     def evaluate(self, idx: Index, q: Array, lam: Array) -> tuple[Array, Array, Array]:
-        """Residual ``c(q) - c_d`` ``(n, m)``, Jacobian ``(n, m, 7)``, ``d^2(lam^T c)/dq^2`` ``(n, 7, 7)``.
+        """Residual ``c(q) - c_d`` ``(n, m)``, Jacobian ``(n, m, nj)``, ``d^2(lam^T c)/dq^2`` ``(n, nj, nj)``.
 
-        ``idx`` selects the samples (their targets); ``q`` ``(n, 7)`` and ``lam`` ``(n, m)``.
+        ``idx`` selects the samples (their targets); ``q`` ``(n, nj)`` and ``lam`` ``(n, m)``.
         """
-        n = idx.shape[0]
+        n, nj = idx.shape[0], q.shape[1]
         if self.kind == "position":
             out = self._evaluate("ik_position", {"q": q, "lam": lam}, n)
             c, J, H = out["c"], out["J"], out["H"]
@@ -276,16 +286,16 @@ class Task:
             out = self._evaluate("ik_pose", {"q": q, "lam": lam, **self._orientation_inputs(idx)}, n)
             c, J, H = out["c"], out["J"], out["H"]
             c[:, :3] -= self.position[idx]
-        return c, J.reshape(n, self.m, 7), H.reshape(n, 7, 7)
+        return c, J.reshape(n, self.m, nj), H.reshape(n, nj, nj)
 
     def evaluate_with_rates(self, idx: Index, q: Array, lam: Array, weight: Array) -> tuple[Array, ...]:
         """As :meth:`evaluate`, plus the exact ``qd, lam_d, qdd, lam_dd`` for no active inequality.
 
-        One compiled call (``ik_position_rates`` / ``ik_pose_rates``) per sample; ``weight`` ``(7,)``
+        One compiled call (``ik_position_rates`` / ``ik_pose_rates``) per sample; ``weight`` ``(nj,)``
         is the diagonal of the Hessian of ``Phi``. The rates are valid only where ``(q, lam)`` is
         a solution with no active limit or triangle row.
         """
-        n = idx.shape[0]
+        n, nj = idx.shape[0], q.shape[1]
         inputs = {"q": q, "lam": lam, "w": weight, "xd": self.velocity[idx], "xdd": self.acceleration[idx]}
         if self.kind == "position":
             out = self._evaluate("ik_position_rates", inputs, n)
@@ -295,20 +305,20 @@ class Task:
             out = self._evaluate("ik_pose_rates", inputs, n)
             out["c"][:, :3] -= self.position[idx]
         rates = (out["qd"], out["lam_d"], out["qdd"], out["lam_dd"])
-        return (out["c"], out["J"].reshape(n, self.m, 7), out["H"].reshape(n, 7, 7), *rates)
+        return (out["c"], out["J"].reshape(n, self.m, nj), out["H"].reshape(n, nj, nj), *rates)
 
     def first_order_rhs(self, idx: Index, q: Array, lam: Array) -> Array:
-        """``-dF/dt`` at fixed ``(q, lam)`` of the KKT residual ``F = [grad L; c - c_d]``, ``(n, 7 + m)``."""
-        n = idx.shape[0]
-        rhs = np.zeros((n, 7 + self.m))
-        rhs[:, 7:10] = self.velocity[idx]
+        """``-dF/dt`` at fixed ``(q, lam)`` of the KKT residual ``F = [grad L; c - c_d]``, ``(n, nj + m)``."""
+        n, nj = idx.shape[0], q.shape[1]
+        rhs = np.zeros((n, nj + self.m))
+        rhs[:, nj : nj + 3] = self.velocity[idx]
         if self.kind == "pose":
             inputs = {"q": q, "lam": lam, **self._orientation_inputs(idx), **self._motion_inputs(idx)}
             rhs -= self._evaluate("ik_pose_dt", inputs, n)["dt"]
         return rhs
 
     def second_order_rhs(self, idx: Index, q: Array, lam: Array, qd: Array, lam_d: Array) -> Array:
-        """``-d^2/dt^2 F(q + t qd, lam + t lam_d, t)`` at ``t = 0``, ``(n, 7 + m)``.
+        """``-d^2/dt^2 F(q + t qd, lam + t lam_d, t)`` at ``t = 0``, ``(n, nj + m)``.
 
         With ``K [qdd; lam_dd] = this`` (active set fixed), ``(qdd, lam_dd)`` are the second
         derivatives of the optimum along the path.
@@ -321,7 +331,8 @@ class Task:
             inputs.update(self._orientation_inputs(idx), **self._motion_inputs(idx))
             d2 = self._evaluate("ik_pose_d2", inputs, n)["d2"]
         rhs = -d2
-        rhs[:, 7:10] += self.acceleration[idx]
+        nj = q.shape[1]
+        rhs[:, nj : nj + 3] += self.acceleration[idx]
         return rhs
 
 
@@ -330,11 +341,11 @@ class BatchState:
     """Mutable per-sample arrays, all with ``N`` rows, updated in place by the solvers.
 
     Attributes:
-        q: ``(N, 7)`` joint values.
+        q: ``(N, n)`` joint values.
         lam: ``(N, m)`` multipliers of the equality rows.
-        mu: ``(N, 14 + k)`` multipliers of the inequalities (>= 0), in the problem's order.
-        active: ``(N, 14 + k)`` active flags of the inequalities.
-        residual, J, H: ``(N, m)``, ``(N, m, 7)``, ``(N, 7, 7)`` task residual, Jacobian and
+        mu: ``(N, 2 n + k)`` multipliers of the inequalities (>= 0), in the problem's order.
+        active: ``(N, 2 n + k)`` active flags of the inequalities.
+        residual, J, H: ``(N, m)``, ``(N, m, n)``, ``(N, n, n)`` task residual, Jacobian and
             ``d^2(lam^T c)/dq^2`` at ``(q, lam)`` (valid where ``evaluated``).
         iterations: ``(N,)`` Newton (or solver) iterations spent on each sample.
         converged: ``(N,)`` whether the sample met the Newton stopping test.
@@ -360,20 +371,21 @@ class BatchState:
     rates_ready: NDArray[np.bool_]
 
     @classmethod
-    def empty(cls, n: int, m: int, n_inequalities: int) -> BatchState:
+    def empty(cls, n: int, m: int, n_inequalities: int, n_joints: int = N_JOINTS) -> BatchState:
+        nj = n_joints
         return cls(
-            q=np.zeros((n, 7)),
+            q=np.zeros((n, nj)),
             lam=np.zeros((n, m)),
             mu=np.zeros((n, n_inequalities)),
             active=np.zeros((n, n_inequalities), dtype=bool),
             residual=np.full((n, m), np.nan),
-            J=np.full((n, m, 7), np.nan),
-            H=np.full((n, 7, 7), np.nan),
+            J=np.full((n, m, nj), np.nan),
+            H=np.full((n, nj, nj), np.nan),
             iterations=np.zeros(n, dtype=np.int64),
             converged=np.zeros(n, dtype=bool),
             method=np.full(n, "", dtype="<U24"),
-            qd=np.zeros((n, 7)),
-            qdd=np.zeros((n, 7)),
+            qd=np.zeros((n, nj)),
+            qdd=np.zeros((n, nj)),
             lam_d=np.zeros((n, m)),
             lam_dd=np.zeros((n, m)),
             rates_ready=np.zeros(n, dtype=bool),

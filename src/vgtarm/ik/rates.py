@@ -39,24 +39,25 @@ def exact(problem: IKProblem, task: Task, state: BatchState, idx: Index) -> None
 
     ``state`` must hold the solution and the model values at it; the rates are stored in it.
     """
+    nj = problem.n
     if idx.size == 0:
         return
     q, lam, active = state.q[idx], state.lam[idx], state.active[idx]
     m = task.m
     K = kkt.kkt_matrix(problem, kkt.hessian(problem, state.H[idx]), state.J[idx], active)
     first, _ = kkt.solve(K, kkt.rates_rhs(problem, task.first_order_rhs(idx, q, lam), active))
-    qd, lam_d = first[:, :7], first[:, 7 : 7 + m]
+    qd, lam_d = first[:, :nj], first[:, nj : nj + m]
     second, _ = kkt.solve(K, kkt.rates_rhs(problem, task.second_order_rhs(idx, q, lam, qd, lam_d), active))
-    qdd = second[:, :7]
-    on_bound = active[:, :7] | active[:, 7:14]
+    qdd = second[:, :nj]
+    on_bound = active[:, :nj] | active[:, nj : 2 * nj]
     qd[on_bound] = qdd[on_bound] = 0.0  # exact: these joints stay on their limits
     state.qd[idx], state.lam_d[idx] = qd, lam_d
-    state.qdd[idx], state.lam_dd[idx] = qdd, second[:, 7 : 7 + m]
+    state.qdd[idx], state.lam_dd[idx] = qdd, second[:, nj : nj + m]
     state.rates_ready[idx] = True
 
 
 def finite_difference(q: Array, dt: float) -> tuple[Array, Array]:
-    """``qd``, ``qdd`` ``(N, 7)`` of samples ``q`` ``(N, 7)`` spaced by ``dt`` (central inside, Euler at the ends)."""
+    """``qd``, ``qdd`` ``(N, n)`` of samples ``q`` ``(N, n)`` spaced by ``dt`` (central inside, Euler at the ends)."""
     qd = np.empty_like(q)
     qdd = np.empty_like(q)
     qd[1:-1] = (q[2:] - q[:-2]) / (2 * dt)

@@ -29,11 +29,11 @@ class IKSamples:
         orientation_error: ``(N,)`` angle between the end-effector and the desired orientation
             (rad); NaN for the free-orientation task.
         phi: ``(N,)`` the cost ``Phi(q)`` of eq. 12.
-        active: ``(N, 14 + k)`` active inequalities, labelled by ``constraint_labels``: lower
+        active: ``(N, 2 n + k)`` active inequalities, labelled by ``constraint_labels``: lower
             limits, upper limits, then the assembly rows ``G q + h >= margin``.
-        constraint_labels: ``(14 + k,)`` names of the inequalities.
+        constraint_labels: ``(2 n + k,)`` names of the inequalities.
         multipliers: ``(N, m)`` Lagrange multipliers of the task equations (3 or 6).
-        inequality_multipliers: ``(N, 14 + k)`` multipliers of the inequalities (>= 0 at an optimum).
+        inequality_multipliers: ``(N, 2 n + k)`` multipliers of the inequalities (>= 0 at an optimum).
         stationarity: ``(N,)`` largest entry of the Lagrangian gradient.
         curvature: ``(N,)`` certificate of the second-order condition, positive when the Hessian of
             the Lagrangian is verified positive definite on the null space of the active
@@ -58,14 +58,19 @@ class IKSamples:
     method: NDArray[np.str_]
 
     @property
+    def n_bounds(self) -> int:
+        """``2 n``: the joint-limit rows (``n`` lower, then ``n`` upper limits) among the inequalities."""
+        return 2 * sum(label.endswith(" >= min") for label in self.constraint_labels)
+
+    @property
     def active_bounds(self) -> NDArray[np.bool_]:
-        """``(N, 14)``: lower limits of ``JOINT_NAMES`` then upper limits."""
-        return self.active[:, :14]
+        """``(N, 2 n)``: lower limits of the joints then upper limits."""
+        return self.active[:, : self.n_bounds]
 
     @property
     def active_assembly(self) -> NDArray[np.bool_]:
-        """``(N, k)``: the assembly rows, labelled by ``constraint_labels[14:]``."""
-        return self.active[:, 14:]
+        """``(N, k)``: the assembly rows, labelled by ``constraint_labels[2 n:]``."""
+        return self.active[:, self.n_bounds :]
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,7 +79,7 @@ class IKResult:
 
     Attributes:
         t: ``(N,)`` sample times (s).
-        q, qd, qdd: ``(N, 7)`` joint values, rates and accelerations (m, rad; per s, per s^2).
+        q, qd, qdd: ``(N, n)`` joint values, rates and accelerations (m, rad; per s, per s^2).
         position, velocity, acceleration: ``(N, 3)`` the desired tip path (SI).
         orientation: ``(N, 3, 3)`` the desired orientation (pose task) or ``None``.
         samples: the per-sample record.
@@ -82,7 +87,7 @@ class IKResult:
         rates: ``"exact"`` or ``"finite_difference"``.
         task: ``"position"`` or ``"pose"``.
         margin: assembly margin used (m).
-        lower, upper: ``(7,)`` joint limits.
+        lower, upper: ``(n,)`` joint limits.
         wall_time: wall-clock time of the solve (s).
         success: every sample succeeded.
         message: a one-line summary (which samples failed, if any).
@@ -91,6 +96,7 @@ class IKResult:
         robot: name of the robot the reference was solved for ("" if unknown).
         robot_fingerprint: :attr:`vgtarm.Robot.fingerprint` of that robot's parameters, so a
             simulation of another robot can say so ("" if unknown).
+        joint_names: the robot's joint names, in the order of the columns of ``q``.
     """
 
     t: Array
@@ -121,21 +127,28 @@ class IKResult:
         return int(self.t.shape[0])
 
     def limit_clearance(self) -> tuple[Array, Array]:
-        """Smallest distance of each joint to its lower and to its upper limit over the path, ``(7,)`` each."""
+        """Smallest distance of each joint to its lower and to its upper limit over the path, ``(n,)`` each."""
         return (self.q - self.lower).min(axis=0), (self.upper - self.q).min(axis=0)
 
 
-#: Columns of the CSV file: time, desired tip point, joints, rates, accelerations (SI units).
-CSV_COLUMNS: tuple[str, ...] = (
-    ("t", "x", "y", "z")
-    + JOINT_NAMES
-    + tuple(f"d{name}" for name in JOINT_NAMES)
-    + tuple(f"dd{name}" for name in JOINT_NAMES)
-)
+def csv_columns(joint_names: tuple[str, ...] = JOINT_NAMES) -> tuple[str, ...]:
+    """Columns of the CSV file of a robot with these joints: time, desired tip point, joints, rates,
+    accelerations (SI units)."""
+    return (
+        ("t", "x", "y", "z")
+        + tuple(joint_names)
+        + tuple(f"d{name}" for name in joint_names)
+        + tuple(f"dd{name}" for name in joint_names)
+    )
+
+
+#: Columns of the CSV file of the paper's robot (a stack's: :func:`csv_columns` of its joints).
+CSV_COLUMNS: tuple[str, ...] = csv_columns()
 
 
 def write_csv(result: IKResult, file: str | os.PathLike[str]) -> None:
-    """Write one row per sample with the columns :data:`CSV_COLUMNS` (full double precision).
+    """Write one row per sample with the columns :func:`csv_columns` of the result's joints (full double
+    precision; :data:`CSV_COLUMNS` for the paper's robot).
 
     The file is written atomically (:func:`vgtarm.fileio.atomic_open`): a reader never sees a
     partial file and nothing is left behind when writing fails.
@@ -144,5 +157,5 @@ def write_csv(result: IKResult, file: str | os.PathLike[str]) -> None:
         raise InputError(f"result = {shown(result)}: expected an IKResult (from inverse_kinematics)")
     table = np.column_stack([result.t, result.position, result.q, result.qd, result.qdd])
     with atomic_open(file) as stream:
-        stream.write(",".join(CSV_COLUMNS) + "\n")
+        stream.write(",".join(csv_columns(result.joint_names)) + "\n")
         np.savetxt(stream, table, delimiter=",", fmt="%.17g")

@@ -26,8 +26,7 @@ from numpy.typing import NDArray
 from scipy.optimize import Bounds, OptimizeResult, minimize
 
 from ..model.codegen.ik import pose_constraints, rotation_from_row_major
-from ..model.parameters import N_PARAMETERS
-from ..model.symbolic import kinematics
+from ..model.definition import PAPER, Definition
 from . import kkt
 from .options import IKOptions
 from .problem import BatchState, IKProblem, Task
@@ -60,7 +59,7 @@ class _Model:
         self.task, self.idx = task, np.array([i], dtype=np.intp)
         self.zero = np.zeros((1, task.m))
         self.key = b""
-        self.value: tuple[Array, Array] = (np.zeros(task.m), np.zeros((task.m, 7)))
+        self.value: tuple[Array, Array] = (np.zeros(task.m), np.zeros((task.m, task.model.n_joints)))
 
     def __call__(self, q: Array) -> tuple[Array, Array]:
         key = q.tobytes()
@@ -79,7 +78,7 @@ def _minimize(
 ) -> OptimizeResult:
     """Run SLSQP in the scaled joints ``u = (q - q*) / (q_max - q_min)`` and return ``q``.
 
-    In ``u`` the cost ``Phi = |u|^2 / 7`` is isotropic (in ``q`` the twist joint's curvature is
+    In ``u`` the cost ``Phi = |u|^2 / n`` is isotropic (in ``q`` the twist joint's curvature is
     2000 times smaller than the legs', which slows SLSQP's quasi-Newton updates considerably);
     bounds become ``[-1/2, 1/2]``. Gradients and Jacobians follow by the chain rule. The
     result's ``x`` is in ``u``.
@@ -114,7 +113,7 @@ def _minimize(
         u0,
         jac=True,
         method="SLSQP",
-        bounds=Bounds(np.full(7, -0.5), np.full(7, 0.5)),
+        bounds=Bounds(np.full(problem.n, -0.5), np.full(problem.n, 0.5)),
         constraints=constraints,
         options={"ftol": options.reference_ftol, "maxiter": options.reference_maxiter},
     )
@@ -202,18 +201,19 @@ def solve_slsqp(problem: IKProblem, task: Task, state: BatchState, q_start: Arra
 METHOD_IPOPT = "ipopt"
 
 
-def build_ipopt(problem: IKProblem, kind: str, options: IKOptions) -> ca.Function:
-    """The IPOPT solver of one sample; its parameter is ``[target point (3), R_d row-major (9, pose only), p]``."""
-    q = ca.SX.sym("q", 7)
+def build_ipopt(problem: IKProblem, kind: str, options: IKOptions, definition: Definition = PAPER) -> ca.Function:
+    """The IPOPT solver of one sample of the robot ``definition`` (default the paper's); its parameter
+    is ``[target point (3), R_d row-major (9, pose only), p]``."""
+    q = ca.SX.sym("q", definition.n_joints)
     point = ca.SX.sym("point", 3)
-    p = ca.SX.sym("p", N_PARAMETERS)
+    p = ca.SX.sym("p", definition.n_parameters)
     if kind == "position":
         parameters = ca.vertcat(point, p)
-        c = kinematics(q, p).tip - point
+        c = definition.kinematics(q, p).tip - point
     else:
         rd = ca.SX.sym("R_d", 9)
         parameters = ca.vertcat(point, rd, p)
-        c = pose_constraints(q, rotation_from_row_major(rd), p) - ca.vertcat(point, ca.SX.zeros(3))
+        c = pose_constraints(q, rotation_from_row_major(rd), p, definition) - ca.vertcat(point, ca.SX.zeros(3))
     cost = 0.5 * ca.sum1(ca.DM(problem.weight) * (q - ca.DM(problem.centre)) ** 2)
     g = ca.vertcat(c, ca.DM(problem.G) @ q + ca.DM(problem.h))
     settings: dict[str, Any] = {
@@ -230,7 +230,7 @@ def build_ipopt(problem: IKProblem, kind: str, options: IKOptions) -> ca.Functio
 
 def solve_ipopt(problem: IKProblem, task: Task, state: BatchState, q_start: Array, options: IKOptions) -> None:
     """The IPOPT reference solver (solver contract: :class:`vgtarm.ik.Solver`)."""
-    solver = build_ipopt(problem, task.kind, options)
+    solver = build_ipopt(problem, task.kind, options, task.model.definition)
     m, k = task.m, problem.n_triangle
     lbg = np.concatenate([np.zeros(m), np.full(k, problem.margin)])
     ubg = np.concatenate([np.zeros(m), np.full(k, np.inf)])

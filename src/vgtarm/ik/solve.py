@@ -167,7 +167,7 @@ def inverse_kinematics(
             tolerances, ``fallback``, ...).
 
     Returns:
-        An :class:`IKResult` with ``.q``, ``.qd``, ``.qdd`` ``(N, 7)`` and the per-sample record.
+        An :class:`IKResult` with ``.q``, ``.qd``, ``.qdd`` ``(N, n)`` and the per-sample record.
 
     Raises:
         PathError: ``path`` is not a :class:`vgtarm.paths.Path`, or has a point farther than
@@ -195,11 +195,17 @@ def inverse_kinematics(
     name, solve = get_solver(solver)
     if rates not in rate_modes.RATE_MODES:
         raise InputError(f"unknown rates mode {rates!r}; valid modes are {', '.join(rate_modes.RATE_MODES)}")
-    settings = IKOptions.from_keywords(options)
+    settings = IKOptions.from_keywords(options, robot.n_joints)
     problem = IKProblem.from_parameters(robot.parameters, settings.margin)
     q_start = _check_start(
         robot, problem, robot.parameters.home if settings.initial_guess is None else settings.initial_guess
     )
+    if robot.is_stack and np.linalg.matrix_rank(robot.tip_jacobian(q_start), tol=1e-9) < 3:
+        raise InputError(
+            f"robot {shown(robot.parameters.name)}: its tip moves in a plane or a line (the tip Jacobian at the start "
+            "pose has rank < 3), so the tip-position task has a dependent row; inverse kinematics of such a robot "
+            "is not supported yet"
+        )
     n = len(path)
     check_memory(
         memory_estimate(n, pose is not None),
@@ -225,15 +231,24 @@ def inverse_kinematics(
     check = kkt.verify(problem, state, settings.tolerances)
     samples = _samples(problem, task, state, check, target)
     result = _result(path, state, qd, qdd, samples, target, problem, name, rates, task.kind, started)
-    return replace(result, work=solved.counters, robot=robot.parameters.name, robot_fingerprint=robot.fingerprint)
+    return replace(
+        result,
+        work=solved.counters,
+        robot=robot.parameters.name,
+        robot_fingerprint=robot.fingerprint,
+        joint_names=robot.joint_names,
+    )
 
 
 def _checked(result: object, task: Task) -> SolverResult:
     """The solver's result, checked against the interface (a user's solver may get it wrong)."""
     if not isinstance(result, SolverResult):
         raise InputError(f"an inverse-kinematics solver must return a SolverResult, got {type(result).__name__}")
-    if result.state.q.shape != (len(task), 7):
-        raise InputError(f"the solver returned q of shape {result.state.q.shape}, expected ({len(task)}, 7)")
+    n_joints = task.model.n_joints
+    if result.state.q.shape != (len(task), n_joints):
+        raise InputError(
+            f"the solver returned q of shape {result.state.q.shape}, expected ({len(task)}, {n_joints})"
+        )
     return result
 
 
@@ -374,7 +389,7 @@ def in_place(step: InPlace) -> Solver:
 
     def solver(problem: IKProblem, task: Task, q_start: Array, options: IKOptions) -> SolverResult:
         started, evaluations = time.perf_counter(), task.evaluations[0]
-        state = BatchState.empty(len(task), task.m, 14 + problem.n_triangle)
+        state = BatchState.empty(len(task), task.m, 2 * problem.n + problem.n_triangle, problem.n)
         step(problem, task, state, q_start, options)
         return SolverResult(
             state=state,

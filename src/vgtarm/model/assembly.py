@@ -83,3 +83,37 @@ def check_assembly(q: ArrayLike, b: Sequence[float], d: Sequence[float], *, wher
         f"'{TRIANGLE_INEQUALITIES[row % 6]}' fails with s={s:.6g} m, v={v:.6g} m, p={p:.6g} m, "
         f"b={b[module - 1]:.6g} m, d={d[module - 1]:.6g} m"
     )
+
+
+def check_margins(
+    q: ArrayLike,
+    G: NDArray[np.float64],
+    h: NDArray[np.float64],
+    legs: Sequence[tuple[int, int, int]],
+    b: Sequence[float],
+    d: Sequence[float],
+    *,
+    where: str = "",
+) -> None:
+    """As :func:`check_assembly` for any number of modules: ``G q + h`` ``(6 m, n)`` holds six rows
+    per module in the order of :data:`TRIANGLE_INEQUALITIES`; ``legs[k]`` are the indices of module
+    ``k``'s ``(s, v, p)`` in ``q`` ``(..., n)``; ``b``, ``d`` its half-widths (for the message)."""
+    qa = np.asarray(q, dtype=float)
+    margins = qa @ G.T + h
+    bad = ~(margins > 0.0)
+    if not bad.any():
+        return
+    rows = G.shape[0]
+    flat_index = int(np.argmax(bad.reshape(-1, rows).any(axis=1)))
+    row = int(np.argmax(bad.reshape(-1, rows)[flat_index]))
+    module = row // 6 + 1
+    qi = qa.reshape(-1, qa.shape[-1])[flat_index]
+    s, v, p = (qi[i] for i in legs[module - 1])
+    index = tuple(int(i) for i in np.unravel_index(flat_index, qa.shape[:-1]))
+    location = "" if qa.ndim == 1 else f" (configuration {index})"
+    prefix = f"{where}: " if where else ""
+    raise AssemblyError(
+        f"{prefix}module {module} cannot be assembled{location}: triangle inequality "
+        f"'{TRIANGLE_INEQUALITIES[row % 6]}' fails with s={s:.6g} m, v={v:.6g} m, p={p:.6g} m, "
+        f"b={b[module - 1]:.6g} m, d={d[module - 1]:.6g} m"
+    )

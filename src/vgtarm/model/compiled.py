@@ -5,7 +5,10 @@ together with the drivers of ``csrc/`` (batch evaluation, the closed loop; their
 one header ``csrc/vgtarm.h``, read by :mod:`.interface`) into one shared library, and cached on
 disk. The cache key hashes every source file of the ``vgtarm.model`` package (so no list is kept
 by hand), the CasADi and cffi versions and the compiler command; the robot's parameters are a
-runtime input of every function, so changing the robot never recompiles.
+runtime input of every function, so changing the robot never recompiles. A stack of modules
+(:mod:`vgtarm.model.stack`) has a library of its own per *structure* (plane angles, which twist
+joints and twist bodies exist: :class:`~vgtarm.model.definition.StackDefinition`), whose key also
+hashes that structure; stacks that differ only in dimensions, masses or limits share it.
 
 Cache folder: ``$VGTARM_CACHE_DIR`` (empty counts as unset; a relative value is taken from the
 current folder), else ``$XDG_CACHE_HOME/vgtarm`` (if absolute), else ``~/.cache/vgtarm``.
@@ -59,6 +62,7 @@ from numpy.typing import NDArray
 
 from ..errors import ConfigError, VgtarmError, cut, shown
 from . import codegen, interface
+from .definition import PAPER, Definition
 
 logger = logging.getLogger("vgtarm")
 
@@ -67,6 +71,11 @@ _PACKAGE_DIR = Path(__file__).resolve().parent
 _SOURCE_SUFFIXES = (".py", ".c", ".h", ".toml")
 _CSRC = _PACKAGE_DIR / "csrc"
 _CFLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off")
+#: Flags of a stack's generated functions, compiled apart before the link with the drivers (built
+#: with :data:`_CFLAGS`): its straight-line code is ten times the paper robot's (17 MB of C for six
+#: modules), and GCC's -O2 spends 4 min 19 s on it where -O1 takes 1 min 22 s (measured on this
+#: 2-core machine). Neither changes a floating-point result: no contraction, no fast math.
+_STACK_GENERATED_CFLAGS = ("-O1", "-fPIC", "-ffp-contract=off")
 _GENERATED_NAME = "vgtarm_model"
 
 #: Values of ``$VGTARM_BACKEND`` (and of ``get_backend(kind)``).
@@ -340,9 +349,10 @@ class InterpretedBackend:
         return outputs
 
 
-def build_functions() -> dict[str, ca.Function]:
-    """Build every CasADi function of the model (a second or so)."""
-    return {key: builder() for key, builder in codegen.all_builders().items()}
+def build_functions(definition: Definition = PAPER) -> dict[str, ca.Function]:
+    """Build every CasADi function of the model (a second or so): the paper's robot, or the stack
+    structure ``definition``."""
+    return {key: builder() for key, builder in codegen.builders_for(definition).items()}
 
 
 def cache_dir() -> Path:
@@ -379,7 +389,7 @@ def model_sources() -> list[Path]:
     )
 
 
-def _cache_key(compiler: str) -> str:
+def _cache_key(compiler: str, definition: Definition = PAPER) -> str:
     digest = hashlib.sha256()
     for path in model_sources():
         digest.update(path.relative_to(_PACKAGE_DIR).as_posix().encode())
@@ -387,6 +397,8 @@ def _cache_key(compiler: str) -> str:
     digest.update(str(getattr(ca, "__version__", "unknown")).encode())
     digest.update(str(cffi.__version__).encode())
     digest.update(" ".join((compiler, *_CFLAGS)).encode())
+    if definition.key:  # a stack's structure (the paper's robot adds nothing: its key is unchanged)
+        digest.update(definition.key.encode())
     return digest.hexdigest()[:20]
 
 
@@ -667,7 +679,27 @@ def _compiler_failure(compiler: str, done: subprocess.CompletedProcess[str]) -> 
     return f"the C compiler {shown(compiler, 80)} failed (exit status {done.returncode}): {cut(first, 160)}"
 
 
-def _compile(compiler: str, workdir: Path) -> tuple[Path, dict[str, Signature]]:
+def _run_compiler(compiler: str, command: list[str]) -> None:
+    """Run one compiler command; :class:`_Unavailable` with the first error line when it fails."""
+    try:
+        done = subprocess.run(
+            command,
+            capture_output=True,
+            text=True,
+            errors="replace",
+            stdin=subprocess.DEVNULL,
+            check=False,
+            timeout=_COMPILE_TIMEOUT,
+        )
+    except subprocess.TimeoutExpired:
+        raise _Unavailable(f"the C compiler {shown(compiler, 80)} ran longer than {_COMPILE_TIMEOUT:.0f} s") from None
+    except OSError as exc:
+        raise _Unavailable(f"cannot run the C compiler {shown(compiler, 80)}: {exc.strerror or exc}") from None
+    if done.returncode != 0:
+        raise _Unavailable(_compiler_failure(compiler, done))
+
+
+def _compile(compiler: str, workdir: Path, definition: Definition = PAPER) -> tuple[Path, dict[str, Signature]]:
     """Generate C for every model function into ``workdir`` and compile it with the drivers.
 
     Returns the library (inside ``workdir``) and the functions' signatures; raises
@@ -675,7 +707,7 @@ def _compile(compiler: str, workdir: Path) -> tuple[Path, dict[str, Signature]]:
     function to copy a prebuilt library instead, so that the checks around it run for real
     without a 10-20 s compile each.
     """
-    built = build_functions()
+    built = build_functions(definition)
     generator = ca.CodeGenerator(f"{_GENERATED_NAME}.c", {"with_header": False})
     for f in built.values():
         generator.add(f)
@@ -684,6 +716,12 @@ def _compile(compiler: str, workdir: Path) -> tuple[Path, dict[str, Signature]]:
     sources = [str(workdir / f"{_GENERATED_NAME}.c"), str(workdir / "layout.c")]
     sources += [str(path) for path in sorted(_CSRC.glob("*.c"))]
     library = workdir / "library.so"
+    if definition != PAPER:  # a stack: its generated code compiled apart (_STACK_GENERATED_CFLAGS)
+        generated = workdir / f"{_GENERATED_NAME}.o"
+        _run_compiler(compiler, [compiler, *_STACK_GENERATED_CFLAGS, "-c", "-o", str(generated), sources[0]])
+        if not generated.is_file():
+            raise _Unavailable(f"the C compiler {shown(compiler, 80)} wrote no object file")
+        sources[0] = str(generated)
     base = [compiler, *_CFLAGS, "-I", str(_CSRC), "-o", str(library), *sources, "-lm"]
     failure = ""
     for command in (base[:1] + ["-fopenmp"] + base[1:], base):
@@ -709,14 +747,16 @@ def _compile(compiler: str, workdir: Path) -> tuple[Path, dict[str, Signature]]:
     raise _Unavailable(failure)
 
 
-def _build(entry: CacheEntry, compiler: str) -> None:
+def _build(entry: CacheEntry, compiler: str, definition: Definition = PAPER) -> None:
     """Compile into a private temporary folder of the cache, then move the library and then its
     metadata into place (each move atomic; a library without metadata is never opened)."""
     _clean_stale_builds(entry.folder)
-    logger.info("compiling the vgtarm model into %s (once per model version)", entry.library)
+    logger.info("compiling the vgtarm model into %s (once per model version and stack structure)", entry.library)
     workdir = Path(tempfile.mkdtemp(dir=entry.folder, prefix=f"{_BUILD_PREFIX}{os.getpid()}-"))
     try:
-        library, signatures = _compile(compiler, workdir)
+        # the paper's robot calls _compile with two arguments (the cache tests replace it so)
+        built = _compile(compiler, workdir) if definition == PAPER else _compile(compiler, workdir, definition)
+        library, signatures = built
         os.chmod(library, 0o755)
         size, digest = _sha256(library)
         payload = {
@@ -728,6 +768,7 @@ def _build(entry: CacheEntry, compiler: str) -> None:
             "compiler": compiler,
             "casadi": str(getattr(ca, "__version__", "unknown")),
             "functions": {key: sig.__dict__ for key, sig in signatures.items()},
+            "structure": definition.key or "paper",
         }
         metadata = workdir / "metadata.json"
         metadata.write_text(json.dumps(payload, indent=1))
@@ -744,13 +785,14 @@ def _remove(entry: CacheEntry) -> None:
             path.unlink()
 
 
-def _compiled_backend(compiler: str) -> CompiledBackend:
-    """The compiled backend from the cache, (re)built once if missing or damaged.
+def _compiled_backend(compiler: str, definition: Definition = PAPER) -> CompiledBackend:
+    """The compiled backend of ``definition`` from the cache, (re)built once if missing or damaged.
 
     Raises :class:`_Unavailable` with a one-line reason when it cannot be had.
     """
     try:
-        entry = CacheEntry(cache_dir(), _cache_key(compiler))
+        key = _cache_key(compiler) if definition == PAPER else _cache_key(compiler, definition)
+        entry = CacheEntry(cache_dir(), key)
     except RuntimeError as exc:  # Path.home() without a home folder
         raise _Unavailable(f"no cache folder: {exc}; set VGTARM_CACHE_DIR") from None
     info = _check_folder(entry.folder)
@@ -780,7 +822,7 @@ def _compiled_backend(compiler: str) -> CompiledBackend:
                         exc,
                     )
                 _remove(entry)
-            _build(entry, compiler)
+            _build(entry, compiler, definition)
     except OSError as exc:
         raise _Unavailable(
             f"cannot build in the cache folder {_shown_path(entry.folder)}: {exc.strerror or exc}"
@@ -806,15 +848,17 @@ def _backend_choice(kind: object) -> str:
 
 
 @functools.cache
-def get_backend(kind: str | None = None) -> CompiledBackend | InterpretedBackend:
-    """The process-wide backend: compiled when possible, else interpreted after one line.
+def get_backend(kind: str | None = None, definition: Definition = PAPER) -> CompiledBackend | InterpretedBackend:
+    """The process-wide backend of a model: compiled when possible, else interpreted after one line.
 
     ``kind`` overrides ``$VGTARM_BACKEND`` (``auto``, ``compiled`` or ``interpreted``). With
     ``compiled`` a model that cannot be compiled raises :class:`BackendError` instead.
+    ``definition`` is the model (:mod:`vgtarm.model.definition`): the paper's robot by default,
+    or a stack's structure, compiled into a library of its own (once per structure, cached).
     """
     choice = _backend_choice(kind)
     if choice == "interpreted":
-        return InterpretedBackend(build_functions())
+        return InterpretedBackend(build_functions(definition))
     try:
         compiler = find_compiler()
         if compiler is None:
@@ -824,7 +868,7 @@ def get_backend(kind: str | None = None) -> CompiledBackend | InterpretedBackend
                 if named
                 else "no C compiler found (cc, gcc or clang)"
             )
-        return _compiled_backend(compiler)
+        return _compiled_backend(compiler) if definition == PAPER else _compiled_backend(compiler, definition)
     except _Unavailable as exc:
         if choice == "compiled":
             raise BackendError(f"VGTARM_BACKEND = 'compiled', but {exc}") from None
@@ -833,4 +877,4 @@ def get_backend(kind: str | None = None) -> CompiledBackend | InterpretedBackend
             exc,
             "VGTARM_BACKEND=interpreted",
         )
-    return InterpretedBackend(build_functions())
+    return InterpretedBackend(build_functions(definition))

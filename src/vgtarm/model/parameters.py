@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from ..errors import ConfigError, cut, shown
 from ..fileio import parse_toml, read_text_limited
-from .assembly import TRIANGLE_INEQUALITIES, triangle_margins
+from .assembly import TRIANGLE_INEQUALITIES, linear_form, triangle_margins
 
 #: Joint names, in the order of the joint vector ``q``.
 JOINT_NAMES: tuple[str, ...] = ("s1", "v1", "p1", "s2", "v2", "p2", "psi3")
@@ -138,6 +138,30 @@ class RobotParameters:
     def total_mass(self) -> float:
         """Sum of the body masses (kg)."""
         return float(sum(body.mass for body in self.bodies))
+
+    @property
+    def n_joints(self) -> int:
+        """Number of joints (7)."""
+        return N_JOINTS
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """Joint names in the order of ``q`` (:data:`JOINT_NAMES`)."""
+        return JOINT_NAMES
+
+    @property
+    def joint_units(self) -> tuple[str, ...]:
+        """Unit of each joint coordinate (:data:`JOINT_UNITS`)."""
+        return JOINT_UNITS
+
+    def margin_form(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``G`` (12, 7) and ``h`` (12,): the triangle margins ``G q + h`` of both modules, six rows per
+        module (:func:`vgtarm.model.assembly.linear_form`)."""
+        return linear_form(self.b, self.d)
+
+    def margin_legs(self) -> tuple[tuple[int, int, int], ...]:
+        """Indices in ``q`` of each module's legs ``(s, v, p)``, in the order of the margin rows."""
+        return ((0, 1, 2), (3, 4, 5))
 
     def vector(self) -> NDArray[np.float64]:
         """The flat parameter vector the compiled model takes, (45,).

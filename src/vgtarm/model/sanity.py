@@ -19,11 +19,16 @@ stopped ``limit_tolerance`` outside) lies far inside.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import InputError, shown
-from .parameters import JOINT_NAMES, JOINT_UNITS, RobotParameters
+from .parameters import RobotParameters
+
+if TYPE_CHECKING:
+    from .stack.description import Stack
 
 Array = NDArray[np.float64]
 
@@ -33,17 +38,19 @@ SANE_WIDENING = 10.0
 SANE_TURNS = 1000.0
 
 
-def sane_range(parameters: RobotParameters) -> tuple[Array, Array]:
+def sane_range(parameters: RobotParameters | Stack) -> tuple[Array, Array]:
     """Lowest and highest accepted value of each joint, ``(n,)`` each (m, rad)."""
     lower, upper = parameters.lower, parameters.upper
-    lengths = np.array([unit == "m" for unit in JOINT_UNITS[: len(lower)]])
+    lengths = np.array([unit == "m" for unit in parameters.joint_units[: len(lower)]])
     width = np.where(lengths, SANE_WIDENING * (upper - lower), SANE_TURNS * 2.0 * np.pi)
     low = lower - width
     low[lengths] = np.maximum(low[lengths], 0.0)
     return low, upper + width
 
 
-def check_joint_range(q: Array, parameters: RobotParameters, bounds: tuple[Array, Array], *, where: str = "q") -> None:
+def check_joint_range(
+    q: Array, parameters: RobotParameters | Stack, bounds: tuple[Array, Array], *, where: str = "q"
+) -> None:
     """Raise :class:`InputError` if a joint value of ``q`` ``(..., n)`` lies outside ``bounds``
     (``sane_range(parameters)``, passed in so callers can keep it).
 
@@ -56,8 +63,9 @@ def check_joint_range(q: Array, parameters: RobotParameters, bounds: tuple[Array
         return
     index = tuple(int(i) for i in np.argwhere(outside)[0])
     joint = index[-1]
-    name = JOINT_NAMES[joint] if joint < len(JOINT_NAMES) else f"joint {joint}"
-    unit = JOINT_UNITS[joint] if joint < len(JOINT_UNITS) else ""
+    names, units = parameters.joint_names, parameters.joint_units
+    name = names[joint] if joint < len(names) else f"joint {joint}"
+    unit = units[joint] if joint < len(units) else ""
     location = f" (configuration {index[:-1]})" if len(index) > 1 else ""
     raise InputError(
         f"{where}: {name} = {shown(float(q[index]))} {unit}{location} is outside the accepted range "

@@ -19,10 +19,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import InputError, VgtarmError, escape, shown
-from ..model.assembly import check_assembly
 from ..model.parameters import RobotParameters
 from ..model.robot import Robot
 from ..model.sanity import check_joint_range
+from ..model.stack import Stack
 from .external import ExternalForce
 from .reference import JointReference
 
@@ -91,7 +91,7 @@ def initial_state(plant: Robot, reference: JointReference, state: Any) -> tuple[
         arrays.append(array)
     q0, qd0 = arrays
     check_joint_range(q0, plant.parameters, plant.joint_range(), where="initial_state q0")
-    check_assembly(q0, plant.parameters.b, plant.parameters.d, where="initial_state q0")
+    plant.check_assembly(q0, where="initial_state q0")
     return q0, qd0
 
 
@@ -124,8 +124,10 @@ def arguments(
     """Refuse, with one :class:`InputError` line, arguments of ``simulate`` of the wrong type."""
     if not isinstance(plant, Robot):
         raise InputError(f"plant = {shown(plant)}: expected a vgtarm.Robot (see vgtarm.load_robot)")
-    if controller_model is not None and not isinstance(controller_model, Robot | RobotParameters):
-        raise InputError(f"controller_model = {shown(controller_model)}: expected None, a Robot or RobotParameters")
+    if controller_model is not None and not isinstance(controller_model, Robot | RobotParameters | Stack):
+        raise InputError(
+            f"controller_model = {shown(controller_model)}: expected None, a Robot, RobotParameters or a Stack"
+        )
     if external_force is not None and not isinstance(external_force, ExternalForce):
         raise InputError(
             f"external_force = {shown(external_force)}: expected None or a vgtarm.simulation.ExternalForce"
@@ -143,3 +145,13 @@ def arguments(
         or not (math.isfinite(transient_s) and transient_s >= 0)
     ):
         raise InputError(f"transient_s = {shown(transient_s)}: expected a duration >= 0 (s)")
+
+
+def gains(plant: Robot, Kp: Array) -> None:
+    """Refuse, with one :class:`InputError` line, gains sized for another number of joints."""
+    if Kp.shape != (plant.n_joints, plant.n_joints):
+        raise InputError(
+            f"the controller's gains are {Kp.shape[0]}x{Kp.shape[1]}, but robot {shown(plant.parameters.name)} has "
+            f"{plant.n_joints} joints (give gains for its joints, e.g. ComputedForceControl.with_gains(kp, kv, "
+            f"{plant.n_joints}))"
+        )

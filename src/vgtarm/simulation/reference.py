@@ -9,13 +9,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import InputError, shown
+from ..model.parameters import N_JOINTS
 from ..paths import MIN_DT
 
 Array = NDArray[np.float64]
 
 
 class HasJointReference(Protocol):
-    """Anything with ``t`` (N,) and ``q``, ``qd``, ``qdd`` (N, 7), such as an IK result."""
+    """Anything with ``t`` (N,) and ``q``, ``qd``, ``qdd`` (N, n), such as an IK result."""
 
     @property
     def t(self) -> Array: ...
@@ -59,10 +60,11 @@ class JointReference:
             raise InputError(f"reference t must be 1-D with at least 2 samples, got shape {t.shape}")
         if not np.isfinite(t).all():
             raise InputError("reference t must be finite")
+        width = np.shape(self.q)[-1] if np.ndim(self.q) == 2 else N_JOINTS  # any number of joints >= 1
         for label in ("q", "qd", "qdd"):
             value = _array(getattr(self, label), label)
-            if value.shape != (len(t), 7):
-                raise InputError(f"reference {label} must have shape ({len(t)}, 7), got {value.shape}")
+            if value.shape != (len(t), width) or width < 1:
+                raise InputError(f"reference {label} must have shape ({len(t)}, {width}), got {value.shape}")
             if not np.isfinite(value).all():
                 row = int(np.argwhere(~np.isfinite(value))[0][0])
                 raise InputError(f"reference {label} must be finite; row {row} (t = {t[row]:.6g} s) is not")

@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import json
-import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -92,8 +91,9 @@ class SimulationResult:
         err = self.tip_error[:n]
         transient = float(self.metadata.get("transient_s", 0.2))
         after = err[self.t[:n] >= self.t[0] + transient]
-        forces = self.effort[:n, :6]
-        torque = self.effort[:n, 6]
+        twist = np.array([name.startswith("psi") for name in self.joint_names])  # N m; the legs' efforts: N
+        forces = self.effort[:n, :6] if self.joint_names == JOINT_NAMES else self.effort[:n, ~twist]
+        torque = self.effort[:n, 6] if self.joint_names == JOINT_NAMES else self.effort[:n, twist]
         summary: dict[str, Any] = {key: self.metadata[key] for key in self.metadata}
         summary.update(
             success=self.success,
@@ -160,7 +160,10 @@ class SimulationResult:
             table = np.genfromtxt(table_file, delimiter=",", skip_header=1, dtype=float, ndmin=2)
         except (OSError, UnicodeDecodeError, ValueError) as exc:
             raise InputError(f"run folder {where}: cannot read the run: {exc}") from None
-        layouts = [cls._columns(estimate, measured) for estimate in (False, True) for measured in (False, True)]
+        joints = [str(n) for n in summary.get("joint_names", JOINT_NAMES)]  # a stack's run records its joints
+        layouts = [
+            cls._columns(estimate, measured, joints) for estimate in (False, True) for measured in (False, True)
+        ]
         columns = next((c for c in layouts if header == c), layouts[0])
         if header != columns or table.shape[1:] != (len(columns),):
             raise InputError(
@@ -171,7 +174,6 @@ class SimulationResult:
         def block(names: list[str]) -> Array:
             return np.ascontiguousarray(table[:, [index[n] for n in names]])
 
-        joints = list(JOINT_NAMES)
         activations: list[GAActivation] = []
         act_file = where / "ga_activations.csv"
         if act_file.is_file() and len(act_file.read_text("utf-8").strip().splitlines()) > 1:
@@ -208,19 +210,25 @@ class SimulationResult:
         computed = set(loaded.summary())
         return replace(loaded, metadata={k: v for k, v in summary.items() if k not in computed})
 
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """The robot's joint names (a stack's run records them in its metadata; else the paper's)."""
+        names = self.metadata.get("joint_names")
+        return tuple(str(n) for n in names) if names else JOINT_NAMES
+
     @staticmethod
-    def _columns(estimate: bool = False, measured: bool = False) -> list[str]:
+    def _columns(estimate: bool = False, measured: bool = False, joints: Sequence[str] = JOINT_NAMES) -> list[str]:
         columns = ["t", "x_d", "y_d", "z_d", "x", "y", "z", "tip_error"]
-        columns += [f"{n}_d" for n in JOINT_NAMES] + list(JOINT_NAMES)
-        columns += [f"d{n}_d" for n in JOINT_NAMES] + [f"d{n}" for n in JOINT_NAMES]
-        columns += [f"F_{n}" for n in JOINT_NAMES] + ["fx", "fy", "fz", "mode"]
-        columns += [f"tau_hat_{n}" for n in JOINT_NAMES] if estimate else []
+        columns += [f"{n}_d" for n in joints] + list(joints)
+        columns += [f"d{n}_d" for n in joints] + [f"d{n}" for n in joints]
+        columns += [f"F_{n}" for n in joints] + ["fx", "fy", "fz", "mode"]
+        columns += [f"tau_hat_{n}" for n in joints] if estimate else []
         columns += ["tip_error_measured"] if measured else []
         return columns
 
     def _table(self) -> tuple[list[str], Array]:
         estimate, measured = self.effort_estimate is not None, self.tip_error_measured is not None
-        columns = self._columns(estimate, measured)
+        columns = self._columns(estimate, measured, self.joint_names)
         extra = [a for a in (self.effort_estimate, self.tip_error_measured) if a is not None]
         table = np.column_stack(
             [
@@ -248,10 +256,6 @@ def _percentile(activations: tuple[GAActivation, ...], q: float) -> float | None
     return float(np.percentile([a.wall_time_s for a in activations], q))
 
 
-#: A field that is exactly ``nan`` in a CSV body.
-_NAN_FIELD = re.compile(r"(?m)(?<![^,\n])nan(?![^,\n])")
-
-
 def _max(values: Array) -> float | None:
     """Largest value that is not NaN, or None if there is none (a run failed at its first sample)."""
     known = values[~np.isnan(values)]
@@ -269,12 +273,15 @@ def _csv(columns: list[str], table: Array) -> str:
     """CSV text: 17 significant digits (exact round trip), empty fields for NaN.
 
     One ``%`` format per row (most of ``vgtarm reproduce``'s time went into formatting numbers
-    one by one); NaN fields are then emptied.
+    one by one); only the rows that hold a NaN are formatted field by field, to leave those empty.
     """
+    values = np.asarray(table, dtype=float).reshape(len(table), len(columns))
+    rows = values.tolist()
     row_format = ",".join(["%.17g"] * len(columns))
-    body = "\n".join(row_format % tuple(row) for row in np.asarray(table, dtype=float).tolist())
-    body = _NAN_FIELD.sub("", body)
-    return ",".join(columns) + "\n" + (body + "\n" if len(table) else "")
+    lines = [row_format % tuple(row) for row in rows]
+    for i in np.flatnonzero(np.isnan(values).any(axis=1)).tolist():
+        lines[i] = ",".join("" if v != v else f"{v:.17g}" for v in rows[i])
+    return ",".join(columns) + "\n" + ("\n".join(lines) + "\n" if lines else "")
 
 
 def _jsonable(value: Any) -> Any:

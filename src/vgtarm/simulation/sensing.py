@@ -44,6 +44,7 @@ class Sensing:
     velocity_noise: float
     velocity_filter_hz: float
     velocity_filter: float
+    units: tuple[str, ...] = JOINT_UNITS
 
     @property
     def active(self) -> bool:
@@ -57,8 +58,8 @@ class Sensing:
 
     def metadata(self) -> dict[str, object]:
         """Summary entries of these settings."""
-        legs = [float(r) for r, unit in zip(self.resolution, JOINT_UNITS, strict=False) if unit == "m"]
-        twists = [float(r) for r, unit in zip(self.resolution, JOINT_UNITS, strict=False) if unit == "rad"]
+        legs = [float(r) for r, unit in zip(self.resolution, self.units, strict=False) if unit == "m"]
+        twists = [float(r) for r, unit in zip(self.resolution, self.units, strict=False) if unit == "rad"]
         return {
             "observer": self.observer,
             "observer_gain_per_s": self.observer_gain if self.observer != "none" else None,
@@ -102,7 +103,7 @@ def _observer_gain(observer: str, observer_gain: float | None, dt: float) -> flo
 
 
 def sensing_settings(
-    n_joints: int,
+    n_joints: int | tuple[str, ...],
     dt: float,
     observer: str,
     observer_gain: float | None,
@@ -112,7 +113,10 @@ def sensing_settings(
     velocity_noise: float,
     velocity_filter_hz: float,
 ) -> Sensing:
-    """Validate the observer and sensing arguments of a run with control period ``dt``."""
+    """Validate the observer and sensing arguments of a run with control period ``dt``.
+
+    ``n_joints`` is the robot's joint units (``m`` legs, ``rad`` twists), or only their number (then
+    the paper's units for 7 joints, else every joint a leg)."""
     if observer not in OBSERVERS:
         raise InputError(f"observer = {observer!r}: expected one of {list(OBSERVERS)}")
     if not isinstance(force_sensor, bool | np.bool_):
@@ -131,7 +135,10 @@ def sensing_settings(
             raise InputError(f"{label} = {step!r}: expected an encoder step of at most {largest:g} {unit}")
     noise = _number("velocity_noise", velocity_noise)
     cutoff = _number("velocity_filter_hz", velocity_filter_hz, strict=True)
-    units = JOINT_UNITS if len(JOINT_UNITS) == n_joints else ("m",) * n_joints
+    if isinstance(n_joints, tuple):
+        units = n_joints
+    else:
+        units = JOINT_UNITS if len(JOINT_UNITS) == n_joints else ("m",) * n_joints
     resolution = np.array([legs if unit == "m" else twist for unit in units])
     return Sensing(
         observer=observer,
@@ -141,4 +148,5 @@ def sensing_settings(
         velocity_noise=noise,
         velocity_filter_hz=cutoff,
         velocity_filter=math.exp(-2.0 * math.pi * cutoff * dt),
+        units=tuple(units),
     )

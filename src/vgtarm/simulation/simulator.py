@@ -29,7 +29,6 @@ from ..control.gains import Gains
 from ..control.scm import SwitchingControl
 from ..errors import InputError, SimulationError, shown
 from ..memory import check_memory
-from ..model.assembly import linear_form
 from ..model.closedloop import (
     ABOVE_THRESHOLD,
     DONE,
@@ -44,8 +43,9 @@ from ..model.closedloop import (
     LoopSettings,
 )
 from ..model.compiled import CompiledBackend
-from ..model.parameters import JOINT_NAMES, RobotParameters
+from ..model.parameters import RobotParameters
 from ..model.robot import Robot
+from ..model.stack import Stack
 from . import checks
 from .external import ExternalForce
 from .python_loop import PythonLoop
@@ -127,7 +127,7 @@ def simulate(
     reference: HasJointReference,
     controller: Controller,
     *,
-    controller_model: RobotParameters | Robot | None = None,
+    controller_model: RobotParameters | Stack | Robot | None = None,
     external_force: ExternalForce | None = None,
     integrator: str = "euler",
     substeps: int = 1,
@@ -195,6 +195,7 @@ def simulate(
         raise InputError(f"substeps = {shown(substeps)}: expected a whole number from 1 to {MAX_SUBSTEPS:,}")
     if not isinstance(controller, ComputedForceControl | SwitchingControl):
         raise InputError(f"controller = {controller!r}: expected ComputedForceControl or SwitchingControl")
+    checks.gains(plant, controller.gains.Kp)
     if not (isinstance(seed, int | np.integer) and seed >= 0):
         raise InputError(f"seed = {seed!r}: expected a whole number >= 0")
     ref = JointReference.of(reference)
@@ -202,7 +203,7 @@ def simulate(
     per_sample = BYTES_PER_SAMPLE_SCM if isinstance(controller, SwitchingControl) else BYTES_PER_SAMPLE
     check_memory(n * per_sample, f"simulation of {n:,} reference samples", "simulate a shorter reference")
     sensing = sensing_settings(
-        ref.q.shape[1],
+        plant.joint_units if ref.q.shape[1] == plant.n_joints else ref.q.shape[1],
         dt,
         observer,
         observer_gain,
@@ -373,6 +374,7 @@ def simulate(
         "transient_s": transient_s,
         "controller_model": model.parameters.name,
         "plant": plant.parameters.name,
+        **({"joint_names": list(plant.joint_names)} if plant.is_stack else {}),
         "backend": plant.backend.kind,
         "plant_engine": plant_engine,
         **sensing.metadata(),
@@ -430,7 +432,7 @@ def loop_arrays(
     """
     n, n_joints = reference.q.shape
     q0, qd0 = initial_state if initial_state is not None else (reference.q[0], np.zeros(n_joints))
-    G, h = linear_form(plant.parameters.b, plant.parameters.d)
+    G, h = plant.margin_form()
     return LoopArrays(
         q_d=reference.q,
         qd_d=reference.qd,
@@ -547,5 +549,6 @@ def _where(plant: Robot, arrays: LoopArrays, k: int) -> str:
     if not np.isfinite(q).all():
         return ""
     lower, upper = plant.parameters.lower, plant.parameters.upper
-    outside = [f"{JOINT_NAMES[i]} = {q[i]:.4g}" for i in range(len(q)) if not lower[i] <= q[i] <= upper[i]]
+    names = plant.joint_names
+    outside = [f"{names[i]} = {q[i]:.4g}" for i in range(len(q)) if not lower[i] <= q[i] <= upper[i]]
     return f" ({', '.join(outside)})" if outside else ""

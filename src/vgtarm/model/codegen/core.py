@@ -11,10 +11,11 @@ from collections.abc import Callable
 
 import casadi as ca
 
-from ..parameters import N_JOINTS, N_PARAMETERS
+from ..definition import PAPER, Definition
 from ..symbolic import SX
 
-Builder = Callable[[], ca.Function]
+#: A builder of one function; its argument (default: the paper's robot) is the model definition.
+Builder = Callable[..., ca.Function]
 
 
 def row_major(matrix: SX) -> SX:
@@ -27,6 +28,7 @@ def function(name: str, inputs: list[SX], outputs: list[SX], in_names: list[str]
     return ca.Function(name, inputs, [ca.densify(o) for o in outputs], in_names, out_names)
 
 
-def symbols() -> tuple[SX, SX, SX]:
+def symbols(definition: Definition = PAPER) -> tuple[SX, SX, SX]:
     """Joint positions, joint velocities and the parameter vector, sized from the model."""
-    return SX.sym("q", N_JOINTS), SX.sym("qd", N_JOINTS), SX.sym("p", N_PARAMETERS)
+    n = definition.n_joints
+    return SX.sym("q", n), SX.sym("qd", n), SX.sym("p", definition.n_parameters)

@@ -27,8 +27,8 @@ from collections.abc import Callable
 
 import casadi as ca
 
-from ..parameters import N_JOINTS, N_PARAMETERS
-from ..symbolic import SX, kinematics, vee
+from ..definition import PAPER, Definition
+from ..symbolic import SX, vee
 from .core import Builder, function, row_major
 
 #: Number of equality rows of each task.
@@ -54,19 +54,19 @@ def orientation_residual(rotation: SX, target: SX) -> SX:
     return vee(target.T @ rotation)
 
 
-def pose_constraints(q: SX, target: SX, p: SX) -> SX:
+def pose_constraints(q: SX, target: SX, p: SX, d: Definition = PAPER) -> SX:
     """``[P(q); e(q, R_d)]`` (6, 1): tip point (m) and orientation residual of ``C03`` (rad-like)."""
-    k = kinematics(q, p)
+    k = d.kinematics(q, p)
     return ca.vertcat(k.tip, orientation_residual(k.C03, target))
 
 
-def _symbols(m: int) -> tuple[SX, SX, SX, SX, SX]:
+def _symbols(m: int, d: Definition) -> tuple[SX, SX, SX, SX, SX]:
     return (
-        SX.sym("q", N_JOINTS),
+        SX.sym("q", d.n_joints),
         SX.sym("lam", m),
-        SX.sym("qd", N_JOINTS),
+        SX.sym("qd", d.n_joints),
         SX.sym("lam_d", m),
-        SX.sym("p", N_PARAMETERS),
+        SX.sym("p", d.n_parameters),
     )
 
 
@@ -77,18 +77,18 @@ def _kkt_parts(c: SX, q: SX, lam: SX) -> tuple[SX, SX]:
     return J, H
 
 
-def position_kkt() -> ca.Function:
+def position_kkt(d: Definition = PAPER) -> ca.Function:
     """``(q, lam, p) -> (P, J_P, H)``: tip (3), its Jacobian (3x7) and ``d^2(lam^T P)/dq^2`` (7x7)."""
-    q, lam, _, _, p = _symbols(3)
-    c = kinematics(q, p).tip
+    q, lam, _, _, p = _symbols(3, d)
+    c = d.kinematics(q, p).tip
     J, H = _kkt_parts(c, q, lam)
     return function("vgt_ik_position", [q, lam, p], [c, row_major(J), row_major(H)], ["q", "lam", "p"], ["c", "J", "H"])
 
 
-def position_d2() -> ca.Function:
+def position_d2(d: Definition = PAPER) -> ca.Function:
     """``(q, lam, qd, lam_d, p) -> d2`` (10): second derivative of ``[J_P^T lam; P]`` along ``(qd, lam_d)``."""
-    q, lam, qd, lam_d, p = _symbols(3)
-    c = kinematics(q, p).tip
+    q, lam, qd, lam_d, p = _symbols(3, d)
+    c = d.kinematics(q, p).tip
     J = ca.jacobian(c, q)
     F = ca.vertcat(J.T @ lam, c)
     z, dz = ca.vertcat(q, lam), ca.vertcat(qd, lam_d)
@@ -96,50 +96,50 @@ def position_d2() -> ca.Function:
     return function("vgt_ik_position_d2", [q, lam, qd, lam_d, p], [d2], ["q", "lam", "qd", "lam_d", "p"], ["d2"])
 
 
-def pose_kkt() -> ca.Function:
+def pose_kkt(d: Definition = PAPER) -> ca.Function:
     """``(q, lam, R_d, p) -> (c, J_c, H)``: ``[P; e]`` (6), Jacobian (6x7), ``d^2(lam^T c)/dq^2`` (7x7).
 
     ``R_d`` is the target orientation flattened row by row (9).
     """
-    q, lam, _, _, p = _symbols(6)
+    q, lam, _, _, p = _symbols(6, d)
     rd = SX.sym("R_d", 9)
-    c = pose_constraints(q, rotation_from_row_major(rd), p)
+    c = pose_constraints(q, rotation_from_row_major(rd), p, d)
     J, H = _kkt_parts(c, q, lam)
     return function(
         "vgt_ik_pose", [q, lam, rd, p], [c, row_major(J), row_major(H)], ["q", "lam", "R_d", "p"], ["c", "J", "H"]
     )
 
 
-def _moving_pose_residual() -> tuple[SX, list[SX], SX, SX]:
+def _moving_pose_residual(d: Definition) -> tuple[SX, list[SX], SX, SX]:
     """KKT residual ``F`` of the pose task with the target rotating along ``s`` (module docstring).
 
     Returns ``F`` (13), the symbols ``[q, lam, qd, lam_d, R_d, w, a, p]``, the direction
     ``(qd, lam_d, 1)`` of ``(q, lam, s)`` and ``s``.
     """
-    q, lam, qd, lam_d, p = _symbols(6)
+    q, lam, qd, lam_d, p = _symbols(6, d)
     rd, w, a, s = SX.sym("R_d", 9), SX.sym("w", 3), SX.sym("a", 3), SX.sym("s")
     spin = skew(w)
     moving = (SX.eye(3) + spin * s + (skew(a) + spin @ spin) * (s**2 / 2)) @ rotation_from_row_major(rd)
-    c = pose_constraints(q, moving, p)
+    c = pose_constraints(q, moving, p, d)
     F = ca.vertcat(ca.jacobian(c, q).T @ lam, c)
     z = ca.vertcat(q, lam, s)
     dz = ca.vertcat(qd, lam_d, 1)
     return F, [q, lam, qd, lam_d, rd, w, a, p], ca.jtimes(F, z, dz), s
 
 
-def pose_dt() -> ca.Function:
+def pose_dt(d: Definition = PAPER) -> ca.Function:
     """``(q, lam, R_d, w, a, p) -> dF/ds`` (13) at fixed ``(q, lam)``, without the desired point's term."""
-    F, (q, lam, _, _, rd, w, a, p), _, s = _moving_pose_residual()
+    F, (q, lam, _, _, rd, w, a, p), _, s = _moving_pose_residual(d)
     dt = ca.substitute(ca.jacobian(F, s), s, 0)
     return function("vgt_ik_pose_dt", [q, lam, rd, w, a, p], [dt], ["q", "lam", "R_d", "w", "a", "p"], ["dt"])
 
 
-def pose_d2() -> ca.Function:
+def pose_d2(d: Definition = PAPER) -> ca.Function:
     """``(q, lam, qd, lam_d, R_d, w, a, p) -> d^2/ds^2 F(q + s qd, lam + s lam_d, s)`` (13) at ``s = 0``.
 
     Without the desired point's term (``-xdd`` in the position rows), which the caller adds.
     """
-    _, symbols, dF, s = _moving_pose_residual()
+    _, symbols, dF, s = _moving_pose_residual(d)
     q, lam, qd, lam_d, _, _, _, _ = symbols
     z = ca.vertcat(q, lam, s)
     dz = ca.vertcat(qd, lam_d, 1)
@@ -156,16 +156,16 @@ def _rates_through_qr(K: SX, first_rhs: SX, second_rhs_of: Callable[[SX], SX]) -
     return first, second
 
 
-def position_rates() -> ca.Function:
+def position_rates(d: Definition = PAPER) -> ca.Function:
     """Model values and exact rates at a solution where no inequality is active (the common case).
 
     ``(q, lam, w, xd, xdd, p) -> (P, J_P, H, qd, lam_d, qdd, lam_dd)``: ``w`` (7) is the diagonal of
     the Hessian of ``Phi``; the KKT matrix ``[[diag(w) + H, J^T], [J, 0]]`` is factorised once (QR)
     for both rate systems. Samples with active limits or triangle rows use the general path.
     """
-    q, lam, qd_s, lam_d_s, p = _symbols(3)
-    w, xd, xdd = SX.sym("w", N_JOINTS), SX.sym("xd", 3), SX.sym("xdd", 3)
-    c = kinematics(q, p).tip
+    q, lam, qd_s, lam_d_s, p = _symbols(3, d)
+    w, xd, xdd = SX.sym("w", d.n_joints), SX.sym("xd", 3), SX.sym("xdd", 3)
+    c = d.kinematics(q, p).tip
     J, H = _kkt_parts(c, q, lam)
     K = ca.blockcat([[ca.diag(w) + H, J.T], [J, SX.zeros(3, 3)]])
     F = ca.vertcat(J.T @ lam, c)
@@ -173,34 +173,36 @@ def position_rates() -> ca.Function:
     d2 = ca.jtimes(ca.jtimes(F, z, dz), z, dz)
 
     def second_rhs(first: SX) -> SX:
-        return ca.vertcat(SX.zeros(N_JOINTS), xdd) - ca.substitute(d2, dz, first)
+        return ca.vertcat(SX.zeros(d.n_joints), xdd) - ca.substitute(d2, dz, first)
 
-    first, second = _rates_through_qr(K, ca.vertcat(SX.zeros(N_JOINTS), xd), second_rhs)
+    first, second = _rates_through_qr(K, ca.vertcat(SX.zeros(d.n_joints), xd), second_rhs)
     names = ["q", "lam", "w", "xd", "xdd", "p"]
-    outputs = [c, row_major(J), row_major(H), first[:N_JOINTS], first[N_JOINTS:], second[:N_JOINTS], second[N_JOINTS:]]
+    n = d.n_joints
+    outputs = [c, row_major(J), row_major(H), first[:n], first[n:], second[:n], second[n:]]
     out_names = ["c", "J", "H", "qd", "lam_d", "qdd", "lam_dd"]
     return function("vgt_ik_position_rates", [q, lam, w, xd, xdd, p], outputs, names, out_names)
 
 
-def pose_rates() -> ca.Function:
+def pose_rates(d: Definition = PAPER) -> ca.Function:
     """As :func:`position_rates` for the pose task: ``(q, lam, w, xd, xdd, R_d, w_d, a_d, p) -> (c, J, H, qd,
     lam_d, qdd, lam_dd)`` with the target orientation ``R_d`` (row-major) turning at ``w_d``, ``a_d``."""
-    F, (q, lam, qd_s, lam_d_s, rd, w_d, a_d, p), dF, s = _moving_pose_residual()
-    w, xd, xdd = SX.sym("w", N_JOINTS), SX.sym("xd", 3), SX.sym("xdd", 3)
+    F, (q, lam, qd_s, lam_d_s, rd, w_d, a_d, p), dF, s = _moving_pose_residual(d)
+    w, xd, xdd = SX.sym("w", d.n_joints), SX.sym("xd", 3), SX.sym("xdd", 3)
     at_rest = ca.substitute(F, s, 0)
-    c = at_rest[N_JOINTS:]
+    c = at_rest[d.n_joints:]
     J, H = _kkt_parts(c, q, lam)
     K = ca.blockcat([[ca.diag(w) + H, J.T], [J, SX.zeros(6, 6)]])
     z, dz = ca.vertcat(q, lam, s), ca.vertcat(qd_s, lam_d_s, 1)
-    first_rhs = ca.vertcat(SX.zeros(N_JOINTS), xd, SX.zeros(3)) - ca.substitute(ca.jacobian(F, s), s, 0)
+    first_rhs = ca.vertcat(SX.zeros(d.n_joints), xd, SX.zeros(3)) - ca.substitute(ca.jacobian(F, s), s, 0)
     d2 = ca.substitute(ca.jtimes(dF, z, dz), s, 0)
 
     def second_rhs(first: SX) -> SX:
-        return ca.vertcat(SX.zeros(N_JOINTS), xdd, SX.zeros(3)) - ca.substitute(d2, ca.vertcat(qd_s, lam_d_s), first)
+        return ca.vertcat(SX.zeros(d.n_joints), xdd, SX.zeros(3)) - ca.substitute(d2, ca.vertcat(qd_s, lam_d_s), first)
 
     first, second = _rates_through_qr(K, first_rhs, second_rhs)
     names = ["q", "lam", "w", "xd", "xdd", "R_d", "w_d", "a_d", "p"]
-    outputs = [c, row_major(J), row_major(H), first[:N_JOINTS], first[N_JOINTS:], second[:N_JOINTS], second[N_JOINTS:]]
+    n = d.n_joints
+    outputs = [c, row_major(J), row_major(H), first[:n], first[n:], second[:n], second[n:]]
     out_names = ["c", "J", "H", "qd", "lam_d", "qdd", "lam_dd"]
     return function("vgt_ik_pose_rates", [q, lam, w, xd, xdd, rd, w_d, a_d, p], outputs, names, out_names)
 

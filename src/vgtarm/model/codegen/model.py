@@ -4,27 +4,25 @@ from __future__ import annotations
 
 import casadi as ca
 
-from ..parameters import N_JOINTS
-from ..symbolic import SX, body_motion, dynamics, kinematics
+from ..definition import PAPER, Definition
+from ..symbolic import SX, body_motion
 from .core import Builder, function, row_major, symbols
 
 
-def fk() -> ca.Function:
-    q, _, p = symbols()
-    k = kinematics(q, p)
-    outputs = [k.passive, k.O1, row_major(k.C01), k.O2, row_major(k.C02), k.tip, row_major(k.C03)]
-    names = ["passive", "O1", "C01", "O2", "C02", "tip", "C03"]
-    return function("vgt_fk", [q, p], outputs, ["q", "p"], names)
+def fk(d: Definition = PAPER) -> ca.Function:
+    q, _, p = symbols(d)
+    k = d.kinematics(q, p)
+    return function("vgt_fk", [q, p], list(k.fk_outputs), ["q", "p"], list(k.fk_names))
 
 
-def tip() -> ca.Function:
-    q, _, p = symbols()
-    return function("vgt_tip", [q, p], [kinematics(q, p).tip], ["q", "p"], ["tip"])
+def tip(d: Definition = PAPER) -> ca.Function:
+    q, _, p = symbols(d)
+    return function("vgt_tip", [q, p], [d.kinematics(q, p).tip], ["q", "p"], ["tip"])
 
 
-def jacobians() -> ca.Function:
-    q, qd, p = symbols()
-    k = kinematics(q, p)
+def jacobians(d: Definition = PAPER) -> ca.Function:
+    q, qd, p = symbols(d)
+    k = d.kinematics(q, p)
     motion = body_motion(k.tip, k.C03, q, qd)
     return function(
         "vgt_jac",
@@ -35,18 +33,18 @@ def jacobians() -> ca.Function:
     )
 
 
-def com_jacobians() -> ca.Function:
-    q, qd, p = symbols()
-    k = kinematics(q, p)
-    motions = [body_motion(k.body_com[i], k.body_rotation[i], q, qd) for i in range(3)]
+def com_jacobians(d: Definition = PAPER) -> ca.Function:
+    q, qd, p = symbols(d)
+    k = d.kinematics(q, p)
+    motions = [body_motion(k.body_com[i], k.body_rotation[i], q, qd) for i in range(len(k.body_com))]
     J_v = ca.vertcat(*[row_major(m.J_v) for m in motions])
     J_w = ca.vertcat(*[row_major(m.J_w) for m in motions])
     return function("vgt_com_jac", [q, p], [J_v, J_w], ["q", "p"], ["J_v", "J_w"])
 
 
-def velocities() -> ca.Function:
-    q, qd, p = symbols()
-    k = kinematics(q, p)
+def velocities(d: Definition = PAPER) -> ca.Function:
+    q, qd, p = symbols(d)
+    k = d.kinematics(q, p)
     motion = body_motion(k.tip, k.C03, q, qd)
     return function(
         "vgt_velocity",
@@ -57,11 +55,11 @@ def velocities() -> ca.Function:
     )
 
 
-def bias_accelerations() -> ca.Function:
-    q, qd, p = symbols()
-    k = kinematics(q, p)
+def bias_accelerations(d: Definition = PAPER) -> ca.Function:
+    q, qd, p = symbols(d)
+    k = d.kinematics(q, p)
     tip_motion = body_motion(k.tip, k.C03, q, qd)
-    bodies = [body_motion(k.body_com[i], k.body_rotation[i], q, qd) for i in range(3)]
+    bodies = [body_motion(k.body_com[i], k.body_rotation[i], q, qd) for i in range(len(k.body_com))]
     return function(
         "vgt_bias_acc",
         [q, qd, p],
@@ -76,38 +74,38 @@ def bias_accelerations() -> ca.Function:
     )
 
 
-def mass_matrix() -> ca.Function:
-    q, qd, p = symbols()
-    M = dynamics(q, qd, p).M
+def mass_matrix(d: Definition = PAPER) -> ca.Function:
+    q, qd, p = symbols(d)
+    M = d.dynamics(q, qd, p).M
     return function("vgt_mass", [q, p], [row_major(M)], ["q", "p"], ["M"])
 
 
-def bias_forces() -> ca.Function:
-    q, qd, p = symbols()
-    return function("vgt_bias_forces", [q, qd, p], [dynamics(q, qd, p).C], ["q", "qd", "p"], ["C"])
+def bias_forces(d: Definition = PAPER) -> ca.Function:
+    q, qd, p = symbols(d)
+    return function("vgt_bias_forces", [q, qd, p], [d.dynamics(q, qd, p).C], ["q", "qd", "p"], ["C"])
 
 
-def forward_dynamics() -> ca.Function:
-    q, qd, p = symbols()
-    F = SX.sym("F", N_JOINTS)
+def forward_dynamics(d: Definition = PAPER) -> ca.Function:
+    q, qd, p = symbols(d)
+    F = SX.sym("F", d.n_joints)
     f = SX.sym("f", 3)
-    dyn = dynamics(q, qd, p)
+    dyn = d.dynamics(q, qd, p)
     qdd = ca.solve(dyn.M, F + dyn.J_P.T @ f - dyn.C)
     return function("vgt_fd", [q, qd, F, f, p], [qdd], ["q", "qd", "F", "f", "p"], ["qdd"])
 
 
-def inverse_dynamics() -> ca.Function:
-    q, qd, p = symbols()
-    qdd = SX.sym("qdd", N_JOINTS)
+def inverse_dynamics(d: Definition = PAPER) -> ca.Function:
+    q, qd, p = symbols(d)
+    qdd = SX.sym("qdd", d.n_joints)
     f = SX.sym("f", 3)
-    dyn = dynamics(q, qd, p)
+    dyn = d.dynamics(q, qd, p)
     F = dyn.M @ qdd + dyn.C - dyn.J_P.T @ f
     return function("vgt_id", [q, qd, qdd, f, p], [F], ["q", "qd", "qdd", "f", "p"], ["F"])
 
 
-def energy() -> ca.Function:
-    q, qd, p = symbols()
-    dyn = dynamics(q, qd, p)
+def energy(d: Definition = PAPER) -> ca.Function:
+    q, qd, p = symbols(d)
+    dyn = d.dynamics(q, qd, p)
     return function(
         "vgt_energy",
         [q, qd, p],

@@ -47,7 +47,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, cast
 
@@ -230,6 +230,87 @@ class Stack:
     def viscous(self) -> NDArray[np.float64]:
         """Viscous friction coefficient of each joint, ``(n_joints,)``."""
         return self._per_joint(lambda m, i: m.viscous[i], lambda t: t.viscous)
+
+    @property
+    def q_min(self) -> tuple[float, ...]:
+        """Lower joint limits as a tuple (as :attr:`RobotParameters.q_min`)."""
+        return tuple(float(x) for x in self.lower)
+
+    @property
+    def q_max(self) -> tuple[float, ...]:
+        """Upper joint limits as a tuple."""
+        return tuple(float(x) for x in self.upper)
+
+    @property
+    def q_home(self) -> tuple[float, ...]:
+        """Home configuration as a tuple."""
+        return tuple(float(x) for x in self.home)
+
+    @property
+    def b(self) -> tuple[float, ...]:
+        """Base half-width of each module (m)."""
+        return tuple(module.b for module in self.modules)
+
+    @property
+    def d(self) -> tuple[float, ...]:
+        """Platform half-width of each module (m)."""
+        return tuple(module.d for module in self.modules)
+
+    @property
+    def total_mass(self) -> float:
+        """Sum of the body masses (kg)."""
+        return float(sum(body.mass for body in self.bodies))
+
+    def margin_form(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``G`` ``(6 n_modules, n_joints)`` and ``h``: the triangle margins ``G q + h`` of every module,
+        six rows per module in the order of :data:`~vgtarm.model.assembly.TRIANGLE_INEQUALITIES`
+        (all > 0 to assemble)."""
+        G = np.zeros((6 * self.n_modules, self.n_joints))
+        h = np.zeros(6 * self.n_modules)
+        for k, (module, idx) in enumerate(zip(self.modules, self.leg_indices, strict=True)):
+            Gk, hk = linear_form((module.b, module.b), (module.d, module.d))
+            G[6 * k : 6 * k + 6, list(idx)] = Gk[:6, :3]
+            h[6 * k : 6 * k + 6] = hk[:6]
+        return G, h
+
+    def margin_legs(self) -> tuple[tuple[int, int, int], ...]:
+        """Indices in ``q`` of each module's legs ``(s, v, p)``, in the order of the margin rows."""
+        return self.leg_indices
+
+    def scaled(self, *, mass: float = 1.0, inertia: float = 1.0, friction: float = 1.0) -> Stack:
+        """A copy with every body mass, inertia and friction coefficient multiplied by a factor
+        (as :meth:`RobotParameters.scaled`; each factor a finite number > 0)."""
+        for label, factor in (("mass", mass), ("inertia", inertia), ("friction", friction)):
+            real = isinstance(factor, int | float | np.integer | np.floating) and not isinstance(factor, bool)
+            if not (real and 0 < factor < 1e300):
+                raise ConfigError(f"scaled: {label} = {shown(factor)}: expected a finite factor > 0")
+
+        def body(b: Body) -> Body:
+            return replace(b, mass=b.mass * mass, inertia=tuple(tuple(x * inertia for x in row) for row in b.inertia))
+
+        modules = []
+        for module in self.modules:
+            twist = module.twist
+            if twist is not None:
+                twist = replace(
+                    twist,
+                    viscous=twist.viscous * friction,
+                    body=None if twist.body is None else body(twist.body),
+                )
+            modules.append(
+                replace(
+                    module,
+                    platform=body(module.platform),
+                    viscous=tuple(c * friction for c in module.viscous),  # type: ignore[arg-type]
+                    twist=twist,
+                )
+            )
+        return replace(
+            self,
+            name=f"{self.name} (mass x{mass:g}, inertia x{inertia:g}, friction x{friction:g})",
+            modules=tuple(modules),
+            end_effector=body(self.end_effector),
+        )
 
     # -- the flat parameter vector ---------------------------------------------------------
 

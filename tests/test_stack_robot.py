@@ -1,0 +1,201 @@
+"""A stack of modules as a first-class robot (issue 13): ``load_robot`` of a stack file, its compiled
+functions against the interpreted stack model, computed force control on a case path placed on the
+robot, the command line, and the paper's robot as a stack against the reference robot."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import vgtarm
+from vgtarm import paths
+from vgtarm.app.cases import PAPER_HOME_TIP, case_path, joint_reference, path_placement, run_case
+from vgtarm.app.cli import main
+from vgtarm.errors import ConfigError
+from vgtarm.model.stack import StackModel
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+DURATION = 0.2  # s of case 1: keeps the suite fast
+
+
+@pytest.fixture(scope="module")
+def six() -> vgtarm.Robot:
+    return vgtarm.load_robot(EXAMPLES / "six_modules.toml")
+
+
+@pytest.fixture(scope="module")
+def six_run(six):
+    reference = joint_reference(six, 1, duration=DURATION)
+    return reference, run_case(six, 1, reference=reference)
+
+
+def _configurations(robot: vgtarm.Robot, count: int, seed: int) -> np.ndarray:
+    """Random configurations within a fifth of each joint's range around home (all assemblable)."""
+    rng = np.random.default_rng(seed)
+    span = robot.parameters.upper - robot.parameters.lower
+    q = robot.parameters.home + 0.1 * span * rng.uniform(-1.0, 1.0, size=(count, robot.n_joints))
+    assert robot.is_assemblable(q).all()
+    return q
+
+
+def test_a_stack_file_loads_as_a_robot_with_its_joints(six):
+    assert six.is_stack and six.n_joints == 21 and six.n_modules == 6
+    assert six.joint_names[:7] == ("s1", "v1", "p1", "s2", "v2", "p2", "psi3")
+    assert six.joint_names[-1] == "psi7" and six.joint_units.count("rad") == 3
+    G, h = six.margin_form()
+    assert G.shape == (36, 21) and h.shape == (36,)
+    assert six.is_assemblable(six.parameters.home)
+
+
+def test_compiled_functions_equal_the_interpreted_stack_model(six):
+    model = StackModel(six.parameters)
+    q = _configurations(six, 4, seed=1)
+    qd = np.random.default_rng(2).normal(size=q.shape)
+    fk = six.forward_kinematics(q)
+    jp, jw = six.tip_jacobian(q), six.angular_jacobian(q)
+    mass, bias = six.mass_matrix(q), six.bias_forces(q, qd)
+    for i in range(len(q)):
+        ref = model.forward_kinematics(q[i])
+        for got, want in (
+            (fk.tip[i], ref.tip),
+            (fk.rotation[i], ref.rotation),
+            (fk.passive[i], ref.passive),
+            (fk.platform_position[i], ref.platform_position),
+            (fk.platform_rotation[i], ref.platform_rotation),
+        ):
+            np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+        want_jp, want_jw = model.jacobians(q[i])
+        np.testing.assert_allclose(jp[i], want_jp, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(jw[i], want_jw, rtol=0, atol=1e-12)
+        want_m = model.mass_matrix(q[i])
+        np.testing.assert_allclose(mass[i], want_m, rtol=0, atol=1e-12 * np.abs(want_m).max())
+        want_c = model.bias_forces(q[i], qd[i])
+        np.testing.assert_allclose(bias[i], want_c, rtol=0, atol=1e-12 * np.abs(want_c).max())
+    # forward dynamics: the generated linear solve against NumPy's Cholesky; inverse of each other
+    F = np.random.default_rng(3).normal(size=q.shape)
+    qdd = six.forward_dynamics(q, qd, F)
+    np.testing.assert_allclose(six.inverse_dynamics(q, qd, qdd), F, rtol=0, atol=1e-8)
+    want = model.forward_dynamics(q[0], qd[0], F[0])
+    np.testing.assert_allclose(qdd[0], want, rtol=0, atol=1e-9 * np.abs(want).max())
+
+
+def test_case_paths_are_centred_at_the_home_tip_and_scaled_to_the_reach(six):
+    placement = path_placement(six)
+    assert placement is not None
+    tip = six.tip_position(six.parameters.home)
+    assert placement.reach == pytest.approx(np.linalg.norm(tip)) and placement.reach == pytest.approx(1.54)
+    assert placement.scale == pytest.approx(1.54 / 0.66)
+    original, placed = paths.case1(0.01), case_path(six, 1, 0.01)
+    back = PAPER_HOME_TIP + (placed.position - tip) / placement.scale
+    np.testing.assert_allclose(back, original.position, atol=1e-12)
+    np.testing.assert_allclose(placed.velocity, placement.scale * original.velocity)
+    assert path_placement(vgtarm.load_robot()) is None  # the paper's robot: the paths as they are
+
+
+def test_cfc_tracks_case_1_on_the_six_module_arm_reproducibly(six, six_run):
+    reference, result = six_run
+    assert result.success and result.q.shape == (len(reference.t), 21)
+    summary = result.summary()
+    size = 0.06 * path_placement(six).scale  # the path's radius on this arm (m)
+    assert summary["max_tip_error_m"] < 1e-2 * size
+    assert summary["path_scale"] == pytest.approx(1.54 / 0.66)
+    again = run_case(six, 1, reference=reference)
+    np.testing.assert_array_equal(again.q, result.q)
+    np.testing.assert_array_equal(again.effort, result.effort)
+
+
+def test_a_stack_run_saves_and_loads_with_its_joint_names(six_run, tmp_path):
+    _, result = six_run
+    result.save(tmp_path / "run")
+    header = (tmp_path / "run" / "timeseries.csv").read_text().split("\n", 1)[0].split(",")
+    assert "psi7" in header and "F_psi5" in header
+    loaded = type(result).load(tmp_path / "run")
+    np.testing.assert_array_equal(loaded.q, result.q)
+
+
+def test_the_simulate_command_runs_a_stack(capsys):
+    config = str(EXAMPLES / "six_modules.toml")
+    status = main(["simulate", "--config", config, "--case", "1", "--controller", "cfc", "--duration", "0.05", "-q"])
+    out, err = capsys.readouterr()
+    assert status == 0, err
+    assert "path_centre_m" in out and "path_scale" in out and "max_tip_error_m" in out
+
+
+def test_describe_and_fk_commands_take_a_stack(capsys, six):
+    config = str(EXAMPLES / "six_modules.toml")
+    assert main(["describe", "--config", config]) == 0
+    out = capsys.readouterr().out
+    assert "psi7" in out and "reach 1.54" in out
+    q = [repr(float(v)) for v in six.parameters.home]
+    assert main(["fk", "--config", config, *q]) == 0
+    out = capsys.readouterr().out
+    assert "module 6" in out and "1.54" in out
+    assert main(["fk", "--config", config, *q[:7]]) == 1
+    err = capsys.readouterr().err
+    assert "expected 21 joint values" in err and err.count("\n") == 1
+
+
+def test_the_planar_module_loads_runs_fk_and_refuses_ik_in_one_line():
+    robot = vgtarm.load_robot(EXAMPLES / "planar_module.toml")
+    assert robot.n_joints == 3 and robot.joint_names == ("s1", "v1", "p1")
+    model = StackModel(robot.parameters)
+    q = _configurations(robot, 3, seed=5)
+    jp = robot.tip_jacobian(q)
+    for i in range(len(q)):
+        np.testing.assert_allclose(robot.tip_position(q[i]), model.tip_position(q[i]), rtol=0, atol=1e-15)
+        np.testing.assert_allclose(jp[i], model.jacobians(q[i])[0], rtol=0, atol=1e-13)
+        # central differences of the compiled tip
+        step = 1e-6
+        fd = np.stack(
+            [
+                (robot.tip_position(q[i] + step * e) - robot.tip_position(q[i] - step * e)) / (2 * step)
+                for e in np.eye(3)
+            ],
+            axis=1,
+        )
+        np.testing.assert_allclose(jp[i], fd, rtol=0, atol=1e-8)
+    # its tip stays in the u2-u3 plane: the position task has a zero row, refused in one line
+    tip = robot.tip_position(robot.parameters.home)
+    path = paths.waypoints([0.0, 0.2], [tip, tip + [0.0, 0.01, -0.005]], 0.01, blend="cubic", name="line")
+    with pytest.raises(vgtarm.errors.InputError, match="moves in a plane") as caught:
+        robot.inverse_kinematics(path)
+    assert "\n" not in str(caught.value)
+
+
+@pytest.mark.parametrize(
+    ("change", "field"),
+    [
+        (lambda text: text.split("[[modules]]")[0] + text[text.index("[end_effector]") :], "modules"),
+        (lambda text: text.replace("d = 0.1\n", "d = 0.2\n", 1), "module1.d"),
+        (lambda text: text.replace("plane = 90.0", 'plane = "ninety"', 1), "module2.plane"),
+    ],
+)
+def test_bad_stack_files_are_refused_in_one_line(tmp_path, change, field):
+    text = (EXAMPLES / "six_modules.toml").read_text()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(change(text))
+    with pytest.raises(ConfigError) as caught:
+        vgtarm.load_robot(bad)
+    message = str(caught.value)
+    assert field in message and "\n" not in message
+
+
+def test_the_paper_robot_as_a_stack_gives_the_reference_robots_numbers():
+    reference, stack = vgtarm.load_robot(), vgtarm.load_robot(EXAMPLES / "paper_robot.toml")
+    assert stack.is_stack and stack.joint_names == reference.joint_names
+    q = _configurations(reference, 8, seed=4)
+    np.testing.assert_array_equal(stack.tip_position(q), reference.tip_position(q))
+    np.testing.assert_array_equal(stack.forward_kinematics(q).rotation, reference.forward_kinematics(q).rotation)
+    np.testing.assert_array_equal(stack.mass_matrix(q), reference.mass_matrix(q))
+    # a CFC run of case 1 to 1e-12: the stack's generated IK derivatives sum the same terms in
+    # another order (the tool offset of the stack), so the reference differs in the last bits
+    ref_a = joint_reference(reference, 1, duration=DURATION)
+    ref_b = joint_reference(stack, 1, duration=DURATION)
+    np.testing.assert_allclose(ref_b.q, ref_a.q, rtol=0, atol=1e-12)
+    run_a = run_case(reference, 1, reference=ref_a)
+    run_b = run_case(stack, 1, reference=ref_b)
+    np.testing.assert_allclose(run_b.q, run_a.q, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(run_b.effort, run_a.effort, rtol=0, atol=1e-12 * np.abs(run_a.effort).max())
+    np.testing.assert_allclose(run_b.tip_error, run_a.tip_error, rtol=0, atol=1e-12)
