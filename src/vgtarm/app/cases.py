@@ -58,13 +58,14 @@ class CaseStudy:
         self, name: str, *, horizon: int = 20, ga: GAOptions | None = None, n_joints: int = N_JOINTS
     ) -> ComputedForceControl | SwitchingControl:
         """``"cfc"``: computed force control with the case's gains (the same on each of the robot's
-        ``n_joints`` joints); ``"scm"``: the switching method (the paper's 7 joints)."""
+        ``n_joints`` joints); ``"scm"``: the switching method around the same gains, with ``2 n_joints^2`` genes."""
         if name == "cfc":
             return ComputedForceControl.with_gains(self.kp, self.kv, n_joints)
         if name == "scm":
             return SwitchingControl.with_gains(
                 self.kp,
                 self.kv,
+                n_joints,
                 threshold=self.threshold,
                 kp_bounds=self.kp_bounds,
                 kv_bounds=self.kv_bounds,
@@ -237,11 +238,6 @@ def run_case(
     placement = path_placement(robot)
     if placement is not None:
         metadata.update(placement.metadata())
-    if controller == "scm" and robot.n_joints != N_JOINTS:
-        raise InputError(
-            f"controller = 'scm': the switching control method runs on the paper's {N_JOINTS}-joint robot only "
-            f"so far; robot {shown(robot.parameters.name)} has {robot.n_joints} joints (use 'cfc')"
-        )
     return simulate(
         robot,
         ref,

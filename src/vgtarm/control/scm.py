@@ -30,6 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..errors import InputError, shown
 from ..ga import GAOptions, GAResult, encode, minimize
 from ..model.closedloop import PREDICTIONS
+from ..model.parameters import N_JOINTS
 from ..model.robot import Robot
 from .gains import Gains, check_within, real_number
 from .law import commanded_acceleration
@@ -104,9 +105,12 @@ class SwitchingControl:
             raise InputError(f"prediction = {shown(self.prediction)}: expected one of {list(PREDICTIONS)}")
 
     @classmethod
-    def with_gains(cls, Kp: ArrayLike, Kv: ArrayLike, **options: object) -> SwitchingControl:
-        """Switching control around fixed gains from scalars, diagonals or matrices."""
-        return cls(Gains.of(Kp, Kv), **options)  # type: ignore[arg-type]
+    def with_gains(
+        cls, Kp: ArrayLike, Kv: ArrayLike, n_joints: int = N_JOINTS, **options: object
+    ) -> SwitchingControl:
+        """Switching control of a robot with ``n_joints`` joints (default the paper's 7) around fixed
+        gains from scalars (times the identity), diagonals or matrices; the GA has ``2 n^2`` genes."""
+        return cls(Gains.of(Kp, Kv, n_joints), **options)  # type: ignore[arg-type]
 
     @property
     def gains(self) -> Gains:
