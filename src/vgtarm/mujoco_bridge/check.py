@@ -36,9 +36,10 @@ def random_states(robot: Robot, n: int, seed: int, margin: float = 0.02) -> np.n
 
 
 def cross_validate(robot: Robot, n: int = 1000, seed: int = 0, bridge: MujocoRobot | None = None) -> list[CheckRow]:
-    """Worst differences between MuJoCo (on the exported model) and our model over ``n`` random
-    assemblable states with random velocities (joint speeds up to 0.05 m/s and 0.5 rad/s),
-    efforts (about 20 N) and tip forces (about 10 N). ``n`` is at most :data:`MAX_STATES`."""
+    """Worst differences between MuJoCo (on the exported model) and our model (the paper's robot
+    or any stack) over ``n`` random assemblable states with random velocities (joint speeds up to
+    0.05 m/s and 0.5 rad/s), efforts (about 20 N) and tip forces (about 10 N). ``n`` is at most
+    :data:`MAX_STATES`."""
     if isinstance(n, bool) or not isinstance(n, int | np.integer) or not 1 <= n <= MAX_STATES:
         raise InputError(f"n = {shown(n)}: expected a number of states in [1, {MAX_STATES:,}]")
     mj = bridge or MujocoRobot(robot)
@@ -48,11 +49,13 @@ def cross_validate(robot: Robot, n: int = 1000, seed: int = 0, bridge: MujocoRob
     def note(name: str, value: object) -> None:
         worst[name] = max(worst.get(name, 0.0), float(value))  # type: ignore[arg-type]
 
-    joints = len(robot.parameters.q_home)
+    joints = robot.n_joints
+    twists = [i for i, unit in enumerate(robot.joint_units) if unit == "rad"]
     zero = np.zeros(joints)
     for q in random_states(robot, n, seed):
         qd = rng.uniform(-0.05, 0.05, size=joints)
-        qd[-1] = rng.uniform(-0.5, 0.5)  # the twist
+        for i in twists:
+            qd[i] = rng.uniform(-0.5, 0.5)
         F = rng.normal(scale=20.0, size=joints)
         f = rng.normal(scale=10.0, size=3)
         fk = robot.forward_kinematics(q)
