@@ -297,3 +297,34 @@ def test_reproduce_seeds_section_matches_single_runs(tmp_path: Path) -> None:
     assert [r["max_tip_error_m"] for r in sorted(rows, key=lambda r: r["seed"])] == by_hand
     mean, std = 1e3 * np.mean(by_hand), 1e3 * np.std(by_hand, ddof=1)
     assert f"| {1e3 * by_hand[0]:.4f} | {mean:.4f} ± {std:.4f} |" in section[-1]
+
+
+STACK_STUDY = """
+[study]
+name = "six modules"
+case = 1
+duration = 0.05
+robot = "six_modules.toml"
+seeds = [0]
+
+[grid]
+controller = ["cfc", "scm"]
+"""
+
+
+def test_a_study_runs_on_a_stack_of_modules_and_its_rows_are_reproduced(tmp_path: Path) -> None:
+    """The robot file may be a stack: the case path is placed on it, the controllers are sized by
+    its 21 joints, and `vgtarm simulate --config` re-runs a row to the same summary."""
+    examples = Path(__file__).resolve().parents[1] / "examples"
+    (tmp_path / "six_modules.toml").write_text((examples / "six_modules.toml").read_text())
+    (tmp_path / "study.toml").write_text(STACK_STUDY)
+    run = run_study(load_study(tmp_path / "study.toml"), tmp_path / "runs", execute_point, workers=1, progress=False)
+    assert len(run.rows) == 2 and all(row["success"] for row in run.rows), run.rows
+    record = Store(run.folder).read(next(r["id"] for r in run.rows if r["controller"] == "scm"))
+    assert record["summary"]["path_scale"] == pytest.approx(1.54 / 0.66)
+    out = tmp_path / "again"
+    assert main([*simulate_command(record["inputs"], study_folder=tmp_path), "--out", str(out), "-q"]) == 0
+    again = json.loads((out / "summary.json").read_text())
+    assert {k: v for k, v in again.items() if k not in TIMING_COLUMNS} == {
+        k: v for k, v in record["summary"].items() if k not in TIMING_COLUMNS
+    }

@@ -119,7 +119,7 @@ def run_beyond_one(
             result = simulate(
                 robot,
                 reference,
-                case_study(2).controller(spec.controller),
+                case_study(2).controller(spec.controller, n_joints=robot.n_joints),
                 external_force=spec.force,
                 seed=seed,
                 integrator=integrator,

@@ -25,12 +25,12 @@ from .. import paths
 from ..control import ComputedForceControl, SwitchingControl
 from ..errors import InputError
 from ..ga import GAOptions
-from ..model.parameters import RobotParameters, parameters_from_dict
-from ..model.robot import Robot, load_robot
+from ..model.parameters import RobotParameters
+from ..model.robot import Robot, load_robot, robot_from_dict
 from ..simulation import JointReference, simulate
 from ..simulation.external import ExternalForce
 from ..study.spec import Value, simulate_options
-from .cases import case_study, truncate_reference
+from .cases import case_path, case_study, path_placement, truncate_reference
 
 Inputs = Mapping[str, Value]
 
@@ -40,7 +40,7 @@ def _robot(robot_text: str | None) -> Robot:
     """The study's robot (the reference robot when ``robot_text`` is None), built once per process."""
     if robot_text is None:
         return load_robot()
-    return Robot(parameters_from_dict(tomllib.loads(robot_text), source="<study robot file>"))
+    return robot_from_dict(tomllib.loads(robot_text), source="<study robot file>")
 
 
 @functools.lru_cache(maxsize=16)
@@ -50,7 +50,7 @@ def _reference(
     """The joint reference of a case or of a path file's text, cut to ``duration``; cached."""
     robot = _robot(robot_text)
     if case is not None:
-        desired = case_study(case).path(dt)
+        desired = case_path(robot, case, dt)  # placed on a stack at its home tip, scaled to its reach
         name = f"case {case}"
     else:
         assert path_text is not None
@@ -73,16 +73,17 @@ def _path_of(text: str, dt: float) -> paths.Path:
         os.unlink(name)
 
 
-def _controller(inputs: Inputs) -> ComputedForceControl | SwitchingControl:
+def _controller(inputs: Inputs, n_joints: int) -> ComputedForceControl | SwitchingControl:
     case = case_study(int(inputs["case"] or 1))  # path files use case 1's gains unless given
     kp = _number(inputs["kp"], case.kp)
     kv = _number(inputs["kv"], case.kv)
     if inputs["controller"] == "cfc":
-        return ComputedForceControl.with_gains(kp, kv)
+        return ComputedForceControl.with_gains(kp, kv, n_joints)
     if inputs["controller"] == "scm":
         return SwitchingControl.with_gains(
             kp,
             kv,
+            n_joints,
             threshold=_number(inputs["threshold"], case.threshold),
             kp_bounds=(case.kp_bounds[0], _number(inputs["kp_max"], case.kp_bounds[1])),
             kv_bounds=(case.kv_bounds[0], _number(inputs["kv_max"], case.kv_bounds[1])),
@@ -119,10 +120,15 @@ def _options(inputs: Inputs) -> dict[str, Any]:
     return {k: inputs[k] for k in simulate_options() if k in inputs and k in accepted}
 
 
-def _metadata(inputs: Inputs) -> dict[str, Any]:
-    if inputs["case"] is not None:
-        return {"case": inputs["case"], "case_title": case_study(int(inputs["case"])).title}
-    return {"path": inputs["path"]}
+def _metadata(robot: Robot, inputs: Inputs) -> dict[str, Any]:
+    if inputs["case"] is None:
+        return {"path": inputs["path"]}
+    placement = path_placement(robot)  # a case path on another robot than the paper's: where and how large
+    return {
+        "case": inputs["case"],
+        "case_title": case_study(int(inputs["case"])).title,
+        **(placement.metadata() if placement is not None else {}),
+    }
 
 
 def execute_point(inputs: Inputs, files: Mapping[str, str]) -> tuple[dict[str, Any], str]:
@@ -147,13 +153,13 @@ def execute_point(inputs: Inputs, files: Mapping[str, str]) -> tuple[dict[str, A
         result = simulate(
             robot,
             reference,
-            _controller(inputs),
+            _controller(inputs, robot.n_joints),
             controller_model=_model(robot, inputs),
             external_force=_external(inputs),
             integrator=str(inputs["integrator"]),
             substeps=int(inputs["substeps"]),  # type: ignore[arg-type]
             seed=int(inputs["seed"]),  # type: ignore[arg-type]
-            metadata=_metadata(inputs),
+            metadata=_metadata(robot, inputs),
             **_options(inputs),
         )
         return result.summary(), ""
@@ -187,7 +193,7 @@ def check_point(inputs: Inputs, files: Mapping[str, str]) -> None:
     simulate(
         robot,
         still,
-        _controller(inputs),
+        _controller(inputs, robot.n_joints),
         controller_model=_model(robot, inputs),
         external_force=_external(inputs),
         integrator=str(inputs["integrator"]),

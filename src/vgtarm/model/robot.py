@@ -28,7 +28,7 @@ from ..fileio import parse_toml, read_text_limited
 from .assembly import check_assembly, check_margins
 from .compiled import CompiledBackend, InterpretedBackend, get_backend
 from .definition import PAPER, Definition, StackDefinition
-from .parameters import ROBOT_FILE_LIMIT, RobotParameters, load_parameters
+from .parameters import ROBOT_FILE_LIMIT, RobotParameters, load_parameters, parameters_from_dict
 from .sanity import check_joint_range, sane_range
 from .stack.description import Stack, stack_from_dict
 
@@ -379,6 +379,24 @@ def load_robot(config: str | Path | None = None) -> Robot:
     if isinstance(config, str | os.PathLike):
         text = read_text_limited(config, ROBOT_FILE_LIMIT, "configuration file", error=ConfigError)
         data = parse_toml(text, cut(str(config), 200), error=ConfigError)
-        if "modules" in data or "end_effector" in data:  # keys of the stack format only
+        if is_stack_format(data):
             return Robot(stack_from_dict(data, source=str(config)))
     return Robot(load_parameters(config))
+
+
+def is_stack_format(data: Mapping[str, Any]) -> bool:
+    """Whether a parsed robot file is in the stack format (it has keys only that format has)."""
+    return "modules" in data or "end_effector" in data
+
+
+def robot_parameters_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> RobotParameters | Stack:
+    """The validated parameters of a parsed robot file of either format (see :func:`load_robot`);
+    nothing is compiled."""
+    if is_stack_format(data):
+        return stack_from_dict(data, source=source)
+    return parameters_from_dict(data, source=source)
+
+
+def robot_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> Robot:
+    """A robot from a parsed robot file of either format (see :func:`load_robot`)."""
+    return Robot(robot_parameters_from_dict(data, source=source))

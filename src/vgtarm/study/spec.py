@@ -40,7 +40,8 @@ import numpy as np
 
 from ..errors import ConfigError, VgtarmError, cut, shown
 from ..fileio import parse_toml, read_text_limited
-from ..model.parameters import ROBOT_FILE_LIMIT, parameters_from_dict
+from ..model.parameters import ROBOT_FILE_LIMIT
+from ..model.robot import robot_parameters_from_dict
 from ..paths import CSV_FILE_LIMIT, from_csv
 from ..simulation import INTEGRATORS, simulate
 from ..simulation.simulator import MAX_SUBSTEPS
@@ -345,7 +346,7 @@ def _check_files(source: str, head: Mapping[str, Any], files: Mapping[str, str],
     """Parse the study's robot and path files now, so a bad one is refused before any run."""
     if "robot" in files:
         where = f"{source}: study.robot = {shown(head['robot'])}"
-        parameters_from_dict(parse_toml(files["robot"], where, error=ConfigError), source=where)
+        robot_parameters_from_dict(parse_toml(files["robot"], where, error=ConfigError), source=where)
     if "path" in files:
         with tempfile.TemporaryDirectory(prefix="vgtarm-study-") as folder:  # the text read, not the file again
             copy = Path(folder) / "path.csv"
