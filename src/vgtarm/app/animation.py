@@ -112,7 +112,15 @@ def frame_plan(result: SimulationResult, *, fps: float = 25.0, speed: float = 1.
 
 def check_same_robot(robot: Robot, result: SimulationResult) -> None:
     """Raise :class:`~vgtarm.errors.InputError` unless ``result`` was made with ``robot``'s geometry
-    (its recorded tip at the first sample is the robot's tip of the recorded ``q``)."""
+    (it has the robot's joints, and its recorded tip at the first sample is the robot's tip of the
+    recorded ``q``)."""
+    names = result.joint_names
+    if names != robot.joint_names or result.q.shape[-1] != robot.n_joints:
+        raise InputError(
+            f"the run has {len(names)} joints ({_names(names)}) and robot {robot.parameters.name!r}"
+            f" has {robot.n_joints} ({_names(robot.joint_names)}): it was made with another robot;"
+            " pass that robot's file with --config"
+        )
     if result.completed < 1:
         raise InputError("the run has no completed sample")
     gap = float(np.linalg.norm(robot.tip_position(result.q[0]) - result.tip[0]))
@@ -121,6 +129,11 @@ def check_same_robot(robot: Robot, result: SimulationResult) -> None:
             f"the run's recorded tip is {gap * 1e3:.4g} mm from robot {robot.parameters.name!r}'s tip of its q: "
             "it was made with another robot; pass that robot's file with --config"
         )
+
+
+def _names(names: tuple[str, ...]) -> str:
+    """Joint names for a message: all of them, or the first and last few of many."""
+    return " ".join(names) if len(names) <= 8 else " ".join((*names[:3], "...", *names[-3:]))
 
 
 def _uses_switching(result: SimulationResult) -> bool:

@@ -37,7 +37,7 @@ def _config(parser: argparse.ArgumentParser) -> None:
 
 
 def cmd_draw(args: argparse.Namespace) -> int:
-    """Draw the robot at one configuration: both operating planes and an isometric view."""
+    """Draw the robot at one configuration: its operating planes and an isometric view."""
     from .drawing import pose_figure
     from .plotting import save_figure
 
@@ -46,10 +46,8 @@ def cmd_draw(args: argparse.Namespace) -> int:
     check_output_file(args.out, "--out", inputs=[args.config])
     robot = load_robot(args.config)
     q = args.q or robot.parameters.home
-    if len(q) != len(robot.parameters.home):
-        raise InputError(
-            f"Q: expected {len(robot.parameters.home)} joint values ({' '.join(JOINT_NAMES)}), got {len(q)}"
-        )
+    if len(q) != robot.n_joints:
+        raise InputError(f"Q: expected {robot.n_joints} joint values ({' '.join(robot.joint_names)}), got {len(q)}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     save_figure(pose_figure(robot, q), args.out)
     print(f"drawing written to {args.out}")
@@ -95,14 +93,15 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 def add_parsers(sub: Any) -> None:
     """Add ``draw``, ``animate`` and ``report`` to the subparsers ``sub``."""
-    draw = sub.add_parser("draw", help="draw the robot at a configuration (two operating planes and isometric)")
+    draw = sub.add_parser("draw", help="draw the robot at a configuration (its operating planes and isometric)")
     draw.add_argument(
         "q",
         nargs="*",
         type=float,
         metavar="Q",
         default=None,
-        help=f"joint values {' '.join(JOINT_NAMES)} (m, rad); none: the home pose",
+        help=f"joint values {' '.join(JOINT_NAMES)} (m, rad); a stack: one per joint, in its order;"
+        " none: the home pose",
     )
     draw.add_argument("--out", type=Path, required=True, metavar="FILE", help="picture file: .png, .svg or .pdf")
     _config(draw)

@@ -3,8 +3,9 @@
 :func:`draw_mechanism` draws one :class:`~vgtarm.app.geometry.MechanismGeometry` into a 3-D Axes
 and returns the artists, which :meth:`MechanismArtists.update` moves to another configuration
 (the animation uses that). :func:`pose_figure` makes the picture of ``vgtarm draw``: the plane of
-module 1, the plane of module 2 and an isometric view side by side, legs coloured by how close
-they are to their limits, with a colour bar. Coordinates are drawn in mm with equal scaling on
+module 1, the plane of module 2 and an isometric view side by side (a stack: module 1's plane, the
+first plane across it if any, see :func:`plane_views`), legs and twists coloured by how close
+their joints are to their limits, with a colour bar. Coordinates are drawn in mm with equal scaling on
 every axis; every bar's Line3D carries the segment's name as its ``gid``, so its drawn data can be
 read back (the tests do).
 
@@ -13,6 +14,8 @@ Nothing here touches pyplot; the figures render headless with the Agg canvas.
 
 from __future__ import annotations
 
+import math
+import textwrap
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -27,7 +30,6 @@ from mpl_toolkits.mplot3d.axes3d import Axes3D
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError
-from ..model.parameters import JOINT_NAMES
 from ..model.robot import Robot
 from .geometry import MechanismGeometry, mechanism_geometry
 
@@ -41,21 +43,40 @@ LEG_CMAP = LinearSegmentedColormap.from_list("vgtarm_closeness", CLOSENESS_COLOU
 CLOSENESS_NORM = Normalize(vmin=0.0, vmax=1.0)
 #: Label of the colour bar.
 CLOSENESS_LABEL = "closeness to a joint limit (0 mid-range, 1 at a limit)"
-#: The three views of :func:`pose_figure`: title, (elevation, azimuth), axis seen end-on (hidden).
-VIEWS: tuple[tuple[str, tuple[float, float], int | None], ...] = (
+#: A view: title, (elevation, azimuth) in degrees, axis seen end-on (hidden, its ticks dropped) or None.
+View = tuple[str, tuple[float, float], int | None]
+#: The three views of :func:`pose_figure` of the paper's robot.
+VIEWS: tuple[View, ...] = (
     ("module 1's plane (u2-u3 of F0)", (0.0, 0.0), 0),
     ("module 2's plane (u1-u3 of F1)", (0.0, -90.0), 1),
     ("isometric", (22.0, -52.0), None),
 )
+#: Size of the paper's robot's :func:`pose_figure` (inches).
+PAPER_FIGURE_SIZE = (11.0, 5.6)
+#: Size of a stack's :func:`pose_figure` (inches).
+STACK_FIGURE_SIZE = (11.0, 6.4)
+#: Plane views are magnified 1.3 times unless the robot is taller than this times its width.
+PLANE_ZOOM_ASPECT = 3.0
+#: Longest line of joint values in the title of :func:`pose_figure` (characters).
+TITLE_WIDTH = 125
+#: Two modules' planes closer than this (degrees) are seen in one view.
+SAME_VIEW_DEGREES = 10.0
 _STYLE: dict[str, dict[str, Any]] = {
     "base": {"color": "0.25", "linewidth": 4.0},
     "leg": {"linewidth": 3.2, "solid_capstyle": "round"},
     "platform": {"color": "0.15", "linewidth": 3.0},
+    "twist": {"color": "black", "linewidth": 2.6},
     "twist_axis": {"color": "0.45", "linewidth": 0.9, "linestyle": (0, (4, 3))},
+    "twist_bar": {"linewidth": 3.0},
     "tool": {"color": "black", "linewidth": 2.6},
     "end_effector": {"linewidth": 3.0},
 }
+#: Colours of the plates: the base, then the platforms alternately (the paper's two: blue, purple).
 _PLATE_COLOURS = {"base": "0.55", "platform1": "tab:blue", "platform2": "tab:purple"}
+_PLATFORM_COLOURS = ("tab:blue", "tab:purple")
+_MOUNT_COLOUR = "tab:olive"
+#: Colour of an end-effector's cross-bar that no joint turns (a stack ending without a twist).
+_FIXED_BAR_COLOUR = "0.15"
 _FRAME_COLOURS = ("tab:red", "tab:green", "tab:blue")
 
 
@@ -102,8 +123,17 @@ class MechanismArtists:
 
 
 def _joint_points(geometry: MechanismGeometry) -> NDArray[np.float64]:
-    """The legs' end joints (k, 3) in m (platform centres and tip excluded)."""
-    return np.stack([p for name, p in geometry.joints.items() if name not in ("O1", "O2", "P")])
+    """The legs' end joints (k, 3) in m (``A``, ``B``, ``A'``, ``B'`` of each module; platform
+    centres and tip excluded)."""
+    return np.stack([p for name, p in geometry.joints.items() if name[0] in "AB"])
+
+
+def _plate_colour(name: str) -> str:
+    if name in _PLATE_COLOURS:
+        return _PLATE_COLOURS[name]
+    if name.startswith("platform") and name[len("platform") :].isdigit():
+        return _PLATFORM_COLOURS[(int(name[len("platform") :]) - 1) % 2]
+    return _MOUNT_COLOUR if name.startswith("twist") else "0.6"
 
 
 def _cmap(cmap: str | Colormap) -> Colormap:
@@ -122,8 +152,9 @@ def draw_mechanism(
 ) -> MechanismArtists:
     """Draw ``geometry`` into the 3-D Axes ``ax`` (a new figure's when None), in mm.
 
-    Returns the :class:`MechanismArtists` (``.ax`` is the Axes). Legs and the end-effector's bar
-    are coloured by their joint's closeness to a limit with ``cmap``; ``frames`` draws F0..F3;
+    Returns the :class:`MechanismArtists` (``.ax`` is the Axes). Legs and the twists' bars (the
+    end-effector's among them) are coloured by their joint's closeness to a limit with ``cmap``;
+    ``frames`` draws the frames (F0..F3 for the paper's robot);
     ``leg_labels`` writes each leg's joint name at its middle.
     """
     if ax is None:
@@ -133,7 +164,7 @@ def draw_mechanism(
     for plate in geometry.plates:
         poly = Poly3DCollection(
             [plate.vertices * MM],
-            facecolor=_PLATE_COLOURS.get(plate.name, "0.6"),
+            facecolor=_plate_colour(plate.name),
             edgecolor="none",
             alpha=0.28,
         )
@@ -144,6 +175,7 @@ def draw_mechanism(
         style = dict(_STYLE[seg.kind])
         if seg.closeness is not None:
             style["color"] = colours(CLOSENESS_NORM(seg.closeness))
+        style.setdefault("color", _FIXED_BAR_COLOUR)
         xyz = np.stack([seg.start, seg.end]) * MM
         (line,) = ax.plot(xyz[:, 0], xyz[:, 1], xyz[:, 2], gid=seg.name, **style)
         artists.lines[seg.name] = line
@@ -209,23 +241,60 @@ def label_axes(ax: Axes3D) -> None:
     ax.tick_params(labelsize=7)
 
 
+def plane_views(geometry: MechanismGeometry) -> tuple[View, ...]:
+    """The views of a stack's :func:`pose_figure`: module 1's plane, the plane of the first module
+    across it (more than :data:`SAME_VIEW_DEGREES` away) if there is one, and an isometric view.
+
+    A module's plane is seen face on, level, along its normal as it stands in ``geometry`` (its
+    base joints' line turned a quarter turn about u3), from the side with the azimuth in
+    [-90, 90) degrees; a plane view along u1 or u2 hides that axis.
+    """
+    views: list[View] = []
+    seen: list[float] = []
+    for k, base in enumerate(geometry.of_kind("base"), start=1):
+        h = base.end - base.start  # A -> B: the module's h axis
+        if math.hypot(h[0], h[1]) <= 1e-6 * float(np.linalg.norm(h)):
+            continue  # a plane lying flat: no level view shows it
+        azimuth = (math.degrees(math.atan2(-h[0], h[1])) + 90.0) % 180.0 - 90.0
+        if any(abs((azimuth - other + 90.0) % 180.0 - 90.0) < SAME_VIEW_DEGREES for other in seen):
+            continue
+        seen.append(azimuth)
+        hidden = 0 if abs(azimuth) < 1e-9 else 1 if abs(azimuth + 90.0) < 1e-9 else None
+        views.append((f"module {k}'s plane", (0.0, round(azimuth, 9) + 0.0), hidden))
+        if len(views) == 2:
+            break
+    return (*views, VIEWS[-1])
+
+
 def pose_figure(
     robot: Robot,
     q: ArrayLike,
     *,
     title: str | None = None,
     cmap: str | Colormap = LEG_CMAP,
-    views: Sequence[tuple[str, tuple[float, float], int | None]] = VIEWS,
-    figsize: tuple[float, float] = (11.0, 5.6),
+    views: Sequence[View] | None = None,
+    figsize: tuple[float, float] | None = None,
     dpi: float = 100.0,
 ) -> Figure:
-    """The robot at ``q`` (n,) seen in each of ``views`` (default: both operating planes and an
-    isometric view), legs coloured by closeness to their limits, with a colour bar."""
+    """The robot at ``q`` (n,) seen in each of ``views``, legs and twists coloured by closeness
+    to their limits, with a colour bar.
+
+    ``views`` default: both operating planes and an isometric view (:data:`VIEWS`) for the paper's
+    robot, :func:`plane_views` for a stack. ``figsize`` default: :data:`PAPER_FIGURE_SIZE` for the
+    paper's robot, :data:`STACK_FIGURE_SIZE` for a stack (room for a title of many joints).
+    """
     qa = np.asarray(q, dtype=float)
-    n = len(robot.parameters.home)
+    n = robot.n_joints
     if qa.shape != (n,):
-        raise InputError(f"q must hold {n} joint values {list(JOINT_NAMES)}, got shape {qa.shape}")
+        raise InputError(f"q must hold {n} joint values {list(robot.joint_names)}, got shape {qa.shape}")
     geometry = mechanism_geometry(robot, qa)
+    if views is None:
+        views = plane_views(geometry) if robot.is_stack else VIEWS
+    if figsize is None:
+        figsize = STACK_FIGURE_SIZE if robot.is_stack else PAPER_FIGURE_SIZE
+    spans = np.ptp(geometry.points(), axis=0)
+    # plane views are magnified to fill their panel, unless the robot is too tall for it (a stack)
+    plane_zoom = 1.3 if spans[2] <= PLANE_ZOOM_ASPECT * max(spans[0], spans[1]) else 1.0
     fig = Figure(figsize=figsize, dpi=dpi, layout="constrained")
     axes = []
     for i, (name, (elev, azim), hidden) in enumerate(views):
@@ -234,7 +303,7 @@ def pose_figure(
         draw_mechanism(geometry, ax, cmap=cmap, leg_labels=hidden is None)
         ax.view_init(elev=elev, azim=azim)
         label_axes(ax)
-        set_equal_extent(ax, geometry.points() * MM, hidden=hidden, zoom=1.0 if hidden is None else 1.3)
+        set_equal_extent(ax, geometry.points() * MM, hidden=hidden, zoom=1.0 if hidden is None else plane_zoom)
         ax.set_title(name, fontsize=10)
         axes.append(ax)
     fig.colorbar(
@@ -244,7 +313,12 @@ def pose_figure(
         label=CLOSENESS_LABEL,
         location="right",
     )
-    values = ", ".join(f"{name} = {value:.4g}" for name, value in zip(JOINT_NAMES, qa, strict=True))
+    # one line of "name = value" entries, wrapped between entries (a stack's many joints)
+    entries = [
+        f"{name}\N{NO-BREAK SPACE}=\N{NO-BREAK SPACE}{value:.4g}"
+        for name, value in zip(robot.joint_names, qa, strict=True)
+    ]
+    values = "\n".join(textwrap.wrap(", ".join(entries), TITLE_WIDTH)).replace("\N{NO-BREAK SPACE}", " ")
     tip = geometry.tip * MM
     fig.suptitle(
         title or f"{robot.parameters.name}\n{values} (m, rad); tip ({tip[0]:.1f}, {tip[1]:.1f}, {tip[2]:.1f}) mm",

@@ -6,12 +6,18 @@ the robot's dimensions, and everything that shows the robot reads it: the Matplo
 (:mod:`vgtarm.app.html_report`). Nothing here is a sketch: the joints follow the spec's module
 (``shared/spec/mechanism.md``) from the passive angles the model returns.
 
-Module ``k`` in its own plane ``(h, z)``: base joints ``A = (-b, 0)``, ``B = (b, 0)``; top joints
-``A' = A + s (cos alpha, sin alpha)`` and ``B' = A + p (cos beta, sin beta)``. Module 1's plane is
-F0's ``u2-u3`` plane, ``(h, z) -> (0, h, z)``; module 2's is F1's ``u1-u3`` plane, mirrored,
-``(h, z) -> (-h, 0, z)``, carried into F0 by ``O1`` and ``C01``. The platform centres, the tool
-(from O2 along ``C02 u3`` for ``h1``) and the frames follow; the tests check them against the
-model's own platform centres and tip.
+Any robot is drawn the same way, as a stack of modules (the paper's robot is the stack of
+:func:`~vgtarm.model.stack.description.stack_from_parameters`: modules at 0 and 90 degrees, a
+twist ``h1`` high after module 2, no tool offset). Module ``k`` stands on a frame ``(o, R)`` (F0
+for module 1) and lies in its plane ``(h, z)``: base joints ``A = (-b, 0)``, ``B = (b, 0)``; top
+joints ``A' = A + s (cos alpha, sin alpha)`` and ``B' = A + p (cos beta, sin beta)``. With
+``phi`` the module's plane angle, ``h`` runs along ``R (-sin phi, cos phi, 0)`` and ``z`` along
+``R u3``: ``(h, z) -> o + R (-h sin phi, h cos phi, z)``, which is module 1's ``(0, h, z)`` and
+module 2's mirrored ``(-h, 0, z)`` of the paper. The platform centre ``O_k`` is the middle of
+``A'B'``, its frame ``C_0k`` the model's. What stands on module ``k`` stands on ``(O_k, C_0k)``,
+or, after a twist joint ``psi``, on ``(O_k + height C_0k u3, C_0k Rz(psi))``; the tip is the last
+such origin plus the end-effector's rotation times the tool offset. The tests check the centres
+and the tip against the model's own.
 
 Lengths are in metres, in F0.
 """
@@ -23,19 +29,22 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import InputError
+from ..errors import InputError, shown
 from ..model.parameters import JOINT_NAMES, JOINT_UNITS, RobotParameters
 from ..model.robot import ForwardKinematics, Robot
+from ..model.stack.description import Stack, stack_from_parameters
+from ..model.stack.symbolic import plane_direction
 
 Array = NDArray[np.float64]
 
 #: Kinds of drawn segment, in drawing order.
-SEGMENT_KINDS = ("base", "leg", "platform", "twist_axis", "tool", "end_effector")
+SEGMENT_KINDS = ("base", "leg", "platform", "twist", "twist_axis", "twist_bar", "tool", "end_effector")
 #: Length of the frames' axis arrows as a fraction of module 1's base half-width.
 FRAME_AXIS_FRACTION = 0.6
-#: Half-length of the end-effector's cross-bar as a fraction of module 2's platform half-width.
+#: Half-length of a twist's cross-bar (the end-effector's, or an inner twist's) as a fraction of the
+#: half-width of the platform it stands on.
 END_EFFECTOR_FRACTION = 0.6
-#: How far the dashed twist axis runs past the tool at each end, as a fraction of ``h1``.
+#: How far a dashed twist axis runs past its part at each end, as a fraction of the part's height.
 TWIST_AXIS_OVERHANG = 0.5
 
 
@@ -45,12 +54,15 @@ class Segment:
 
     Attributes:
         name: ``"s1"``, ``"v1"``, ``"p1"`` ... for legs (the joint's name), ``"base1"``,
-            ``"platform1"`` (the module's top edge ``A'B'``), ``"tool"``, ``"twist_axis"``,
-            ``"end_effector"``.
+            ``"platform1"`` (the module's top edge ``A'B'``), ``"tool"`` (the end-effector, from
+            the last platform centre to the tip), ``"twist_axis"`` (the end-effector's twist
+            axis), ``"end_effector"`` (its cross-bar); a twist joint ``psiN`` inside the arm
+            gives ``"twistN"`` (its part, from the platform centre to the next module's mount),
+            ``"twist_axisN"`` and ``"twist_barN"`` (its cross-bar).
         kind: one of :data:`SEGMENT_KINDS`.
         start, end: end points (3,) in F0 (m).
-        joint: index in ``q`` of the joint that drives this bar (legs, and the twist for the
-            end-effector's cross-bar), else ``None``.
+        joint: index in ``q`` of the joint that drives this bar (legs, the twists' cross-bars and
+            the end-effector's when a twist turns it), else ``None``.
         closeness: how close that joint is to a limit, 0 in the middle of its range, 1 at a
             limit (see :func:`limit_closeness`); ``None`` for bars without a joint.
     """
@@ -70,7 +82,8 @@ class Segment:
 
 @dataclass(frozen=True)
 class Plate:
-    """A flat body drawn as a closed polygon: ``"base"``, ``"platform1"``, ``"platform2"``.
+    """A flat body drawn as a closed polygon: ``"base"``, ``"platform1"``, ``"platform2"`` ...,
+    and ``"twistN"`` (the mount on top of an inner twist joint ``psiN``).
 
     ``vertices`` (k, 3) in F0 (m), in order around the polygon (not repeated at the end).
     """
@@ -83,8 +96,9 @@ class Plate:
 class FrameAxes:
     """A frame drawn as three short axes: ``origin`` (3,) and ``rotation`` (3, 3) in F0.
 
-    ``label`` is ``"F0"`` .. ``"F3"``; F3's axes are drawn at the tip (its orientation is the
-    end-effector's ``C03``; the spec puts its origin at O2, where F2's axes already are).
+    ``label`` is ``"F0"`` (the base), ``"F1"`` .. ``"Fm"`` (the platforms of the ``m`` modules)
+    and ``"F{m+1}"``, the end-effector's frame drawn at the tip (the paper's F3: its orientation
+    is ``C03``; the spec puts its origin at O2, where F2's axes already are).
     """
 
     label: str
@@ -98,11 +112,11 @@ class MechanismGeometry:
 
     Attributes:
         q: the configuration (n,).
-        joints: named joint points (3,): ``A1, B1, A1', B1', A2, B2, A2', B2'`` (base and top
-            joints of each module), ``O1, O2`` (platform centres), ``P`` (the tip).
+        joints: named joint points (3,): ``A1, B1, A1', B1', A2, ...`` (base and top joints of
+            each module), ``O1, O2, ...`` (platform centres), ``P`` (the tip).
         segments: the bars, in the order of :data:`SEGMENT_KINDS`.
-        plates: base and platforms as polygons.
-        frames: F0, F1, F2, F3 as small axes.
+        plates: base, platforms and twist mounts as polygons.
+        frames: F0, the platforms' frames and the end-effector's as small axes.
         axis_length: length of the frames' axes (m).
     """
 
@@ -139,6 +153,62 @@ class MechanismGeometry:
         return np.concatenate(parts)
 
 
+@dataclass(frozen=True)
+class ArmLayout:
+    """What the drawing needs of a robot's structure, module by module (``m`` modules, ``n`` joints).
+
+    Attributes:
+        joint_names: ``(n,)`` names of the joints, in the order of ``q``.
+        lower, upper: ``(n,)`` joint limits (m, rad).
+        b, d: ``(m,)`` base and platform half-widths (m).
+        planes: ``(m,)`` ``(cos, sin)`` of each module's plane angle (exact for multiples of 90 degrees).
+        legs: ``(m,)`` indices in ``q`` of each module's ``(s, v, p)``.
+        twists: ``(m,)`` the twist joint after each module as ``(index in q, height in m)``, or None.
+        tool: ``(3,)`` tip point from the last mount point, in the end-effector's frame (m).
+    """
+
+    joint_names: tuple[str, ...]
+    lower: Array
+    upper: Array
+    b: tuple[float, ...]
+    d: tuple[float, ...]
+    planes: tuple[tuple[float, float], ...]
+    legs: tuple[tuple[int, int, int], ...]
+    twists: tuple[tuple[int, float] | None, ...]
+    tool: Array
+
+    @property
+    def n_modules(self) -> int:
+        """Number of modules."""
+        return len(self.b)
+
+
+def arm_layout(parameters: RobotParameters | Stack) -> ArmLayout:
+    """The :class:`ArmLayout` of the paper's robot (as its stack) or of a stack."""
+    if isinstance(parameters, RobotParameters):
+        stack = stack_from_parameters(parameters)
+    elif isinstance(parameters, Stack):
+        stack = parameters
+    else:
+        raise InputError(
+            f"parameters = {shown(parameters)}: expected RobotParameters or a Stack (see vgtarm.load_robot)"
+        )
+    twists: list[tuple[int, float] | None] = []
+    for module, (_, _, i_p) in zip(stack.modules, stack.leg_indices, strict=True):
+        twists.append(None if module.twist is None else (i_p + 1, float(module.twist.height)))
+    return ArmLayout(
+        joint_names=stack.joint_names,
+        lower=stack.lower,
+        upper=stack.upper,
+        b=tuple(float(m.b) for m in stack.modules),
+        d=tuple(float(m.d) for m in stack.modules),
+        planes=tuple(plane_direction(m.plane) for m in stack.modules),
+        legs=stack.leg_indices,
+        twists=tuple(twists),
+        tool=np.array(stack.tool, dtype=float),
+    )
+
+
 def limit_closeness(q: ArrayLike, lower: ArrayLike, upper: ArrayLike) -> Array:
     """How close each joint is to its nearer limit: ``1 - 2 min(u, 1 - u)`` with ``u`` the
     position within ``[lower, upper]``; 0 at mid-range, 1 at a limit, above 1 outside.
@@ -150,8 +220,10 @@ def limit_closeness(q: ArrayLike, lower: ArrayLike, upper: ArrayLike) -> Array:
     return np.asarray(1.0 - 2.0 * np.minimum(u, 1.0 - u))
 
 
-def leg_joints(parameters: RobotParameters) -> list[tuple[int, int, int]]:
-    """Indices in ``q`` of ``(s, v, p)`` of each module, from the joint names (``s1, v1, p1`` ...)."""
+def leg_joints(parameters: RobotParameters | Stack) -> list[tuple[int, int, int]]:
+    """Indices in ``q`` of ``(s, v, p)`` of each module (``s1, v1, p1`` ... of the joint names)."""
+    if isinstance(parameters, Stack):
+        return list(parameters.leg_indices)
     found = []
     for k in range(1, len(parameters.modules) + 1):
         try:
@@ -162,11 +234,16 @@ def leg_joints(parameters: RobotParameters) -> list[tuple[int, int, int]]:
 
 
 def twist_joint() -> int:
-    """Index in ``q`` of the twist joint: the one angular (``rad``) joint."""
+    """Index in ``q`` of the paper's robot's twist joint: its one angular (``rad``) joint."""
     angular = [i for i, unit in enumerate(JOINT_UNITS) if unit == "rad"]
     if len(angular) != 1:
         raise InputError(f"expected one angular joint in {JOINT_NAMES}, found {len(angular)}")
     return angular[0]
+
+
+def twist_joints(parameters: RobotParameters | Stack) -> tuple[int, ...]:
+    """Indices in ``q`` of every twist joint of a robot, base first (the paper's: ``(6,)``)."""
+    return tuple(twist[0] for twist in arm_layout(parameters).twists if twist is not None)
 
 
 def _module_points(q: Array, legs: tuple[int, int, int], passive: Array, b: float) -> dict[str, Array]:
@@ -182,89 +259,153 @@ def _module_points(q: Array, legs: tuple[int, int, int], passive: Array, b: floa
     }
 
 
-def geometry_from_kinematics(parameters: RobotParameters, q: ArrayLike, fk: ForwardKinematics) -> MechanismGeometry:
+def _diamond(origin: Array, rotation: Array, plane: tuple[float, float], half: float) -> Array:
+    """A square plate of half-diagonal ``half`` in the frame ``(origin, rotation)``, with two corners
+    on a module's plane of direction ``plane`` (where its base joints are)."""
+    c, s = plane
+    corners = half * np.array([[c, s, 0.0], [-s, c, 0.0], [-c, -s, 0.0], [s, -c, 0.0]])
+    return np.stack([origin + rotation @ corner for corner in corners])
+
+
+def _twist_rotation(rotation: Array, angle: float) -> Array:
+    """``rotation Rz(angle)``: the frame turned by a twist joint about its u3 axis."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.asarray(rotation @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]))
+
+
+def _geometry(layout: ArmLayout, q: ArrayLike, fk: ForwardKinematics) -> MechanismGeometry:
+    """The drawn geometry of one configuration ``q`` (n,) of a robot laid out as ``layout``."""
+    qa = np.asarray(q, dtype=float)
+    m, n = layout.n_modules, len(layout.joint_names)
+    if qa.shape != (n,) or fk.tip.shape != (3,) or fk.platform_position.shape != (m, 3):
+        raise InputError(
+            f"q must be one configuration ({n},) with its forward kinematics ({m} platforms), got shape {qa.shape}"
+        )
+    closeness = limit_closeness(qa, layout.lower, layout.upper)
+
+    def driven(name: str, kind: str, start: Array, end: Array, joint: int | None) -> Segment:
+        if joint is None:
+            return Segment(name, kind, start, end)
+        return Segment(name, kind, start, end, joint=joint, closeness=float(closeness[joint]))
+
+    joints: dict[str, Array] = {}
+    centres: dict[str, Array] = {}
+    segments: list[Segment] = []
+    mounts: dict[int, Plate] = {}  # the plate on top of the twist joint after module k
+    frames = [FrameAxes("F0", np.zeros(3), np.eye(3))]
+    origin, rotation = np.zeros(3), np.eye(3)  # the frame module k stands on
+    for k in range(m):
+        number = k + 1
+        c, s = layout.planes[k]
+        # (h, z) in the module's plane -> origin + R (-h sin phi, h cos phi, z) in F0
+        for name, (h, z) in _module_points(qa, layout.legs[k], fk.passive[k], layout.b[k]).items():
+            joints[f"{name}{number}"] = origin + rotation @ np.array([-s * h, c * h, z])
+        centre = 0.5 * (joints[f"A'{number}"] + joints[f"B'{number}"])
+        platform = fk.platform_rotation[k]
+        centres[f"O{number}"] = centre
+        frames.append(FrameAxes(f"F{number}", centre, platform))
+        segments.append(Segment(f"base{number}", "base", joints[f"A{number}"], joints[f"B{number}"]))
+        i_s, i_v, i_p = layout.legs[k]
+        for index, start, end in ((i_s, "A", "A'"), (i_v, "B", "B'"), (i_p, "A", "B'")):
+            segments.append(
+                driven(layout.joint_names[index], "leg", joints[f"{start}{number}"], joints[f"{end}{number}"], index)
+            )
+        segments.append(Segment(f"platform{number}", "platform", joints[f"A'{number}"], joints[f"B'{number}"]))
+        origin, rotation = centre, platform
+        twist = layout.twists[k]
+        if twist is not None:
+            index, height = twist
+            axis = platform[:, 2]
+            mount = centre + height * axis
+            overhang = TWIST_AXIS_OVERHANG * height
+            ends = (centre - overhang * axis, mount + overhang * axis)
+            rotation = fk.rotation if k == m - 1 else _twist_rotation(platform, float(qa[index]))
+            if k == m - 1:  # the end-effector's twist: its part belongs to the tool drawn below
+                segments.append(Segment("twist_axis", "twist_axis", *ends))
+            else:
+                label = f"{number + 1}"  # psi{k+1} after module k, as the stack names it
+                half_bar = END_EFFECTOR_FRACTION * layout.d[k]
+                bar_centre, bar = centre + 0.5 * height * axis, rotation[:, 0]
+                segments.append(Segment(f"twist{label}", "twist", centre, mount))
+                segments.append(Segment(f"twist_axis{label}", "twist_axis", *ends))
+                segments.append(
+                    driven(
+                        f"twist_bar{label}",
+                        "twist_bar",
+                        bar_centre - half_bar * bar,
+                        bar_centre + half_bar * bar,
+                        index,
+                    )
+                )
+                mounts[k] = Plate(f"twist{label}", _diamond(mount, rotation, layout.planes[k + 1], layout.b[k + 1]))
+            origin = mount
+    last = m - 1
+    centre = centres[f"O{m}"]
+    tip = origin + fk.rotation @ layout.tool
+    segments.append(Segment("tool", "tool", centre, tip))
+    twist = layout.twists[last]
+    half_bar = END_EFFECTOR_FRACTION * layout.d[last]
+    if twist is not None:
+        bar_centre = centre + 0.5 * twist[1] * fk.platform_rotation[last][:, 2]
+    else:
+        bar_centre = 0.5 * (centre + tip)
+    bar = fk.rotation[:, 0]
+    end_joint = None if twist is None else twist[0]
+    segments.append(
+        driven("end_effector", "end_effector", bar_centre - half_bar * bar, bar_centre + half_bar * bar, end_joint)
+    )
+    frames.append(FrameAxes(f"F{m + 1}", tip, fk.rotation))
+    # each platform: its top joints on one diagonal; on the other, the base joints of the module
+    # standing right on it (not in the same plane), else its own half-width across its plane
+    plates = [Plate("base", _diamond(np.zeros(3), np.eye(3), layout.planes[0], layout.b[0]))]
+    for k in range(m):
+        number = k + 1
+        centre, platform = centres[f"O{number}"], fk.platform_rotation[k]
+        c, s = layout.planes[k]
+        on_top = (
+            k < last and layout.twists[k] is None and abs(_relative_sine(layout.planes[k], layout.planes[k + 1])) > 1e-9
+        )
+        if on_top:
+            across = (joints[f"A{number + 1}"], joints[f"B{number + 1}"])
+        else:
+            side = layout.d[k] * (platform @ np.array([c, s, 0.0]))
+            across = (centre + side, centre - side)
+        plates.append(
+            Plate(f"platform{number}", np.stack([joints[f"A'{number}"], across[0], joints[f"B'{number}"], across[1]]))
+        )
+        if k in mounts:
+            plates.append(mounts[k])
+    joints.update(centres)
+    joints["P"] = tip
+    return MechanismGeometry(
+        q=qa.copy(),
+        joints=joints,
+        segments=tuple(sorted(segments, key=lambda seg: SEGMENT_KINDS.index(seg.kind))),
+        plates=tuple(plates),
+        frames=tuple(frames),
+        axis_length=FRAME_AXIS_FRACTION * layout.b[0],
+    )
+
+
+def _relative_sine(below: tuple[float, float], above: tuple[float, float]) -> float:
+    """``sin(phi_above - phi_below)`` of two stacked modules' plane directions ``(cos, sin)``: 0 when
+    the upper module lies in the plane of the lower one, its base joints on the platform's edge."""
+    return above[1] * below[0] - above[0] * below[1]
+
+
+def geometry_from_kinematics(
+    parameters: RobotParameters | Stack, q: ArrayLike, fk: ForwardKinematics
+) -> MechanismGeometry:
     """The drawn geometry of one configuration ``q`` (n,) from its forward kinematics ``fk``.
 
-    ``fk`` must be the forward kinematics of ``q`` alone (no batch axes); the passive angles and
-    the platform rotations are taken from it, the points are built from the module equations.
+    ``parameters`` are the robot's (:attr:`vgtarm.Robot.parameters`: the paper's or a stack). ``fk``
+    must be the forward kinematics of ``q`` alone (no batch axes); the passive angles and the
+    platform rotations are taken from it, the points are built from the module equations.
     """
     qa = np.asarray(q, dtype=float)
     if qa.ndim != 1 or fk.tip.shape != (3,):
         raise InputError(f"q must be one configuration (n,), got shape {qa.shape}")
-    p = parameters
-    legs = leg_joints(p)
-    twist = twist_joint()
-    closeness = limit_closeness(qa, p.lower, p.upper)
-    c01, c02 = fk.platform_rotation[0], fk.platform_rotation[1]
-    # Module 1: (h, z) -> (0, h, z) in F0. Module 2: (h, z) -> (-h, 0, z) in F1, then O1 + C01 x.
-    plane1 = _module_points(qa, legs[0], fk.passive[0], p.modules[0].b)
-    plane2 = _module_points(qa, legs[1], fk.passive[1], p.modules[1].b)
-    joints: dict[str, Array] = {f"{name}1": np.array([0.0, hz[0], hz[1]]) for name, hz in plane1.items()}
-    o1 = 0.5 * (joints["A'1"] + joints["B'1"])
-    for name, hz in plane2.items():
-        joints[f"{name}2"] = o1 + c01 @ np.array([-hz[0], 0.0, hz[1]])
-    o2 = 0.5 * (joints["A'2"] + joints["B'2"])
-    axis = c02[:, 2]
-    tip = o2 + p.h1 * axis
-    joints.update(O1=o1, O2=o2, P=tip)
-
-    segments: list[Segment] = []
-    for k in (1, 2):
-        segments.append(Segment(f"base{k}", "base", joints[f"A{k}"], joints[f"B{k}"]))
-    for k, (i_s, i_v, i_p) in enumerate(legs, start=1):
-        for index, start, end in ((i_s, "A", "A'"), (i_v, "B", "B'"), (i_p, "A", "B'")):
-            segments.append(
-                Segment(
-                    JOINT_NAMES[index],
-                    "leg",
-                    joints[f"{start}{k}"],
-                    joints[f"{end}{k}"],
-                    joint=index,
-                    closeness=float(closeness[index]),
-                )
-            )
-    for k in (1, 2):
-        segments.append(Segment(f"platform{k}", "platform", joints[f"A'{k}"], joints[f"B'{k}"]))
-    overhang = TWIST_AXIS_OVERHANG * p.h1
-    segments.append(Segment("twist_axis", "twist_axis", o2 - overhang * axis, tip + overhang * axis))
-    segments.append(Segment("tool", "tool", o2, tip))
-    half_bar = END_EFFECTOR_FRACTION * p.modules[1].d
-    bar_centre = o2 + 0.5 * p.h1 * axis
-    bar = fk.rotation[:, 0]
-    segments.append(
-        Segment(
-            "end_effector",
-            "end_effector",
-            bar_centre - half_bar * bar,
-            bar_centre + half_bar * bar,
-            joint=twist,
-            closeness=float(closeness[twist]),
-        )
-    )
-
-    b1, d2 = p.modules[0].b, p.modules[1].d
-    base_plate = np.array([[b1, 0.0, 0.0], [0.0, b1, 0.0], [-b1, 0.0, 0.0], [0.0, -b1, 0.0]])
-    plates = (
-        Plate("base", base_plate),
-        # platform 1 carries module 1's top joints and module 2's base joints
-        Plate("platform1", np.stack([joints["A'1"], joints["A2"], joints["B'1"], joints["B2"]])),
-        # platform 2 carries module 2's top joints; its other diagonal (no joints) is drawn as long
-        Plate("platform2", np.stack([joints["A'2"], o2 + d2 * c02[:, 1], joints["B'2"], o2 - d2 * c02[:, 1]])),
-    )
-    frames = (
-        FrameAxes("F0", np.zeros(3), np.eye(3)),
-        FrameAxes("F1", o1, c01),
-        FrameAxes("F2", o2, c02),
-        FrameAxes("F3", tip, fk.rotation),
-    )
-    return MechanismGeometry(
-        q=qa.copy(),
-        joints=joints,
-        segments=tuple(sorted(segments, key=lambda s: SEGMENT_KINDS.index(s.kind))),
-        plates=plates,
-        frames=frames,
-        axis_length=FRAME_AXIS_FRACTION * b1,
-    )
+    return _geometry(arm_layout(parameters), qa, fk)
 
 
 def mechanism_geometry(robot: Robot, q: ArrayLike) -> MechanismGeometry:
@@ -276,14 +417,15 @@ def mechanism_geometry(robot: Robot, q: ArrayLike) -> MechanismGeometry:
 
 
 def mechanism_geometries(robot: Robot, q: ArrayLike) -> list[MechanismGeometry]:
-    """The drawn geometry of every configuration of ``q`` (m, n), from one batched FK call."""
+    """The drawn geometry of every configuration of ``q`` (k, n), from one batched FK call."""
     qa = np.asarray(q, dtype=float)
     if qa.ndim != 2:
-        raise InputError(f"q must be a batch of configurations (m, n), got shape {qa.shape}")
+        raise InputError(f"q must be a batch of configurations (k, n), got shape {qa.shape}")
     fk = robot.forward_kinematics(qa)
+    layout = arm_layout(robot.parameters)
     return [
-        geometry_from_kinematics(
-            robot.parameters,
+        _geometry(
+            layout,
             qa[i],
             ForwardKinematics(
                 passive=fk.passive[i],

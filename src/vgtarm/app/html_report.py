@@ -31,9 +31,9 @@ from numpy.typing import ArrayLike, NDArray
 from .. import errors
 from ..errors import InputError
 from ..fileio import atomic_write_text
-from ..model.parameters import EFFORT_UNITS, JOINT_NAMES
 from ..model.robot import Robot
 from ..simulation.result import MODE_GA, SimulationResult
+from .animation import check_same_robot
 from .drawing import CLOSENESS_COLOURS, MM
 from .geometry import MechanismGeometry, mechanism_geometries
 from .report import TABLE_COLUMNS, RunSpec, table_row
@@ -51,6 +51,9 @@ COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e
 #: Colour scale of the legs' closeness to a limit (as the Matplotlib drawing: green to red).
 CLOSENESS_SCALE = [[i / (len(CLOSENESS_COLOURS) - 1), c] for i, c in enumerate(CLOSENESS_COLOURS)]
 _COLOURBAR_TITLE = "legs: closeness<br>to a limit<br>(0 mid-range,<br>1 at a limit)"
+#: Height of one panel of the efforts' figure (px): the paper's 7 joints, and a robot of more joints.
+EFFORT_PANEL_PX = 150
+EFFORT_PANEL_PX_MANY = 110
 
 
 @dataclass(frozen=True)
@@ -176,14 +179,20 @@ def _error_figure(runs: Sequence[ReportRun], max_points: int) -> dict[str, Any]:
     return {"data": data, "layout": layout}
 
 
+def effort_unit(joint: str) -> str:
+    """Unit of the effort of the joint named ``joint``: N m for a twist (``psi...``), N for a leg."""
+    return "N m" if joint.startswith("psi") else "N"
+
+
 def _effort_figure(runs: Sequence[ReportRun], max_points: int) -> dict[str, Any]:
     from plotly.subplots import make_subplots
 
-    n = runs[0].result.effort.shape[1]
+    names = runs[0].result.joint_names  # every run has them (checked by page_figures)
+    n = len(names)
     # the panels' axes as Plotly's subplots lay them out (a figure without traces is cheap to build)
     grid = make_subplots(rows=n, cols=1, shared_xaxes=True, vertical_spacing=0.012)
-    for j in range(n):
-        grid.update_yaxes(title_text=f"{JOINT_NAMES[j]} ({EFFORT_UNITS[j]})", title_font={"size": 10}, row=j + 1, col=1)
+    for j, joint in enumerate(names):
+        grid.update_yaxes(title_text=f"{joint} ({effort_unit(joint)})", title_font={"size": 10}, row=j + 1, col=1)
     grid.update_xaxes(title_text="time (s)", row=n, col=1)
     axes = grid.to_plotly_json()["layout"]
     data = []
@@ -192,16 +201,18 @@ def _effort_figure(runs: Sequence[ReportRun], max_points: int) -> dict[str, Any]
         for j in range(n):
             t, f = _series(run.result, run.result.effort[:, j], max_points)
             suffix = "" if j == 0 else str(j + 1)
+            hover = f"{names[j]}: %{{y:.4g}} {effort_unit(names[j])}<extra>{html.escape(run.label)}</extra>"
             data.append(
                 {"type": "scatter", "x": typed_array(t), "y": typed_array(f), "name": run.label,
                  "legendgroup": run.label, "showlegend": j == 0, "mode": "lines",
-                 "line": {"color": colour, "width": 1.0}, "xaxis": "x" + suffix, "yaxis": "y" + suffix}
+                 "line": {"color": colour, "width": 1.0}, "xaxis": "x" + suffix, "yaxis": "y" + suffix,
+                 "hovertemplate": hover}
             )  # fmt: skip
     layout = _layout(
         {
             **{key: value for key, value in axes.items() if key != "template"},
             "title": {"text": "Actuator efforts (legend toggles a run in every panel)"},
-            "height": 150 * n + 120,
+            "height": (EFFORT_PANEL_PX if n <= 7 else EFFORT_PANEL_PX_MANY) * n + 120,
             "legend": {"font": {"size": 10}},
         }
     )
@@ -268,21 +279,26 @@ def _polylines(pairs: Sequence[tuple[Array, Array]]) -> tuple[list[float | None]
 def mechanism_traces(geometry: MechanismGeometry) -> list[dict[str, Any]]:
     """The moving traces of the mechanism at one configuration, as Plotly trace dicts (mm).
 
-    Order: legs (coloured by closeness), bars (bases, platforms' top edges, tool), twist axis,
-    end-effector bar, plates, frames' u1, u2, u3 axes, tip. The legs' trace carries ``customdata``
-    with the leg names.
+    Order: legs (coloured by closeness), bars (bases, platforms' top edges, twist parts, tool),
+    twist axes, twists' and end-effector's bars, plates, frames' u1, u2, u3 axes, tip. The legs'
+    trace carries ``customdata`` with the leg names. The traces are the same for every
+    configuration of one robot (a robot without twist joints has an empty twist-axis trace).
     """
     legs = geometry.of_kind("leg")
     lx, ly, lz = _polylines([(s.start, s.end) for s in legs])
     colour: list[float] = []
     for s in legs:
         colour += [float(s.closeness or 0.0)] * 3
-    bars = geometry.of_kind("base") + geometry.of_kind("platform") + geometry.of_kind("tool")
+    bars = (
+        geometry.of_kind("base") + geometry.of_kind("platform") + geometry.of_kind("twist") + geometry.of_kind("tool")
+    )
     bx, by, bz = _polylines([(s.start, s.end) for s in bars])
-    axis = geometry.segment("twist_axis")
-    ax_, ay, az = _polylines([(axis.start, axis.end)])
-    bar = geometry.segment("end_effector")
-    ex, ey, ez = _polylines([(bar.start, bar.end)])
+    ax_, ay, az = _polylines([(axis.start, axis.end) for axis in geometry.of_kind("twist_axis")])
+    twist_bars = geometry.of_kind("twist_bar")
+    ex, ey, ez = _polylines([(bar.start, bar.end) for bar in (*twist_bars, geometry.segment("end_effector"))])
+    bar_name = "twists and end-effector" if twist_bars else "end-effector (twist)"
+    bar_names = ", ".join(["bases, platforms", *(["twist parts"] if geometry.of_kind("twist") else []), "tool"])
+    axis_name = "twist axes" if len(geometry.of_kind("twist_axis")) > 1 else "twist axis"
     vertices = np.concatenate([p.vertices for p in geometry.plates]) * MM
     i_, j_, k_ = [], [], []
     offset = 0
@@ -313,21 +329,22 @@ def mechanism_traces(geometry: MechanismGeometry) -> list[dict[str, Any]]:
             },
             "hoverinfo": "skip",
         },
-        {"type": "scatter3d", "mode": "lines", "name": "bases, platforms, tool", "x": bx, "y": by, "z": bz,
+        {"type": "scatter3d", "mode": "lines", "name": bar_names, "x": bx, "y": by, "z": bz,
          "line": {"width": 7, "color": "#333333"}, "hoverinfo": "skip"},
-        {"type": "scatter3d", "mode": "lines", "name": "twist axis", "x": ax_, "y": ay, "z": az,
+        {"type": "scatter3d", "mode": "lines", "name": axis_name, "x": ax_, "y": ay, "z": az,
          "line": {"width": 2, "color": "#777777", "dash": "dash"}, "hoverinfo": "skip"},
-        {"type": "scatter3d", "mode": "lines", "name": "end-effector (twist)", "x": ex, "y": ey, "z": ez,
+        {"type": "scatter3d", "mode": "lines", "name": bar_name, "x": ex, "y": ey, "z": ez,
          "line": {"width": 8, "color": "#6a3d9a"}, "hoverinfo": "skip"},
         {"type": "mesh3d", "name": "plates", **_xyz(vertices, np.float64),
          "i": i_, "j": j_, "k": k_, "color": "#6baed6", "opacity": 0.35, "hoverinfo": "skip"},
     ]  # fmt: skip
+    frames = f"{geometry.frames[0].label}-{geometry.frames[-1].label}"
     for i, colour_name in enumerate(("#d62728", "#2ca02c", "#1f77b4")):
         fx, fy, fz = _polylines(
             [(f.origin, f.origin + geometry.axis_length * f.rotation[:, i]) for f in geometry.frames]
         )
         traces.append(
-            {"type": "scatter3d", "mode": "lines", "name": f"frames F0-F3: u{i + 1}", "x": fx, "y": fy, "z": fz,
+            {"type": "scatter3d", "mode": "lines", "name": f"frames {frames}: u{i + 1}", "x": fx, "y": fy, "z": fz,
              "line": {"width": 4, "color": colour_name}, "hoverinfo": "skip"}
         )  # fmt: skip
     tip = geometry.tip * MM
@@ -481,9 +498,18 @@ def page_figures(
     robot: Robot, runs: Sequence[ReportRun], *, max_points: int = MAX_POINTS, max_frames: int = MAX_FRAMES
 ) -> list[tuple[str, str, dict[str, Any]]]:
     """The page's figures as ``(div id, heading, Plotly figure dict)``: tip error, efforts, 3-D
-    paths, then the mechanism along the first run of each case study."""
+    paths, then the mechanism along the first run of each case study.
+
+    Every run must have been made with ``robot`` (its joints, and its recorded tip at its first
+    sample): else :class:`~vgtarm.errors.InputError` names the run's folder.
+    """
     if not runs:
         raise InputError("runs: expected at least one run to report")
+    for run in runs:
+        try:
+            check_same_robot(robot, run.result)
+        except InputError as exc:
+            raise InputError(f"run {run.folder}: {exc}") from None
     figures: list[tuple[str, str, dict[str, Any]]] = [
         ("tip-error", "Tip error", _error_figure(runs, max_points)),
         ("efforts", "Actuator efforts", _effort_figure(runs, max_points)),

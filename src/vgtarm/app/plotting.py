@@ -5,9 +5,13 @@ when ``ax`` is None) and returns it; nothing here touches pyplot's global state 
 ``show()``, so the module works headless without choosing a backend. Lengths are plotted in mm,
 angles in mrad, forces in N and torques in N m; the result records stay in SI units.
 
+Joint plots draw one line per joint of the run's robot, named by :attr:`SimulationResult.joint_names`
+(the paper's ``s1 .. psi3``, or a stack's ``s1, v1, p1, ..., psi7``): legs (lengths, forces) on
+the left axis, twist joints (angles, torques) on a twin axis on the right.
+
 - :func:`plot_path_3d`: desired and actual tip paths in 3-D (Figs. 4 and 7).
 - :func:`plot_tip_error`: tip position error against time for compared runs (Figs. 5 and 8).
-- :func:`plot_efforts`: leg forces and twist torque of one run (Figs. 6 and 9).
+- :func:`plot_efforts`: leg forces and twist torques of one run (Figs. 6 and 9).
 - :func:`plot_joint_errors`: joint tracking errors ``q_d - q`` of one run.
 - :func:`comparison_figure`: the three views above in one figure.
 - :func:`save_figure`: write a figure atomically, format from the suffix.
@@ -21,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib import colormaps
 from matplotlib.axes import Axes
 from matplotlib.colors import to_hex
 from matplotlib.figure import Figure
@@ -31,7 +36,6 @@ from numpy.typing import NDArray
 
 from ..errors import InputError
 from ..fileio import atomic_path
-from ..model.parameters import JOINT_NAMES
 from ..simulation.result import MODE_GA, SimulationResult
 
 __all__ = [
@@ -46,8 +50,12 @@ __all__ = [
 
 #: Metres to millimetres, radians to milliradians.
 _MILLI = 1e3
-#: Number of leg actuators (the six prismatic joints); the last joint is the twist.
-_N_LEGS = 6
+#: Beginning of a twist joint's name (an angle in rad, its effort a torque in N m); the others are legs.
+TWIST_PREFIX = "psi"
+#: Line styles of the twist joints on the right axis, in order (black lines).
+_TWIST_STYLES = ("--", ":", "-.", (0, (5, 1, 1, 1, 1, 1)), (0, (8, 2)))
+#: Colours of the leg lines when there are more than Matplotlib's default cycle holds (10).
+_MANY_LEGS_CMAP = "tab20"
 #: Smallest 3-D box side, as a fraction of the largest, so planar paths keep some depth.
 _MIN_BOX_FRACTION = 0.15
 #: Fill colour of spans in GA mode.
@@ -194,36 +202,41 @@ def plot_efforts(
     title: str | None = None,
     joints: Sequence[str] | None = None,
 ) -> Axes:
-    """Leg actuator forces (N) and the twist torque (N m, right axis) of one run against time (s).
+    """Leg actuator forces (N) and twist torques (N m, right axis) of one run against time (s).
 
     Args:
-        result: the run; ``effort`` (N, 7): six leg forces in N, then the twist torque in N m.
+        result: the run; ``effort`` (N, n): one column per joint of :attr:`~SimulationResult.joint_names`,
+            legs in N, twist joints (``psi...``) in N m.
         ax: Axes to draw into (the force axis); a new figure when None.
         title: Axes title (default: "Actuator efforts, <label>").
-        joints: names from :data:`vgtarm.parameters.JOINT_NAMES` to draw (default: all); the
-            twist torque gets a twin y-axis on the right when ``"psi3"`` is among them.
+        joints: names of the run's joints to draw (default: all); the twist torques get a twin
+            y-axis on the right when a twist joint is among them.
 
     Returns:
-        The primary (force) Axes; spans in GA mode (``mode == 1``) are shaded.
+        The primary (force) Axes, with one line per leg joint named ``F_<joint>``; spans in GA
+        mode (``mode == 1``) are shaded.
     """
     _check_result(result, "result")
-    chosen = _joint_indices(joints)
+    names = result.joint_names
+    chosen = _joint_indices(joints, names)
+    legs = [j for j in chosen if not _is_twist(names[j])]
+    twists = [j for j in chosen if _is_twist(names[j])]
     ax = _new_axes(ax)
     handles: list[Any] = []
-    for j in chosen:
-        if j < _N_LEGS:
-            handles += ax.plot(result.t, result.effort[:, j], lw=1.0, label=f"F_{JOINT_NAMES[j]}")
-    twin = None
-    if _N_LEGS in chosen:
+    for j, colour in zip(legs, _leg_colours(len(legs)), strict=True):
+        handles += ax.plot(result.t, result.effort[:, j], lw=1.0, color=colour, label=f"F_{names[j]}")
+    if twists:
         twin = ax.twinx()
-        handles += twin.plot(
-            result.t, result.effort[:, _N_LEGS], color="k", ls="--", lw=1.0, label=f"τ_{JOINT_NAMES[_N_LEGS]} (right)"
-        )
-        twin.set_ylabel(f"twist torque τ_{JOINT_NAMES[_N_LEGS]} (N m)")
+        for j, style in zip(twists, _twist_styles(len(twists)), strict=True):
+            handles += twin.plot(
+                result.t, result.effort[:, j], color="k", ls=style, lw=1.0, label=f"τ_{names[j]} (right)"
+            )
+        only = names[twists[0]]
+        twin.set_ylabel(f"twist torque τ_{only} (N m)" if len(twists) == 1 else "twist torques (N m)")
     if _shade_ga(ax, result):
         handles.append(Patch(color=_GA_COLOR, alpha=0.2, label="GA gains"))
     ax.set_xlabel("time (s)")
-    ax.set_ylabel("leg force (N)" if any(j < _N_LEGS for j in chosen) else "")
+    ax.set_ylabel("leg force (N)" if legs else "")
     ax.set_title(title if title is not None else f"Actuator efforts, {label_of(result)}")
     ax.grid(True, alpha=0.3)
     _legend_above(ax, handles)
@@ -233,32 +246,37 @@ def plot_efforts(
 def plot_joint_errors(result: SimulationResult, *, ax: Axes | None = None, title: str | None = None) -> Axes:
     """Joint tracking errors ``q_d - q`` of one run against time (s).
 
-    The six legs in mm on the left axis, the twist ``psi3`` in mrad on a twin axis on the right
-    (dashed black line); spans in GA mode are shaded.
+    The legs in mm on the left axis, the twist joints (``psi...``) in mrad on a twin axis on the
+    right (black lines, dashed for the first); spans in GA mode are shaded.
 
     Args:
-        result: the run; ``q_desired`` and ``q`` (N, 7), legs in m, twist in rad.
+        result: the run; ``q_desired`` and ``q`` (N, n), legs in m, twists in rad, one column
+            per joint of :attr:`~SimulationResult.joint_names`.
         ax: Axes to draw into (the leg axis); a new figure when None.
         title: Axes title (default: "Joint tracking errors, <label>").
 
     Returns:
-        The primary (leg) Axes.
+        The primary (leg) Axes, with one line per leg named by its joint.
     """
     _check_result(result, "result")
     ax = _new_axes(ax)
+    names = result.joint_names
     error = (result.q_desired - result.q) * _MILLI
+    legs = [j for j, name in enumerate(names) if not _is_twist(name)]
+    twists = [j for j, name in enumerate(names) if _is_twist(name)]
     handles: list[Any] = []
-    for j in range(_N_LEGS):
-        handles += ax.plot(result.t, error[:, j], lw=1.0, label=JOINT_NAMES[j])
-    twin = ax.twinx()
-    handles += twin.plot(
-        result.t, error[:, _N_LEGS], color="k", ls="--", lw=1.0, label=f"{JOINT_NAMES[_N_LEGS]} (right)"
-    )
+    for j, colour in zip(legs, _leg_colours(len(legs)), strict=True):
+        handles += ax.plot(result.t, error[:, j], lw=1.0, color=colour, label=names[j])
+    if twists:
+        twin = ax.twinx()
+        for j, style in zip(twists, _twist_styles(len(twists)), strict=True):
+            handles += twin.plot(result.t, error[:, j], color="k", ls=style, lw=1.0, label=f"{names[j]} (right)")
+        only = names[twists[0]]
+        twin.set_ylabel(f"twist error {only}_d − {only} (mrad)" if len(twists) == 1 else "twist errors q_d − q (mrad)")
     if _shade_ga(ax, result):
         handles.append(Patch(color=_GA_COLOR, alpha=0.2, label="GA gains"))
     ax.set_xlabel("time (s)")
     ax.set_ylabel("leg error q_d − q (mm)")
-    twin.set_ylabel(f"twist error {JOINT_NAMES[_N_LEGS]}_d − {JOINT_NAMES[_N_LEGS]} (mrad)")
     ax.set_title(title if title is not None else f"Joint tracking errors, {label_of(result)}")
     ax.grid(True, alpha=0.3)
     _legend_above(ax, handles)
@@ -355,15 +373,32 @@ def _runs_and_labels(
     return runs, [str(label) for label in labels]
 
 
-def _joint_indices(joints: Sequence[str] | None) -> list[int]:
+def _is_twist(name: str) -> bool:
+    """Whether the joint ``name`` is a twist (an angle), not a leg (a length)."""
+    return name.startswith(TWIST_PREFIX)
+
+
+def _leg_colours(n: int) -> list[Any]:
+    """Colours of ``n`` leg lines: Matplotlib's default cycle, or ``tab20`` for more than it holds."""
+    if n <= 10:
+        return [f"C{i}" for i in range(n)]
+    cmap = colormaps[_MANY_LEGS_CMAP]
+    return [cmap(i % cmap.N) for i in range(n)]
+
+
+def _twist_styles(n: int) -> list[Any]:
+    return [_TWIST_STYLES[i % len(_TWIST_STYLES)] for i in range(n)]
+
+
+def _joint_indices(joints: Sequence[str] | None, names: Sequence[str]) -> list[int]:
     if joints is None:
-        return list(range(len(JOINT_NAMES)))
+        return list(range(len(names)))
     if isinstance(joints, str) or not isinstance(joints, Sequence) or not joints:
-        raise InputError(f"joints = {joints!r}: expected a non-empty sequence of names from {list(JOINT_NAMES)}")
-    unknown = [j for j in joints if j not in JOINT_NAMES]
+        raise InputError(f"joints = {joints!r}: expected a non-empty sequence of names from {list(names)}")
+    unknown = [j for j in joints if j not in names]
     if unknown:
-        raise InputError(f"joints = {list(joints)!r}: unknown {unknown}, expected names from {list(JOINT_NAMES)}")
-    return sorted({JOINT_NAMES.index(j) for j in joints})
+        raise InputError(f"joints = {list(joints)!r}: unknown {unknown}, expected names from {list(names)}")
+    return sorted({list(names).index(j) for j in joints})
 
 
 def _new_axes(ax: Axes | None) -> Axes:
