@@ -6,6 +6,8 @@ with one line or trace per joint, named by the run's joints."""
 from __future__ import annotations
 
 import re
+import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,6 +18,7 @@ from PIL import Image
 import vgtarm
 from vgtarm.app import cli
 from vgtarm.app.animation import check_same_robot, render_animation
+from vgtarm.app.cli_visual import robot_file_of_runs
 from vgtarm.app.drawing import CLOSENESS_COLOURS, CLOSENESS_NORM, MM, draw_mechanism, plane_views, pose_figure
 from vgtarm.app.geometry import (
     SEGMENT_KINDS,
@@ -317,11 +320,43 @@ def test_report_command_writes_the_page_of_a_stack_run(run_dir, tmp_path, capsys
 
 @pytest.mark.parametrize("command", ["animate", "report"])
 def test_a_stack_run_with_the_paper_robot_is_refused_in_one_line(command, run_dir, tmp_path, capsys):
+    bare = tmp_path / "bare"  # the run without the copy of its robot file: the reference robot is tried
+    shutil.copytree(run_dir, bare)
+    (bare / "robot.toml").unlink()
     out = tmp_path / ("a.gif" if command == "animate" else "page")
-    assert cli.main([command, str(run_dir), "--out", str(out)]) == 1
+    assert cli.main([command, str(bare), "--out", str(out)]) == 1
     err = capsys.readouterr().err.strip()
     assert err.startswith("vgtarm: error:") and "21 joints" in err and "--config" in err and "\n" not in err
     assert not out.exists()
+
+
+def test_a_run_keeps_its_robot_file_and_animate_and_report_find_it(run_dir, tmp_path, capsys):
+    """`simulate --config F --out RUN` copies F into RUN (robot.toml); `animate RUN` and `report RUN`
+    then need no --config. Runs of different robots together are refused in one line."""
+    assert (run_dir / "robot.toml").read_bytes() == Path("examples/six_modules.toml").read_bytes()
+    assert cli.main(["animate", str(run_dir), "--out", str(tmp_path / "a.gif"), "--fps", "10", "-q"]) == 0
+    assert cli.main(["report", str(run_dir), "--out", str(tmp_path / "page")]) == 0
+    assert "psi7" in (tmp_path / "page" / "report.html").read_text("utf-8")
+    paper = tmp_path / "paper_run"
+    argv = ["simulate", "--case", "1", "--controller", "cfc", "--duration", "0.05", "--out", str(paper), "-q"]
+    assert cli.main(argv) == 0 and not (paper / "robot.toml").exists()
+    capsys.readouterr()
+    assert cli.main(["report", str(run_dir), str(paper), "--out", str(tmp_path / "both")]) == 1
+    err = capsys.readouterr().err
+    assert "different robots" in err and err.count("\n") == 1
+    assert not (tmp_path / "both").exists()
+
+
+def test_runs_of_a_reproduction_find_the_robot_file_at_its_top(tmp_path):
+    top = tmp_path / "results"
+    (top / "beyond" / "observer").mkdir(parents=True)
+    (top / "case1_cfc").mkdir()
+    (top / "report.md").write_text("report")
+    (top / "robot.toml").write_text("robot")
+    assert robot_file_of_runs(None, [top / "case1_cfc", top / "beyond" / "observer"]) == top / "robot.toml"
+    assert robot_file_of_runs(Path("mine.toml"), [top / "case1_cfc"]) == Path("mine.toml")
+    (top / "report.md").unlink()  # not a reproduction: a robot.toml above a run is not taken
+    assert robot_file_of_runs(None, [top / "case1_cfc"]) is None
 
 
 def test_the_page_of_a_stack_run_renders_in_a_real_browser(run_dir, tmp_path):

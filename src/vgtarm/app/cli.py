@@ -20,10 +20,10 @@ from typing import Any, NoReturn
 import numpy as np
 
 from .. import __version__, paths
-from ..errors import MESSAGE_LENGTH, InputError, UnreachableError, VgtarmError, cut, escape, shown
-from ..fileio import atomic_folder, check_output_file, check_output_folder
+from ..errors import MESSAGE_LENGTH, ConfigError, InputError, UnreachableError, VgtarmError, cut, escape, shown
+from ..fileio import atomic_folder, atomic_write_text, check_output_file, check_output_folder, read_text_limited
 from ..ik import CSV_COLUMNS, write_csv
-from ..model.parameters import JOINT_NAMES, JOINT_UNITS
+from ..model.parameters import JOINT_NAMES, JOINT_UNITS, ROBOT_FILE_LIMIT
 from ..model.robot import load_robot
 from ..paths import Path as DesiredPath
 from . import cli_mujoco, cli_stack, cli_study, cli_visual
@@ -85,18 +85,26 @@ def cmd_fk(args: argparse.Namespace) -> int:
     return 0
 
 
+def _robot_text(config: Path | None) -> str | None:
+    """The text of the robot file ``config`` (None for the reference robot), to keep beside a run."""
+    if config is None:
+        return None
+    return read_text_limited(config, ROBOT_FILE_LIMIT, "configuration file", error=ConfigError)
+
+
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Run one case study, print its summary, write its results and figures."""
     from tqdm import tqdm
 
     from ..errors import SimulationError
-    from ..simulation.result import RUN_FILES
+    from ..simulation.result import ROBOT_COPY, RUN_FILES
     from .cases import joint_reference, run_case
     from .plotting import comparison_figure, save_figure
 
     if args.out is not None:
         check_output_folder(args.out, "--out", inputs=[args.config], owned=RUN_FILES)  # before the work
     robot = load_robot(args.config)
+    robot_text = _robot_text(args.config)
     if args.plant == "mujoco":
         from .. import mujoco_bridge  # noqa: F401  (registers the MuJoCo plant)
     model = robot.parameters.scaled(mass=args.model_mass, inertia=args.model_inertia, friction=args.model_friction)
@@ -135,6 +143,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                 try:  # the folder is replaced whole: no figure of an earlier run stays beside it
                     with atomic_folder(args.out, "--out", inputs=[args.config], owned=RUN_FILES) as partial:
                         exc.result.save(partial)  # type: ignore[attr-defined]
+                        if robot_text is not None:
+                            atomic_write_text(partial / ROBOT_COPY, robot_text)
                 except (VgtarmError, OSError, ValueError) as failure:
                     note = f"partial results not written: {cut(str(failure), 120)}"
                 else:
@@ -176,6 +186,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         with atomic_folder(args.out, "--out", inputs=[args.config], owned=RUN_FILES) as written:  # whole or not
             result.save(written)
             save_figure(comparison_figure([result]), written / "figure.png")
+            if robot_text is not None:  # animate and report find the run's robot by it
+                atomic_write_text(written / ROBOT_COPY, robot_text)
         print(f"results written to {args.out}")
     return 0
 

@@ -54,6 +54,34 @@ def cmd_draw(args: argparse.Namespace) -> int:
     return 0
 
 
+def robot_file_of_runs(config: Path | None, runs: list[Path]) -> Path | None:
+    """The robot file for saved ``runs``: ``config`` when given; else the copy of the robot file
+    the runs were made with (``robot.toml``, kept by ``simulate --out`` in the run's folder and by
+    ``reproduce`` at the top of its folder, up to two levels above a run); else None, the
+    reference robot. Runs made with different robot files are refused in one line."""
+    if config is not None:
+        return config
+    copies = [_robot_copy(run) for run in runs]
+    if len({None if copy is None else copy.read_bytes() for copy in copies}) > 1:
+        raise InputError(
+            "the runs were made with different robots (compare their robot.toml files): give one robot with --config"
+        )
+    return copies[0] if copies else None
+
+
+def _robot_copy(run: Path) -> Path | None:
+    """The ``robot.toml`` of a run's folder, or of the reproduction (a folder with ``report.md``,
+    one or two levels up) that holds it; None when there is none."""
+    from ..simulation.result import ROBOT_COPY
+
+    if (run / ROBOT_COPY).is_file():
+        return run / ROBOT_COPY
+    for folder in (run.parent, run.parent.parent):
+        if (folder / ROBOT_COPY).is_file() and (folder / "report.md").is_file():
+            return folder / ROBOT_COPY
+    return None
+
+
 def _load_run(folder: Path) -> Any:
     from ..simulation import SimulationResult
 
@@ -65,7 +93,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
     from .animation import render_animation
 
     check_output_file(args.out, "--out", inputs=[args.config])
-    robot = load_robot(args.config)
+    robot = load_robot(robot_file_of_runs(args.config, [args.run_dir]))
     made = render_animation(
         robot, _load_run(args.run_dir), args.out, fps=args.fps, speed=args.speed, dpi=args.dpi, progress=not args.quiet
     )
@@ -82,7 +110,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 
     inputs, owned = [*args.runs, args.config], ("*.html", PLOTLY_JS)
     check_output_folder(args.out, "--out", inputs=inputs, owned=owned)  # before the work; never over a run
-    robot = load_robot(args.config)
+    robot = load_robot(robot_file_of_runs(args.config, list(args.runs)))
     runs = load_runs(args.runs)
     intro = "Runs: " + ", ".join(p.name for p in args.runs)
     with atomic_folder(args.out, "--out", inputs=inputs, owned=owned) as folder:  # replaces an old report whole

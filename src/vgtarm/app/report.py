@@ -20,11 +20,12 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from ..errors import InputError, shown
-from ..fileio import atomic_folder, atomic_write_text
+from ..errors import ConfigError, InputError, shown
+from ..fileio import atomic_folder, atomic_write_text, read_text_limited
+from ..model.parameters import ROBOT_FILE_LIMIT
 from ..model.robot import Robot
 from ..simulation import JointReference, SimulationResult
-from ..simulation.result import MODE_GA
+from ..simulation.result import MODE_GA, ROBOT_COPY
 from .beyond import BeyondRun, beyond_figure, beyond_runs, beyond_section, run_beyond_one
 from .cases import PAPER_RESULTS, case_study, joint_reference, run_case
 from .plotting import plot_efforts, plot_path_3d, plot_tip_error, save_figure
@@ -78,7 +79,7 @@ Progress = Callable[[str, int, int], None]
 
 #: Files a reproduction written before folders listed their files may hold at its top level (so
 #: such a folder of only these may be replaced; one with run folders must be moved away first).
-REPRODUCE_FILES = ("report.md", "report.html", "plotly.min.js", "*.png")
+REPRODUCE_FILES = ("report.md", "report.html", "plotly.min.js", "*.png", ROBOT_COPY)
 
 
 def reproduce(
@@ -114,7 +115,10 @@ def reproduce(
     start = time.perf_counter()
     if not (isinstance(workers, int) and not isinstance(workers, bool) and workers >= 1):
         raise InputError(f"workers = {shown(workers)}: expected a whole number of processes >= 1")
+    robot_text = None if config is None else read_text_limited(config, ROBOT_FILE_LIMIT, "config", error=ConfigError)
     with atomic_folder(out, "out", inputs=[config], owned=REPRODUCE_FILES) as folder:
+        if robot_text is not None:  # animate and report find the runs' robot by it
+            atomic_write_text(folder / ROBOT_COPY, robot_text)
         results = _reproduce_into(
             robot,
             folder,

@@ -19,7 +19,10 @@ Array = NDArray[np.float64]
 
 #: The files :meth:`SimulationResult.save` writes (and the figure ``vgtarm simulate`` adds): an
 #: existing folder of only these, written before folders listed their files, may be replaced.
-RUN_FILES = ("summary.json", "timeseries.csv", "ga_activations.csv", "figure.png")
+RUN_FILES = ("summary.json", "timeseries.csv", "ga_activations.csv", "figure.png", "robot.toml")
+#: The copy of the robot file a run was made with (``vgtarm simulate --config``, ``vgtarm reproduce
+#: --config``), by which ``vgtarm animate`` and ``vgtarm report`` find the run's robot.
+ROBOT_COPY = "robot.toml"
 
 #: Controller mode per sample.
 MODE_FIXED, MODE_GA, MODE_NOT_RUN = 0, 1, -1
