@@ -138,3 +138,20 @@ def test_ctrl_c_ends_a_reproduction_and_its_workers(warm, tmp_path):  # noqa: F8
         time.sleep(0.05)
     assert _alive_in_group(command.child.pid) == []
     assert not out.exists()
+
+
+def test_workers_build_a_stacks_robot_and_make_its_runs_bit_for_bit(tmp_path):
+    """A worker builds the robot of the parameters it is given, a stack too (its structure's
+    library, not the paper's): a switching-control run of the six-module arm matches the one made here."""
+    from functools import partial
+
+    from vgtarm import load_robot
+    from vgtarm.app.cases import run_case
+
+    six = load_robot(Path(__file__).resolve().parents[1] / "examples" / "six_modules.toml")
+    reference = joint_reference(six, 1, duration=0.1)
+    here = run_case(six, 1, controller="scm", reference=reference, seed=2)
+    with Workers(1, six.parameters) as pool:
+        there = pool.submit(partial(run_case, controller="scm", reference=reference, seed=2), 1).result()
+    for name in ("q", "effort", "tip_error"):
+        np.testing.assert_array_equal(getattr(here, name), getattr(there, name), err_msg=name)

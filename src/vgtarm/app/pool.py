@@ -25,7 +25,8 @@ from concurrent.futures import Future, ProcessPoolExecutor
 from typing import Any, TypeVar
 
 from ..model.parameters import RobotParameters
-from ..model.robot import Robot
+from ..model.robot import Robot, definition_of
+from ..model.stack import Stack
 
 T = TypeVar("T")
 #: Most worker processes by default (the reproduction has four long runs and about 40 short tasks).
@@ -68,7 +69,7 @@ class Workers:
     """``count`` worker processes, each calling ``fn(robot, *args)`` with its own robot of
     ``parameters`` (backend ``backend``); a context manager (see the module's notes on Ctrl-C)."""
 
-    def __init__(self, count: int, parameters: RobotParameters, backend: str = "compiled") -> None:
+    def __init__(self, count: int, parameters: RobotParameters | Stack, backend: str = "compiled") -> None:
         if not (isinstance(count, int) and count >= 1):
             raise ValueError(f"count = {count!r}: expected a whole number of workers >= 1")
         self.count, self.parameters, self.backend = count, parameters, backend
@@ -124,12 +125,13 @@ class Workers:
 _ROBOT: list[Robot] = []
 
 
-def _start_worker(parameters: RobotParameters, backend: str) -> None:
-    """A worker's start: one GA thread, and its own robot."""
+def _start_worker(parameters: RobotParameters | Stack, backend: str) -> None:
+    """A worker's start: one GA thread, and its own robot (the paper's or a stack, of the backend
+    kind ``backend``; a compiled library is loaded from the cache the calling process filled)."""
     from ..model.compiled import get_backend
 
     os.environ["VGTARM_THREADS"] = "1"
-    _ROBOT.append(Robot(parameters, backend=get_backend(backend)))
+    _ROBOT.append(Robot(parameters, backend=get_backend(backend, definition_of(parameters))))
 
 
 def _call(fn: Callable[..., T], *args: Any) -> T:

@@ -92,6 +92,15 @@ def _as_array(
     return array
 
 
+def definition_of(parameters: RobotParameters | Stack) -> Definition:
+    """The model whose compiled functions serve ``parameters``: the paper's, or a stack's structure."""
+    if isinstance(parameters, RobotParameters):
+        return PAPER
+    if isinstance(parameters, Stack):
+        return StackDefinition.of(parameters)
+    raise InputError(f"parameters = {shown(parameters)}: expected RobotParameters or a Stack (see vgtarm.load_robot)")
+
+
 class Robot:
     """A manipulator model: :class:`RobotParameters` (the paper's robot) or a
     :class:`~vgtarm.model.stack.Stack` evaluated through the compiled backend.
@@ -112,23 +121,11 @@ class Robot:
         parameters: RobotParameters | Stack,
         backend: CompiledBackend | InterpretedBackend | None = None,
     ) -> None:
-        definition: Definition
-        if isinstance(parameters, RobotParameters):
-            definition = PAPER
-        elif isinstance(parameters, Stack):
-            definition = StackDefinition.of(parameters)
-        else:
-            raise InputError(
-                f"parameters = {shown(parameters)}: expected RobotParameters or a Stack (see vgtarm.load_robot)"
-            )
-        # RobotParameters or Stack; typed Any so that the layers written for the paper's robot only
-        # (drawing, MJCF export, reports) still type-check: they are not yet generalised to stacks
+        definition = definition_of(parameters)
+        # RobotParameters or Stack (typed Any: the layers above read the fields both share)
         self.parameters: Any = parameters
         self.definition = definition
-        if backend is not None:
-            self.backend = backend
-        else:
-            self.backend = get_backend() if definition == PAPER else get_backend(None, definition)
+        self.backend = backend if backend is not None else get_backend(None, definition)
         self._p = parameters.vector()
         self._low, self._high = sane_range(parameters)
         self._G, self._h = parameters.margin_form()
