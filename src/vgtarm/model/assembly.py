@@ -65,24 +65,8 @@ def check_assembly(q: ArrayLike, b: Sequence[float], d: Sequence[float], *, wher
     The message names the first failing configuration (its index in a batch), the module and the
     violated triangle inequality with the leg lengths involved.
     """
-    qa = np.asarray(q, dtype=float)
-    margins = triangle_margins(qa, b, d)
-    bad = ~(margins > 0.0)
-    if not bad.any():
-        return
-    flat_index = int(np.argmax(bad.reshape(-1, 12).any(axis=1)))
-    row = int(np.argmax(bad.reshape(-1, 12)[flat_index]))
-    module = row // 6 + 1
-    qi = qa.reshape(-1, 7)[flat_index]
-    s, v, p = qi[3 * (module - 1) : 3 * module]
-    index = tuple(int(i) for i in np.unravel_index(flat_index, qa.shape[:-1]))
-    location = "" if qa.ndim == 1 else f" (configuration {index})"
-    prefix = f"{where}: " if where else ""
-    raise AssemblyError(
-        f"{prefix}module {module} cannot be assembled{location}: triangle inequality "
-        f"'{TRIANGLE_INEQUALITIES[row % 6]}' fails with s={s:.6g} m, v={v:.6g} m, p={p:.6g} m, "
-        f"b={b[module - 1]:.6g} m, d={d[module - 1]:.6g} m"
-    )
+    G, h = linear_form(b, d)
+    check_margins(q, G, h, ((0, 1, 2), (3, 4, 5)), b, d, where=where)
 
 
 def check_margins(

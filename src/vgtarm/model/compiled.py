@@ -679,10 +679,10 @@ def _compiler_failure(compiler: str, done: subprocess.CompletedProcess[str]) -> 
     return f"the C compiler {shown(compiler, 80)} failed (exit status {done.returncode}): {cut(first, 160)}"
 
 
-def _run_compiler(compiler: str, command: list[str]) -> None:
-    """Run one compiler command; :class:`_Unavailable` with the first error line when it fails."""
+def _run(compiler: str, command: list[str]) -> subprocess.CompletedProcess[str]:
+    """Run one compiler command and return what it did; :class:`_Unavailable` when it cannot run."""
     try:
-        done = subprocess.run(
+        return subprocess.run(
             command,
             capture_output=True,
             text=True,
@@ -695,6 +695,11 @@ def _run_compiler(compiler: str, command: list[str]) -> None:
         raise _Unavailable(f"the C compiler {shown(compiler, 80)} ran longer than {_COMPILE_TIMEOUT:.0f} s") from None
     except OSError as exc:
         raise _Unavailable(f"cannot run the C compiler {shown(compiler, 80)}: {exc.strerror or exc}") from None
+
+
+def _run_compiler(compiler: str, command: list[str]) -> None:
+    """Run one compiler command; :class:`_Unavailable` with the first error line when it fails."""
+    done = _run(compiler, command)
     if done.returncode != 0:
         raise _Unavailable(_compiler_failure(compiler, done))
 
@@ -725,22 +730,7 @@ def _compile(compiler: str, workdir: Path, definition: Definition = PAPER) -> tu
     base = [compiler, *_CFLAGS, "-I", str(_CSRC), "-o", str(library), *sources, "-lm"]
     failure = ""
     for command in (base[:1] + ["-fopenmp"] + base[1:], base):
-        try:
-            done = subprocess.run(
-                command,
-                capture_output=True,
-                text=True,
-                errors="replace",
-                stdin=subprocess.DEVNULL,
-                check=False,
-                timeout=_COMPILE_TIMEOUT,
-            )
-        except subprocess.TimeoutExpired:
-            raise _Unavailable(
-                f"the C compiler {shown(compiler, 80)} ran longer than {_COMPILE_TIMEOUT:.0f} s"
-            ) from None
-        except OSError as exc:
-            raise _Unavailable(f"cannot run the C compiler {shown(compiler, 80)}: {exc.strerror or exc}") from None
+        done = _run(compiler, command)
         if done.returncode == 0 and library.is_file():
             return library, {key: Signature.of(f) for key, f in built.items()}
         failure = _compiler_failure(compiler, done)

@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..errors import ConfigError, InputError, cut, shown
 from ..fileio import parse_toml, read_text_limited
-from .assembly import check_assembly, check_margins
+from .assembly import check_margins
 from .compiled import CompiledBackend, InterpretedBackend, get_backend
 from .definition import PAPER, Definition, StackDefinition
 from .parameters import ROBOT_FILE_LIMIT, RobotParameters, load_parameters, parameters_from_dict
@@ -185,10 +185,7 @@ class Robot:
         """Raise :class:`~vgtarm.errors.AssemblyError` naming the module and the triangle inequality
         if a configuration of ``q`` ``(..., n)`` cannot be assembled."""
         p = self.parameters
-        if isinstance(p, RobotParameters):
-            check_assembly(q, p.b, p.d, where=where)
-        else:
-            check_margins(q, self._G, self._h, p.margin_legs(), p.b, p.d, where=where)
+        check_margins(q, self._G, self._h, p.margin_legs(), p.b, p.d, where=where)
 
     def joint_range(self) -> tuple[Array, Array]:
         """Lowest and highest joint values the methods accept, ``(n,)`` each (m, rad).
