@@ -299,3 +299,22 @@ def test_the_observer_and_the_force_sensor_work_on_the_six_module_arm(six):
         got = estimate[k + 1 : k + 1 + window].mean(axis=0)
         want = tau_ext[k : k + window].mean(axis=0)
         assert np.linalg.norm(got - want) < 0.1 * np.linalg.norm(want), k
+
+
+def test_the_report_of_a_stack_names_the_robot_and_the_placement_of_the_paths(six, six_run, six_scm_run):
+    from vgtarm.app.report import RunSpec, render_report
+
+    _, cfc = six_run
+    runs = {RunSpec(1, "cfc", False, "exact"): cfc, RunSpec(1, "scm", False, "exact"): six_scm_run}
+    markdown = render_report(runs, {}, seed=0, integrator="euler", substeps=1, wall_time_s=1.0)
+    assert six.parameters.name in markdown
+    assert "This robot is not the paper's" in markdown and "(0, 0, 1.54) m" in markdown and "2.333 times" in markdown
+    paper = render_report(
+        {RunSpec(1, "cfc", False, "exact"): cfc.__class__(**{**vars(cfc), "metadata": {}})},
+        {},
+        seed=0,
+        integrator="euler",
+        substeps=1,
+        wall_time_s=1.0,
+    )
+    assert "This robot is not the paper's" not in paper
