@@ -1,4 +1,8 @@
-"""Run every benchmark and print Markdown tables (paste them into docs/benchmarks.md)."""
+"""Run every benchmark and print Markdown tables (paste them into docs/benchmarks.md).
+
+``python -m benchmarks`` runs every group but ``stacks``, which compiles ten libraries from cold
+(about half an hour on two cores): name it, ``python -m benchmarks stacks``.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +12,16 @@ from vgtarm._entry import single_threaded_blas
 
 single_threaded_blas()  # as the vgtarm command does, before NumPy is imported
 
-from . import bench_ga, bench_ik, bench_model, bench_mujoco, bench_reproduce, bench_sim, bench_study  # noqa: E402
+from . import (  # noqa: E402
+    bench_ga,
+    bench_ik,
+    bench_model,
+    bench_mujoco,
+    bench_reproduce,
+    bench_sim,
+    bench_stacks,
+    bench_study,
+)
 from .common import machine  # noqa: E402
 
 MODULES = {
@@ -19,11 +32,14 @@ MODULES = {
     "study": bench_study,
     "mujoco": bench_mujoco,
     "reproduce": bench_reproduce,
+    "stacks": bench_stacks,
 }
+#: Groups run when none is named (``stacks`` is long: it compiles ten libraries from cold).
+DEFAULT = [name for name in MODULES if name != "stacks"]
 
 
 def main(argv: list[str]) -> None:
-    chosen = argv or list(MODULES)
+    chosen = argv or DEFAULT
     unknown = [name for name in chosen if name not in MODULES]
     if unknown:
         raise SystemExit(f"unknown benchmark {unknown[0]!r}; choose from {sorted(MODULES)}")
