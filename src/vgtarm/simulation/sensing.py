@@ -103,7 +103,7 @@ def _observer_gain(observer: str, observer_gain: float | None, dt: float) -> flo
 
 
 def sensing_settings(
-    n_joints: int | tuple[str, ...],
+    units: tuple[str, ...],
     dt: float,
     observer: str,
     observer_gain: float | None,
@@ -115,8 +115,8 @@ def sensing_settings(
 ) -> Sensing:
     """Validate the observer and sensing arguments of a run with control period ``dt``.
 
-    ``n_joints`` is the robot's joint units (``m`` legs, ``rad`` twists), or only their number (then
-    the paper's units for 7 joints, else every joint a leg)."""
+    ``units`` are the robot's joint units (``m``: a leg, whose encoder has ``encoder_resolution``;
+    ``rad``: a twist, ``twist_resolution``)."""
     if observer not in OBSERVERS:
         raise InputError(f"observer = {observer!r}: expected one of {list(OBSERVERS)}")
     if not isinstance(force_sensor, bool | np.bool_):
@@ -135,10 +135,6 @@ def sensing_settings(
             raise InputError(f"{label} = {step!r}: expected an encoder step of at most {largest:g} {unit}")
     noise = _number("velocity_noise", velocity_noise)
     cutoff = _number("velocity_filter_hz", velocity_filter_hz, strict=True)
-    if isinstance(n_joints, tuple):
-        units = n_joints
-    else:
-        units = JOINT_UNITS if len(JOINT_UNITS) == n_joints else ("m",) * n_joints
     resolution = np.array([legs if unit == "m" else twist for unit in units])
     return Sensing(
         observer=observer,

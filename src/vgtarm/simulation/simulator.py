@@ -203,7 +203,7 @@ def simulate(
     per_sample = BYTES_PER_SAMPLE_SCM if isinstance(controller, SwitchingControl) else BYTES_PER_SAMPLE
     check_memory(n * per_sample, f"simulation of {n:,} reference samples", "simulate a shorter reference")
     sensing = sensing_settings(
-        plant.joint_units if ref.q.shape[1] == plant.n_joints else ref.q.shape[1],
+        plant.joint_units,
         dt,
         observer,
         observer_gain,
