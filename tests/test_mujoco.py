@@ -87,10 +87,16 @@ def test_our_joint_accelerations_from_mujoco_match_finite_differences_of_its_mot
     with the velocity-product term) against second differences of the tendon lengths along the
     motion ``qpos + qvel t + qacc t^2 / 2`` that MuJoCo computed, at joint speeds of 0.5 m/s
     where leaving that term out is off by about 1e-2 and reading the followers' slides by 2e-5."""
+    assert_accelerations_are_second_differences(bridge, random_configurations(robot, 8, seed=8, margin=0.02))
+
+
+def assert_accelerations_are_second_differences(bridge, configurations) -> None:
+    """Our joint accelerations read from MuJoCo equal the second differences of our joint positions
+    read along ``qpos + qvel t + qacc t^2 / 2`` (MuJoCo's own motion) at speeds up to 0.5 m/s."""
     model, data = bridge.model, bridge.data
     rng = np.random.default_rng(8)
     h = 1e-4
-    for q in random_configurations(robot, 8, seed=8, margin=0.02):
+    for q in configurations:
         qd = rng.uniform(-0.5, 0.5, size=q.size)
         qdd = bridge.forward_dynamics(q, qd, rng.normal(scale=20.0, size=q.size))
         np.testing.assert_allclose(bridge.joint_positions(), q, rtol=0, atol=1e-14)

@@ -20,6 +20,8 @@ from vgtarm.mujoco_bridge.check import cross_validate, random_states  # noqa: E4
 from vgtarm.mujoco_bridge.export import to_mjcf  # noqa: E402
 from vgtarm.mujoco_bridge.model import MujocoRobot  # noqa: E402
 
+from .test_mujoco import assert_accelerations_are_second_differences  # noqa: E402
+
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 STACKS = ("six_modules", "planar_module")
 
@@ -179,24 +181,7 @@ def test_structures_beyond_the_examples_export_and_agree():
 def test_joint_accelerations_from_mujoco_match_finite_differences_of_its_motion(six):
     """The map from MuJoCo's state to our 21 joints against second differences of the tendon
     lengths and tree joints along the motion MuJoCo computed (as for the paper's robot)."""
-    bridge = MujocoRobot(six)
-    model, data = bridge.model, bridge.data
-    rng = np.random.default_rng(8)
-    h = 1e-4
-    for q in random_states(six, 4, seed=8):
-        qd = rng.uniform(-0.5, 0.5, size=q.size)
-        qdd = bridge.forward_dynamics(q, qd, rng.normal(scale=20.0, size=q.size))
-        np.testing.assert_allclose(bridge.joint_velocities(), qd, rtol=0, atol=1e-13)
-        qpos, qvel, qacc = data.qpos.copy(), data.qvel.copy(), data.qacc.copy()
-        lengths = []
-        for t in (-h, 0.0, h):
-            data.qpos[:] = qpos + qvel * t + 0.5 * qacc * t * t  # hinges and slides only
-            mujoco.mj_kinematics(model, data)
-            mujoco.mj_comPos(model, data)
-            mujoco.mj_tendon(model, data)
-            lengths.append(bridge.joint_positions())
-        second_difference = (lengths[2] - 2.0 * lengths[1] + lengths[0]) / h**2
-        np.testing.assert_allclose(second_difference, qdd, rtol=0, atol=1e-6 * np.abs(qdd).max())
+    assert_accelerations_are_second_differences(MujocoRobot(six), random_states(six, 4, seed=8))
 
 
 def test_the_paper_robot_as_a_stack_exports_the_paper_robots_model():
