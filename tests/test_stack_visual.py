@@ -12,14 +12,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 from matplotlib.colors import to_rgba
-from mpl_toolkits.mplot3d.art3d import Line3D
 from PIL import Image
 
 import vgtarm
 from vgtarm.app import cli
 from vgtarm.app.animation import check_same_robot, render_animation
 from vgtarm.app.cli_visual import robot_file_of_runs
-from vgtarm.app.drawing import CLOSENESS_COLOURS, CLOSENESS_NORM, MM, draw_mechanism, plane_views, pose_figure
+from vgtarm.app.drawing import CLOSENESS_COLOURS, CLOSENESS_NORM, draw_mechanism, plane_views, pose_figure
 from vgtarm.app.geometry import (
     SEGMENT_KINDS,
     limit_closeness,
@@ -31,6 +30,8 @@ from vgtarm.app.html_report import figure_errors, load_runs, page_figures
 from vgtarm.app.plotting import plot_efforts, plot_joint_errors
 from vgtarm.errors import InputError
 from vgtarm.simulation import SimulationResult
+
+from .test_drawing import _drawn_segments
 
 #: Tolerance on drawn lengths and points (m).
 GEOMETRY_TOL = 1e-12
@@ -188,15 +189,6 @@ def test_twist_joints_are_the_angular_joints(stack, robot):
 
 
 # -- drawings ------------------------------------------------------------------------------
-
-
-def _drawn_segments(ax) -> dict[str, np.ndarray]:
-    found = {}
-    for line in ax.get_lines():
-        if isinstance(line, Line3D) and line.get_gid():
-            xs, ys, zs = line.get_data_3d()
-            found[line.get_gid()] = np.column_stack([xs, ys, zs]).astype(float) / MM
-    return found
 
 
 def test_the_drawing_holds_the_geometry_and_moves_with_it(stack, poses):
