@@ -113,7 +113,8 @@ def cheap_rebuild(monkeypatch: pytest.MonkeyPatch, pristine: compiled.CacheEntry
     signatures = compiled._parse_metadata(pristine.metadata.read_bytes(), pristine).signatures
     builds: list[Path] = []
 
-    def copy(compiler: str, workdir: Path) -> tuple[Path, dict[str, compiled.Signature]]:
+    def copy(compiler: str, workdir: Path, definition: object = None) -> tuple[Path, dict[str, compiled.Signature]]:
+        assert definition == compiled.PAPER
         builds.append(workdir)
         assert workdir.parent == compiled.cache_dir() and (workdir.stat().st_mode & 0o777) == 0o700
         shutil.copyfile(pristine.library, workdir / "library.so")
@@ -121,7 +122,7 @@ def cheap_rebuild(monkeypatch: pytest.MonkeyPatch, pristine: compiled.CacheEntry
 
     monkeypatch.setattr(compiled, "_compile", copy)
     # the key of the pristine copy, even if a model source changes while the suite runs
-    monkeypatch.setattr(compiled, "_cache_key", lambda compiler: pristine.key)
+    monkeypatch.setattr(compiled, "_cache_key", lambda compiler, definition=compiled.PAPER: pristine.key)
     monkeypatch.delenv("VGTARM_BACKEND", raising=False)
     return builds
 

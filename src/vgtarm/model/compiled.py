@@ -745,9 +745,7 @@ def _build(entry: CacheEntry, compiler: str, definition: Definition = PAPER) -> 
     logger.info("compiling the vgtarm model into %s (once per model version and stack structure)", entry.library)
     workdir = Path(tempfile.mkdtemp(dir=entry.folder, prefix=f"{_BUILD_PREFIX}{os.getpid()}-"))
     try:
-        # the paper's robot calls _compile with two arguments (the cache tests replace it so)
-        built = _compile(compiler, workdir) if definition == PAPER else _compile(compiler, workdir, definition)
-        library, signatures = built
+        library, signatures = _compile(compiler, workdir, definition)
         os.chmod(library, 0o755)
         size, digest = _sha256(library)
         payload = {
@@ -782,8 +780,7 @@ def _compiled_backend(compiler: str, definition: Definition = PAPER) -> Compiled
     Raises :class:`_Unavailable` with a one-line reason when it cannot be had.
     """
     try:
-        key = _cache_key(compiler) if definition == PAPER else _cache_key(compiler, definition)
-        entry = CacheEntry(cache_dir(), key)
+        entry = CacheEntry(cache_dir(), _cache_key(compiler, definition))
     except RuntimeError as exc:  # Path.home() without a home folder
         raise _Unavailable(f"no cache folder: {exc}; set VGTARM_CACHE_DIR") from None
     info = _check_folder(entry.folder)
@@ -859,7 +856,7 @@ def get_backend(kind: str | None = None, definition: Definition = PAPER) -> Comp
                 if named
                 else "no C compiler found (cc, gcc or clang)"
             )
-        return _compiled_backend(compiler) if definition == PAPER else _compiled_backend(compiler, definition)
+        return _compiled_backend(compiler, definition)
     except _Unavailable as exc:
         if choice == "compiled":
             raise BackendError(f"VGTARM_BACKEND = 'compiled', but {exc}") from None
