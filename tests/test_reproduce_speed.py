@@ -27,16 +27,7 @@ from vgtarm.app.pool import Inline, Workers
 from vgtarm.app.report import RunSpec, _beyond_run, reproduce
 from vgtarm.errors import InputError
 from vgtarm.simulation.result import GAActivation, _csv
-
-#: Keys of summary.json that hold wall-clock times.
-TIMES = {
-    "wall_time_s",
-    "real_time_factor",
-    "ga_time_s",
-    "ga_time_per_activation_s",
-    "ga_activation_time_median_s",
-    "ga_activation_time_p99_s",
-}
+from vgtarm.study.store import TIMING_COLUMNS
 
 
 def _csv_with_a_regex(columns: list[str], table: np.ndarray) -> str:
@@ -85,7 +76,9 @@ def _same_folder_but_times(a: Path, b: Path) -> None:
             assert (a / name).read_bytes() == (b / name).read_bytes(), name
         elif name.name == "summary.json":
             sa, sb = (json.loads((x / name).read_text()) for x in (a, b))
-            assert {k: v for k, v in sa.items() if k not in TIMES} == {k: v for k, v in sb.items() if k not in TIMES}
+            assert {k: v for k, v in sa.items() if k not in TIMING_COLUMNS} == {
+                k: v for k, v in sb.items() if k not in TIMING_COLUMNS
+            }
     lines_a, lines_b = ((x / "report.md").read_text().splitlines() for x in (a, b))
     assert [line for line in lines_a if "![" in line] == [line for line in lines_b if "![" in line]
 
