@@ -318,3 +318,29 @@ def test_the_report_of_a_stack_names_the_robot_and_the_placement_of_the_paths(si
         wall_time_s=1.0,
     )
     assert "This robot is not the paper's" not in paper
+
+
+def test_the_inverse_kinematics_of_the_six_module_arm_is_exact_and_optimal(six):
+    """Case 2 placed on the 21-joint arm: the tip follows the path, the exact rates satisfy the
+    velocity and acceleration relations, and the fast solver reaches the optimum of the joint-limit
+    cost that SciPy's SLSQP (a second algorithm) reaches from the same start."""
+    from tests.test_ik_solvers import subsample
+
+    path = case_path(six, 2, 0.01)
+    fast = six.inverse_kinematics(path)
+    assert fast.success, fast.message
+    np.testing.assert_allclose(six.tip_position(fast.q), path.position, rtol=0, atol=1e-9)
+    J = six.tip_jacobian(fast.q)
+    velocity = np.einsum("nij,nj->ni", J, fast.qd)
+    acceleration = np.einsum("nij,nj->ni", J, fast.qdd) + six.bias_accelerations(fast.q, fast.qd).tip
+    assert np.abs(velocity - path.velocity).max() <= 1e-8 * np.abs(path.velocity).max()
+    assert np.abs(acceleration - path.acceleration).max() <= 1e-8 * np.abs(path.acceleration).max()
+    lower, upper = six.parameters.lower, six.parameters.upper
+    assert ((fast.q >= lower - 1e-12) & (fast.q <= upper + 1e-12)).all()
+    coarse = subsample(path, 9)
+    quick = six.inverse_kinematics(coarse)
+    reference = six.inverse_kinematics(coarse, solver="slsqp")
+    both = quick.samples.success & reference.samples.success
+    assert both.sum() >= 8, reference.message
+    np.testing.assert_allclose(quick.samples.phi[both], reference.samples.phi[both], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(quick.q[both], reference.q[both], rtol=0, atol=1e-5)
