@@ -294,7 +294,8 @@ def pose_figure(
         figsize = STACK_FIGURE_SIZE if robot.is_stack else PAPER_FIGURE_SIZE
     spans = np.ptp(geometry.points(), axis=0)
     # plane views are magnified to fill their panel, unless the robot is too tall for it (a stack)
-    plane_zoom = 1.3 if spans[2] <= PLANE_ZOOM_ASPECT * max(spans[0], spans[1]) else 1.0
+    tall = spans[2] > PLANE_ZOOM_ASPECT * max(spans[0], spans[1])
+    plane_zoom = 1.0 if tall else 1.3
     fig = Figure(figsize=figsize, dpi=dpi, layout="constrained")
     axes = []
     for i, (name, (elev, azim), hidden) in enumerate(views):
@@ -305,6 +306,10 @@ def pose_figure(
         label_axes(ax)
         set_equal_extent(ax, geometry.points() * MM, hidden=hidden, zoom=1.0 if hidden is None else plane_zoom)
         ax.set_title(name, fontsize=10)
+        if tall:  # a narrow panel: few ticks across, so that their labels do not run together
+            for index, axis in enumerate((ax.xaxis, ax.yaxis)):
+                if index != hidden:  # the axis seen end-on keeps no ticks
+                    axis.set_major_locator(MaxNLocator(3))
         axes.append(ax)
     fig.colorbar(
         ScalarMappable(norm=CLOSENESS_NORM, cmap=_cmap(cmap)),
@@ -319,7 +324,7 @@ def pose_figure(
         for name, value in zip(robot.joint_names, qa, strict=True)
     ]
     values = "\n".join(textwrap.wrap(", ".join(entries), TITLE_WIDTH)).replace("\N{NO-BREAK SPACE}", " ")
-    tip = geometry.tip * MM
+    tip = np.round(geometry.tip * MM, 1) + 0.0  # no "-0.0" for a round-off below 0.05 mm
     fig.suptitle(
         title or f"{robot.parameters.name}\n{values} (m, rad); tip ({tip[0]:.1f}, {tip[1]:.1f}, {tip[2]:.1f}) mm",
         fontsize=10,
