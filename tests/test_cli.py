@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 
 import pytest
 
@@ -96,3 +98,27 @@ def test_simulate_with_a_wrong_controller_model(capsys):
     status, out, _ = run(capsys, "simulate", "--case", "2", "--model-mass", "1.5", "--quiet")
     assert status == 0
     assert "max_tip_error_m" in out
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["simulate", "--case", "1", "--controller", "cfc", "--plant", "mujoco", "--duration", "0.01", "-q"],
+        ["export", "mjcf", "--out", "robot.xml", "--validate"],
+        ["check", "mujoco", "--states", "2"],
+    ],
+    ids=["simulate", "export --validate", "check"],
+)
+def test_mujoco_commands_without_mujoco_say_what_to_install_in_one_line(argv, tmp_path):
+    """MuJoCo is an optional extra: without it (its import blocked in a fresh interpreter) each
+    command that needs it ends with one line naming the extra, exit status 1, and writes nothing
+    (the export alone needs no MuJoCo; only its --validate loads the model in it)."""
+    script = (
+        "import sys; sys.modules['mujoco'] = None\n"
+        "from vgtarm.app.cli import main\n"
+        f"sys.exit(main({argv!r}))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert done.returncode == 1, done.stderr
+    assert done.stderr.count("\n") == 1 and "pip install 'vgtarm[mujoco]'" in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr and not (tmp_path / "robot.xml").exists()
