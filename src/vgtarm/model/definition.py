@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from .parameters import BODY_NAMES, N_JOINTS, N_PARAMETERS
-from .symbolic import SX, dynamics, kinematics
+from .symbolic import SX, dynamics, kinematics, row_major
 
 if TYPE_CHECKING:
     from .stack.description import Stack
@@ -48,12 +48,6 @@ class SymbolicDynamics:
     potential_energy: SX
 
 
-def _row_major(matrix: SX) -> SX:
-    import casadi as ca
-
-    return ca.vec(matrix.T)
-
-
 @dataclass(frozen=True)
 class PaperDefinition:
     """The paper's 7-joint robot (:func:`vgtarm.model.symbolic.kinematics` and ``dynamics``)."""
@@ -66,7 +60,7 @@ class PaperDefinition:
 
     def kinematics(self, q: SX, p: SX) -> SymbolicKinematics:
         k = kinematics(q, p)
-        outputs = (k.passive, k.O1, _row_major(k.C01), k.O2, _row_major(k.C02), k.tip, _row_major(k.C03))
+        outputs = (k.passive, k.O1, row_major(k.C01), k.O2, row_major(k.C02), k.tip, row_major(k.C03))
         names = ("passive", "O1", "C01", "O2", "C02", "tip", "C03")
         return SymbolicKinematics(k.tip, k.C03, k.body_com, k.body_rotation, outputs, names)
 
@@ -131,9 +125,9 @@ class StackDefinition:
         outputs = (
             k.passive,
             ca.vertcat(*k.platform_origins),
-            ca.vertcat(*[_row_major(r) for r in k.platform_rotations]),
+            ca.vertcat(*[row_major(r) for r in k.platform_rotations]),
             k.tip,
-            _row_major(k.end_effector_rotation),
+            row_major(k.end_effector_rotation),
         )
         names = ("passive", "O", "C", "tip", "C03")
         return SymbolicKinematics(k.tip, k.end_effector_rotation, k.body_com, k.body_rotation, outputs, names)

@@ -172,6 +172,12 @@ def kinematics(q: SX, p: SX) -> Kinematics:
     )
 
 
+def row_major(matrix: SX) -> SX:
+    """Flatten a matrix row by row into a column vector (``vec(A.T)``: how every function's matrix
+    output is laid out)."""
+    return ca.vec(matrix.T)
+
+
 def time_derivative(expr: SX, q: SX, qd: SX) -> SX:
     """d/dt of an expression of ``q`` (and of the constant-rate symbol ``qd``), with ``qdd = 0``.
 

@@ -13,14 +13,10 @@ import casadi as ca
 
 from ..definition import PAPER, Definition
 from ..symbolic import SX
+from ..symbolic import row_major as row_major  # the families take it from here
 
 #: A builder of one function; its argument (default: the paper's robot) is the model definition.
 Builder = Callable[..., ca.Function]
-
-
-def row_major(matrix: SX) -> SX:
-    """Flatten a matrix row by row into a column vector."""
-    return ca.vec(matrix.T)
 
 
 def function(name: str, inputs: list[SX], outputs: list[SX], in_names: list[str], out_names: list[str]) -> ca.Function:

@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ...errors import AssemblyError, InputError, shown
 from ..assembly import TRIANGLE_INEQUALITIES
-from ..symbolic import SX
+from ..symbolic import SX, row_major
 from .description import LEG_NAMES, Stack, stack_margins
 from .symbolic import stack_dynamics, stack_kinematics
 
@@ -42,10 +42,6 @@ class StackForwardKinematics:
     rotation: Array
 
 
-def _row_major(matrix: SX) -> SX:
-    return ca.vec(matrix.T)
-
-
 class StackModel:
     """The symbolic model of a :class:`Stack`, evaluated numerically one configuration at a time.
 
@@ -69,9 +65,9 @@ class StackModel:
             [
                 kin.passive,
                 ca.vertcat(*kin.platform_origins),
-                ca.vertcat(*[_row_major(r) for r in kin.platform_rotations]),
+                ca.vertcat(*[row_major(r) for r in kin.platform_rotations]),
                 kin.tip,
-                _row_major(kin.end_effector_rotation),
+                row_major(kin.end_effector_rotation),
             ],
         )
         self._jac = ca.Function("stack_jac", [q, p], [dyn.J_P, dyn.J_W])
