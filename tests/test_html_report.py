@@ -7,7 +7,10 @@ import html
 import os
 import re
 import shutil
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -198,7 +201,10 @@ def _browser_or_skip():
     return sync_playwright
 
 
-def test_page_in_a_real_browser(page, tmp_path):
+@contextmanager
+def browser_tab(page: Path, plots: int) -> Iterator[tuple[Any, list[str]]]:
+    """``page`` open in headless Chromium with its ``plots`` Plotly plots rendered: yields the tab and
+    the list of problems seen (console errors, page errors, failed or network requests)."""
     sync_playwright = _browser_or_skip()
     problems: list[str] = []
     with sync_playwright() as pw:
@@ -210,40 +216,43 @@ def test_page_in_a_real_browser(page, tmp_path):
             tab.on("requestfailed", lambda r: problems.append(f"request failed: {r.url}"))
             tab.on("request", lambda r: None if r.url.startswith("file://") else problems.append(f"network: {r.url}"))
             tab.goto(page.as_uri(), wait_until="load")
-            tab.wait_for_function(
-                f"document.querySelectorAll('.js-plotly-plot').length === {PLOTS_ONE_CASE}", timeout=60_000
-            )
-            # the table: a header and one row per run
-            assert tab.locator("#summary-table tbody tr").count() == 2
-            assert tab.locator("#summary-table th").count() == len(TABLE_COLUMNS)
-            # every plot rendered: its SVG layers, traces drawn, and a WebGL canvas for the 3-D ones
-            report = tab.evaluate(
-                """() => Array.from(document.querySelectorAll('.plotly-graph-div')).map(d => ({
-                    id: d.id, rendered: d.classList.contains('js-plotly-plot'),
-                    svg: d.querySelectorAll('svg.main-svg').length, traces: (d.data || []).length,
-                    lines: d.querySelectorAll('path.js-line').length, canvas: d.querySelectorAll('canvas').length,
-                    threeD: !!(d._fullLayout && d._fullLayout.scene)}))"""
-            )
-            assert [p["id"] for p in report] == ["tip-error", "efforts", "paths", "mechanism-1"]
-            for plot in report:
-                assert plot["rendered"] and plot["svg"] >= 1 and plot["traces"] >= 1, plot
-                assert plot["canvas"] >= 1 if plot["threeD"] else plot["lines"] >= plot["traces"], plot
-            # pressing play moves the mechanism: the legs' trace data and the slider change
-            legs = "document.getElementById('mechanism-1').data.findIndex(t => t.customdata)"
-            read = f"""() => {{ const d = document.getElementById('mechanism-1');
-                return JSON.stringify([Array.from(d.data[{legs}].z), d._fullLayout.sliders[0].active]); }}"""
-            before = tab.evaluate(read)
-            tab.locator("#mechanism-1").scroll_into_view_if_needed()
-            tab.locator("#mechanism-1 .updatemenu-button").first.click()
-            tab.wait_for_function(
-                """() => { const d = document.getElementById('mechanism-1');
-                    return d._fullLayout.sliders[0].active >= 3; }""",
-                timeout=30_000,
-            )
-            after = tab.evaluate(read)
-            assert after != before
-            tab.screenshot(path=str(tmp_path / "report.png"), full_page=True)
+            tab.wait_for_function(f"document.querySelectorAll('.js-plotly-plot').length === {plots}", timeout=60_000)
+            yield tab, problems
         finally:
             browser.close()
+
+
+def test_page_in_a_real_browser(page, tmp_path):
+    with browser_tab(page, PLOTS_ONE_CASE) as (tab, problems):
+        # the table: a header and one row per run
+        assert tab.locator("#summary-table tbody tr").count() == 2
+        assert tab.locator("#summary-table th").count() == len(TABLE_COLUMNS)
+        # every plot rendered: its SVG layers, traces drawn, and a WebGL canvas for the 3-D ones
+        report = tab.evaluate(
+            """() => Array.from(document.querySelectorAll('.plotly-graph-div')).map(d => ({
+                id: d.id, rendered: d.classList.contains('js-plotly-plot'),
+                svg: d.querySelectorAll('svg.main-svg').length, traces: (d.data || []).length,
+                lines: d.querySelectorAll('path.js-line').length, canvas: d.querySelectorAll('canvas').length,
+                threeD: !!(d._fullLayout && d._fullLayout.scene)}))"""
+        )
+        assert [p["id"] for p in report] == ["tip-error", "efforts", "paths", "mechanism-1"]
+        for plot in report:
+            assert plot["rendered"] and plot["svg"] >= 1 and plot["traces"] >= 1, plot
+            assert plot["canvas"] >= 1 if plot["threeD"] else plot["lines"] >= plot["traces"], plot
+        # pressing play moves the mechanism: the legs' trace data and the slider change
+        legs = "document.getElementById('mechanism-1').data.findIndex(t => t.customdata)"
+        read = f"""() => {{ const d = document.getElementById('mechanism-1');
+            return JSON.stringify([Array.from(d.data[{legs}].z), d._fullLayout.sliders[0].active]); }}"""
+        before = tab.evaluate(read)
+        tab.locator("#mechanism-1").scroll_into_view_if_needed()
+        tab.locator("#mechanism-1 .updatemenu-button").first.click()
+        tab.wait_for_function(
+            """() => { const d = document.getElementById('mechanism-1');
+                return d._fullLayout.sliders[0].active >= 3; }""",
+            timeout=30_000,
+        )
+        after = tab.evaluate(read)
+        assert after != before
+        tab.screenshot(path=str(tmp_path / "report.png"), full_page=True)
     assert (tmp_path / "report.png").stat().st_size > 10_000
     assert not problems, problems

@@ -352,27 +352,17 @@ def test_runs_of_a_reproduction_find_the_robot_file_at_its_top(tmp_path):
 
 
 def test_the_page_of_a_stack_run_renders_in_a_real_browser(run_dir, tmp_path):
-    from tests.test_html_report import CHROMIUM, CHROMIUM_ARGS, _browser_or_skip
+    from tests.test_html_report import _browser_or_skip, browser_tab
 
-    sync_playwright = _browser_or_skip()
+    _browser_or_skip()  # before the report is written
     assert cli.main(["report", str(run_dir), "--config", "examples/six_modules.toml", "--out", str(tmp_path)]) == 0
-    problems: list[str] = []
-    with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        try:
-            tab = browser.new_page(viewport={"width": 1280, "height": 900})
-            tab.on("console", lambda m: problems.append(f"console {m.type}: {m.text}") if m.type == "error" else None)
-            tab.on("pageerror", lambda e: problems.append(f"page error: {e}"))
-            tab.goto((tmp_path / "report.html").as_uri(), wait_until="load")
-            tab.wait_for_function("document.querySelectorAll('.js-plotly-plot').length === 4", timeout=60_000)
-            shown = tab.evaluate(
-                """() => Array.from(document.querySelectorAll('.plotly-graph-div')).map(d => ({
-                    id: d.id, traces: (d.data || []).length, lines: d.querySelectorAll('path.js-line').length,
-                    canvas: d.querySelectorAll('canvas').length}))"""
-            )
-            tab.screenshot(path=str(tmp_path / "page.png"), full_page=True)
-        finally:
-            browser.close()
+    with browser_tab(tmp_path / "report.html", 4) as (tab, problems):
+        shown = tab.evaluate(
+            """() => Array.from(document.querySelectorAll('.plotly-graph-div')).map(d => ({
+                id: d.id, traces: (d.data || []).length, lines: d.querySelectorAll('path.js-line').length,
+                canvas: d.querySelectorAll('canvas').length}))"""
+        )
+        tab.screenshot(path=str(tmp_path / "page.png"), full_page=True)
     assert not problems, problems
     by_id = {plot["id"]: plot for plot in shown}
     assert by_id["efforts"]["traces"] == 21 and by_id["efforts"]["lines"] >= 21
