@@ -155,16 +155,59 @@ def test_codegen_refuses_a_duplicate_function_name(monkeypatch):
         codegen.all_builders()
 
 
-def test_cache_key_covers_every_model_source():
+def _model_imports(relative: str) -> set[str]:
+    """Model-package files (relative posix paths) that ``relative`` imports at any depth, following
+    the import statements themselves (a package's ``__init__`` only when it is imported by name)."""
+    model = PACKAGE / "model"
+    seen: set[str] = set()
+    todo = [relative]
+    while todo:
+        current = todo.pop()
+        if current in seen:
+            continue
+        seen.add(current)
+        path = model / current
+        package = path.parent.relative_to(model).parts
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, ast.ImportFrom) or node.level == 0:
+                continue
+            base = list(package[: len(package) - (node.level - 1)]) if node.level > 1 else list(package)
+            if node.level - 1 > len(package):
+                continue  # above the model package (errors, fileio): not a model source
+            parts = base + (node.module.split(".") if node.module else [])
+            candidates = [parts + [alias.name] for alias in node.names] + [parts]
+            for candidate in candidates:
+                stem = "/".join(candidate)
+                for found in (f"{stem}.py", f"{stem}/__init__.py" if candidate != base else ""):
+                    if found and (model / found).is_file():
+                        todo.append(found)
+                        break
+    return seen
+
+
+def test_cache_key_covers_every_source_the_code_generation_reads():
+    """Every model file the code generation, the stack definitions and the C interface import (at
+    any depth), every C source and the robot data are hashed; what the key skips is runtime only."""
     from vgtarm.model import compiled
 
-    sources = {p.relative_to(PACKAGE / "model").as_posix() for p in compiled.model_sources()}
-    on_disk = {
-        p.relative_to(PACKAGE / "model").as_posix()
-        for p in (PACKAGE / "model").rglob("*")
-        if p.suffix in (".py", ".c", ".h") and "__pycache__" not in p.parts
-    }
-    assert on_disk <= sources
+    model = PACKAGE / "model"
+    sources = {p.relative_to(model).as_posix() for p in compiled.model_sources()}
+    roots = ["codegen/__init__.py", "definition.py", "interface.py", "stack/symbolic.py", "stack/description.py"]
+    shaping = set().union(*(_model_imports(root) for root in roots))
+    shaping |= {p.relative_to(model).as_posix() for p in model.rglob("*") if p.suffix in (".c", ".h", ".toml")}
+    assert shaping <= sources, sorted(shaping - sources)
+    assert not shaping & compiled.RUNTIME_ONLY
+    on_disk = {p.relative_to(model).as_posix() for p in model.rglob("*.py") if "__pycache__" not in p.parts}
+    assert on_disk - sources == set(compiled.RUNTIME_ONLY)
+    assert {"codegen/control.py", "symbolic.py", "parameters.py", "csrc/ga.c"} <= shaping  # the walk finds them
+
+
+def test_cache_key_follows_the_build_recipe(monkeypatch):
+    from vgtarm.model import compiled
+
+    before = compiled._cache_key("cc")
+    monkeypatch.setattr(compiled, "_STACK_GENERATED_CFLAGS", ("-O3", "-fPIC"))
+    assert compiled._cache_key("cc") != before
 
 
 def test_c_interface_layout_matches_the_compiler(robot):

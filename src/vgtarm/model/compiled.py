@@ -3,8 +3,10 @@
 On first use the functions of :mod:`vgtarm.model.codegen` are generated as C by CasADi, compiled
 together with the drivers of ``csrc/`` (batch evaluation, the closed loop; their interface is the
 one header ``csrc/vgtarm.h``, read by :mod:`.interface`) into one shared library, and cached on
-disk. The cache key hashes every source file of the ``vgtarm.model`` package (so no list is kept
-by hand), the CasADi and cffi versions and the compiler command; the robot's parameters are a
+disk. The cache key hashes every source file of the ``vgtarm.model`` package that can shape a
+library (all but the few runtime modules of :data:`RUNTIME_ONLY`, so no list of the others is kept
+by hand and a new module is hashed by default), the recipe of :func:`_compile`, the CasADi and
+cffi versions and the compiler command; the robot's parameters are a
 runtime input of every function, so changing the robot never recompiles. A stack of modules
 (:mod:`vgtarm.model.stack`) has a library of its own per *structure* (plane angles, which twist
 joints and twist bodies exist: :class:`~vgtarm.model.definition.StackDefinition`), whose key also
@@ -40,6 +42,7 @@ import contextlib
 import fcntl
 import functools
 import hashlib
+import inspect
 import json
 import logging
 import os
@@ -69,6 +72,12 @@ logger = logging.getLogger("vgtarm")
 _PACKAGE_DIR = Path(__file__).resolve().parent
 #: Suffixes of the model package's source files that the cache key hashes.
 _SOURCE_SUFFIXES = (".py", ".c", ".h", ".toml")
+#: Modules of the model package that never shape a compiled library: the runtime around it (the
+#: Robot API, the loop bindings, the accepted joint range, this cache). The key skips them, so
+#: editing one does not recompile every library (the six-module arm's takes about 80 s); the build
+#: recipe of this module is hashed apart (:func:`_recipe`). ``tests/test_architecture.py`` checks
+#: that no module the code generation imports, directly or not, is in this set.
+RUNTIME_ONLY = frozenset({"__init__.py", "robot.py", "closedloop.py", "sanity.py", "compiled.py", "stack/model.py"})
 _CSRC = _PACKAGE_DIR / "csrc"
 _CFLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off")
 #: Flags of a stack's generated functions, compiled apart before the link with the drivers (built
@@ -382,12 +391,23 @@ def find_compiler() -> str | None:
 
 
 def model_sources() -> list[Path]:
-    """Every source file of the ``vgtarm.model`` package, in a fixed order."""
+    """Every source file of the ``vgtarm.model`` package that can shape a compiled library (all
+    but :data:`RUNTIME_ONLY`), in a fixed order."""
     return sorted(
         path
         for path in _PACKAGE_DIR.rglob("*")
-        if path.is_file() and path.suffix in _SOURCE_SUFFIXES and "__pycache__" not in path.parts
+        if path.is_file()
+        and path.suffix in _SOURCE_SUFFIXES
+        and "__pycache__" not in path.parts
+        and path.relative_to(_PACKAGE_DIR).as_posix() not in RUNTIME_ONLY
     )
+
+
+def _recipe() -> bytes:
+    """How this module turns the generated C into a library: the source of :func:`_compile` and
+    every flag it uses (the rest of this module loads, checks and caches; it is not hashed)."""
+    flags = (_CFLAGS, _STACK_GENERATED_CFLAGS, _GENERATED_NAME)
+    return inspect.getsource(_compile).encode() + repr(flags).encode()
 
 
 def _cache_key(compiler: str, definition: Definition = PAPER) -> str:
@@ -395,6 +415,7 @@ def _cache_key(compiler: str, definition: Definition = PAPER) -> str:
     for path in model_sources():
         digest.update(path.relative_to(_PACKAGE_DIR).as_posix().encode())
         digest.update(path.read_bytes())
+    digest.update(_recipe())
     digest.update(str(getattr(ca, "__version__", "unknown")).encode())
     digest.update(str(cffi.__version__).encode())
     digest.update(" ".join((compiler, *_CFLAGS)).encode())
