@@ -204,7 +204,8 @@ def _browser_or_skip():
 @contextmanager
 def browser_tab(page: Path, plots: int) -> Iterator[tuple[Any, list[str]]]:
     """``page`` open in headless Chromium with its ``plots`` Plotly plots rendered: yields the tab and
-    the list of problems seen (console errors, page errors, failed or network requests)."""
+    the list of problems seen (console errors, page errors, failed or network requests, dialogs
+    such as an ``alert``, which are dismissed)."""
     sync_playwright = _browser_or_skip()
     problems: list[str] = []
     with sync_playwright() as pw:
@@ -213,6 +214,12 @@ def browser_tab(page: Path, plots: int) -> Iterator[tuple[Any, list[str]]]:
             tab = browser.new_page(viewport={"width": 1280, "height": 900})
             tab.on("console", lambda m: problems.append(f"console {m.type}: {m.text}") if m.type == "error" else None)
             tab.on("pageerror", lambda e: problems.append(f"page error: {e}"))
+
+            def dialog(d: Any) -> None:
+                problems.append(f"dialog {d.type}: {d.message}")
+                d.dismiss()
+
+            tab.on("dialog", dialog)
             tab.on("requestfailed", lambda r: problems.append(f"request failed: {r.url}"))
             tab.on("request", lambda r: None if r.url.startswith("file://") else problems.append(f"network: {r.url}"))
             tab.goto(page.as_uri(), wait_until="load")

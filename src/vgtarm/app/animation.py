@@ -35,6 +35,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError, cut
 from ..fileio import atomic_path
+from ..markup import mpl_text
 from ..memory import check_memory
 from ..model.robot import Robot
 from ..simulation.result import MODE_GA, SimulationResult
@@ -329,7 +330,8 @@ class _GifWriter:
 def _title(robot: Robot, result: SimulationResult, speed: float) -> str:
     meta = result.metadata
     return (
-        f"{robot.parameters.name}: case {meta.get('case', '?')}, {str(meta.get('controller', 'run')).upper()}"
+        f"{mpl_text(robot.parameters.name)}: case {mpl_text(meta.get('case', '?'))},"
+        f" {mpl_text(str(meta.get('controller', 'run')).upper())}"
         + (" + tool force" if meta.get("external_force") else "")
         + (f", {speed:g}x speed" if speed != 1 else "")
     )

@@ -21,6 +21,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ..errors import SimulationError
+from ..markup import md_cell, md_code, md_text
 from ..model.robot import Robot
 from ..simulation import ExternalForce, JointReference, SimulationResult, simulate
 from .cases import case_study, run_case
@@ -214,10 +215,11 @@ def beyond_section(results: dict[BeyondRun, SimulationResult], figure: str) -> l
     for spec, s in summaries.items():
         if not spec.in_table:
             continue
-        largest = _mm(s["max_tip_error_m"]) if s["success"] else str(s["message"]).split(":")[0]
+        largest = _mm(s["max_tip_error_m"]) if s["success"] else md_cell(str(s["message"]).split(":")[0])
         lines.append(
-            f"| {spec.label} | {'realistic' if spec.realistic else 'perfect'} | {largest} |"
-            f" {_mm(s['rms_tip_error_m'])} | {s['peak_force_n']:.1f} | {s['ga_activations']} | `{spec.folder}/` |"
+            f"| {md_cell(spec.label)} | {'realistic' if spec.realistic else 'perfect'} | {largest} |"
+            f" {_mm(s['rms_tip_error_m'])} | {s['peak_force_n']:.1f} | {s['ga_activations']} |"
+            f" {md_code(spec.folder + '/')} |"
         )
     lines += ["", f"![tip error beyond the paper]({figure})", "", "### What bounds the remaining error", ""]
     by_label = {(spec.label, spec.realistic): s for spec, s in summaries.items()}
@@ -261,7 +263,7 @@ def beyond_section(results: dict[BeyondRun, SimulationResult], figure: str) -> l
         lines.append(
             "- Switching control without the observer does not survive realistic sensing: its GA tunes full gain"
             " matrices on a 20 ms prediction from the measured state, and with velocities differenced from"
-            f" {ENCODER_RESOLUTION * 1e6:g} um encoder counts the run {scm_realistic['message']}."
+            f" {ENCODER_RESOLUTION * 1e6:g} um encoder counts the run {md_text(scm_realistic['message'])}."
         )
     quiet = [
         realistic

@@ -30,6 +30,7 @@ from mpl_toolkits.mplot3d.axes3d import Axes3D
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError
+from ..markup import mpl_text
 from ..model.robot import Robot
 from .geometry import MechanismGeometry, mechanism_geometry
 
@@ -325,8 +326,9 @@ def pose_figure(
     ]
     values = "\n".join(textwrap.wrap(", ".join(entries), TITLE_WIDTH)).replace("\N{NO-BREAK SPACE}", " ")
     tip = np.round(geometry.tip * MM, 1) + 0.0  # no "-0.0" for a round-off below 0.05 mm
+    name = mpl_text(robot.parameters.name)  # a user's name: a "$" in it starts no math
     fig.suptitle(
-        title or f"{robot.parameters.name}\n{values} (m, rad); tip ({tip[0]:.1f}, {tip[1]:.1f}, {tip[2]:.1f}) mm",
+        title or f"{name}\n{values} (m, rad); tip ({tip[0]:.1f}, {tip[1]:.1f}, {tip[2]:.1f}) mm",
         fontsize=10,
     )
     return fig

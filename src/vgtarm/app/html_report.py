@@ -12,12 +12,17 @@ Light enough to open at once:
 - plotly.js is not embedded: the page loads ``plotly.min.js`` from its own folder, written once
   there (the same copy serves every page of the folder), so it opens from disk with no server
   and no network.
+
+Users name things on the page: the runs' folders, the robot, the joints, the title, and a saved
+run's metadata (its controller). Every such string goes through :mod:`vgtarm.markup`, into the
+page's HTML by :func:`~vgtarm.markup.html_text` and into the figures by
+:func:`~vgtarm.markup.plotly_text` (Plotly reads tags and ``%{...}`` in its labels), so it shows
+as written and adds no element, attribute or link; ``intro`` and ``title`` are plain text too.
 """
 
 from __future__ import annotations
 
 import base64
-import html
 import json
 import time
 from collections.abc import Sequence
@@ -31,6 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 from .. import errors
 from ..errors import InputError
 from ..fileio import atomic_write_text
+from ..markup import html_text, plotly_text
 from ..model.robot import Robot
 from ..simulation.result import MODE_GA, SimulationResult
 from .animation import check_same_robot
@@ -58,7 +64,8 @@ EFFORT_PANEL_PX_MANY = 110
 
 @dataclass(frozen=True)
 class ReportRun:
-    """One run on the page: its table cells' spec, its legend label and the folder it is saved in."""
+    """One run on the page: its table cells' spec, its legend label and the folder it is saved in
+    (plain text: the page escapes them)."""
 
     spec: RunSpec
     label: str
@@ -67,10 +74,16 @@ class ReportRun:
 
 
 def spec_of(result: SimulationResult) -> RunSpec:
-    """The :class:`RunSpec` of a run from its metadata (case 0 when the run is not a case study)."""
+    """The :class:`RunSpec` of a run from its metadata (case 0 when the run is not a case study);
+    a case that is not a whole number is refused (:class:`~vgtarm.errors.InputError`)."""
     meta = result.metadata
+    case = meta.get("case", 0) or 0
+    try:
+        number = int(case)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"case = {errors.shown(case)}: expected a whole number (a case study) or 0") from None
     return RunSpec(
-        case=int(meta.get("case", 0) or 0),
+        case=number,
         controller=str(meta.get("controller", "run")),
         external_force=bool(meta.get("external_force", False)),
         rates=str(meta.get("reference_rates", "exact")),
@@ -163,8 +176,9 @@ def _error_figure(runs: Sequence[ReportRun], max_points: int) -> dict[str, Any]:
     data = []
     for i, run in enumerate(runs):
         t, e = _series(run.result, run.result.tip_error * MM, max_points)
+        label = plotly_text(run.label)
         data.append(
-            {"type": "scatter", "x": typed_array(t), "y": typed_array(e), "name": run.label, "mode": "lines",
+            {"type": "scatter", "x": typed_array(t), "y": typed_array(e), "name": label, "mode": "lines",
              "line": {"color": COLOURS[i % len(COLOURS)], "width": 1.2}}
         )  # fmt: skip
     layout = _layout(
@@ -192,19 +206,21 @@ def _effort_figure(runs: Sequence[ReportRun], max_points: int) -> dict[str, Any]
     # the panels' axes as Plotly's subplots lay them out (a figure without traces is cheap to build)
     grid = make_subplots(rows=n, cols=1, shared_xaxes=True, vertical_spacing=0.012)
     for j, joint in enumerate(names):
-        grid.update_yaxes(title_text=f"{joint} ({effort_unit(joint)})", title_font={"size": 10}, row=j + 1, col=1)
+        title = f"{plotly_text(joint)} ({effort_unit(joint)})"
+        grid.update_yaxes(title_text=title, title_font={"size": 10}, row=j + 1, col=1)
     grid.update_xaxes(title_text="time (s)", row=n, col=1)
     axes = grid.to_plotly_json()["layout"]
     data = []
     for i, run in enumerate(runs):
         colour = COLOURS[i % len(COLOURS)]
+        label = plotly_text(run.label)
         for j in range(n):
             t, f = _series(run.result, run.result.effort[:, j], max_points)
             suffix = "" if j == 0 else str(j + 1)
-            hover = f"{names[j]}: %{{y:.4g}} {effort_unit(names[j])}<extra>{html.escape(run.label)}</extra>"
+            hover = f"{plotly_text(names[j])}: %{{y:.4g}} {effort_unit(names[j])}<extra>{label}</extra>"
             data.append(
-                {"type": "scatter", "x": typed_array(t), "y": typed_array(f), "name": run.label,
-                 "legendgroup": run.label, "showlegend": j == 0, "mode": "lines",
+                {"type": "scatter", "x": typed_array(t), "y": typed_array(f), "name": label,
+                 "legendgroup": label, "showlegend": j == 0, "mode": "lines",
                  "line": {"color": colour, "width": 1.0}, "xaxis": "x" + suffix, "yaxis": "y" + suffix,
                  "hovertemplate": hover}
             )  # fmt: skip
@@ -229,14 +245,14 @@ def _path_figure(runs: Sequence[ReportRun], max_points: int) -> dict[str, Any]:
         if run.spec.case not in shown_desired:
             shown_desired.add(run.spec.case)
             d = (r.tip_desired[index] * MM).astype(np.float32)
-            name = f"case {run.spec.case}: desired" if run.spec.case else f"{run.label}: desired"
+            name = f"case {run.spec.case}: desired" if run.spec.case else f"{plotly_text(run.label)}: desired"
             data.append(
                 {"type": "scatter3d", **_xyz(d), "name": name, "mode": "lines",
                  "line": {"color": "black", "width": 3}}
             )  # fmt: skip
         a = (r.tip[index] * MM).astype(np.float32)
         data.append(
-            {"type": "scatter3d", **_xyz(a), "name": run.label, "mode": "lines",
+            {"type": "scatter3d", **_xyz(a), "name": plotly_text(run.label), "mode": "lines",
              "line": {"color": COLOURS[i % len(COLOURS)], "width": 2}}
         )  # fmt: skip
     layout = _layout(
@@ -381,6 +397,7 @@ def mechanism_figure(
          "line": {"color": "#ff7f0e", "width": 3}, "hoverinfo": "skip"},
     ]  # fmt: skip
     moving = list(range(len(static), len(static) + len(first)))
+    label = plotly_text(run.label)
     points = np.concatenate([g.points() for g in geometries]) * MM
     lo, hi = points.min(axis=0), points.max(axis=0)
     pad = 0.05 * float((hi - lo).max())
@@ -389,14 +406,14 @@ def mechanism_figure(
             "name": str(i),
             "data": mechanism_traces(g),
             "traces": moving,
-            "layout": {"title": {"text": f"{run.label}: {_status(r, int(k))}"}},
+            "layout": {"title": {"text": f"{label}: {_status(r, int(k))}"}},
         }
         for i, (g, k) in enumerate(zip(geometries, samples, strict=True))
     ]
     step_ms = 1000.0 / fps
     layout = _layout(
         dict(
-            title={"text": f"{run.label}: {_status(r, int(samples[0]))}"},
+            title={"text": f"{label}: {_status(r, int(samples[0]))}"},
             height=720,
             scene={
                 "xaxis": {"title": {"text": "x (mm)"}, "range": [lo[0] - pad, hi[0] + pad]},
@@ -539,24 +556,25 @@ def render_html(
     max_points: int = MAX_POINTS,
     max_frames: int = MAX_FRAMES,
 ) -> str:
-    """The page's HTML (it expects ``plotly.min.js`` beside it)."""
+    """The page's HTML (it expects ``plotly.min.js`` beside it). ``title`` and ``intro`` (a sentence
+    before the page's own note) are plain text, shown as written."""
     import plotly.io as pio
 
     figures = page_figures(robot, runs, max_points=max_points, max_frames=max_frames)
-    header = "".join(f"<th>{html.escape(c)}</th>" for c in TABLE_COLUMNS)
+    header = "".join(f"<th>{html_text(c)}</th>" for c in TABLE_COLUMNS)
     rows = []
     for run in runs:
         cells = table_row(run.spec, run.result.summary(), run.folder)
-        rows.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in cells) + "</tr>")
+        rows.append("<tr>" + "".join(f"<td>{html_text(c)}</td>" for c in cells) + "</tr>")
     parts = [
         "<!DOCTYPE html>",
         '<html lang="en"><head><meta charset="utf-8">',
-        f"<title>{html.escape(title)}</title>",
+        f"<title>{html_text(title)}</title>",
         f'<script src="{PLOTLY_JS}"></script>',
         f"<style>{_STYLE}</style></head><body>",
-        f"<h1>{html.escape(title)}</h1>",
-        f'<p class="note">{intro} Generated on {time.strftime("%Y-%m-%d %H:%M")} for robot'
-        f" <b>{html.escape(robot.parameters.name)}</b>. Lengths in mm on the plots; plots are decimated for display"
+        f"<h1>{html_text(title)}</h1>",
+        f'<p class="note">{html_text(intro)} Generated on {time.strftime("%Y-%m-%d %H:%M")} for robot'
+        f" <b>{html_text(robot.parameters.name)}</b>. Lengths in mm on the plots; plots are decimated for display"
         f" (at most {max_points} points per curve, keeping each bucket's extremes).</p>",
         "<h2>Maximum tip error</h2>",
         f'<table id="summary-table"><thead><tr>{header}</tr></thead><tbody>{"".join(rows)}</tbody></table>',
@@ -566,7 +584,7 @@ def render_html(
         body = pio.to_html(
             fig, validate=False, include_plotlyjs=False, full_html=False, div_id=div_id, auto_play=False, config=config
         )
-        parts.append(f'<div class="plot"><h2>{html.escape(heading)}</h2>{body}</div>')
+        parts.append(f'<div class="plot"><h2>{html_text(heading)}</h2>{body}</div>')
     parts.append("</body></html>")
     return "\n".join(parts) + "\n"
 
@@ -596,7 +614,10 @@ def load_runs(folders: Sequence[str | Path]) -> list[ReportRun]:
     for folder in folders:
         path = Path(folder)
         result = SimulationResult.load(path)
-        spec = spec_of(result)
+        try:
+            spec = spec_of(result)
+        except InputError as exc:
+            raise InputError(f"run folder {errors.cut(str(path), 200)}: {exc}") from None
         label = f"{path.name}: {spec.label}" if spec.case == 0 else f"case {spec.case} {spec.label} ({path.name})"
         runs.append(ReportRun(spec=spec, label=label, folder=path.name, result=result))
     return runs

@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 
 from ..errors import InputError
 from ..fileio import atomic_path
+from ..markup import mpl_text
 from ..simulation.result import MODE_GA, SimulationResult
 
 __all__ = [
@@ -69,11 +70,12 @@ def label_of(result: SimulationResult) -> str:
 
     The controller name upper-cased (``"CFC"``, ``"SCM"``), then ``" + tool force"`` when
     ``metadata["external_force"]`` is true and ``" (FD rates)"`` when the reference rates were
-    obtained by finite differences, e.g. ``"CFC + tool force (FD rates)"``.
+    obtained by finite differences, e.g. ``"CFC + tool force (FD rates)"``. The controller's name
+    comes from the run's file: a ``$`` in it shows as written (:func:`vgtarm.markup.mpl_text`).
     """
     _check_result(result, "result")
     meta = result.metadata
-    label = str(meta.get("controller", "run")).upper()
+    label = mpl_text(str(meta.get("controller", "run")).upper())
     if meta.get("external_force"):
         label += " + tool force"
     if meta.get("reference_rates") == "finite_difference":

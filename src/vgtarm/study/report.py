@@ -4,6 +4,10 @@ Reads ``results.parquet`` of a study folder and writes ``report.md`` with the ta
 figures: the distribution of the maximum tip error per controller (box plot with every run as a
 point), the error against each controller-model factor that the study varies, and against each
 gain the study varies.
+
+The table's values come from a file users can write (controllers, ids, error messages that quote
+their files): every one goes into the Markdown through :mod:`vgtarm.markup` and into the figures'
+labels through :func:`~vgtarm.markup.mpl_text`.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from matplotlib.figure import Figure
 
 from ..errors import InputError
 from ..fileio import atomic_path, atomic_write_text
+from ..markup import md_cell, md_code, mpl_text
 from .store import read_table
 
 #: Figures of the table: (column, label, scale to the shown unit).
@@ -63,7 +68,7 @@ def plot_error_distribution(rows: Sequence[dict[str, Any]], *, ax: Axes | None =
         for c in controllers
     ]
     ax.boxplot(data, showfliers=False)
-    ax.set_xticks(range(1, len(controllers) + 1), [c.upper() for c in controllers])
+    ax.set_xticks(range(1, len(controllers) + 1), [mpl_text(c.upper()) for c in controllers])
     jitter = np.random.default_rng(0)  # fixed: the same figure for the same table
     for i, values in enumerate(data, start=1):
         ax.scatter(i + jitter.uniform(-0.12, 0.12, len(values)), values, s=12, alpha=0.6, zorder=3)
@@ -81,7 +86,7 @@ def plot_error_against(rows: Sequence[dict[str, Any]], column: str, *, ax: Axes 
         chosen = [r for r in chosen if r.get(column) is not None]
         x = [float(r[column]) for r in chosen]
         y = [1e3 * float(r["max_tip_error_m"]) for r in chosen]
-        ax.scatter(x, y, s=14, alpha=0.7, label=controller.upper())
+        ax.scatter(x, y, s=14, alpha=0.7, label=mpl_text(controller.upper()))
     ax.set_xlabel(column)
     ax.set_ylabel("max tip error (mm)")
     ax.grid(True, alpha=0.3)
@@ -120,9 +125,11 @@ def write_report(folder: str | Path) -> Path:
         ]
         for controller, s in stats.items():
             worst = s["worst"]
-            where_worst = f"`{worst['id']}` ({worst.get('seed')})" if worst else "—"
+            where_worst = f"{md_code(worst['id'])} ({md_cell(worst.get('seed'))})" if worst else "—"
             cells = [_fmt(s[k] * scale) for k in ("mean", "std", "min", "max")]
-            lines.append(f"| {controller.upper()} | {s['n']} | {s['failed']} | {' | '.join(cells)} | {where_worst} |")
+            lines.append(
+                f"| {md_cell(controller.upper())} | {s['n']} | {s['failed']} | {' | '.join(cells)} | {where_worst} |"
+            )
         lines.append("")
     failed = [r for r in rows if not r.get("success")]
     if failed:
@@ -133,8 +140,9 @@ def write_report(folder: str | Path) -> Path:
             "| --- | --- | --- | --- | --- |",
         ]
         for r in failed[:50]:
-            message = str(r.get("message", "")).replace("|", "/")
-            lines.append(f"| `{r['id']}` | {r['controller']} | {r.get('seed')} | {r.get('error')} | {message} |")
+            cells = [md_code(r["id"]), *(md_cell(r.get(key)) for key in ("controller", "seed", "error"))]
+            cells.append(md_cell(r.get("message", "")))
+            lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
     lines += ["## Figures", ""]
     figures: list[tuple[str, str, str | None]] = [
