@@ -3,7 +3,9 @@
 The folder helper (:func:`vgtarm.fileio.atomic_folder`) is tested directly, with the Linux
 atomic exchange and with the rename-aside fallback; the command-line cases are the ones of
 issue 14: a failed run into the folder of an earlier run, Ctrl-C while the figure is drawn, an
-output path that is a file, ``ik -o`` naming its input, ``describe | head -1``.
+output path that is a file, ``ik -o`` naming its input, ``describe | head -1``. Issue 20 (item 2):
+a folder that gains a user's file, folder or pipe during the run, or at the last moment around
+the swap, keeps it, and the result goes beside it with one line saying where.
 """
 
 from __future__ import annotations
@@ -11,10 +13,12 @@ from __future__ import annotations
 import json
 import os
 import signal
+import stat
 import subprocess
 import sys
 import textwrap
 from pathlib import Path
+from unittest.mock import ANY
 
 import pytest
 
@@ -226,6 +230,134 @@ def test_write_errors_name_the_users_path_not_the_temporary(tmp_path):
     assert info.value.filename == str(tmp_path / "no" / "ref.csv")
 
 
+# --- files added during the run (issue 20, item 2) --------------------------------------------
+
+
+def _add_notes(folder: Path) -> None:
+    (folder / "NOTES.txt").write_text("mine")
+
+
+def _add_video_folder(folder: Path) -> None:
+    (folder / "videos").mkdir()
+    (folder / "videos" / "case1.gif").write_bytes(b"GIF89a")
+
+
+def _add_empty_folder(folder: Path) -> None:
+    (folder / "later").mkdir()
+
+
+def _replace_a_listed_file_by_a_pipe(folder: Path) -> None:
+    (folder / "summary.json").unlink()
+    os.mkfifo(folder / "summary.json")
+
+
+FOREIGN = {
+    "a note": _add_notes,
+    "a folder with a video": _add_video_folder,
+    "an empty folder": _add_empty_folder,
+    "a pipe in place of a listed file": _replace_a_listed_file_by_a_pipe,
+}
+
+
+def _tree(folder: Path) -> dict[str, object]:
+    """Every entry under ``folder``: a file's bytes, else its kind (a pipe is never opened)."""
+    found: dict[str, object] = {}
+    for path in sorted(folder.rglob("*")):
+        mode = path.lstat().st_mode
+        found[path.relative_to(folder).as_posix()] = path.read_bytes() if stat.S_ISREG(mode) else stat.S_IFMT(mode)
+    return found
+
+
+@pytest.mark.parametrize("added", sorted(FOREIGN))
+def test_a_folder_that_gained_a_users_file_during_the_run_is_kept_and_the_result_goes_beside_it(
+    tmp_path, swap, caplog, added
+):
+    target = tmp_path / "run"
+    with atomic_folder(target) as folder:
+        (folder / "summary.json").write_text("old")
+        (folder / "figure.png").write_bytes(b"old figure")
+    with fileio.placements() as moved, atomic_folder(target, "--out") as folder:
+        (folder / "summary.json").write_text("new")
+        FOREIGN[added](target)  # while the run writes its temporary folder
+        during = _tree(target)
+    assert _tree(target) == during  # nothing of the old folder touched, the user's entry kept
+    assert moved == {target: tmp_path / "run-2"}
+    assert _listing(tmp_path / "run-2") == {MANIFEST: ANY, "summary.json": b"new"}
+    [line] = [r.getMessage() for r in caplog.records]
+    assert line.startswith(f"vgtarm: --out {target}: the folder holds '") and "\n" not in line
+    assert line.endswith(
+        f"which vgtarm did not write there; it is kept as it was, and the new results are in {target}-2"
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run", "run-2"]
+
+
+def test_an_old_folder_without_a_file_list_that_gained_a_file_is_kept_too(tmp_path, swap, caplog):
+    legacy = tmp_path / "run"
+    legacy.mkdir()
+    (legacy / "summary.json").write_text("old")
+    with fileio.placements() as moved, atomic_folder(legacy, owned=("summary.json",)) as folder:
+        (folder / "summary.json").write_text("new")
+        (legacy / "notes.md").write_text("mine")
+    assert _listing(legacy) == {"summary.json": b"old", "notes.md": b"mine"}
+    assert moved[legacy] == tmp_path / "run-2" and "no .vgtarm-output list" in caplog.records[0].getMessage()
+
+
+@pytest.mark.parametrize("second", [False, True], ids=["after the first look", "after the look again"])
+def test_a_file_added_at_the_last_moment_is_never_deleted(tmp_path, swap, monkeypatch, caplog, second):
+    """The race: a file lands in the old folder after a check at the swap. After the first look
+    (before the exchange or the rename aside), the look again finds it: the old folder is put
+    back and the result goes beside. After the look again (the old folder already swapped out),
+    emptying it from its list leaves that file, and the folder is kept beside."""
+    target = tmp_path / "run"
+    with atomic_folder(target) as folder:
+        (folder / "summary.json").write_text("old")
+    looked: list[Path] = []
+    foreign = fileio._foreign
+
+    def late_file(folder: Path, owned):
+        reason = foreign(folder, owned)
+        looked.append(folder)
+        if len(looked) == (2 if second else 1):
+            (folder / "late.txt").write_text("mine")  # the old folder, wherever it is now
+        return reason
+
+    with fileio.placements() as moved, atomic_folder(target) as folder:
+        (folder / "summary.json").write_text("new")
+        monkeypatch.setattr(fileio, "_foreign", late_file)
+    assert len(looked) == 2  # looked at twice at the swap
+    [line] = [r.getMessage() for r in caplog.records]
+    kept = tmp_path / "run-2"
+    if second:  # the new result is in place; the old folder's own files are gone, the late one kept
+        assert _listing(target) == {MANIFEST: ANY, "summary.json": b"new"} and moved == {}
+        assert _listing(kept) == {"late.txt": b"mine"}
+        assert line == (
+            f"vgtarm: output folder {target}: files vgtarm did not write appeared in the folder while it was"
+            f" replaced; kept them in {kept}"
+        )
+    else:  # the old folder is back as it was, with the late file; the result beside it
+        assert _listing(target) == {MANIFEST: ANY, "summary.json": b"old", "late.txt": b"mine"}
+        assert _listing(kept) == {MANIFEST: ANY, "summary.json": b"new"} and moved == {target: kept}
+        assert "the folder holds 'late.txt'" in line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run", "run-2"]
+
+
+def test_a_killed_swap_leaves_foreign_files_that_the_next_run_keeps(tmp_path, caplog):
+    """An old folder set aside by a run killed after its swap is emptied from its list by the
+    next run, never removed as a tree; a pipe at a temporary name is never touched."""
+    dead = _dead_pid()
+    with atomic_folder(tmp_path / "run") as folder:
+        (folder / "summary.json").write_text("new")
+    aside = tmp_path / f".run.{dead}.0123abcd.old"
+    with atomic_folder(aside) as folder:  # an old run folder, with its list
+        (folder / "summary.json").write_text("old")
+    (aside / "NOTES.txt").write_text("mine")
+    pipe = tmp_path / f".other.{dead}.89abcdef.tmp"
+    os.mkfifo(pipe)
+    clean_stale(tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([pipe.name, "run", "run-2"])
+    assert _listing(tmp_path / "run-2") == {"NOTES.txt": b"mine"} and "kept them in" in caplog.records[0].getMessage()
+
+
 # --- the command line -----------------------------------------------------------------------
 
 
@@ -297,6 +429,83 @@ def test_ik_refuses_to_overwrite_its_input_before_any_work(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err == f"vgtarm: error: -o {source}: is an input of this command; writing it would destroy it\n"
     assert source.read_bytes() == before and [p.name for p in tmp_path.iterdir()] == ["path.csv"]
+
+
+@pytest.mark.parametrize("when", ["during the run", "while the results are written"])
+def test_a_users_file_added_during_simulate_is_kept_and_the_line_names_where_the_run_went(
+    tmp_path, capsys, caplog, monkeypatch, when
+):
+    """The folder was checked before the run; a file the user adds to it afterwards (while the run
+    computes, or while its files are written) is kept, and the run goes beside it."""
+    from vgtarm.app import cases, plotting
+
+    out = tmp_path / "run"
+    assert main([*SHORT, "--out", str(out)]) == 0
+    patched, name = (cases, "run_case") if when == "during the run" else (plotting, "save_figure")
+    original = getattr(patched, name)
+
+    def user_writes_notes(*args, **kwargs):
+        (out / "NOTES.txt").write_text("mine")  # the user, in the folder of the earlier run
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(patched, name, user_writes_notes)
+    before = _listing(out)
+    capsys.readouterr()
+    assert main([*SHORT, "--seed", "3", "--out", str(out)]) == 0
+    captured = capsys.readouterr()
+    assert captured.out.splitlines()[-1] == f"results written to {out}-2"
+    [warning] = [r.getMessage() for r in caplog.records if r.name == "vgtarm"]
+    assert warning.startswith(f"vgtarm: --out {out}: the folder holds 'NOTES.txt'")
+    assert warning.endswith(f"the new results are in {out}-2")
+    assert _listing(out) == {**before, "NOTES.txt": b"mine"}
+    assert json.loads((tmp_path / "run-2" / "summary.json").read_text())["seed"] == 3
+    assert (tmp_path / "run-2" / "figure.png").exists()
+
+
+def test_the_line_saying_where_the_run_went_reaches_the_terminal(tmp_path):
+    """As a program (no logging set up): the warning is one line on standard error, exit 0."""
+    out = tmp_path / "run"
+    assert main([*SHORT, "--out", str(out)]) == 0
+    script = (
+        "import sys\nfrom vgtarm.app import cases\nfrom vgtarm.app.cli import main\n"
+        "run_case = cases.run_case\n"
+        "def with_notes(*args, **kwargs):\n"
+        "    open(sys.argv[1] + '/NOTES.txt', 'w').write('mine')\n"
+        "    return run_case(*args, **kwargs)\n"
+        f"cases.run_case = with_notes\nsys.exit(main({SHORT!r} + ['--out', sys.argv[1]]))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script, str(out)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stderr == (
+        f"vgtarm: --out {out}: the folder holds 'NOTES.txt', which vgtarm did not write there;"
+        f" it is kept as it was, and the new results are in {out}-2\n"
+    )
+    assert done.stdout.splitlines()[-1] == f"results written to {out}-2"
+    assert (out / "NOTES.txt").read_text() == "mine" and (tmp_path / "run-2" / "figure.png").exists()
+
+
+def test_reproduce_names_the_folder_beside_when_its_folder_gained_a_file(tmp_path, capsys, monkeypatch):
+    """``vgtarm reproduce --out X &``, then ``echo notes > X/NOTES.txt`` during the run."""
+    from vgtarm.app import report
+    from vgtarm.app.report import REPRODUCE_FILES, Reproduction
+
+    out = tmp_path / "results"
+    with atomic_folder(out) as folder:
+        (folder / "report.md").write_text("old")
+
+    def fake_reproduce(robot, where, **kwargs):
+        with atomic_folder(where, "out", owned=REPRODUCE_FILES) as folder:
+            (folder / "report.md").write_text("new")
+            (out / "NOTES.txt").write_text("notes")
+        return Reproduction({}, Path(where) / "report.md", 0.0)
+
+    monkeypatch.setattr(report, "reproduce", fake_reproduce)
+    assert main(["reproduce", "--quiet", "--out", str(out)]) == 0
+    assert capsys.readouterr().out.splitlines()[-1] == (
+        f"report written to {out}-2/report.md and {out}-2/report.html (0.0 s)"
+    )
+    assert _listing(out) == {MANIFEST: ANY, "report.md": b"old", "NOTES.txt": b"notes"}
+    assert (tmp_path / "results-2" / "report.md").read_text() == "new"
 
 
 @pytest.mark.parametrize(("argv", "status"), [(["describe"], CLOSED_PIPE), (["--help"], 0)])

@@ -1,4 +1,5 @@
-"""Writing files and folders so that a reader never sees a partial one.
+"""Writing files and folders so that a reader never sees a partial one, and nothing that is not
+vgtarm's own is ever replaced or deleted.
 
 A single file goes to a temporary name in the same folder and is renamed over its target
 (:func:`atomic_path`, :func:`atomic_open`, :func:`atomic_write_text`). A result folder is written
@@ -7,39 +8,73 @@ the same way as one unit (:func:`atomic_folder`): into a hidden temporary siblin
 the user's path, never the temporary one. :func:`check_output_folder` and
 :func:`check_output_file` check an output path before a command starts its work.
 
+What may be replaced (checked before the work, and again at the moment of writing with
+``lstat``, so that a link is judged itself, never what it points to):
+
+- a file only by a file: a new name, or an existing *regular* file. A device (``/dev/full``), a
+  named pipe, a socket, a folder or a symbolic link (to anything, a regular file included: vgtarm
+  does not write through links) is refused in one line naming the path, what it is and what was
+  expected. On Linux the new file and the old one are swapped in one atomic step
+  (``renameat2(RENAME_EXCHANGE)``) and what was swapped out is looked at again: if it is not a
+  regular file (it changed since the check) it is swapped back and the write refused, so no
+  window remains between the check and the rename.
+- a folder only by a folder: a new name, or an existing real folder (not a link, not a mount
+  point) holding only what vgtarm wrote: the files listed in its ``.vgtarm-output``, or, for a
+  folder written before that list existed, only files whose names match the writer's ``owned``
+  patterns. A folder holding anything else is refused before the work, never deleted.
+
+A folder that changed during the run: when the result is complete, the old folder is checked
+again; if it gained files vgtarm did not write (a user's notes, a video rendered into it), or is
+no longer a real folder, it is left exactly as it is and the new result goes beside it, to the
+first free name ``<name>-2``, ``<name>-3``, ...; one warning line on the ``vgtarm`` logger says so
+and :func:`placements` tells the caller where the result went. The check is repeated after the
+atomic exchange on the folder swapped out, which is swapped back if it gained a file between the
+two. The folder replaced is then emptied file by file from its own list, never removed as a
+tree: anything left in it (a file written into it at the last moment) is kept beside, again with
+one warning line.
+
 Replacing a folder: on Linux ``renameat2(RENAME_EXCHANGE)`` swaps the two folders in one atomic
 step. Elsewhere (or on a file system without it) the old folder is renamed aside to
-``.<name>.<pid>.<random>.old``, the new one renamed in, and the old one removed; a crash between
-the two renames leaves no folder at the user's path but the old one aside, which the next run
-into the same parent puts back (see :func:`clean_stale`).
+``.<name>.<pid>.<random>.old``, checked, the new one renamed in, and the old one emptied; a crash
+between the two renames leaves no folder at the user's path but the old one aside, which the next
+run into the same parent puts back (see :func:`clean_stale`).
 
-A folder is replaced only if vgtarm wrote everything in it: each folder written by
-:func:`atomic_folder` lists its files in ``.vgtarm-output``; a folder holding anything else (a
-user's notes, a video rendered into it later) is refused, never deleted.
+A read-only file system, a folder without write permission and a mount point (which a rename
+cannot replace) are found by the checks before the work.
 """
 
 from __future__ import annotations
 
+import contextvars
 import ctypes
 import errno
 import fnmatch
+import functools
+import logging
 import os
 import re
 import secrets
 import shutil
+import stat
 import tomllib
-from collections.abc import Collection, Iterable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable, Collection, Iterable, Iterator
+from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import Any, TextIO
 
 from .errors import InputError, VgtarmError, cut
+
+logger = logging.getLogger("vgtarm")
 
 #: The list of files a folder written by :func:`atomic_folder` holds (one relative path a line).
 MANIFEST = ".vgtarm-output"
 _MANIFEST_HEADER = "# written by vgtarm as one unit; a later run replaces this folder only if it holds nothing else"
 #: Names of temporary files and folders: ``.<name>.<pid>.<8 hex>.tmp[<suffix>]`` or ``....old``.
 _TEMPORARY = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.[0-9a-f]{8}\.(?P<kind>tmp|old)(?:\.[^.]*)?$")
+#: How often a rename looks again at a target that changes under it before giving up.
+_ATTEMPTS = 5
+#: Highest ``k`` of the names ``<name>-k`` tried beside a folder that may not be replaced.
+_BESIDE_LIMIT = 10_000
 
 
 #: Longest rendering of a path in a message (longer than other values: the name is at the end).
@@ -71,40 +106,410 @@ def _user_path(exc: OSError, temporary: Path, target: Path) -> OSError:
     return exc
 
 
+# --- what is at a path ----------------------------------------------------------------------
+
+
+def _kind(mode: int) -> str:
+    """What a file system entry of ``mode`` (from ``lstat``) is, for a message."""
+    kinds: list[tuple[Callable[[int], bool], str]] = [
+        (stat.S_ISREG, "a file"),
+        (stat.S_ISDIR, "a folder"),
+        (stat.S_ISLNK, "a symbolic link"),
+        (stat.S_ISFIFO, "a named pipe (FIFO)"),
+        (stat.S_ISSOCK, "a socket"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+    ]
+    return next((name for test, name in kinds if test(mode)), "a special file")
+
+
+def _lstat(path: str | os.PathLike[str]) -> os.stat_result | None:
+    """``os.lstat(path)``, or None when nothing is there (a missing name, or a parent that is a
+    file: :func:`check_writable_parent` names that)."""
+    try:
+        return os.lstat(path)
+    except (FileNotFoundError, NotADirectoryError):
+        return None
+
+
+def describe(path: str | os.PathLike[str]) -> str:
+    """What is at ``path``, judged without following a link: ``"a named pipe (FIFO)"``,
+    ``"a symbolic link to a character device"``, ``"nothing"``."""
+    found = _lstat(path)
+    if found is None:
+        return "nothing"
+    if not stat.S_ISLNK(found.st_mode):
+        return _kind(found.st_mode)
+    try:
+        return f"a symbolic link to {_kind(os.stat(path).st_mode)}"
+    except OSError:
+        return "a symbolic link that leads nowhere"
+
+
+class OutputPathError(VgtarmError, FileExistsError):
+    """An output path holds, at the moment of writing, something a writer may not replace (a
+    device, a pipe, a socket, a link, a folder): a user's error and a state of the file system, so
+    both a :class:`~vgtarm.errors.VgtarmError` and a :class:`FileExistsError`. Its text is the one
+    line naming the path, what is there and what was expected. (The checks before the work raise
+    :class:`~vgtarm.errors.InputError` for the same paths.)"""
+
+    def __init__(self, message: str, path: str | os.PathLike[str]) -> None:
+        super().__init__(errno.EEXIST, message, os.fspath(path))
+
+    def __str__(self) -> str:
+        return str(self.strerror)
+
+
+def _file_refusal(target: Path, what: str, found: os.stat_result) -> str:
+    """The one line refusing to write the file ``target`` over ``found``, which is not a regular file."""
+    shown = _shown(str(target))
+    if stat.S_ISDIR(found.st_mode):
+        return f"{what} {shown}: is a folder; give a file name"
+    link = " (vgtarm does not write through links)" if stat.S_ISLNK(found.st_mode) else ""
+    return f"{what} {shown}: is {describe(target)}; expected a regular file or a new file name{link}"
+
+
+def _not_a_file(target: Path, what: str, found: os.stat_result) -> OutputPathError:
+    return OutputPathError(_file_refusal(target, what, found), target)
+
+
+def _not_a_folder(target: Path, what: str) -> InputError:
+    """The one line refusing to write a result folder at ``target``, which is not a real folder."""
+    shown = _shown(str(target))
+    found = describe(target)
+    if found.startswith("a symbolic link"):
+        return InputError(f"{what} {shown}: is {found}; expected the folder itself (not a link) or a new folder name")
+    return InputError(f"{what} {shown}: is {found}, not a folder; expected a folder or a new folder name")
+
+
+def _mount_points() -> frozenset[str]:
+    """The mount points of this process now (Linux ``/proc/self/mountinfo``; empty elsewhere),
+    which also shows a bind mount of a folder of the same file system (``os.path.ismount`` does not)."""
+    try:
+        with open("/proc/self/mountinfo", encoding="utf-8", errors="surrogateescape") as stream:
+            lines = stream.read(4 * 2**20).splitlines()
+    except OSError:
+        return frozenset()
+    octal = re.compile(r"\\([0-7]{3})")  # the kernel writes a space as \040, a backslash as \134
+    return frozenset(octal.sub(lambda m: chr(int(m[1], 8)), line.split()[4]) for line in lines if len(line.split()) > 4)
+
+
+def _is_mount_point(path: Path) -> bool:
+    try:
+        if os.path.ismount(path):
+            return True
+        return os.fspath(path.resolve()) in _mount_points()
+    except (OSError, ValueError):
+        return False
+
+
+def _read_only(path: str | os.PathLike[str]) -> bool:
+    """Whether ``path`` lies on a file system mounted read-only (which even root cannot write)."""
+    try:
+        return bool(os.statvfs(path).f_flag & os.ST_RDONLY)
+    except (OSError, AttributeError):  # no statvfs here (Windows), or it cannot tell: not refused
+        return False
+
+
+# --- renames --------------------------------------------------------------------------------
+
+_AT_FDCWD, _RENAME_NOREPLACE, _RENAME_EXCHANGE = -100, 1, 2
+#: What ``renameat2`` reports when the system or the file system cannot do what was asked.
+_UNSUPPORTED = (errno.EINVAL, errno.ENOSYS, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EPERM)
+
+
+@functools.cache
+def _renameat2() -> Any:
+    """The C library's ``renameat2`` (Linux), or None."""
+    try:
+        return ctypes.CDLL(None, use_errno=True).renameat2
+    except (AttributeError, OSError):
+        return None
+
+
+def _rename2(first: Path, second: Path, flags: int) -> bool:
+    """``renameat2(first, second, flags)``: True if done, False where it is not possible here;
+    any other failure raises :class:`OSError` naming ``second``."""
+    call = _renameat2()
+    if call is None:
+        return False
+    if call(_AT_FDCWD, os.fsencode(first), _AT_FDCWD, os.fsencode(second), flags) == 0:
+        return True
+    code = ctypes.get_errno()
+    if code in _UNSUPPORTED:
+        return False
+    raise OSError(code, os.strerror(code), os.fspath(second))
+
+
+def _exchange(first: Path, second: Path) -> bool:
+    """Swap two entries in one atomic step (Linux ``renameat2``); False where that is not possible."""
+    return _rename2(first, second, _RENAME_EXCHANGE)
+
+
+def _rename_new(source: Path, target: Path) -> bool:
+    """Rename ``source`` to ``target`` only if nothing is there: True if done, False if something
+    is (atomic on Linux; elsewhere checked just before the rename)."""
+    try:
+        if _rename2(source, target, _RENAME_NOREPLACE):
+            return True
+    except FileExistsError:
+        return False
+    if os.path.lexists(target):
+        return False
+    try:
+        os.rename(source, target)
+    except OSError as exc:  # a folder (not empty) or a file appeared there meanwhile
+        if exc.errno in (errno.EEXIST, errno.ENOTEMPTY, errno.ENOTDIR, errno.EISDIR):
+            return False
+        raise
+    return True
+
+
+def _rename_beside(source: Path, target: Path) -> Path:
+    """Rename ``source`` to the first free name ``<target>-2``, ``<target>-3``, ...; return it."""
+    for k in range(2, _BESIDE_LIMIT):
+        candidate = target.with_name(f"{target.name}-{k}")
+        if _rename_new(source, candidate):
+            return candidate
+    raise FileExistsError(errno.EEXIST, f"no free name {target.name}-k beside it", os.fspath(target))
+
+
+#: Where :func:`atomic_folder` put results it could not put at their path, while :func:`placements` runs.
+_PLACED: contextvars.ContextVar[dict[Path, Path] | None] = contextvars.ContextVar("vgtarm_placed", default=None)
+
+
 @contextmanager
-def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
+def placements() -> Iterator[dict[Path, Path]]:
+    """Record, while the block runs, where :func:`atomic_folder` wrote results it could not put at
+    their path (the folder there gained files vgtarm did not write, or became something else
+    during the run): ``{path as given: the folder beside it that holds the results}``. A command
+    prints the path it finds here instead of the one it asked for."""
+    record: dict[Path, Path] = {}
+    token = _PLACED.set(record)
+    try:
+        yield record
+    finally:
+        _PLACED.reset(token)
+
+
+def _placed_beside(new: Path, target: Path, what: str, reason: str) -> Path:
+    """Put the finished folder ``new`` beside ``target`` (which is left as it is), saying why in one line."""
+    placed = _rename_beside(new, target)
+    logger.warning(
+        "vgtarm: %s %s: %s; it is kept as it was, and the new results are in %s",
+        what,
+        _shown(str(target)),
+        reason,
+        _shown(str(placed)),
+    )
+    record = _PLACED.get()
+    if record is not None:
+        record[target] = placed
+    return placed
+
+
+# --- single files ---------------------------------------------------------------------------
+
+
+def _refuse_unless_file(target: Path, what: str) -> None:
+    """Raise :class:`OutputPathError` if something that is not a regular file is at ``target``."""
+    found = _lstat(target)
+    if found is not None and not stat.S_ISREG(found.st_mode):
+        raise _not_a_file(target, what, found)
+
+
+def _put_file(temporary: Path, target: Path, what: str) -> None:
+    """Rename the finished file ``temporary`` to ``target``: to a new name, or over a regular file;
+    never over anything else, looked at with ``lstat`` at the last moment (and, after an atomic
+    exchange, looked at again and swapped back if it changed in between)."""
+    for _ in range(_ATTEMPTS):
+        found = _lstat(target)
+        if found is None:
+            if _rename_new(temporary, target):
+                return
+            continue  # something appeared there meanwhile: look at it
+        if not stat.S_ISREG(found.st_mode):
+            raise _not_a_file(target, what, found)
+        try:
+            exchanged = _exchange(temporary, target)
+        except FileNotFoundError:
+            continue  # it went away meanwhile
+        if not exchanged:  # no atomic exchange here: the look above is the last guard
+            os.replace(temporary, target)
+            return
+        old = os.lstat(temporary)  # what was at the target until now
+        if stat.S_ISREG(old.st_mode):
+            os.unlink(temporary)
+            return
+        _exchange(temporary, target)  # it changed after the look: put it back, refuse
+        raise _not_a_file(target, what, old)
+    raise FileExistsError(errno.EEXIST, "changed again and again while it was written", os.fspath(target))
+
+
+def _drop_temporary(temporary: Path) -> None:
+    """Remove a temporary file of ours (never anything else that may sit at its name)."""
+    found = _lstat(temporary)
+    if found is not None and stat.S_ISREG(found.st_mode):
+        temporary.unlink(missing_ok=True)
+
+
+@contextmanager
+def atomic_path(path: str | os.PathLike[str], what: str = "output file") -> Iterator[Path]:
     """A temporary path to write in place of ``path``; it replaces ``path`` when the block ends.
 
     The temporary name is in the same folder and keeps the suffix (for writers that choose the
     format from it); the writer creates the file, so it gets the usual permissions
-    (``tempfile.mkstemp`` would make it private to the user). On any error the temporary file is
-    removed and ``path`` is left as it was; an ``OSError`` names ``path``, not the temporary file.
+    (``tempfile.mkstemp`` would make it private to the user). ``path`` must be a new name or a
+    regular file, when the block starts and again when it ends (``lstat``: a symbolic link is
+    refused, whatever it points to); else :class:`OutputPathError` names ``what``, the path, what
+    is there and what was expected. On any error the temporary file is removed and
+    ``path`` is left as it was; an ``OSError`` names ``path``, not the temporary file.
     """
     target = Path(path)
+    _refuse_unless_file(target, what)
     temporary = target.with_name(_temporary_name(target.stem, suffix=target.suffix))
     try:
         yield temporary
-        os.replace(temporary, target)
+        _put_file(temporary, target, what)
     except OSError as exc:
-        temporary.unlink(missing_ok=True)
+        _drop_temporary(temporary)
         raise _user_path(exc, temporary, target)  # noqa: B904  (the same exception, renamed)
     except BaseException:
-        temporary.unlink(missing_ok=True)
+        _drop_temporary(temporary)
         raise
 
 
 @contextmanager
-def atomic_open(path: str | os.PathLike[str]) -> Iterator[TextIO]:
-    """A text stream whose content replaces ``path`` only when the block ends without error."""
-    with atomic_path(path) as temporary, open(temporary, "x", encoding="utf-8", newline="") as stream:
+def atomic_open(path: str | os.PathLike[str], what: str = "output file") -> Iterator[TextIO]:
+    """A text stream whose content replaces ``path`` only when the block ends without error
+    (the rules of :func:`atomic_path`)."""
+    with atomic_path(path, what) as temporary, open(temporary, "x", encoding="utf-8", newline="") as stream:
         yield stream
 
 
-def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
+def atomic_write_text(path: str | os.PathLike[str], text: str, what: str = "output file") -> Path:
     """Write ``text`` to ``path`` atomically (see :func:`atomic_open`)."""
-    with atomic_open(path) as stream:
+    with atomic_open(path, what) as stream:
         stream.write(text)
     return Path(path)
+
+
+# --- what a folder holds --------------------------------------------------------------------
+
+
+def _entries(folder: Path) -> dict[str, int]:
+    """Every entry under ``folder`` by relative POSIX path, with its ``lstat`` mode: files and
+    anything else that is not a folder, and each empty folder as ``"name/"``. Links are not
+    followed; an entry that vanishes while it is looked at is left out."""
+    found: dict[str, int] = {}
+    pending = [(os.fspath(folder), "")]
+    while pending:
+        where, prefix = pending.pop()
+        try:
+            with os.scandir(where) as listing:
+                children = list(listing)
+        except OSError:
+            if not prefix:
+                raise
+            found[prefix] = stat.S_IFDIR  # a folder that cannot be read: listed as such, never assumed empty
+            continue
+        if not children and prefix:
+            found[prefix] = stat.S_IFDIR
+        for child in children:
+            try:
+                mode = child.stat(follow_symlinks=False).st_mode
+            except FileNotFoundError:
+                continue
+            if stat.S_ISDIR(mode):
+                pending.append((child.path, f"{prefix}{child.name}/"))
+            else:
+                found[prefix + child.name] = mode
+    return found
+
+
+def _manifest(folder: Path) -> set[str] | None:
+    """The list of what vgtarm wrote in ``folder`` (its regular file ``.vgtarm-output``), or None."""
+    found = _lstat(folder / MANIFEST)
+    if found is None or not stat.S_ISREG(found.st_mode):
+        return None
+    try:
+        text = (folder / MANIFEST).read_text("utf-8")
+    except (OSError, UnicodeDecodeError):
+        return None
+    return {line for line in text.splitlines() if line and not line.startswith("#")}
+
+
+def _ours(name: str, mode: int, listed: Collection[str]) -> bool:
+    """Whether the entry ``name`` (``mode`` from ``lstat``) is one vgtarm wrote: listed, and a
+    regular file (or an empty folder listed as one)."""
+    return name in listed and (stat.S_ISREG(mode) or (name.endswith("/") and stat.S_ISDIR(mode)))
+
+
+def _legacy(folder: Path, owned: Collection[str]) -> tuple[list[str], str | None]:
+    """For a folder without ``.vgtarm-output``: its entries that are regular files named by one of
+    the ``owned`` patterns, and why it may not be replaced (another entry), or None."""
+    written: list[str] = []
+    for name in sorted(os.listdir(folder)):
+        found = _lstat(folder / name)
+        if found is None:
+            continue
+        if not (stat.S_ISREG(found.st_mode) and any(fnmatch.fnmatchcase(name, p) for p in owned)):
+            return written, f"the folder holds {_shown(repr(name))} and no {MANIFEST} list of what vgtarm wrote there"
+        written.append(name)
+    return written, None
+
+
+def _foreign(folder: Path, owned: Collection[str]) -> str | None:
+    """Why an existing folder may not be replaced (an entry vgtarm did not write), or None."""
+    listed = _manifest(folder)
+    if listed is None:  # a folder written before the list existed
+        return _legacy(folder, owned)[1]
+    entries = _entries(folder)
+    extra = sorted(name for name, mode in entries.items() if name != MANIFEST and not _ours(name, mode, listed))
+    if not extra:
+        return None
+    kind = f", {_kind(entries[extra[0]])}" if extra[0] in listed else ""  # a listed name, now a pipe
+    return f"the folder holds {_shown(repr(extra[0]))}{kind}, which vgtarm did not write there"
+
+
+def _written(folder: Path, owned: Collection[str]) -> list[str]:
+    """The entries of ``folder`` that vgtarm wrote (its list, or the ``owned`` files of an old folder)."""
+    listed = _manifest(folder)
+    if listed is None:
+        return _legacy(folder, owned)[0]
+    entries = _entries(folder)
+    return [name for name, mode in entries.items() if _ours(name, mode, listed)] + [MANIFEST]
+
+
+def _empty(old: Path, target: Path, what: str, owned: Collection[str]) -> None:
+    """Remove the replaced folder ``old`` (set aside at an ``.old`` name) entry by entry from what
+    vgtarm wrote in it, never as a tree. Anything left (a file written into it at the last moment) is
+    kept: the folder goes beside ``target`` with one warning line."""
+    written = _written(old, owned)
+    folders = {old}
+    for name in written:
+        path = old / name.rstrip("/")
+        folders.update(p for p in path.parents if old in p.parents)
+        if name.endswith("/"):
+            folders.add(path)
+        else:
+            found = _lstat(path)
+            if found is not None and stat.S_ISREG(found.st_mode):
+                with suppress(OSError):
+                    path.unlink()
+    for folder in sorted(folders, key=lambda p: len(p.parts), reverse=True):  # the deepest first
+        with suppress(OSError):
+            folder.rmdir()
+    if not os.path.lexists(old):
+        return
+    with suppress(OSError):
+        kept = _rename_beside(old, target)
+        logger.warning(
+            "vgtarm: %s %s: files vgtarm did not write appeared in the folder while it was replaced; kept them in %s",
+            what,
+            _shown(str(target)),
+            _shown(str(kept)),
+        )
 
 
 def _alive(pid: int) -> bool:
@@ -119,21 +524,18 @@ def _alive(pid: int) -> bool:
     return True
 
 
-def _remove(path: Path) -> None:
-    if path.is_dir() and not path.is_symlink():
-        shutil.rmtree(path, ignore_errors=True)
-    else:
-        path.unlink(missing_ok=True)
-
-
 def clean_stale(folder: str | os.PathLike[str]) -> list[Path]:
     """Remove the temporary files and folders left in ``folder`` by writers that were killed.
 
     Only names of the form :func:`atomic_path` and :func:`atomic_folder` make, of a process id
-    that no longer runs on this machine, are touched. A folder set aside while a killed run
-    replaced it (``.<name>.<pid>.<random>.old``) is put back when ``<name>`` is missing, else
-    removed. Returns what was removed or put back. (It assumes the folder is not shared with
-    writers on other machines, whose process ids mean nothing here.)
+    that no longer runs on this machine, are touched, and only if they are regular files or real
+    folders (a device, pipe, socket or link at such a name is left alone). A folder set aside while
+    a killed run replaced it (``.<name>.<pid>.<random>.old``) is put back when ``<name>`` is
+    missing, else emptied from its list of files (``.vgtarm-output``) only, anything else in it
+    kept beside ``<name>`` (:func:`atomic_folder`'s rule). An unfinished result
+    (``.<name>.<pid>.<random>.tmp``, in which only vgtarm writes) is removed. Returns what was
+    removed or put back. (It assumes the folder is not shared with writers on other machines,
+    whose process ids mean nothing here.)
     """
     where = Path(folder)
     touched: list[Path] = []
@@ -148,55 +550,40 @@ def clean_stale(folder: str | os.PathLike[str]) -> list[Path]:
         path = Path(entry.path)
         original = where / match["name"]
         try:
-            if match["kind"] == "old" and entry.is_dir(follow_symlinks=False) and not original.exists():
+            if entry.is_file(follow_symlinks=False):
+                path.unlink()
+            elif not entry.is_dir(follow_symlinks=False):
+                continue
+            elif match["kind"] == "tmp":  # an unfinished result: only vgtarm writes in it
+                shutil.rmtree(path, ignore_errors=True)
+            elif not os.path.lexists(original):
                 os.rename(path, original)
-            else:
-                _remove(path)
+            elif _manifest(path) is not None:
+                _empty(path, original, "folder", ())
+            else:  # an old folder of the time before folders listed their files
+                shutil.rmtree(path, ignore_errors=True)
         except OSError:
             continue
         touched.append(path)
     return touched
 
 
-def _files(folder: Path) -> set[str]:
-    """Relative paths (POSIX form) of every file and empty folder under ``folder``."""
-    found: set[str] = set()
-    for root, dirs, files in os.walk(folder):
-        relative = Path(root).relative_to(folder)
-        found.update((relative / name).as_posix() for name in files)
-        if not dirs and not files and root != os.fspath(folder):
-            found.add(relative.as_posix() + "/")
-    return found
-
-
-def _manifest(folder: Path) -> set[str] | None:
-    try:
-        text = (folder / MANIFEST).read_text("utf-8")
-    except (OSError, UnicodeDecodeError):
-        return None
-    return {line for line in text.splitlines() if line and not line.startswith("#")}
-
-
-def _foreign(folder: Path, owned: Collection[str]) -> str | None:
-    """Why an existing folder may not be replaced (an entry vgtarm did not write), or None."""
-    listed = _manifest(folder)
-    if listed is not None:
-        extra = sorted(_files(folder) - listed - {MANIFEST})
-        return f"the folder holds {_shown(extra[0])!r}, which vgtarm did not write there" if extra else None
-    for name in sorted(os.listdir(folder)):  # a folder written before the manifest existed
-        if not ((folder / name).is_file() and any(fnmatch.fnmatchcase(name, p) for p in owned)):
-            return f"the folder holds {_shown(name)!r} and no {MANIFEST} list of what vgtarm wrote there"
-    return None
+# --- checks before the work -----------------------------------------------------------------
 
 
 def _named(path: str | os.PathLike[str], what: str, kind: str) -> Path:
     """``path`` as a :class:`~pathlib.Path`, or :class:`~vgtarm.errors.InputError` if it cannot name
-    anything: empty, or holding a NUL character (which the system refuses in any file name)."""
+    anything: empty, holding a NUL character (which the system refuses in any file name), or
+    characters that have no bytes in the file system's encoding (possible only from Python)."""
     text = os.fspath(path)
     if text == "":
         raise InputError(f"{what} '': expected a {kind} name")
     if "\0" in text:
         raise InputError(f"{what} {_shown(repr(text))}: a {kind} name cannot hold a NUL character")
+    try:
+        os.fsencode(text)
+    except UnicodeError:
+        raise InputError(f"{what} {_shown(repr(text))}: not a valid {kind} name on this system") from None
     return Path(text)
 
 
@@ -205,25 +592,49 @@ def _unusable(exc: OSError, path: str | os.PathLike[str], what: str) -> InputErr
     return InputError(f"{what} {_shown(str(path))}: cannot be used ({exc.strerror or type(exc).__name__})")
 
 
+def _check_writable(folder: Path, path: str | os.PathLike[str], what: str) -> None:
+    """Refuse, naming ``path``, unless we may create entries in the existing ``folder``."""
+    where = "" if folder == Path(path).absolute() else f"{_shown(str(folder))} "
+    if _read_only(folder):
+        raise InputError(
+            f"{what} {_shown(str(path))}: {where}is on a read-only file system; give a folder you can write in"
+        )
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InputError(f"{what} {_shown(str(path))}: cannot write in {_shown(str(folder))} (permission denied)")
+
+
 def check_writable_parent(path: str | os.PathLike[str], what: str = "output") -> None:
     """Raise :class:`~vgtarm.errors.InputError` (one line naming ``path``) unless the nearest
-    existing folder above ``path`` is a folder we may write in (missing ones can be created)."""
+    existing folder above ``path`` is a folder we may write in (missing ones can be created), and
+    so is ``path`` itself when it is an existing folder (a result folder is written in as it is
+    replaced; a study's folder grows). A read-only file system is found here, before the work
+    (``statvfs``; permission bits alone would not show it to root), as is a missing permission."""
     shown = _shown(str(path))
     try:
-        ancestor = _named(path, what, "file").absolute().parent
+        named = _named(path, what, "file").absolute()
+        ancestor = named.parent
         while not ancestor.exists() and not ancestor.is_symlink():
             ancestor = ancestor.parent
         is_folder = ancestor.is_dir()
+        itself = _lstat(named)
     except OSError as exc:
         raise _unusable(exc, path, what) from exc
     if not is_folder:
         raise InputError(f"{what} {shown}: {_shown(str(ancestor))} is a file, not a folder")
-    if not os.access(ancestor, os.W_OK | os.X_OK):
-        raise InputError(f"{what} {shown}: cannot write in {_shown(str(ancestor))} (permission denied)")
+    _check_writable(ancestor, path, what)
+    if itself is not None and stat.S_ISDIR(itself.st_mode):
+        _check_writable(named, path, what)
 
 
 def _resolved(paths: Iterable[str | os.PathLike[str] | None]) -> list[Path]:
     return [Path(p).resolve() for p in paths if p is not None and os.fspath(p) != ""]
+
+
+def _refuse_mount_point(target: Path, shown: str, what: str) -> None:
+    if _is_mount_point(target):
+        raise InputError(
+            f"{what} {shown}: is a mount point, which vgtarm cannot replace by a rename; give a new name inside it"
+        )
 
 
 def check_output_folder(
@@ -235,28 +646,48 @@ def check_output_folder(
 ) -> Path:
     """Check, before any work, that a result folder can be written at ``path`` as one unit.
 
-    ``path`` must not be a file or a symbolic link; its nearest existing parent must be a folder
-    we may write in; it must not be or hold one of ``inputs`` (the files or folders the command
-    reads), nor the current folder; and an existing folder there must hold only what vgtarm wrote
-    (the files listed in its ``.vgtarm-output``; for a folder without that list, only files whose
-    names match one of the ``owned`` patterns). ``what`` names the path in messages (``--out``).
+    ``path`` must be a new name or a real folder (not a file, device, pipe, socket or symbolic
+    link, judged with ``lstat``; not a mount point); its nearest existing parent, and the folder
+    itself, must be folders we may write in, on a file system that is not read-only; it must not
+    be or hold one of ``inputs`` (the files or folders the command reads), nor the current folder;
+    and an existing folder there must hold only what vgtarm wrote (the files listed in its
+    ``.vgtarm-output``; for a folder without that list, only files whose names match one of the
+    ``owned`` patterns). ``what`` names the path in messages (``--out``).
 
-    Raises :class:`~vgtarm.errors.InputError` with one line naming ``path`` and what is wrong.
+    Raises :class:`~vgtarm.errors.InputError` with one line naming ``path``, what is there and
+    what was expected.
     """
+    return _checked_folder(path, what, inputs, owned, foreign=True)
+
+
+def _checked_folder(
+    path: str | os.PathLike[str],
+    what: str,
+    inputs: Iterable[str | os.PathLike[str] | None],
+    owned: Collection[str],
+    *,
+    foreign: bool,
+) -> Path:
+    """:func:`check_output_folder`; with ``foreign`` False, a folder holding files vgtarm did not
+    write passes (they are looked for again at the swap)."""
     target = _named(path, what, "folder")
     try:
-        return _check_output_folder(target, _shown(str(path)), what, inputs, owned)
+        return _check_output_folder(target, _shown(str(path)), what, inputs, owned, foreign)
     except OSError as exc:
         raise _unusable(exc, path, what) from exc
 
 
 def _check_output_folder(
-    target: Path, shown: str, what: str, inputs: Iterable[str | os.PathLike[str] | None], owned: Collection[str]
+    target: Path,
+    shown: str,
+    what: str,
+    inputs: Iterable[str | os.PathLike[str] | None],
+    owned: Collection[str],
+    foreign: bool,
 ) -> Path:
-    if target.is_symlink():
-        raise InputError(f"{what} {shown}: is a symbolic link; give the folder itself or a new name")
-    if target.exists() and not target.is_dir():
-        raise InputError(f"{what} {shown}: is a file, not a folder; give a new folder name")
+    found = _lstat(target)
+    if found is not None and not stat.S_ISDIR(found.st_mode):
+        raise _not_a_folder(target, what)
     check_writable_parent(target, what)
     resolved = target.resolve()
     if resolved == resolved.parent or resolved in (Path.cwd(), *Path.cwd().parents):
@@ -266,10 +697,11 @@ def _check_output_folder(
             raise InputError(f"{what} {shown}: is an input of this command; choose another folder")
         if resolved in source.parents:
             raise InputError(f"{what} {shown}: holds {_shown(str(source))}, an input of this command; choose another")
-    if target.is_dir():
-        foreign = _foreign(target, owned)
-        if foreign is not None:
-            raise InputError(f"{what} {shown}: {foreign}; give a new or empty folder, or move that away")
+    if found is not None:
+        _refuse_mount_point(target, shown, what)
+        reason = _foreign(target, owned) if foreign else None
+        if reason is not None:
+            raise InputError(f"{what} {shown}: {reason}; give a new or empty folder, or move that away")
     return target
 
 
@@ -278,10 +710,13 @@ def check_output_file(
 ) -> Path:
     """Check, before any work, that a file can be written at ``path``.
 
-    ``path`` must not be a folder, nor one of ``inputs`` (the files the command reads), and its
-    nearest existing parent must be a folder we may write in. Temporary files left beside it by
-    killed runs are removed (:func:`clean_stale`). Raises :class:`~vgtarm.errors.InputError` with
-    one line naming ``path`` and what is wrong.
+    ``path`` must be a new name or an existing regular file (``lstat``: a folder, device, named
+    pipe, socket or symbolic link is refused, a link even to a regular file; nor a mount point),
+    not one of ``inputs`` (the files the command reads), and its nearest existing parent must be
+    a folder we may write in, on a file system that is not read-only. Temporary files left beside
+    it by killed runs are removed (:func:`clean_stale`). Raises
+    :class:`~vgtarm.errors.InputError` with one line naming ``path``, what is there and what was
+    expected.
     """
     target = _named(path, what, "file")
     try:
@@ -291,51 +726,88 @@ def check_output_file(
 
 
 def _check_output_file(target: Path, shown: str, what: str, inputs: Iterable[str | os.PathLike[str] | None]) -> Path:
-    if target.is_dir():
-        raise InputError(f"{what} {shown}: is a folder; give a file name")
+    found = _lstat(target)
+    if found is not None and not stat.S_ISREG(found.st_mode):
+        raise InputError(_file_refusal(target, what, found))
     resolved = target.resolve()
     for source in _resolved(inputs):
-        if source == resolved or (target.exists() and source.exists() and os.path.samefile(source, target)):
+        if source == resolved or (found is not None and source.exists() and os.path.samefile(source, target)):
             raise InputError(f"{what} {shown}: is an input of this command; writing it would destroy it")
     check_writable_parent(target, what)
+    if found is not None:
+        _refuse_mount_point(target, shown, what)
     if target.parent.is_dir():
         clean_stale(target.parent)
     return target
 
 
-def _exchange(first: Path, second: Path) -> bool:
-    """Swap two folders in one atomic step (Linux ``renameat2``); False where that is not possible."""
-    try:
-        renameat2 = ctypes.CDLL(None, use_errno=True).renameat2
-    except (AttributeError, OSError):
-        return False
-    at_fdcwd, rename_exchange = -100, 2
-    if renameat2(at_fdcwd, os.fsencode(first), at_fdcwd, os.fsencode(second), rename_exchange) == 0:
-        return True
-    code = ctypes.get_errno()
-    if code in (errno.EINVAL, errno.ENOSYS, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EPERM):
-        return False
-    raise OSError(code, os.strerror(code), os.fspath(second))
+# --- result folders -------------------------------------------------------------------------
 
 
-def _replace_folder(new: Path, target: Path) -> None:
-    """Put the complete folder ``new`` at ``target``, replacing a folder there whole."""
-    if not target.exists() and not target.is_symlink():
-        os.rename(new, target)  # fails if a folder appeared there meanwhile: nothing is lost
-        return
-    if target.is_symlink() or not target.is_dir():  # it changed since it was checked
-        raise FileExistsError(errno.EEXIST, "exists and is not a folder", os.fspath(target))
-    if _exchange(new, target):
-        shutil.rmtree(new, ignore_errors=True)  # it now holds the old folder
-        return
-    aside = target.with_name(_temporary_name(target.name, kind="old"))
-    os.rename(target, aside)
+def _swap_back(new: Path, target: Path, what: str) -> bool:
+    """After an exchange: put the old folder (now at ``new``) back at ``target``; True if done.
+    Should that fail, the old folder is kept beside ``target`` (never at a temporary name, which a
+    later run would clean) and the new one stays at ``target``: False."""
     try:
-        os.rename(new, target)
-    except BaseException:
-        os.rename(aside, target)
-        raise
-    shutil.rmtree(aside, ignore_errors=True)
+        if _exchange(new, target):
+            return True
+    except OSError:
+        pass
+    kept = _rename_beside(new, target)
+    logger.warning(
+        "vgtarm: %s %s: could not put the earlier folder back; it is kept as it was in %s",
+        what,
+        _shown(str(target)),
+        _shown(str(kept)),
+    )
+    return False
+
+
+def _replace_folder(new: Path, target: Path, what: str, owned: Collection[str]) -> Path:
+    """Put the complete folder ``new`` at ``target``, replacing a folder there whole if it holds
+    only what vgtarm wrote; else leave it as it is and put ``new`` beside it. Returns where ``new`` went."""
+    for _ in range(_ATTEMPTS):
+        found = _lstat(target)
+        if found is None:
+            if _rename_new(new, target):
+                return target
+            continue  # something appeared there meanwhile: look at it
+        if not stat.S_ISDIR(found.st_mode):  # it changed since it was checked
+            return _placed_beside(new, target, what, f"is now {describe(target)}, not a folder")
+        reason = _foreign(target, owned)
+        if reason is not None:
+            return _placed_beside(new, target, what, reason)
+        try:
+            exchanged = _exchange(new, target)
+        except FileNotFoundError:
+            continue
+        if exchanged:  # new now holds the old folder: look at it again, where nothing can reach it
+            try:
+                reason = _foreign(new, owned)
+            except BaseException:
+                _swap_back(new, target, what)
+                raise
+            if reason is not None:
+                return _placed_beside(new, target, what, reason) if _swap_back(new, target, what) else target
+            aside = target.with_name(_temporary_name(target.name, kind="old"))
+            os.rename(new, aside)  # an old folder is only ever at an .old name (see clean_stale)
+            _empty(aside, target, what, owned)
+            return target
+        aside = target.with_name(_temporary_name(target.name, kind="old"))
+        os.rename(target, aside)
+        try:
+            reason = _foreign(aside, owned)
+            if reason is None:
+                os.rename(new, target)
+        except BaseException:
+            os.rename(aside, target)
+            raise
+        if reason is not None:
+            os.rename(aside, target)
+            return _placed_beside(new, target, what, reason)
+        _empty(aside, target, what, owned)
+        return target
+    raise FileExistsError(errno.EEXIST, "changed again and again while it was replaced", os.fspath(target))
 
 
 @contextmanager
@@ -345,6 +817,7 @@ def atomic_folder(
     *,
     inputs: Iterable[str | os.PathLike[str] | None] = (),
     owned: Collection[str] = (),
+    checked: bool = False,
 ) -> Iterator[Path]:
     """A new empty temporary folder to fill in place of the folder ``path``; it replaces ``path``
     whole when the block ends without error.
@@ -354,8 +827,16 @@ def atomic_folder(
     parents are created and the temporary sibling ``.<name>.<pid>.<random>.tmp`` is made. On any
     error, Ctrl-C included, the temporary folder is removed and ``path`` is left as it was. The
     finished folder lists its files in ``.vgtarm-output``. An ``OSError`` names the user's path.
+
+    If, when the block ends, the folder at ``path`` holds files vgtarm did not write (added during
+    the run) or is no longer a real folder, it is left as it is and the result goes beside it
+    (``<name>-2``, ...), with one warning line on the ``vgtarm`` logger; :func:`placements`
+    tells the caller where. ``checked``: the caller checked ``path`` with
+    :func:`check_output_folder` before its work and enters this block only after it (a command
+    that writes its results at the end); files the folder gained since are then the user's,
+    added during the run: they are kept the same way, not refused here.
     """
-    target = check_output_folder(path, what, inputs=inputs, owned=owned)
+    target = _checked_folder(path, what, inputs, owned, foreign=not checked)
     created = [p for p in reversed(target.absolute().parents) if not p.exists()]
     temporary = target.with_name(_temporary_name(target.name))
     try:
@@ -366,11 +847,11 @@ def atomic_folder(
         raise _user_path(exc, temporary, target)  # noqa: B904  (the same exception, renamed)
     try:
         yield temporary
-        files = sorted(_files(temporary) - {MANIFEST})
+        files = sorted(set(_entries(temporary)) - {MANIFEST})
         atomic_write_text(temporary / MANIFEST, "\n".join([_MANIFEST_HEADER, *files]) + "\n")
-        _replace_folder(temporary, target)
+        _replace_folder(temporary, target, what, owned)
     except BaseException as exc:
-        shutil.rmtree(temporary, ignore_errors=True)
+        shutil.rmtree(temporary, ignore_errors=True)  # only vgtarm writes in it
         for parent in reversed(created):  # the parents this call made, if still empty
             try:
                 parent.rmdir()

@@ -33,7 +33,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import InputError, cut
+from ..errors import InputError, cut, escape
 from ..fileio import atomic_path
 from ..markup import mpl_text
 from ..memory import check_memory
@@ -391,7 +391,7 @@ def render_animation(
     with atomic_path(path) as temporary:
         writer = _writer(temporary, plan.fps, path)
         try:
-            for i in tqdm(range(len(plan)), desc=f"rendering {path.name}", unit="frame", disable=not progress):
+            for i in tqdm(range(len(plan)), desc=f"rendering {escape(path.name)}", unit="frame", disable=not progress):
                 pixels, drawn[i] = scene.show(geometries[i], int(plan.samples[i]))
                 writer.append_data(pixels)
         except BaseException:  # an error or Ctrl-C: the encoder stops, the temporary file goes

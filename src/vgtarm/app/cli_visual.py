@@ -11,8 +11,8 @@ import math
 from pathlib import Path
 from typing import Any
 
-from ..errors import InputError
-from ..fileio import atomic_folder, check_output_file, check_output_folder
+from ..errors import InputError, escape
+from ..fileio import atomic_folder, check_output_file, check_output_folder, placements
 from ..model.parameters import JOINT_NAMES
 from ..model.robot import load_robot
 
@@ -50,7 +50,7 @@ def cmd_draw(args: argparse.Namespace) -> int:
         raise InputError(f"Q: expected {robot.n_joints} joint values ({' '.join(robot.joint_names)}), got {len(q)}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     save_figure(pose_figure(robot, q), args.out)
-    print(f"drawing written to {args.out}")
+    print(f"drawing written to {escape(str(args.out))}")  # escaped: a path never drives the terminal
     return 0
 
 
@@ -98,7 +98,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
         robot, _load_run(args.run_dir), args.out, fps=args.fps, speed=args.speed, dpi=args.dpi, progress=not args.quiet
     )
     print(
-        f"animation written to {made.path} ({len(made.plan)} frames at {made.plan.fps:g} fps,"
+        f"animation written to {escape(str(made.path))} ({len(made.plan)} frames at {made.plan.fps:g} fps,"
         f" {made.plan.duration_s:.3f} s of run at {made.plan.speed:g}x)"
     )
     return 0
@@ -113,9 +113,10 @@ def cmd_report(args: argparse.Namespace) -> int:
     robot = load_robot(robot_file_of_runs(args.config, list(args.runs)))
     runs = load_runs(args.runs)
     intro = "Runs: " + ", ".join(p.name for p in args.runs)
-    with atomic_folder(args.out, "--out", inputs=inputs, owned=owned) as folder:  # replaces an old report whole
+    with placements() as moved, atomic_folder(args.out, "--out", inputs=inputs, owned=owned, checked=True) as folder:
         page = write_html_report(robot, runs, folder, title=args.title, intro=intro)
-    print(f"report written to {args.out / page.name}")
+    where = moved.get(args.out, args.out)  # beside it if the folder gained a user's file during the run
+    print(f"report written to {escape(str(where / page.name))}")
     return 0
 
 
