@@ -2,10 +2,12 @@
 
 Every case of issue 14 that used to crash (SIGBUS, segfault), print a traceback, load a planted
 library or give garbage with exit 0 must now end in a rebuilt cache or in one line. The checks
-run for real; only the rebuild is made cheap in most tests by replacing ``compiled._compile``
-(the step that runs CasADi's generator and the C compiler) with a copy of the pristine library
-taken from the user's cache, so one genuine compile is left (``test_truncated_library_is_rebuilt_by_the_command``).
-Commands run in subprocesses with ``VGTARM_CACHE_DIR`` pointing at a temporary folder.
+run for real; only the rebuild is made cheap in most tests by replacing ``compiled._produce``
+(the step that runs CasADi's generator and the C compiler in a build process) with a copy of the
+pristine library taken from the user's cache, so few genuine compiles are left
+(``test_truncated_library_is_rebuilt_by_the_command`` and the entries of another structure of
+issue 20, which compile two one-module stacks). Commands run in subprocesses with
+``VGTARM_CACHE_DIR`` pointing at a temporary folder.
 """
 
 from __future__ import annotations
@@ -26,7 +28,9 @@ import pytest
 
 import vgtarm
 from vgtarm.errors import ConfigError
-from vgtarm.model import compiled
+from vgtarm.model import compiled, outline
+from vgtarm.model.definition import PAPER, Definition, StackDefinition
+from vgtarm.model.stack import load_stack
 
 #: Runs the command line in a fresh interpreter (``python -c``): exit status and streams as a user sees them.
 CLI = "import sys; from vgtarm.app.cli import main; sys.exit(main())"
@@ -113,14 +117,14 @@ def cheap_rebuild(monkeypatch: pytest.MonkeyPatch, pristine: compiled.CacheEntry
     signatures = compiled._parse_metadata(pristine.metadata.read_bytes(), pristine).signatures
     builds: list[Path] = []
 
-    def copy(compiler: str, workdir: Path, definition: object = None) -> tuple[Path, dict[str, compiled.Signature]]:
-        assert definition == compiled.PAPER
+    def copy(compiler: str, workdir: Path, definition: object, key: str) -> tuple[Path, dict[str, compiled.Signature]]:
+        assert definition == compiled.PAPER and key == pristine.key
         builds.append(workdir)
         assert workdir.parent == compiled.cache_dir() and (workdir.stat().st_mode & 0o777) == 0o700
         shutil.copyfile(pristine.library, workdir / "library.so")
         return workdir / "library.so", signatures
 
-    monkeypatch.setattr(compiled, "_compile", copy)
+    monkeypatch.setattr(compiled, "_produce", copy)
     # the key of the pristine copy, even if a model source changes while the suite runs
     monkeypatch.setattr(compiled, "_cache_key", lambda compiler, definition=compiled.PAPER: pristine.key)
     monkeypatch.delenv("VGTARM_BACKEND", raising=False)
@@ -175,13 +179,21 @@ DAMAGE = {
     "metadata with a wrong library size": (_edit_metadata(lambda m: m.update(size=m["size"] + 1)), "metadata says"),
     "metadata with a wrong output size": (
         _edit_metadata(lambda m: m["functions"]["tip"].update(nnz_out=[2])),
-        "tip: size of output 0",
+        "metadata field functions.tip.nnz_out is [2], expected [3] for this model",
     ),
     "metadata with a wrong input size": (
         _edit_metadata(lambda m: m["functions"]["mass"]["nnz_in"].__setitem__(0, 70)),
-        "mass: size of input 0",
+        "metadata field functions.mass.nnz_in is [70, 45], expected [7, 45]",
     ),
-    "metadata missing an output": (_edit_metadata(_fewer_outputs), "fk: number of inputs or outputs"),
+    "metadata missing an output": (_edit_metadata(_fewer_outputs), "metadata field functions.fk.nnz_out is"),
+    "metadata with a renamed output": (
+        _edit_metadata(lambda m: m["functions"]["fk"]["out_names"].__setitem__(0, "other")),
+        "metadata field functions.fk.out_names",
+    ),
+    "metadata of another structure": (
+        _edit_metadata(lambda m: m.update(structure="stack:0.0,-,-")),
+        "metadata field structure is 'stack:0.0,-,-', expected 'paper'",
+    ),
     "metadata with a hostile function name": (
         _edit_metadata(lambda m: m["functions"]["tip"].update(name="x; int y")),
         "C identifier",
@@ -370,9 +382,9 @@ def test_refused_cache_is_refused_even_with_a_good_library(tmp_path, pristine):
     assert len(stderr_lines(done)) == 1 and "refusing the cache folder" in done.stderr
 
 
-def test_compiled_backend_required_but_impossible_is_one_error_line(tmp_path):
+def test_compiled_backend_required_but_impossible_is_one_error_line(tmp_path, configuration):
     env = {"VGTARM_CACHE_DIR": str(tmp_path / "cache"), "CC": "false", "VGTARM_BACKEND": "compiled"}
-    done = run(["describe"], env, tmp_path)
+    done = run(fk_args(configuration), env, tmp_path)  # describe needs no compiled model: it builds none
     assert done.returncode == 1 and not done.stdout
     lines = stderr_lines(done)
     assert len(lines) == 1 and lines[0].startswith("vgtarm: error: VGTARM_BACKEND = 'compiled', but the C compiler")
@@ -399,3 +411,124 @@ def test_empty_cache_dir_means_unset_and_relative_means_absolute(tmp_path, prist
     done = run([], {"VGTARM_CACHE_DIR": "relative"}, work, code=WHICH)
     kind, library = done.stdout.split()
     assert done.returncode == 0 and kind == "compiled" and Path(library).parent == work / "relative"
+
+
+# ----------------------------------------------------------------------------- entries of another model (issue 20)
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+@pytest.mark.parametrize("model", ["paper", "planar_module.toml", "paper_robot.toml", "six_modules.toml"])
+def test_the_outline_gives_every_function_the_sizes_of_the_real_one(model):
+    """The metadata is checked against the sizes the outline computes in milliseconds: they must be
+    those of the functions the symbolic construction builds."""
+    definition: Definition = PAPER if model == "paper" else StackDefinition.of(load_stack(EXAMPLES / model))
+    shapes = outline.shapes(definition)
+    real = {key: compiled.Signature.of(f) for key, f in compiled.build_functions(definition).items()}
+    assert set(shapes) == set(real)
+    for key, sig in real.items():
+        shape = shapes[key]
+        assert (sig.name, sig.nnz_in, sig.nnz_out, sig.in_names, sig.out_names, sig.sz_arg, sig.sz_res) == (
+            shape.name,
+            shape.nnz_in,
+            shape.nnz_out,
+            shape.in_names,
+            shape.out_names,
+            shape.sz_arg,
+            shape.sz_res,
+        ), key
+
+
+@pytest.fixture(scope="module")
+def planars(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Path, compiled.CacheEntry]]:
+    """Two one-module stacks of the same sizes and different structures (plane 0 and 90 degrees),
+    each compiled for real into a private cache: ``{plane: (robot file, cache entry)}``."""
+    if compiled.find_compiler() is None:
+        pytest.skip("no C compiler")
+    folder = tmp_path_factory.mktemp("planars")
+    cache = folder / "cache"
+    cache.mkdir(mode=0o700)
+    text = (EXAMPLES / "planar_module.toml").read_text()
+    made = {}
+    for plane in ("0", "90"):
+        path = folder / f"planar{plane}.toml"
+        path.write_text(text.replace("plane = 0.0", f"plane = {plane}.0", 1))
+        definition = StackDefinition.of(load_stack(path))
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setenv("VGTARM_CACHE_DIR", str(cache))
+            patch.delenv("VGTARM_BACKEND", raising=False)
+            backend = compiled.get_backend.__wrapped__("compiled", definition)
+        key = backend.library_path.name.removeprefix("vgtarm_").removesuffix(".so")
+        made[plane] = (path, compiled.CacheEntry(cache, key, definition))
+    assert made["0"][1].key != made["90"][1].key
+    return made
+
+
+def _place(source: compiled.CacheEntry, target: compiled.CacheEntry, **rewrite: str) -> None:
+    """``source``'s library and metadata under ``target``'s key, the metadata's key (and the fields
+    ``rewrite`` names) rewritten: a consistent entry, but of another model."""
+    target.folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+    shutil.copy2(source.library, target.library)
+    meta = json.loads(source.metadata.read_text())
+    meta.update(key=target.key, library=target.library.name, **rewrite)
+    target.metadata.write_text(json.dumps(meta))
+
+
+def _planar_q(path: Path) -> np.ndarray:
+    """A configuration off the symmetric home, so that the planes of 0 and 90 degrees move the tip apart."""
+    return load_stack(path).home + np.array([0.01, -0.01, 0.0])
+
+
+@pytest.mark.parametrize(
+    ("other", "reason"),
+    [
+        ("90", "metadata field structure is 'stack:90.0,-,-', expected 'stack:0.0,-,-'"),  # same sizes: a wrong tip
+        ("paper", "metadata field structure is 'paper', expected 'stack:0.0,-,-'"),  # other sizes: a traceback
+    ],
+)
+def test_an_entry_of_another_structure_under_this_key_is_rebuilt_once(tmp_path, planars, pristine, other, reason):
+    """Issue 20: a consistent entry of another structure, placed under this key with its key field
+    rewritten, loaded and gave a wrong tip with exit 0 (same sizes) or a traceback on every command
+    (other sizes). It is damage: removed and rebuilt once, with one line, and the tip is right."""
+    path, planar = planars["0"]
+    entry = compiled.CacheEntry(tmp_path / "cache", planar.key, planar.definition)
+    _place(pristine if other == "paper" else planars[other][1], entry)
+    q = _planar_q(path)
+    args = ["fk", "--config", str(path), *(repr(float(v)) for v in q)]
+    done = run(args, {"VGTARM_CACHE_DIR": str(entry.folder)}, tmp_path)
+    assert done.returncode == 0, done.stderr
+    found = stderr_lines(done)
+    assert len(found) == 1 and reason in found[0] and "removing it and rebuilding the library once" in found[0], found
+    expected = compiled.InterpretedBackend(compiled.build_functions(planar.definition))
+    stack = load_stack(path)
+    tip = expected.evaluate("tip", [q, stack.vector()], 1)[0][0]
+    np.testing.assert_allclose(printed_tip(done.stdout), tip, rtol=1e-9, atol=1e-12)
+    other_tip = compiled.InterpretedBackend(compiled.build_functions(planars["90"][1].definition))
+    assert np.abs(other_tip.evaluate("tip", [q, stack.vector()], 1)[0][0] - tip).max() > 1e-3  # it was wrong
+    assert_clean_entry(entry)
+    assert json.loads(entry.metadata.read_text())["structure"] == "stack:0.0,-,-"
+    again = run(args, {"VGTARM_CACHE_DIR": str(entry.folder)}, tmp_path)
+    assert again.returncode == 0 and not again.stderr  # rebuilt once: the next command is silent
+
+
+def test_an_entry_whose_structure_field_is_rewritten_too_fails_on_its_sizes(tmp_path, planars, pristine):
+    _, planar = planars["0"]
+    entry = compiled.CacheEntry(tmp_path / "cache", planar.key, planar.definition)
+    _place(pristine, entry, structure="stack:0.0,-,-")
+    with pytest.raises(
+        compiled._Damaged, match=r"^metadata field functions\.fk\.nnz_in is \[7, 45\], expected \[3, \d+\]"
+    ):
+        compiled._load(entry)
+
+
+def test_the_library_report_is_checked_against_the_signatures(pristine):
+    """Second line of defence: the library's own report of its functions' sizes (after the
+    metadata's checks) catches signatures that do not describe it."""
+    meta = compiled._parse_metadata(pristine.metadata.read_bytes(), pristine)
+    wrong = dict(meta.signatures)
+    wrong["tip"] = compiled.Signature(**{**wrong["tip"].__dict__, "nnz_out": (2,)})
+    backend = compiled.CompiledBackend(pristine.library, wrong)
+    try:
+        assert backend.mismatches() == ["tip: size of output 0"]
+    finally:
+        backend.close()

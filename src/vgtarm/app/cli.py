@@ -21,7 +21,14 @@ import numpy as np
 
 from .. import __version__, paths
 from ..errors import MESSAGE_LENGTH, ConfigError, InputError, UnreachableError, VgtarmError, cut, escape, shown
-from ..fileio import atomic_folder, atomic_write_text, check_output_file, check_output_folder, read_text_limited
+from ..fileio import (
+    atomic_folder,
+    atomic_write_text,
+    check_output_file,
+    check_output_folder,
+    placements,
+    read_text_limited,
+)
 from ..ik import CSV_COLUMNS, write_csv
 from ..model.parameters import JOINT_NAMES, JOINT_UNITS, ROBOT_FILE_LIMIT
 from ..model.robot import load_robot
@@ -35,18 +42,17 @@ def _format_vector(values: Sequence[float] | np.ndarray, digits: int = 6) -> str
 
 def cmd_describe(args: argparse.Namespace) -> int:
     """Print the robot: dimensions, limits, home pose, tip at home, mass-matrix eigenvalues."""
-    robot = load_robot(args.config)
-    if robot.is_stack:
-        from .cli_stack import describe_stack
+    from ..model.stack import Stack
+    from .cli_stack import describe_stack, home_figures, model_state, robot_description
 
-        return describe_stack(robot)
-    p = robot.parameters
+    p = robot_description(args.config)  # no model is built: see cli_stack
+    if isinstance(p, Stack):
+        return describe_stack(p)
     home = p.home
-    fk = robot.forward_kinematics(home)
-    eigenvalues = np.linalg.eigvalsh(robot.mass_matrix(home))
+    state, figures = model_state(p), home_figures(p)  # before any line: either may refuse in one line
     print(f"robot      {escape(p.name)}")  # a name from a user's file never drives the terminal
     print(f"source     {escape(p.source)}")
-    print(f"model      {robot.backend.kind} CasADi functions")
+    print(f"model      {state}")
     for k, module in enumerate(p.modules, start=1):
         print(f"module {k}   b = {module.b:g} m, d = {module.d:g} m")
     print(f"twist part h1 = {p.h1:g} m")
@@ -58,8 +64,11 @@ def cmd_describe(args: argparse.Namespace) -> int:
         print(f"body       {body.name:<13} mass {body.mass:g} kg, com {_format_vector(body.com)} m")
     print(f"friction   {_format_vector(p.viscous)} (N s/m; N m s/rad for psi3)")
     print(f"gravity    {_format_vector(p.gravity)} m/s^2")
-    print(f"tip @ home {_format_vector(fk.tip, 10)} m")
-    print(f"M @ home   eigenvalues {_format_vector(eigenvalues, 5)} (kg, kg m^2)")
+    print(f"tip @ home {_format_vector(figures.tip, 10)} m")
+    if figures.eigenvalues is None:
+        print(f"M @ home   {figures.mass_note}")
+    else:
+        print(f"M @ home   eigenvalues {_format_vector(figures.eigenvalues, 5)} (kg, kg m^2)")
     return 0
 
 
@@ -141,14 +150,20 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         except SimulationError as exc:
             if args.out is not None and exc.result is not None:
                 try:  # the folder is replaced whole: no figure of an earlier run stays beside it
-                    with atomic_folder(args.out, "--out", inputs=[args.config], owned=RUN_FILES) as partial:
+                    with (
+                        placements() as moved,
+                        atomic_folder(
+                            args.out, "--out", inputs=[args.config], owned=RUN_FILES, checked=True
+                        ) as partial,
+                    ):
                         exc.result.save(partial)  # type: ignore[attr-defined]
                         if robot_text is not None:
                             atomic_write_text(partial / ROBOT_COPY, robot_text)
                 except (VgtarmError, OSError, ValueError) as failure:
                     note = f"partial results not written: {cut(str(failure), 120)}"
                 else:
-                    note = f"partial results (up to the failure, success false) written to {cut(str(args.out), 200)}"
+                    where = moved.get(args.out, args.out)  # beside it if the folder gained a user's file
+                    note = f"partial results (up to the failure, success false) written to {cut(str(where), 200)}"
                 # one line: the failure (cut so that the note is never cut off), then where its results are
                 raise SimulationError(f"{cut(str(exc), 200)}; {note}", exc.result) from exc
             raise
@@ -183,12 +198,15 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         text = f"{value:.6g}" if isinstance(value, float) else str(value)
         print(f"{key:<34} {text}")
     if args.out is not None:
-        with atomic_folder(args.out, "--out", inputs=[args.config], owned=RUN_FILES) as written:  # whole or not
+        with (
+            placements() as moved,
+            atomic_folder(args.out, "--out", inputs=[args.config], owned=RUN_FILES, checked=True) as written,
+        ):
             result.save(written)
             save_figure(comparison_figure([result]), written / "figure.png")
             if robot_text is not None:  # animate and report find the run's robot by it
                 atomic_write_text(written / ROBOT_COPY, robot_text)
-        print(f"results written to {args.out}")
+        print(f"results written to {escape(str(moved.get(args.out, args.out)))}")  # escaped: never drives the terminal
     return 0
 
 
@@ -202,7 +220,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     check_output_folder(args.out, "--out", inputs=[args.config], owned=REPRODUCE_FILES)  # before the work
     robot = load_robot(args.config)
     runs = paper_runs()
-    with tqdm(total=len(runs), desc="reproduce", unit="run", disable=args.quiet) as bar:
+    with placements() as moved, tqdm(total=len(runs), desc="reproduce", unit="run", disable=args.quiet) as bar:
 
         def progress(label: str, done: int, total: int) -> None:
             bar.set_postfix_str(label)
@@ -226,7 +244,9 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
             f"{spec.folder:<26} {s['max_tip_error_m'] * 1e3:>10.4f} {s['max_tip_error_after_transient_m'] * 1e3:>17.4f}"
             f" {s['ga_activations']:>5} {s['wall_time_s']:>9.3f}"
         )
-    print(f"report written to {made.report} and {made.report.with_suffix('.html')} ({made.wall_time_s:.1f} s)")
+    report = moved.get(args.out, args.out) / made.report.name  # beside it if the folder gained a user's file
+    shown_report = f"{escape(str(report))} and {escape(str(report.with_suffix('.html')))}"
+    print(f"report written to {shown_report} ({made.wall_time_s:.1f} s)")
     return 0
 
 
@@ -374,7 +394,8 @@ def cmd_ik(args: argparse.Namespace) -> int:
     worst = int(np.argmax(samples.residual))
     largest = int(np.argmax(samples.phi))
     task = "tip position and orientation held from the first sample" if args.pose else "tip position, orientation free"
-    print(f"path       {path.name}: {len(result)} samples, dt = {path.dt:g} s, t = {path.t[0]:g} .. {path.t[-1]:g} s")
+    span = f"dt = {path.dt:g} s, t = {path.t[0]:g} .. {path.t[-1]:g} s"
+    print(f"path       {escape(path.name)}: {len(result)} samples, {span}")  # the name of a user's file, escaped
     print(f"task       {task}")
     print(f"solver     {result.solver}, rates {result.rates}, {result.wall_time * 1e3:.1f} ms")
     fallbacks = int(np.count_nonzero(np.char.find(samples.method.astype(str), "fallback") >= 0))
@@ -392,7 +413,7 @@ def cmd_ik(args: argparse.Namespace) -> int:
         print(f"           {name:<5} {gap:.6g} {robot.joint_units[i]} from its {side} at t = {when:.6g} s")
     if args.output is not None:
         columns = f"{', '.join(CSV_COLUMNS[:4])}, joints, rates, accelerations"
-        print(f"output     {args.output} ({len(result)} rows: {columns})")
+        print(f"output     {escape(str(args.output))} ({len(result)} rows: {columns})")
     return 0
 
 

@@ -1,43 +1,123 @@
-"""``vgtarm convert-robot``: write a robot file in the stack format.
+"""``vgtarm convert-robot`` and what ``vgtarm describe`` prints without building a model.
 
 Registered in :func:`vgtarm.app.cli.build_parser` by :func:`add_parsers`. The stack format
-(``vgtarm.model.stack``) describes any stack of VGT modules; this command turns a robot file of
-the fixed 7-joint format (default: the shipped reference robot) into it, value for value, so the
+(``vgtarm.model.stack``) describes any stack of VGT modules; ``convert-robot`` turns a robot file
+of the fixed 7-joint format (default: the shipped reference robot) into it, value for value, so the
 stack's model gives the fixed model's numbers (see ``docs/modelling.md``, "Stacks of modules").
+
+``vgtarm describe`` needs no compiled model, so it builds none (a stack of fifty modules would take
+hours): it reads the robot file (:func:`robot_description`), evaluates the tip at home and the mass
+matrix there with CasADi's interpreter on those two functions alone (:func:`home_figures`; the mass
+matrix only when its construction is estimated short) and says what building the whole model
+would cost (:func:`model_state`).
 """
 
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
-from ..errors import cut, escape
-from ..fileio import atomic_write_text, check_output_file
-from ..model.parameters import load_parameters
-from ..model.robot import Robot
+from ..errors import ConfigError, cut, escape
+from ..fileio import atomic_write_text, check_output_file, parse_toml, read_text_limited
+from ..memory import size_text
+from ..model import budget, compiled
+from ..model.parameters import ROBOT_FILE_LIMIT, RobotParameters, load_parameters
+from ..model.robot import definition_of, robot_parameters_from_dict
 from ..model.stack import Stack, stack_from_parameters, stack_to_toml
+
+#: ``vgtarm describe`` evaluates the mass matrix at home when building its function alone is
+#: estimated shorter than this (s): about 11 modules (a stack of 50 would take minutes).
+DESCRIBE_MASS_LIMIT = 1.0
 
 
 def _vector(values: object, digits: int = 6) -> str:
     return "[" + ", ".join(f"{float(v):.{digits}g}" for v in values) + "]"  # type: ignore[attr-defined]
 
 
-def describe_stack(robot: Robot) -> int:
+def robot_description(config: Path | None) -> RobotParameters | Stack:
+    """The validated parameters of the robot file ``config`` (either format; the shipped reference
+    robot for None), read as :func:`vgtarm.load_robot` reads them, without building its model."""
+    if config is None:
+        return load_parameters(None)
+    text = read_text_limited(config, ROBOT_FILE_LIMIT, "configuration file", error=ConfigError)
+    data = parse_toml(text, cut(str(config), 200), error=ConfigError)
+    return robot_parameters_from_dict(data, source=str(config))
+
+
+@dataclass(frozen=True)
+class HomeFigures:
+    """What ``vgtarm describe`` evaluates at the home pose.
+
+    Attributes:
+        tip: ``(3,)`` tip point (m).
+        eigenvalues: eigenvalues of the mass matrix (kg, kg m^2), or None when not evaluated.
+        mass_note: why the mass matrix was not evaluated (empty when it was).
+    """
+
+    tip: NDArray[np.float64]
+    eigenvalues: NDArray[np.float64] | None
+    mass_note: str
+
+
+def home_figures(parameters: RobotParameters | Stack) -> HomeFigures:
+    """The tip and the mass matrix's eigenvalues at home, from the functions of the model's one
+    definition run by CasADi's interpreter: the tip always (the kinematics alone: 0.06 s for fifty
+    modules), the mass matrix when its construction is estimated shorter than
+    :data:`DESCRIBE_MASS_LIMIT`. Nothing is compiled or written."""
+    definition = definition_of(parameters)
+    cost = budget.estimate(definition)
+    names = ["tip"] + (["mass"] if cost.mass_seconds <= DESCRIBE_MASS_LIMIT else [])
+    functions = compiled.functions_of(definition, names)
+    home, p, n = parameters.home, parameters.vector(), parameters.n_joints
+    tip = functions.evaluate("tip", [home, p], 1)[0][0]
+    if "mass" not in names:
+        note = (
+            f"not evaluated: its function alone takes about {budget.time_text(cost.mass_seconds)} to build "
+            f"for {n} joints (describe builds no model)"
+        )
+        return HomeFigures(tip, None, note)
+    mass = functions.evaluate("mass", [home, p], 1)[0].reshape(n, n)
+    return HomeFigures(tip, np.asarray(np.linalg.eigvalsh(mass), dtype=np.float64), "")
+
+
+def model_state(parameters: RobotParameters | Stack) -> str:
+    """What a command that needs the model would do: load the compiled library from the cache, or
+    build it (its estimated cost, and whether it would be refused), or use the interpreter."""
+    definition = definition_of(parameters)
+    cost = budget.estimate(definition)
+    choice = compiled.backend_choice()
+    if choice == "interpreted":
+        kind, what = "interpreted", "symbolic model for CasADi's interpreter (VGTARM_BACKEND)"
+    elif choice == "auto" and compiled.find_compiler() is None:
+        kind, what = "interpreted", "no C compiler; symbolic model for CasADi's interpreter"
+    elif compiled.library_cached(definition):
+        return "compiled library in the cache"
+    else:
+        kind, what = "compiled", "compiled library"
+    text = (
+        f"{what} not built yet: about {budget.time_text(cost.seconds(kind))} and "
+        f"{size_text(cost.bytes(kind))} to build on first use (estimated)"
+    )
+    try:
+        budget.check(cost, kind)
+    except budget.BuildRefused:
+        return f"{text}, more than allowed here: commands that need it refuse to build it"
+    return text
+
+
+def describe_stack(stack: Stack) -> int:
     """``vgtarm describe`` of a stack: modules, joints, bodies, tip and reach at home, mass matrix."""
-    stack = robot.parameters
-    assert isinstance(stack, Stack)
     home = stack.home
-    tip = robot.tip_position(home)
-    eigenvalues = np.linalg.eigvalsh(robot.mass_matrix(home))
+    state, figures = model_state(stack), home_figures(stack)  # before any line: either may refuse in one line
+    tip = figures.tip
     print(f"robot      {escape(stack.name)}")  # a name from a user's file never drives the terminal
     print(f"source     {escape(stack.source)}")
-    print(
-        f"model      {robot.backend.kind} CasADi functions, a stack of {stack.n_modules} modules, "
-        f"{stack.n_joints} joints"
-    )
+    print(f"model      a stack of {stack.n_modules} modules, {stack.n_joints} joints; {state}")
     for k, module in enumerate(stack.modules, start=1):
         twist = "" if module.twist is None else f", then twist psi{k + 1} (height {module.twist.height:g} m)"
         print(f"module {k:<3} b = {module.b:g} m, d = {module.d:g} m, plane {module.plane:g} deg{twist}")
@@ -53,7 +133,10 @@ def describe_stack(robot: Robot) -> int:
     print(f"friction   {_vector(stack.viscous)} (N s/m legs; N m s/rad twists)")
     print(f"gravity    {_vector(stack.gravity)} m/s^2")
     print(f"tip @ home {_vector(tip, 10)} m; reach {float(np.linalg.norm(tip)):.6g} m")
-    print(f"M @ home   eigenvalues {_vector(eigenvalues, 5)} (kg, kg m^2)")
+    if figures.eigenvalues is None:
+        print(f"M @ home   {figures.mass_note}")
+    else:
+        print(f"M @ home   eigenvalues {_vector(figures.eigenvalues, 5)} (kg, kg m^2)")
     return 0
 
 
@@ -70,7 +153,7 @@ def cmd_convert_robot(args: argparse.Namespace) -> int:
     )
     args.out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_text(args.out, stack_to_toml(stack, header=header))
-    print(f"stack of {stack.n_modules} modules and {stack.n_twists} twist joint written to {args.out}")
+    print(f"stack of {stack.n_modules} modules and {stack.n_twists} twist joint written to {escape(str(args.out))}")
     return 0
 
 

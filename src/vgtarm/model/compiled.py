@@ -20,20 +20,30 @@ Trust rules of the cache (the README repeats them for users):
 
 - The folder must belong to the current user and be writable by nobody else (it is created with
   mode 0700); otherwise it is refused with one line saying why.
-- Beside each library ``vgtarm_<key>.so`` lies ``vgtarm_<key>.json``: the key, the library's
-  size and SHA-256 and the signatures of the generated functions. A library is opened only by
-  absolute path and only after its metadata validated and its size and SHA-256 matched (so a
-  truncated file is never mapped); once opened, the library's own report of every function's
-  sizes and the structure layout must equal the metadata. A library without metadata is never
-  opened.
-- Whatever fails a check is removed and rebuilt once, with one warning line. A build runs in a
-  private temporary folder ``.build-<pid>-*`` of the cache, under a lock, and moves the library
-  and then its metadata into place atomically; build folders left by dead processes or older
-  than an hour are removed.
-- When the compiled model cannot be had (no or failing compiler, a read-only or refused folder,
-  a rebuilt library that still fails), ``auto`` runs CasADi's interpreter after one line naming
-  the reason; ``VGTARM_BACKEND=interpreted`` chooses it silently, and ``compiled`` turns the
-  reason into a :class:`BackendError` instead.
+- Beside each library ``vgtarm_<key>.so`` lies ``vgtarm_<key>.json``: the key, the model's
+  structure, the library's size and SHA-256 and the signatures of the generated functions. A
+  library is opened only by absolute path and only after its metadata validated and its size and
+  SHA-256 matched (so a truncated file is never mapped). The metadata must identify the model being
+  loaded, not only carry its key: its structure must be this model's, and every function must have
+  the C name, the sizes and names of inputs and outputs and the argument and result counts that the
+  code generation gives this model (computed from the definition in milliseconds by
+  :mod:`.outline`). Once opened, the library's own report of every function's sizes and the
+  structure layout must equal the metadata. A library without metadata is never opened.
+- Whatever fails a check is removed and rebuilt once, with one warning line. A build is first
+  estimated from the structure and refused in one line beyond the memory available or the build
+  time limit (:mod:`.budget`); it runs in a build process of its own (:mod:`.building`: Ctrl-C
+  stops it within a fraction of a second, a terminal shows its phases) in a private temporary
+  folder ``.build-<pid>-*`` of the cache, under a lock, and the library and then its metadata are
+  moved into place atomically; the folder goes whatever happens, and build folders left by dead
+  processes or older than an hour are removed.
+- When the compiled model cannot be had (no or failing compiler, a file size limit that stops the
+  build, a read-only or refused folder, a rebuilt library that still fails), ``auto`` runs
+  CasADi's interpreter after one line naming the reason; ``VGTARM_BACKEND=interpreted`` chooses it
+  silently, and ``compiled`` turns the reason into a :class:`BackendError` instead. The
+  interpreter's symbolic construction is estimated and refused alike, and runs in a build process
+  too unless it is short (:data:`IN_PROCESS_SYMBOLIC`). A build refused by its estimate raises
+  :class:`~vgtarm.model.budget.BuildRefused` whatever the backend choice: the interpreter would
+  need the same symbolic construction.
 """
 
 from __future__ import annotations
@@ -64,7 +74,7 @@ from cffi import FFI
 from numpy.typing import NDArray
 
 from ..errors import ConfigError, VgtarmError, cut, shown
-from . import codegen, interface
+from . import budget, building, codegen, interface, outline
 from .definition import PAPER, Definition
 
 logger = logging.getLogger("vgtarm")
@@ -77,7 +87,19 @@ _SOURCE_SUFFIXES = (".py", ".c", ".h", ".toml")
 #: editing one does not recompile every library (the six-module arm's takes about 80 s); the build
 #: recipe of this module is hashed apart (:func:`_recipe`). ``tests/test_architecture.py`` checks
 #: that no module the code generation imports, directly or not, is in this set.
-RUNTIME_ONLY = frozenset({"__init__.py", "robot.py", "closedloop.py", "sanity.py", "compiled.py", "stack/model.py"})
+RUNTIME_ONLY = frozenset(
+    {
+        "__init__.py",
+        "robot.py",
+        "closedloop.py",
+        "sanity.py",
+        "compiled.py",
+        "stack/model.py",
+        "budget.py",
+        "building.py",
+        "outline.py",
+    }
+)
 _CSRC = _PACKAGE_DIR / "csrc"
 _CFLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off")
 #: Flags of a stack's generated functions, compiled apart before the link with the drivers (built
@@ -365,6 +387,26 @@ def build_functions(definition: Definition = PAPER) -> dict[str, ca.Function]:
     return {key: builder() for key, builder in codegen.builders_for(definition).items()}
 
 
+def functions_of(definition: Definition, names: Sequence[str]) -> InterpretedBackend:
+    """CasADi's interpreter on the functions ``names`` of ``definition`` alone, built in this process
+    (for a few functions known to be cheap: nothing is estimated or compiled)."""
+    builders = codegen.builders_for(definition)
+    return InterpretedBackend({name: builders[name]() for name in names})
+
+
+def library_cached(definition: Definition = PAPER) -> bool:
+    """Whether the cache holds a library and metadata for ``definition`` under the current key (not
+    checked: only a load checks it)."""
+    compiler = find_compiler()
+    if compiler is None:
+        return False
+    try:
+        entry = CacheEntry(cache_dir(), _cache_key(compiler, definition), definition)
+    except RuntimeError:  # Path.home() without a home folder
+        return False
+    return os.path.lexists(entry.library) and os.path.lexists(entry.metadata)
+
+
 def cache_dir() -> Path:
     """Folder of the compiled libraries, always absolute.
 
@@ -426,10 +468,12 @@ def _cache_key(compiler: str, definition: Definition = PAPER) -> str:
 
 @dataclass(frozen=True)
 class CacheEntry:
-    """Where the library of one cache key lives: ``folder/vgtarm_<key>.so`` and its ``.json``."""
+    """Where the library of one cache key lives: ``folder/vgtarm_<key>.so`` and its ``.json``, and
+    the model it must be the library of (its metadata is checked against it)."""
 
     folder: Path
     key: str
+    definition: Definition = PAPER
 
     @property
     def library(self) -> Path:
@@ -564,9 +608,31 @@ class _Metadata:
     signatures: dict[str, Signature]
 
 
+def structure_of(definition: Definition) -> str:
+    """The structure a library's metadata records: ``paper``, or a stack's structure key."""
+    return definition.key or "paper"
+
+
+def _check_shapes(signatures: dict[str, Signature], definition: Definition) -> None:
+    """:class:`_Damaged` unless every function has the C name and the sizes and names of inputs and
+    outputs that the code generation gives ``definition`` (:mod:`.outline`)."""
+    for key, shape in outline.shapes(definition).items():
+        sig = signatures[key]
+        for field in ("name", "nnz_in", "nnz_out", "in_names", "out_names", "sz_arg", "sz_res"):
+            found, expected = getattr(sig, field), getattr(shape, field)
+            if found != expected:
+                shown_found = list(found) if isinstance(found, tuple) else found
+                shown_expected = list(expected) if isinstance(expected, tuple) else expected
+                raise _Damaged(
+                    f"metadata field functions.{key}.{field} is {shown(shown_found, 40)}, expected "
+                    f"{shown(shown_expected, 40)} for this model"
+                )
+
+
 def _parse_metadata(raw: bytes, entry: CacheEntry) -> _Metadata:
-    """The validated metadata of ``entry``: the format, the key, the library's size and SHA-256,
-    and one signature for each function the model generates (distinct C names)."""
+    """The validated metadata of ``entry``: the format, the key, the model's structure, the
+    library's size and SHA-256, and one signature for each function the model generates, with the
+    names and sizes the code generation gives this model (distinct C names)."""
     try:
         payload = json.loads(raw)
     except (ValueError, RecursionError):
@@ -575,17 +641,23 @@ def _parse_metadata(raw: bytes, entry: CacheEntry) -> _Metadata:
         raise _Damaged(f"{entry.metadata.name} is not metadata of format {METADATA_FORMAT}")
     if payload.get("key") != entry.key:
         raise _Damaged(f"metadata field key is {shown(payload.get('key'), 30)}, expected {entry.key!r}")
+    structure = structure_of(entry.definition)
+    if payload.get("structure") != structure:
+        raise _Damaged(
+            f"metadata field structure is {shown(payload.get('structure'), 50)}, expected {shown(structure, 50)}"
+        )
     size = _count(payload.get("size"), "size", _MAX_LIBRARY_BYTES)
     sha256 = payload.get("sha256")
     if not (isinstance(sha256, str) and re.fullmatch(r"[0-9a-f]{64}", sha256)):
         raise _Damaged(f"metadata field sha256 is {shown(sha256, 30)}, expected 64 hexadecimal digits")
     functions = payload.get("functions")
-    expected = set(codegen.all_builders())
+    expected = set(codegen.builders_for(entry.definition))
     if not isinstance(functions, dict) or set(functions) != expected:
         raise _Damaged("metadata field functions does not list exactly the model's functions")
     signatures = {key: _parse_signature(key, functions[key]) for key in sorted(expected)}
     if len({sig.name for sig in signatures.values()}) != len(signatures):
         raise _Damaged("metadata field functions repeats a C name")
+    _check_shapes(signatures, entry.definition)
     return _Metadata(size, sha256, signatures)
 
 
@@ -652,17 +724,20 @@ def _process_alive(pid: int) -> bool:
     return True
 
 
-def _clean_stale_builds(folder: Path) -> None:
-    """Remove build folders whose process is gone or that are older than an hour."""
+def _clean_stale_builds(folder: Path, prefix: str = _BUILD_PREFIX) -> None:
+    """Remove the build folders ``prefix<pid>-*`` of ``folder`` that are the current user's and
+    whose process is gone or that are older than an hour."""
     now = time.time()
     for item in folder.iterdir():
-        if not item.name.startswith(_BUILD_PREFIX):
+        if not item.name.startswith(prefix):
             continue
         try:
             info = item.lstat()
         except OSError:
             continue
-        pid_text = item.name[len(_BUILD_PREFIX) :].split("-", 1)[0]
+        if info.st_uid != os.geteuid():
+            continue
+        pid_text = item.name[len(prefix) :].split("-", 1)[0]
         dead = not (pid_text.isdigit() and _process_alive(int(pid_text)))
         if dead or now - info.st_mtime > _STALE_BUILD_AGE:
             if stat.S_ISDIR(info.st_mode):
@@ -759,14 +834,40 @@ def _compile(compiler: str, workdir: Path, definition: Definition = PAPER) -> tu
     raise _Unavailable(failure)
 
 
+def _produce(compiler: str, workdir: Path, definition: Definition, key: str) -> tuple[Path, dict[str, Signature]]:
+    """Run :func:`_compile` in a build process of its own (:mod:`.building`: Ctrl-C stops it at
+    once, progress on a terminal) into ``workdir``; the library and the functions' signatures.
+
+    Raises :class:`_Unavailable` with the build's one-line reason. The cache tests replace this
+    function to copy a prebuilt library instead, so that the checks around it run for real
+    without a compile each.
+    """
+    try:
+        result = building.run("compile", compiler, workdir, definition, key, budget.estimate(definition))
+    except building.BuildFailed as exc:
+        raise _Unavailable(str(exc)) from None
+    functions = result.get("functions")
+    expected = set(codegen.builders_for(definition))
+    if result.get("library") != "library.so" or not isinstance(functions, dict) or set(functions) != expected:
+        raise _Unavailable("the build process reported no library or not every function of the model")
+    try:
+        signatures = {name: _parse_signature(name, functions[name]) for name in sorted(expected)}
+    except _Damaged as exc:
+        raise _Unavailable(f"the build process reported wrong signatures: {exc}") from None
+    return workdir / "library.so", signatures
+
+
 def _build(entry: CacheEntry, compiler: str, definition: Definition = PAPER) -> None:
-    """Compile into a private temporary folder of the cache, then move the library and then its
-    metadata into place (each move atomic; a library without metadata is never opened)."""
+    """Compile (in a build process) into a private temporary folder of the cache, then move the
+    library and then its metadata into place (each move atomic; a library without metadata is never
+    opened). The folder goes whatever happens, Ctrl-C included."""
     _clean_stale_builds(entry.folder)
     logger.info("compiling the vgtarm model into %s (once per model version and stack structure)", entry.library)
     workdir = Path(tempfile.mkdtemp(dir=entry.folder, prefix=f"{_BUILD_PREFIX}{os.getpid()}-"))
     try:
-        library, signatures = _compile(compiler, workdir, definition)
+        library, signatures = _produce(compiler, workdir, definition, entry.key)
+        if not library.is_file() or library.is_symlink():
+            raise _Unavailable("the build process wrote no library")
         os.chmod(library, 0o755)
         size, digest = _sha256(library)
         payload = {
@@ -778,7 +879,7 @@ def _build(entry: CacheEntry, compiler: str, definition: Definition = PAPER) -> 
             "compiler": compiler,
             "casadi": str(getattr(ca, "__version__", "unknown")),
             "functions": {key: sig.__dict__ for key, sig in signatures.items()},
-            "structure": definition.key or "paper",
+            "structure": structure_of(definition),
         }
         metadata = workdir / "metadata.json"
         metadata.write_text(json.dumps(payload, indent=1))
@@ -801,7 +902,7 @@ def _compiled_backend(compiler: str, definition: Definition = PAPER) -> Compiled
     Raises :class:`_Unavailable` with a one-line reason when it cannot be had.
     """
     try:
-        entry = CacheEntry(cache_dir(), _cache_key(compiler, definition))
+        entry = CacheEntry(cache_dir(), _cache_key(compiler, definition), definition)
     except RuntimeError as exc:  # Path.home() without a home folder
         raise _Unavailable(f"no cache folder: {exc}; set VGTARM_CACHE_DIR") from None
     info = _check_folder(entry.folder)
@@ -819,6 +920,7 @@ def _compiled_backend(compiler: str, definition: Definition = PAPER) -> Compiled
             else f"{where} and holds no library of this model version"
         )
         raise _Unavailable(why)
+    budget.check(budget.estimate(definition), "compiled")  # before any work: BuildRefused in one line
     try:
         with _build_lock(entry.folder):
             if os.path.lexists(entry.library) or os.path.lexists(entry.metadata):
@@ -844,6 +946,12 @@ def _compiled_backend(compiler: str, definition: Definition = PAPER) -> Compiled
         raise _Unavailable(f"the library just built fails its checks: {exc}") from None
 
 
+def backend_choice() -> str:
+    """The backend ``$VGTARM_BACKEND`` chooses (``auto``, ``compiled`` or ``interpreted``; empty or
+    unset: ``auto``); :class:`~vgtarm.errors.ConfigError` naming the value otherwise."""
+    return _backend_choice(None)
+
+
 def _backend_choice(kind: object) -> str:
     """The validated backend choice: ``kind``, else ``$VGTARM_BACKEND`` (empty = unset), else auto."""
     if kind is None or kind == "":
@@ -864,10 +972,12 @@ def get_backend(kind: str | None = None, definition: Definition = PAPER) -> Comp
     ``compiled`` a model that cannot be compiled raises :class:`BackendError` instead.
     ``definition`` is the model (:mod:`vgtarm.model.definition`): the paper's robot by default,
     or a stack's structure, compiled into a library of its own (once per structure, cached).
+    A model that must be built and whose estimated build exceeds the memory available or the build
+    time limit raises :class:`~vgtarm.model.budget.BuildRefused` (:mod:`.budget`) before any work.
     """
     choice = _backend_choice(kind)
     if choice == "interpreted":
-        return InterpretedBackend(build_functions(definition))
+        return _interpreted(definition)
     try:
         compiler = find_compiler()
         if compiler is None:
@@ -886,4 +996,35 @@ def get_backend(kind: str | None = None, definition: Definition = PAPER) -> Comp
             exc,
             "VGTARM_BACKEND=interpreted",
         )
-    return InterpretedBackend(build_functions(definition))
+    return _interpreted(definition)
+
+
+#: A symbolic construction estimated shorter than this (s) runs in this process (the paper's robot:
+#: 0.15 s; its longest CasADi call, which Ctrl-C cannot break, much less); a longer one in a build
+#: process (:mod:`.building`).
+IN_PROCESS_SYMBOLIC = 0.5
+
+
+def _interpreted(definition: Definition) -> InterpretedBackend:
+    """CasADi's interpreter on the functions of ``definition``, after the estimate of their symbolic
+    construction fits the limits (:class:`~vgtarm.model.budget.BuildRefused` otherwise)."""
+    cost = budget.estimate(definition)
+    budget.check(cost, "interpreted")
+    if cost.symbolic_seconds < IN_PROCESS_SYMBOLIC:
+        return InterpretedBackend(build_functions(definition))
+    prefix = "vgtarm-symbolic-"
+    with contextlib.suppress(OSError):  # those of commands killed meanwhile (kill -9)
+        _clean_stale_builds(Path(tempfile.gettempdir()), prefix)
+    folder = Path(tempfile.mkdtemp(prefix=f"{prefix}{os.getpid()}-"))
+    try:
+        try:
+            result = building.run("functions", "", folder, definition, "", cost)
+        except building.BuildFailed as exc:
+            raise BackendError(f"cannot build the symbolic model of {cost.model}: {exc}") from None
+        names = result.get("functions")
+        expected = set(codegen.builders_for(definition))
+        if not isinstance(names, list) or set(names) != expected:
+            raise BackendError(f"cannot build the symbolic model of {cost.model}: not every function was built")
+        return InterpretedBackend({name: ca.Function.load(str(folder / f"{name}.casadi")) for name in sorted(expected)})
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)

@@ -1,0 +1,200 @@
+"""What building a model costs, estimated from its structure before anything is built, and the
+limits the estimate must fit.
+
+A model is built once per structure: CasADi constructs its symbolic functions (the *symbolic
+construction*), writes them as C and the C compiler compiles it; the interpreter needs the
+symbolic construction alone. Both grow fast with the number of joints ``n``: fifty modules
+(175 joints, the most a stack may have) would take hours and tens of GB. So a build is first
+estimated from ``n`` with the fits of ``docs/benchmarks.md`` ("Building a model: time and
+memory"), and refused in one line when the estimate exceeds:
+
+- the **memory** one request may use (:func:`vgtarm.memory.memory_limit`: ``MemAvailable`` of
+  ``/proc/meminfo``, or ``$VGTARM_MEMORY_LIMIT``);
+- the **build time limit**: ``$VGTARM_BUILD_TIME_LIMIT`` seconds (a number; default
+  :data:`DEFAULT_TIME_LIMIT`, 30 min, which also bounds one compiler run).
+
+The fits (least squares of ``y = c n^a`` in log-log, 2-core x86_64 vm, CasADi 3.8.2, gcc 12.2;
+stacks of the benchmark family, ``k`` modules, ``3k + ceil(k/2)`` joints):
+
+- symbolic construction of every function: ``3.09e-4 n^3.09`` s (measured 4 to 42 joints, fit on
+  14 to 42), holding ``0.19 n^2.07`` MiB (the same runs);
+- the build process with the generated C: ``0.293 n^2.00`` MiB above its ``95`` MiB of Python,
+  CasADi and NumPy (measured 4 to 28 joints, fit on 14 to 28); it waits while the compiler runs;
+- the compiler: ``0.245 n^1.87`` s of CPU (measured 4 to 35 joints) and a peak of
+  ``2.88 n^2.04`` MiB: measured 4 to 28 joints, the exponent fitted on 14 to 28 and the curve put
+  through the largest measurement (2.58 GB at 28 joints), so that it errs on the high side, and
+  never below the 180 MiB it takes for the smallest stack;
+- the mass matrix alone (what ``vgtarm describe`` evaluates): ``1.06e-5 n^3.13`` s (21 to 70 joints).
+
+The paper's fixed robot is measured apart (its C is compiled whole at ``-O2``).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+
+from ..errors import ConfigError, VgtarmError, shown
+from ..memory import memory_limit, size_text
+from .definition import Definition, StackDefinition
+
+#: The variable that sets the longest estimated build allowed (seconds).
+TIME_LIMIT_VARIABLE = "VGTARM_BUILD_TIME_LIMIT"
+#: Longest estimated build allowed by default (s): as long as one compiler run may take.
+DEFAULT_TIME_LIMIT = 1800.0
+#: A build estimated longer than this (s) shows its progress on a terminal.
+LONG_BUILD = 5.0
+
+_MIB = float(1 << 20)
+#: ``(c, a)`` of ``c n^a``: symbolic construction (s) and its memory (MiB), the build process with
+#: the generated C (MiB), compiler CPU (s) and peak memory (MiB), the mass matrix alone (s). See
+#: the module docstring.
+SYMBOLIC_SECONDS = (3.09e-4, 3.09)
+SYMBOLIC_MIB = (0.190, 2.07)
+GENERATION_MIB = (0.293, 2.00)
+COMPILER_SECONDS = (0.245, 1.87)
+COMPILER_MIB = (2.88, 2.04)
+MASS_SECONDS = (1.06e-5, 3.13)
+#: The compiler's peak for the smallest stack (MiB): the least it takes.
+COMPILER_FLOOR_MIB = 180.0
+#: Memory of the build process before the symbolic construction (MiB).
+PROCESS_MIB = 95.0
+#: The paper's robot, measured on an idle machine: symbolic construction (s, MiB), the build
+#: process with the generated C (MiB), compile (s: 8.2 s idle, about 15 s on a busy machine, the
+#: figure used) and the compiler's peak (MiB).
+PAPER_FIGURES = (0.15, 10.0, 20.0, 15.0, 275.0)
+
+
+class BuildRefused(VgtarmError, RuntimeError):
+    """Building a model would take more time or memory than allowed; the message says how much."""
+
+
+@dataclass(frozen=True)
+class BuildEstimate:
+    """The estimated cost of building one model.
+
+    Attributes:
+        model: the model for messages (``"the paper's robot"``, ``"stack 'x' (50 modules, 175 joints)"``).
+        joints: its number of joints.
+        symbolic_seconds, symbolic_bytes: CasADi's construction of every function (time, memory held).
+        generation_bytes: the build process's memory with the functions and their generated C.
+        compiler_seconds, compiler_bytes: the C compiler (time, peak memory).
+        mass_seconds: the construction of the mass matrix function alone.
+    """
+
+    model: str
+    joints: int
+    symbolic_seconds: float
+    symbolic_bytes: float
+    generation_bytes: float
+    compiler_seconds: float
+    compiler_bytes: float
+    mass_seconds: float
+
+    def seconds(self, kind: str) -> float:
+        """Time of a build for the ``compiled`` or ``interpreted`` backend (s)."""
+        return self.symbolic_seconds + (self.compiler_seconds if kind == "compiled" else 0.0)
+
+    def bytes(self, kind: str) -> float:
+        """Peak memory of a build for the ``compiled`` backend (the build process with the generated
+        C and the compiler beside it) or the ``interpreted`` one (the functions built in a process
+        and read back by this one)."""
+        if kind == "compiled":
+            return PROCESS_MIB * _MIB + self.generation_bytes + self.compiler_bytes
+        return PROCESS_MIB * _MIB + 2 * self.symbolic_bytes
+
+
+def _power(fit: tuple[float, float], n: int) -> float:
+    c, a = fit
+    return c * float(n) ** a
+
+
+def describe_model(definition: Definition) -> str:
+    """The model for a message: the paper's robot, or a stack with its name and size."""
+    if isinstance(definition, StackDefinition):
+        stack = definition.stack
+        return f"stack {shown(stack.name)} ({len(definition.structure)} modules, {definition.n_joints} joints)"
+    return "the paper's robot"
+
+
+def estimate(definition: Definition) -> BuildEstimate:
+    """The estimated cost of building ``definition`` (module docstring)."""
+    n = definition.n_joints
+    if not isinstance(definition, StackDefinition):
+        sym, sym_mib, generation_mib, compile_s, compiler_mib = PAPER_FIGURES
+        return BuildEstimate(
+            describe_model(definition),
+            n,
+            sym,
+            sym_mib * _MIB,
+            generation_mib * _MIB,
+            compile_s,
+            compiler_mib * _MIB,
+            0.02,
+        )
+    return BuildEstimate(
+        model=describe_model(definition),
+        joints=n,
+        symbolic_seconds=_power(SYMBOLIC_SECONDS, n),
+        symbolic_bytes=_power(SYMBOLIC_MIB, n) * _MIB,
+        generation_bytes=_power(GENERATION_MIB, n) * _MIB,
+        compiler_seconds=_power(COMPILER_SECONDS, n),
+        compiler_bytes=max(_power(COMPILER_MIB, n), COMPILER_FLOOR_MIB) * _MIB,
+        mass_seconds=_power(MASS_SECONDS, n),
+    )
+
+
+def time_text(seconds: float) -> str:
+    """A duration for a message: ``"0.4 s"``, ``"78 s"``, ``"3.4 min"``, ``"12 min"``, ``"2.5 h"``."""
+    if seconds < 10:
+        return f"{seconds:.1f} s"
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 600:
+        return f"{seconds / 60:.1f} min"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def time_limit() -> float:
+    """The longest estimated build allowed (s): ``$VGTARM_BUILD_TIME_LIMIT``, else 30 min.
+
+    Raises:
+        ConfigError: the variable is set but not a positive number of seconds.
+    """
+    text = os.environ.get(TIME_LIMIT_VARIABLE, "")
+    if not text.strip():
+        return DEFAULT_TIME_LIMIT
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise ConfigError(f"{TIME_LIMIT_VARIABLE} = {shown(text)}: expected a number of seconds > 0")
+    return value
+
+
+def check(cost: BuildEstimate, kind: str) -> None:
+    """Refuse, in one line naming the estimate and what to do, a build for the ``compiled`` or
+    ``interpreted`` backend whose estimated time or memory exceeds the limits."""
+    seconds, needed = cost.seconds(kind), cost.bytes(kind)
+    limit = time_limit()
+    memory, where = memory_limit()
+    over: list[str] = []
+    advice = ["use a stack of fewer modules"]
+    if seconds > limit:
+        source = "set by " if os.environ.get(TIME_LIMIT_VARIABLE, "").strip() else ""
+        over.append(f"the build time limit of {time_text(limit)} ({source}{TIME_LIMIT_VARIABLE})")
+        advice.append(f"raise {TIME_LIMIT_VARIABLE} (seconds)")
+    if memory is not None and needed > memory:
+        over.append(f"the {size_text(memory)} {where}")
+        advice.append("run it where more memory is free")
+    if not over:
+        return
+    what = "compiled model" if kind == "compiled" else "symbolic model (for CasADi's interpreter)"
+    raise BuildRefused(
+        f"building the {what} of {cost.model} needs about {time_text(seconds)} and {size_text(needed)} of memory "
+        f"(estimated from its {cost.joints} joints), more than {' and '.join(over)}; {', or '.join(advice)}"
+    )

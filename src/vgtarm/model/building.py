@@ -1,0 +1,286 @@
+"""Building a model in a process of its own, which Ctrl-C stops at once and which shows its progress.
+
+CasADi's symbolic construction and code generation are long calls into C++ that do not return to
+Python for seconds to hours, so a build run in vgtarm's own process could not be interrupted.
+:func:`run` starts ``python -m vgtarm.model.building`` instead, in a session of its own (a
+terminal's Ctrl-C does not reach it), hands it the model definition on its standard input and
+waits for it in short polls: on Ctrl-C (or any other exception) it kills the build's whole process
+group (the build and its compiler) and lets the caller remove the build folder, so the command ends
+within a fraction of a second with nothing left behind. The build process also ends with its
+parent: the kernel kills it when the parent dies (``PR_SET_PDEATHSIG``), and a watchdog kills its
+compiler too.
+
+Two kinds of build:
+
+- ``compile``: :func:`vgtarm.model.compiled._compile` into the private build folder the caller
+  made; the result names the library and gives the functions' signatures; the caller keeps every
+  check of the compile cache (metadata, SHA-256, lock, atomic moves);
+- ``functions``: the symbolic functions alone, saved into the folder for CasADi's interpreter.
+
+The build process ignores ``SIGXFSZ``, so a write beyond the file size limit (``ulimit -f``) fails
+with ``EFBIG`` instead of killing it, and a build stopped by that limit is reported as such, with
+the limit, and not as a compiler error. On a terminal, a build estimated longer than
+:data:`vgtarm.model.budget.LONG_BUILD` prints a line per phase with the time elapsed, and one every
+:data:`HEARTBEAT` seconds within a long phase, on standard error.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import json
+import os
+import pickle
+import resource
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from ..errors import cut
+from ..memory import size_text
+from .budget import LONG_BUILD, BuildEstimate, time_limit, time_text
+from .definition import Definition
+
+#: What the build process writes last into its folder: the result, or the reason it failed.
+RESULT = "result.json"
+#: Seconds between two polls of the build process (the longest Ctrl-C can wait).
+POLL = 0.05
+#: Seconds between two progress lines within one long phase.
+HEARTBEAT = 30.0
+#: Largest result file read (bytes).
+_MAX_RESULT = 1 << 22
+#: The package folder the build process imports vgtarm from: the one this process runs.
+_PACKAGE_ROOT = Path(__file__).resolve().parents[2]
+
+
+class BuildFailed(Exception):
+    """The build process failed or reported a failure; the message is the one-line reason."""
+
+
+# ----------------------------------------------------------------------------- the caller's side
+
+
+def _phase(kind: str, folder: Path) -> str:
+    """What a build is doing, from the files it has written so far."""
+    if kind == "functions" or not (folder / "vgtarm_model.c").exists():
+        return "building the symbolic model"
+    if not (folder / "layout.c").exists():
+        return "writing the C code"
+    if (folder / "vgtarm_model.o").exists():
+        return "linking the library"
+    return "compiling the C code"
+
+
+class _Progress:
+    """Progress lines on standard error (a terminal only): one per phase, with the time elapsed."""
+
+    def __init__(self, show: bool, kind: str, cost: BuildEstimate) -> None:
+        self.show, self.kind = show, kind
+        self.start = self.last = time.monotonic()
+        self.phase = ""
+        what = "compiled model" if kind == "compile" else "symbolic model"
+        mode = "compiled" if kind == "compile" else "interpreted"
+        self._line(
+            f"building the {what} of {cost.model}: about {time_text(cost.seconds(mode))} and "
+            f"{size_text(cost.bytes(mode))} of memory (estimated); Ctrl-C stops it"
+        )
+
+    def _line(self, text: str) -> None:
+        if self.show:
+            with contextlib.suppress(OSError, ValueError):
+                print(f"vgtarm: {text}", file=sys.stderr, flush=True)
+
+    def update(self, folder: Path) -> None:
+        now = time.monotonic()
+        phase = _phase(self.kind, folder)
+        if phase != self.phase:
+            self.phase, self.last = phase, now
+            self._line(f"{time_text(now - self.start)}: {phase}")
+        elif now - self.last >= HEARTBEAT:
+            self.last = now
+            self._line(f"{time_text(now - self.start)}: still {phase}")
+
+    def done(self) -> None:
+        self._line(f"{time_text(time.monotonic() - self.start)}: built")
+
+
+def _terminal() -> bool:
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):
+        return False
+
+
+def _kill(process: subprocess.Popen[bytes]) -> None:
+    """Kill the build's process group (the build and its compiler) and reap the build."""
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.killpg(process.pid, signal.SIGKILL)
+    with contextlib.suppress(subprocess.TimeoutExpired):
+        process.wait(timeout=2.0)
+
+
+def _ending(status: int) -> str:
+    if status < 0:
+        try:
+            name = signal.Signals(-status).name
+        except ValueError:
+            name = f"signal {-status}"
+        hint = " (out of memory?)" if -status == signal.SIGKILL else ""
+        return f"was killed by {name}{hint}"
+    return f"ended with status {status}"
+
+
+def run(
+    kind: str, compiler: str, folder: Path, definition: Definition, key: str, cost: BuildEstimate
+) -> dict[str, Any]:
+    """Build ``definition`` in a process of its own, into the private ``folder``; its result.
+
+    ``kind`` is ``compile`` (the library, for the cache entry ``key``) or ``functions`` (the
+    symbolic functions saved for the interpreter). Raises :class:`BuildFailed` with a one-line
+    reason. A ``KeyboardInterrupt`` (or any other exception) while it runs kills the build process
+    and its compiler before it propagates; the caller removes ``folder``.
+    """
+    if not sys.executable:
+        raise BuildFailed("no Python interpreter to build the model with (sys.executable is empty)")
+    code = (
+        f"import sys; sys.path.insert(0, {str(_PACKAGE_ROOT)!r}); "
+        "from vgtarm.model.building import main; sys.exit(main(sys.argv[1:]))"
+    )
+    # the same interpreter and environment (where CasADi and NumPy are found); the package this
+    # process runs comes first, and the current folder of ``-c`` is the private build folder
+    command = [sys.executable, "-c", code, kind, compiler, str(folder), key, str(os.getpid())]
+    payload = pickle.dumps(definition, protocol=pickle.HIGHEST_PROTOCOL)
+    progress = _Progress(
+        cost.seconds("compiled" if kind == "compile" else "interpreted") > LONG_BUILD and _terminal(), kind, cost
+    )
+    try:
+        process = subprocess.Popen(
+            command,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            cwd=folder,
+            start_new_session=True,
+        )
+    except OSError as exc:
+        raise BuildFailed(f"cannot start the build process: {exc.strerror or exc}") from None
+    errors = b""
+    try:
+        first = True
+        while True:
+            try:
+                _, errors = process.communicate(payload if first else None, timeout=POLL)
+                break
+            except subprocess.TimeoutExpired:
+                first = False
+                progress.update(folder)
+    except BaseException:
+        _kill(process)
+        raise
+    result = _result(folder)
+    if result is None:
+        lines = [line for line in errors.decode(errors="replace").splitlines() if line.strip()]
+        last = f": {cut(lines[-1].strip(), 160)}" if lines else ""
+        raise BuildFailed(f"the build process {_ending(process.returncode)}{last}")
+    if "failure" in result:
+        raise BuildFailed(cut(str(result["failure"]), 300))
+    progress.done()
+    return result
+
+
+def _result(folder: Path) -> dict[str, Any] | None:
+    """The build process's result in ``folder``, or None when it wrote none (it crashed)."""
+    try:
+        with open(folder / RESULT, "rb") as stream:
+            raw = stream.read(_MAX_RESULT + 1)
+        payload = json.loads(raw) if len(raw) <= _MAX_RESULT else None
+    except (OSError, ValueError):
+        return None
+    return payload if isinstance(payload, dict) else None
+
+
+# ----------------------------------------------------------------------------- the build process
+
+
+def _end_with(parent: int) -> None:
+    """End this build (and its compiler) when the process that started it ends, however it ends."""
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG: this process
+    if os.getppid() != parent:  # the parent died before the line above
+        os._exit(1)
+
+    def watch() -> None:  # the compiler too (runs while this process waits for it)
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        with contextlib.suppress(OSError):
+            os.killpg(0, signal.SIGKILL)
+
+    threading.Thread(target=watch, daemon=True).start()
+
+
+def _file_limit(folder: Path, failure: str) -> str | None:
+    """The reason to give when the file size limit (``ulimit -f``) stopped the build, else None."""
+    soft, _ = resource.getrlimit(resource.RLIMIT_FSIZE)
+    if soft == resource.RLIM_INFINITY:
+        return None
+    stopped = sorted(p.name for p in folder.iterdir() if p.is_file() and p.stat().st_size >= soft)
+    # EFBIG ("File too large") where the limit applies, or the compiler killed by SIGXFSZ ("File
+    # size limit exceeded": Python's subprocess restores the signal's default for the compiler)
+    told = any(text in failure.lower() for text in ("file too large", "file size limit exceeded"))
+    if not (stopped or told):
+        return None
+    where = f"{stopped[0]} stopped at {soft:,} bytes" if stopped else "the compiler could not write its output"
+    return (
+        f"the file size limit (ulimit -f) of {soft:,} bytes ({size_text(soft)}) stopped the build: {where}; "
+        "raise it (ulimit -f unlimited) and run the command again"
+    )
+
+
+def _compile(compiler: str, folder: Path, definition: Definition, key: str) -> dict[str, Any]:
+    from . import compiled
+
+    if compiled._cache_key(compiler, definition) != key:
+        return {"failure": "the model's source files changed while the library was being built; run the command again"}
+    compiled._COMPILE_TIMEOUT = max(compiled._COMPILE_TIMEOUT, time_limit())
+    library, signatures = compiled._compile(compiler, folder, definition)
+    return {"library": library.name, "functions": {name: sig.__dict__ for name, sig in signatures.items()}}
+
+
+def _functions(folder: Path, definition: Definition) -> dict[str, Any]:
+    from . import compiled
+
+    built = compiled.build_functions(definition)
+    for name, f in built.items():
+        f.save(str(folder / f"{name}.casadi"))
+    return {"functions": sorted(built)}
+
+
+def main(argv: Sequence[str]) -> int:
+    """The build process: ``KIND COMPILER FOLDER KEY PARENT_PID``, the definition (pickled) on
+    standard input; writes :data:`RESULT` into ``FOLDER`` (module docstring)."""
+    kind, compiler, folder_text, key, parent = argv
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # writes beyond ulimit -f fail with EFBIG instead
+    _end_with(int(parent))
+    folder = Path(folder_text)
+    definition = pickle.load(sys.stdin.buffer)
+    try:
+        result = _compile(compiler, folder, definition, key) if kind == "compile" else _functions(folder, definition)
+    except Exception as exc:  # the reason, in one line, for the caller
+        lines = str(exc).strip().splitlines()
+        failure = lines[0] if lines else type(exc).__name__
+        if type(exc).__name__ != "_Unavailable":
+            failure = f"{type(exc).__name__}: {failure}"
+        result = {"failure": _file_limit(folder, str(exc)) or failure}
+    partial = folder / f".{RESULT}"
+    try:
+        partial.write_text(json.dumps(result))
+        os.replace(partial, folder / RESULT)
+    except OSError as exc:  # the caller reports a build that wrote no result
+        print(f"cannot write the build's result: {exc.strerror or exc}", file=sys.stderr)
+        return 1
+    return 0
