@@ -257,6 +257,9 @@ def test_a_reference_of_the_wrong_type_is_one_line(robot, cfc, reference):
         ("text", InputError, "expected a pair"),
         ("far", InputError, "initial_state q0: s1 = 5.0 m is outside the accepted range"),
         ("unassemblable", AssemblyError, "initial_state q0: module 1 cannot be assembled"),
+        ("qd0 huge", InputError, r"initial_state qd0: psi3 = 1e\+300 rad/s is outside the accepted range"),
+        ("q0 complex", InputError, r"initial_state q0 must be real numbers; .*\(0\.25\+1j\) is complex"),
+        ("qd0 None", InputError, r"initial_state qd0 must be real numbers; .* = None is not a number"),
     ],
 )
 def test_a_bad_initial_state_is_an_input_error_not_a_divergence(robot, short_ik, cfc, state, error, match):
@@ -272,6 +275,12 @@ def test_a_bad_initial_state_is_an_input_error_not_a_divergence(robot, short_ik,
         value = "rest"
     elif state == "far":
         q0[:3] = 5.0
+    elif state == "qd0 huge":
+        qd0[6] = 1e300
+    elif state == "q0 complex":
+        value = ([0.25 + 1j, *q0[1:]], qd0)
+    elif state == "qd0 None":
+        value = (q0, [None] * 7)
     else:
         q0[:3] = (0.22, 0.22, 0.46)
     with pytest.raises(error, match=match) as info:
@@ -280,8 +289,10 @@ def test_a_bad_initial_state_is_an_input_error_not_a_divergence(robot, short_ik,
 
 
 def test_a_run_that_diverges_at_once_still_summarises_and_saves(robot, short_ik, cfc, tmp_path):
+    """Rates of 1000 m/s (inside the accepted range; 1e300 is refused before the run) leave the
+    limits within the first period."""
     with pytest.raises(SimulationError) as info:
-        simulate(robot, short_ik, cfc, initial_state=(short_ik.q[0], np.full(7, 1e300)))
+        simulate(robot, short_ik, cfc, initial_state=(short_ik.q[0], np.full(7, 1e3)))
     partial = info.value.result
     assert isinstance(partial, SimulationResult) and not partial.success
     summary = partial.summary()
@@ -444,6 +455,62 @@ def test_simulate_refuses_a_plant_that_is_not_a_robot(short_ik, cfc):
         simulate("robot", short_ik, cfc)  # type: ignore[arg-type]
 
 
+def _bodies_scaled(parameters, mass: float = 1.0, inertia: float = 1.0):
+    """``parameters`` with every body's mass and inertia multiplied (without ``scaled``'s own check)."""
+    bodies = tuple(
+        dataclasses.replace(b, mass=b.mass * mass, inertia=tuple(tuple(x * inertia for x in r) for r in b.inertia))
+        for b in parameters.bodies
+    )
+    return dataclasses.replace(parameters, bodies=bodies)
+
+
+@pytest.mark.parametrize(
+    ("mass", "inertia", "friction", "match"),
+    [
+        (1e4, 1.0, 1.0, r"its mass is 1e\+04 times the plant's"),
+        (1e-4, 1.0, 1.0, r"its mass is 0\.0001 times the plant's"),
+        (1.0, 2e3, 1.0, r"its inertia is 2e\+03 times the plant's"),
+        (1.0, 1.0, 1e-5, r"its friction is 1e-05 times the plant's"),
+    ],
+)
+def test_a_controller_model_far_from_the_plant_names_the_ratio_and_the_range(
+    robot, short_ik, cfc, mass, inertia, friction, match
+):
+    """Issue 20, item 9: a model a thousand times off is no model of the plant; the line says the
+    ratio and the accepted range, never "not finite"."""
+    model = _bodies_scaled(robot.parameters, mass, inertia)
+    model = dataclasses.replace(model, viscous=tuple(c * friction for c in model.viscous))
+    for given in (model, robot.with_parameters(model)):
+        with pytest.raises(
+            InputError, match=rf"^controller_model: {match} .*expected a ratio in \[0\.001, 1000\]"
+        ) as info:
+            simulate(robot, short_ik, cfc, controller_model=given)
+        one_line(info.value)
+
+
+def test_controller_models_at_the_ends_of_the_range_run(robot, short_ik, cfc):
+    """Accepted, they run (a model a thousand times too heavy wrecks the run: a divergence, not a refusal)."""
+    for factor in (1e-3, 1e3):
+        try:
+            result = simulate(robot, short_ik, cfc, controller_model=_bodies_scaled(robot.parameters, factor, factor))
+        except SimulationError as error:
+            result = error.result
+        assert result.q.shape == short_ik.q.shape
+
+
+def test_model_mass_far_below_the_plants_is_refused_with_the_range(capsys):
+    status, out, err = run(capsys, "simulate", "--case", "1", "--duration", "0.01", "--model-mass", "1e-300", "-q")
+    assert status == 1 and err.count("\n") == 1
+    assert "1e-300" in err and "[0.001, 1000]" in err and "finite" not in err
+
+
+@pytest.mark.parametrize("value", ["1e308", "1e10"])
+def test_model_mass_far_above_the_plants_is_refused_with_the_range(capsys, value):
+    status, out, err = run(capsys, "simulate", "--case", "1", "--duration", "0.01", "--model-mass", value, "-q")
+    assert status == 1 and err.count("\n") == 1
+    assert repr(float(value)) in err and "[0.001, 1000]" in err and "finite" not in err
+
+
 def test_robot_methods_refuse_wrong_types(robot):
     with pytest.raises(InputError, match="expected RobotParameters"):
         vgtarm.Robot("reference")  # type: ignore[arg-type]
@@ -519,7 +586,7 @@ def test_other_public_functions_refuse_wrong_types(robot, tmp_path):
         write_csv(pathlib.Path("q.csv"), tmp_path / "out.csv")  # type: ignore[arg-type]
     assert not (tmp_path / "out.csv").exists()
     for value in ("2", math.nan, 0, True, 10**400):
-        with pytest.raises(vgtarm.ConfigError, match="scaled: mass = .*expected a finite factor > 0"):
+        with pytest.raises(vgtarm.ConfigError, match="scaled: mass = .*expected a (finite )?factor"):
             robot.parameters.scaled(mass=value)  # type: ignore[arg-type]
     for value in ("0.001", b"1", None):
         with pytest.raises(PathError, match="dt must be a real number"):

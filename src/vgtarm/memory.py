@@ -18,6 +18,10 @@ from .errors import ConfigError, InputError, VgtarmError, shown
 
 #: The variable that sets the memory limit of one request (bytes, optional suffix k, M, G, T).
 LIMIT_VARIABLE = "VGTARM_MEMORY_LIMIT"
+#: A batch estimated below this many bytes is not compared with the machine's available memory
+#: (reading it costs as much as evaluating a small batch); ``$VGTARM_MEMORY_LIMIT`` applies to
+#: every batch.
+SMALL_BATCH = 64 * 10**6
 _SUFFIXES = {"": 1, "k": 10**3, "m": 10**6, "g": 10**9, "t": 10**12}
 _LIMIT_TEXT = re.compile(r"^\s*(\d+)\s*([kmgt]?)b?\s*$", re.IGNORECASE)
 
@@ -27,7 +31,7 @@ def size_text(n_bytes: float) -> str:
     for unit, scale in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
         if n_bytes >= scale:
             value = n_bytes / scale
-            return f"{value:.3g} {unit}" if value < 100 else f"{value:.0f} {unit}"
+            return f"{value:.3g} {unit}" if value < 100 or value >= 1e5 else f"{value:.0f} {unit}"
     return f"{int(n_bytes)} bytes"
 
 
@@ -86,4 +90,26 @@ def check_memory(needed: float, request: str, advice: str, *, error: type[Vgtarm
         return
     raise error(
         f"{request}: about {size_text(needed)} of memory needed, more than the {size_text(limit)} {where}; {advice}"
+    )
+
+
+def check_batch(rows: int, row_bytes: float, request: str, *, error: type[VgtarmError] = InputError) -> None:
+    """Refuse, with one line, a batch of ``rows`` rows of about ``row_bytes`` bytes each that will not
+    fit in :func:`memory_limit`, before anything is allocated for it.
+
+    ``request`` names what was asked (``"mass_matrix"``); the message names the rows, the estimate,
+    the limit and where it comes from, and the largest part that fits. A batch under
+    :data:`SMALL_BATCH` is checked only against ``$VGTARM_MEMORY_LIMIT``.
+    """
+    needed = rows * row_bytes
+    if needed <= SMALL_BATCH and not os.environ.get(LIMIT_VARIABLE, "").strip():
+        return
+    limit, where = memory_limit()
+    if limit is None or needed <= limit:
+        return
+    most = int(limit // row_bytes) if row_bytes > 0 else rows
+    advice = f"evaluate it in parts of at most {most:,} rows" if most > 0 else f"raise {LIMIT_VARIABLE}"
+    raise error(
+        f"{request}: a batch of {rows:,} rows needs about {size_text(needed)} of memory ({row_bytes:,.0f} bytes a "
+        f"row), more than the {size_text(limit)} {where}; {advice}"
     )

@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 from ..errors import ConfigError, cut, shown
 from ..fileio import parse_toml, read_text_limited
 from .assembly import TRIANGLE_INEQUALITIES, linear_form, triangle_margins
+from .factors import model_factor
 
 #: Joint names, in the order of the joint vector ``q``.
 JOINT_NAMES: tuple[str, ...] = ("s1", "v1", "p1", "s2", "v2", "p2", "psi3")
@@ -183,12 +184,12 @@ class RobotParameters:
         """A copy with every body mass, inertia and friction coefficient multiplied by a factor.
 
         Convenient for giving a controller a wrong model of the plant. Each factor must be a
-        finite number > 0 (``ConfigError`` otherwise).
+        number in :data:`~vgtarm.model.factors.MODEL_FACTOR_RANGE` (``ConfigError`` otherwise).
         """
-        for label, factor in (("mass", mass), ("inertia", inertia), ("friction", friction)):
-            real = isinstance(factor, int | float | np.integer | np.floating) and not isinstance(factor, bool)
-            if not (real and 0 < factor < 1e300):  # also false for NaN and for ints beyond any float
-                raise ConfigError(f"scaled: {label} = {shown(factor)}: expected a finite factor > 0")
+        mass, inertia, friction = (
+            model_factor(label, factor, error=ConfigError)
+            for label, factor in (("mass", mass), ("inertia", inertia), ("friction", friction))
+        )
         bodies = tuple(
             replace(
                 body,

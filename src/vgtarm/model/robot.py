@@ -14,6 +14,7 @@ its own per structure (:mod:`vgtarm.model.definition`).
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -25,11 +26,22 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..errors import ConfigError, InputError, cut, shown
 from ..fileio import parse_toml, read_text_limited
+from ..memory import check_batch
 from .assembly import check_margins
 from .compiled import CompiledBackend, InterpretedBackend, get_backend
 from .definition import PAPER, Definition, StackDefinition
 from .parameters import ROBOT_FILE_LIMIT, RobotParameters, load_parameters, parameters_from_dict
-from .sanity import check_joint_range, sane_range
+from .sanity import (
+    FORCE_NAMES,
+    RANGE_REASONS,
+    as_float,
+    check_input,
+    check_joint_range,
+    finite,
+    input_ranges,
+    input_units,
+    real_array,
+)
 from .stack.description import Stack, stack_from_dict
 
 Array = NDArray[np.float64]
@@ -72,24 +84,12 @@ class BiasAccelerations:
     body_angular: Array
 
 
-#: Arguments whose last axis is the joint vector (messages name the joint).
-_JOINT_VECTORS = frozenset({"q", "qd", "qdd", "F"})
-
-
-def _as_array(
-    value: ArrayLike, name: str, last: int, finite: bool = True, names: tuple[str, ...] = ()
-) -> Array:
-    try:
-        array = np.asarray(value, dtype=float)
-    except (TypeError, ValueError, OverflowError):
-        raise InputError(f"{name} must be an array of numbers, got {shown(value)}") from None
-    if array.ndim == 0 or array.shape[-1] != last:
-        raise InputError(f"{name} must have shape (..., {last}), got shape {array.shape}")
-    if finite and not np.isfinite(array).all():
-        index = np.argwhere(~np.isfinite(array))[0]
-        joint = f" ({names[index[-1]]})" if name in _JOINT_VECTORS and last == len(names) else ""
-        raise InputError(f"{name} must be finite; {name}[{', '.join(map(str, index))}]{joint} = {array[tuple(index)]}")
-    return array
+#: Per row of a batch, the bytes of the checks' temporaries for each triangle margin row.
+_MARGIN_BYTES = 17
+#: A result that is not finite is blamed on ``q`` if a triangle margin is below this (m: the model is
+#: singular where a module cannot be assembled), else on an input above this fraction of its bound.
+_SINGULAR_MARGIN = 1e-6
+_LARGE_INPUT = 1e-3
 
 
 def definition_of(parameters: RobotParameters | Stack) -> Definition:
@@ -109,11 +109,23 @@ class Robot:
     parameters sharing the same compiled code (for example a controller's imperfect model; for a
     stack, a stack of the same structure).
 
-    Every method taking joint values ``q`` refuses, with :class:`~vgtarm.errors.InputError`,
-    values that are not finite or lie outside the accepted range :meth:`joint_range` (lengths
-    within ten spans of their limits and >= 0, angles within 1000 turns: see
-    :mod:`vgtarm.model.sanity`), and, with
-    :class:`~vgtarm.errors.AssemblyError`, leg sets that cannot be assembled.
+    Every method refuses, with one :class:`~vgtarm.errors.InputError` line naming the argument,
+    the element and the user's value (:mod:`vgtarm.model.sanity`):
+
+    - arrays that are not real numbers (complex values, even with a zero imaginary part;
+      booleans, ``None``, text) or of the wrong shape, and leading shapes that do not broadcast;
+    - values that are not finite or lie outside :meth:`input_ranges`: joint values ``q`` outside
+      :meth:`joint_range` (lengths within ten spans of their limits and >= 0, angles within 1000
+      turns), rates ``qd`` beyond a million spans of the limits per second, accelerations ``qdd``
+      beyond that rate reached in a microsecond, efforts ``F`` and the tip force ``f_tip`` beyond
+      1e12 N (N m);
+    - a batch whose estimated memory exceeds what the machine has (or ``$VGTARM_MEMORY_LIMIT``),
+      before anything is allocated, naming the rows, the estimate and the limit;
+    - a result that is still not finite, naming the input that drove it (a configuration at the
+      edge of assembly, for example);
+
+    and, with :class:`~vgtarm.errors.AssemblyError`, leg sets that cannot be assembled. A batch of
+    zero rows gives empty results.
     """
 
     def __init__(
@@ -127,7 +139,9 @@ class Robot:
         self.definition = definition
         self.backend = backend if backend is not None else get_backend(None, definition)
         self._p = parameters.vector()
-        self._low, self._high = sane_range(parameters)
+        self._ranges = input_ranges(parameters)
+        self._low, self._high = self._ranges["q"]
+        self._units = input_units(parameters)
         self._G, self._h = parameters.margin_form()
         self.n_joints: int = parameters.n_joints
         self.joint_names: tuple[str, ...] = parameters.joint_names
@@ -181,11 +195,19 @@ class Robot:
         (six rows per module, in the order of :data:`~vgtarm.model.assembly.TRIANGLE_INEQUALITIES`)."""
         return self._G.copy(), self._h.copy()
 
-    def check_assembly(self, q: Array, *, where: str = "q") -> None:
+    def check_assembly(self, q: ArrayLike, *, where: str = "q") -> None:
         """Raise :class:`~vgtarm.errors.AssemblyError` naming the module and the triangle inequality
-        if a configuration of ``q`` ``(..., n)`` cannot be assembled."""
-        p = self.parameters
-        check_margins(q, self._G, self._h, p.margin_legs(), p.b, p.d, where=where)
+        if a configuration of ``q`` ``(..., n)`` cannot be assembled (:class:`InputError` if ``q``
+        is not an array of finite real numbers)."""
+        if not isinstance(where, str):
+            raise InputError(f"where = {shown(where)}: expected the name of the argument (str)")
+        raw = real_array(q, where, self.n_joints, self.joint_names)
+        shape = raw.shape[:-1]
+        check_batch(math.prod(shape), _MARGIN_BYTES * self._G.shape[0] + 16 * self.n_joints, "check_assembly")
+        qa = as_float(raw)
+        largest = np.full(self.n_joints, np.finfo(float).max)
+        check_input(qa, where, (-largest, largest), self.joint_names, self._units["q"], raw=raw)
+        self._check_margins(qa, where)
 
     def joint_range(self) -> tuple[Array, Array]:
         """Lowest and highest joint values the methods accept, ``(n,)`` each (m, rad).
@@ -196,29 +218,134 @@ class Robot:
         """
         return self._low.copy(), self._high.copy()
 
+    def input_ranges(self) -> dict[str, tuple[Array, Array]]:
+        """Lowest and highest accepted value of each input, by argument name: ``q`` (as
+        :meth:`joint_range`), ``qd``, ``qdd``, ``F`` ``(n,)`` each (SI per joint: m, rad; per s;
+        per s^2; N, N m) and ``f_tip`` ``(3,)`` (N). See :mod:`vgtarm.model.sanity` for the bounds."""
+        return {label: (low.copy(), high.copy()) for label, (low, high) in self._ranges.items()}
+
     def in_joint_range(self, q: ArrayLike) -> NDArray[np.bool_]:
         """Whether each configuration ``(..., n)`` is finite and inside :meth:`joint_range`."""
-        qa = _as_array(q, "q", self.n_joints, finite=False, names=self.joint_names)
+        (qa,), _ = self._arrays("in_joint_range", [("q", q, self.n_joints)], outputs=0, finite=False)
         return np.asarray(((qa >= self._low) & (qa <= self._high)).all(axis=-1))
 
     # -- helpers -----------------------------------------------------------------------------
 
-    def _evaluate(
-        self, name: str, named: list[tuple[str, ArrayLike, int]], check_q: bool = True
-    ) -> tuple[tuple[int, ...], list[Array]]:
-        arrays = [_as_array(value, label, size, names=self.joint_names) for label, value, size in named]
+    def _arrays(
+        self,
+        method: str,
+        named: list[tuple[str, ArrayLike, int]],
+        *,
+        outputs: int,
+        finite: bool = True,
+        margins: bool = False,
+    ) -> tuple[list[Array], tuple[int, ...]]:
+        """The inputs of ``method`` checked (real numbers, shape, memory of the batch, ranges) as float
+        arrays (views where possible), and their broadcast leading shape.
+
+        ``named`` holds ``(argument, value, size of the last axis)``; ``outputs`` is the number of
+        floats ``method`` creates per row; ``margins``: the method evaluates the triangle margins.
+        ``finite=False`` checks only the type and the shape."""
+        raws = [real_array(value, label, size, self._names(label)) for label, value, size in named]
+        shapes = [raw.shape[:-1] for raw in raws]
         try:
-            shape = np.broadcast_shapes(*[a.shape[:-1] for a in arrays])
+            shape = shapes[0] if shapes.count(shapes[0]) == len(shapes) else np.broadcast_shapes(*shapes)
         except ValueError:
-            shapes = ", ".join(f"{label} {a.shape}" for (label, _, _), a in zip(named, arrays, strict=True))
-            raise InputError(f"leading shapes do not broadcast: {shapes}") from None
-        if check_q:
-            check_joint_range(arrays[0], self.parameters, (self._low, self._high), where=named[0][0])
-            self.check_assembly(arrays[0], where=named[0][0])
-        n = int(np.prod(shape, dtype=int))
+            given = ", ".join(f"{label} {raw.shape}" for (label, _, _), raw in zip(named, raws, strict=True))
+            raise InputError(f"{method}: leading shapes do not broadcast: {given}") from None
+        row_bytes = 8 * outputs + (_MARGIN_BYTES * self._G.shape[0] if margins else 0)
+        for raw in raws:
+            size = raw.shape[-1]
+            row_bytes += 3 * size  # the range check's booleans
+            row_bytes += 8 * size if raw.dtype != np.float64 else 0  # the conversion
+            row_bytes += 8 * size if raw.shape[:-1] != shape or not raw.flags.c_contiguous else 0  # one row each
+        check_batch(math.prod(shape), max(row_bytes, 1), method)
+        arrays = [as_float(raw) for raw in raws]
+        if finite:
+            for (label, _, _), raw, array in zip(named, raws, arrays, strict=True):
+                if label == "q":
+                    check_joint_range(array, self.parameters, (self._low, self._high), where=label, raw=raw)
+                else:
+                    check_input(
+                        array,
+                        label,
+                        self._ranges[label],
+                        self._names(label),
+                        self._units[label],
+                        raw=raw,
+                        explain=RANGE_REASONS.get(label, ""),
+                    )
+        return arrays, shape
+
+    def _names(self, label: str) -> tuple[str, ...]:
+        """Names of the entries of argument ``label``'s last axis (joints, or x y z of a force)."""
+        return FORCE_NAMES if label == "f_tip" else self.joint_names if label in self._ranges else ()
+
+    def _evaluate(
+        self, method: str, name: str, named: list[tuple[str, ArrayLike, int]], outputs: int
+    ) -> tuple[tuple[int, ...], list[Array]]:
+        """Evaluate the compiled function ``name`` for ``method`` on checked inputs (the first is ``q``,
+        refused outside the range and when it cannot be assembled); ``outputs`` as for :meth:`_arrays`.
+        A result that is not finite is refused, naming the input that drove it."""
+        arrays, shape = self._arrays(method, named, outputs=outputs, margins=True)
+        self._check_margins(arrays[0], named[0][0])
+        n = math.prod(shape)
         flat = [np.broadcast_to(a, shape + a.shape[-1:]).reshape(n, a.shape[-1]) for a in arrays]
-        outputs = self.backend.evaluate(name, [*flat, self._p], n)
-        return shape, outputs
+        results = self.backend.evaluate(name, [*flat, self._p], n)
+        for result in results:
+            if not finite(result):
+                self._refuse_result(method, named, flat, shape, results)
+        return shape, results
+
+    def _check_margins(self, q: Array, where: str) -> None:
+        p = self.parameters
+        check_margins(q, self._G, self._h, p.margin_legs(), p.b, p.d, where=where)
+
+    def _refuse_result(
+        self,
+        method: str,
+        named: list[tuple[str, ArrayLike, int]],
+        flat: list[Array],
+        shape: tuple[int, ...],
+        results: list[Array],
+    ) -> None:
+        """Raise the :class:`InputError` of a result that is not finite from inputs that passed every
+        check: name the first such row and what drove it (an unassemblable neighbourhood of ``q``,
+        else the input that is largest for its range)."""
+        bad = np.zeros(len(flat[0]), dtype=bool)
+        for result in results:
+            bad |= ~np.isfinite(result).all(axis=1)
+        row = int(np.argmax(bad))
+        index = tuple(int(i) for i in np.unravel_index(row, shape)) if shape else ()
+        location = f" for configuration {index}" if shape else ""
+        margin = float((flat[0][row] @ self._G.T + self._h).min())
+        ratios = [
+            (float(np.max(np.abs(a[row]) / self._ranges[label][1])), label, a[row])
+            for (label, _, _), a in zip(named, flat, strict=True)
+            if label != "q"
+        ]
+        ratio, label, values = max(ratios, key=lambda item: item[0], default=(0.0, "", flat[0][row]))
+        if margin < _SINGULAR_MARGIN:
+            culprit = (
+                f"q{location} is {margin:.3g} m from a leg set that cannot be assembled, where the model is singular"
+            )
+        elif ratio >= _LARGE_INPUT:
+            j = int(np.argmax(np.abs(values) / self._ranges[label][1]))
+            names, unit = self._names(label), self._units[label][j]
+            element = f"{label}[{j}] ({names[j]})" if j < len(names) else f"{label}[{j}]"
+            culprit = (
+                f"{element} = {float(values[j]):.6g} {unit} drove it out of range ({100 * ratio:.3g} % of its bound "
+                f"{self._ranges[label][1][j]:.6g} {unit}); use smaller values"
+            )
+        else:
+            culprit = (
+                f"the parameters of robot {shown(self.parameters.name)} make the model overflow there "
+                "(check its masses and inertias)"
+            )
+        raise InputError(
+            f"{method}: the result is not finite{location} although every input is finite and inside its accepted "
+            f"range; {culprit}"
+        )
 
     def evaluate(self, name: str, inputs: Mapping[str, ArrayLike], n: int) -> dict[str, Array]:
         """Evaluate the compiled function ``name`` on ``n`` samples, inputs and outputs by name.
@@ -232,12 +359,35 @@ class Robot:
             sig = self.backend.signature(name)
         except (KeyError, TypeError):
             raise InputError(f"evaluate: no compiled function named {shown(name)}") from None
+        if not isinstance(inputs, Mapping):
+            raise InputError(f"evaluate: inputs = {shown(inputs)}: expected a mapping of input names to arrays")
+        if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 0:
+            raise InputError(f"evaluate: n = {shown(n)}: expected a number of samples (a whole number >= 0)")
+        n = int(n)
         wanted = [label for label in sig.in_names if label != "p"]
-        unknown = sorted(set(inputs) - set(wanted))
+        unknown = sorted(set(inputs) - set(wanted), key=str)
         missing = [label for label in wanted if label not in inputs]
         if unknown or missing:
             raise InputError(f"{name}: inputs {wanted} expected, got unknown {unknown} and missing {missing}")
-        arrays = [np.asarray(inputs[label], dtype=np.float64) for label in wanted]
+        sizes = dict(zip(sig.in_names, sig.nnz_in, strict=True))
+        raws = []
+        for label in wanted:
+            raw = real_array(inputs[label], f"{name} input {label}", sizes[label])
+            if raw.shape not in ((n, sizes[label]), (sizes[label],)):
+                raise InputError(
+                    f"{name} input {label}: expected shape ({n}, {sizes[label]}) or ({sizes[label]},), got {raw.shape}"
+                )
+            raws.append(raw)
+        row_bytes = 8 * (sum(sig.nnz_out) + sum(r.shape[-1] for r in raws if r.ndim == 2 and r.dtype != np.float64))
+        check_batch(n, max(row_bytes, 1), f"evaluate {name}")
+        arrays = [as_float(raw) for raw in raws]
+        for label, raw, array in zip(wanted, raws, arrays, strict=True):
+            if not finite(array):
+                index = tuple(int(i) for i in np.argwhere(~np.isfinite(array))[0])
+                raise InputError(
+                    f"{name} input {label} must be finite; {label}[{', '.join(map(str, index))}] = "
+                    f"{shown(raw[index].item() if isinstance(raw[index], np.generic) else raw[index])}"
+                )
         outputs = self.backend.evaluate(name, [*arrays, self._p], n)
         return dict(zip(sig.out_names, outputs, strict=True))
 
@@ -245,20 +395,24 @@ class Robot:
 
     def is_assemblable(self, q: ArrayLike, margin: float = 0.0) -> NDArray[np.bool_]:
         """Whether each configuration ``(..., n)`` can be assembled with the given margin (m)."""
-        qa = _as_array(q, "q", self.n_joints, names=self.joint_names)
         if isinstance(margin, bool) or not isinstance(margin, int | float | np.integer | np.floating):
             raise InputError(f"margin = {shown(margin)}: expected a length (m)")
+        if not math.isfinite(margin):
+            raise InputError(f"margin = {shown(margin)}: expected a finite length (m)")
+        largest = np.full(self.n_joints, np.finfo(float).max)
+        (qa,), _ = self._arrays("is_assemblable", [("q", q, self.n_joints)], outputs=0, margins=True, finite=False)
+        check_input(qa, "q", (-largest, largest), self.joint_names, self._units["q"])
         return np.asarray((qa @ self._G.T + self._h > margin).all(axis=-1))
 
     def forward_kinematics(self, q: ArrayLike) -> ForwardKinematics:
         """Passive angles, platform frames, tip point and orientation (paper eqs. 1-11)."""
-        shape, out = self._evaluate("fk", [("q", q, self.n_joints)])
+        m = self.n_modules
+        shape, out = self._evaluate("forward_kinematics", "fk", [("q", q, self.n_joints)], outputs=28 * m + 12)
         if self.definition == PAPER:
             passive, o1, c01, o2, c02, tip, c03 = out
             origins, rotations = np.stack([o1, o2], axis=1), np.stack([c01, c02], axis=1)
         else:
             passive, origins, rotations, tip, c03 = out
-        m = self.n_modules
         return ForwardKinematics(
             passive=passive.reshape(shape + (m, 4)),
             platform_position=origins.reshape(shape + (m, 3)),
@@ -269,23 +423,23 @@ class Robot:
 
     def tip_position(self, q: ArrayLike) -> Array:
         """Tip point P in F0, ``(..., 3)`` (m). Cheaper than the full forward kinematics."""
-        shape, (tip,) = self._evaluate("tip", [("q", q, self.n_joints)])
+        shape, (tip,) = self._evaluate("tip_position", "tip", [("q", q, self.n_joints)], outputs=3)
         return tip.reshape(shape + (3,))
 
     def tip_jacobian(self, q: ArrayLike) -> Array:
         """Translational Jacobian of the tip ``J_P = dP/dq``, ``(..., 3, n)``."""
-        shape, (jp, _) = self._evaluate("jac", [("q", q, self.n_joints)])
+        shape, (jp, _) = self._evaluate("tip_jacobian", "jac", [("q", q, self.n_joints)], outputs=6 * self.n_joints)
         return jp.reshape(shape + (3, self.n_joints))
 
     def tip_hessian(self, q: ArrayLike) -> Array:
         """Second derivatives of the tip point ``d^2 P_k / dq_l dq_m``, ``(..., 3, n, n)``."""
         n = self.n_joints
-        shape, (h,) = self._evaluate("tip_hessian", [("q", q, n)])
+        shape, (h,) = self._evaluate("tip_hessian", "tip_hessian", [("q", q, n)], outputs=3 * n * n)
         return h.reshape(shape + (3, n, n))
 
     def angular_jacobian(self, q: ArrayLike) -> Array:
         """Angular Jacobian of the end-effector (F0 components), ``(..., 3, n)``."""
-        shape, (_, jw) = self._evaluate("jac", [("q", q, self.n_joints)])
+        shape, (_, jw) = self._evaluate("angular_jacobian", "jac", [("q", q, self.n_joints)], outputs=6 * self.n_joints)
         return jw.reshape(shape + (3, self.n_joints))
 
     def com_jacobians(self, q: ArrayLike) -> tuple[Array, Array]:
@@ -294,19 +448,23 @@ class Robot:
         Axis ``-3`` is the body (:attr:`body_names`: platform 1, platform 2, end-effector for the
         paper's robot).
         """
-        shape, (jv, jw) = self._evaluate("com_jac", [("q", q, self.n_joints)])
         nb, n = len(self.body_names), self.n_joints
+        shape, (jv, jw) = self._evaluate("com_jacobians", "com_jac", [("q", q, n)], outputs=6 * nb * n)
         return jv.reshape(shape + (nb, 3, n)), jw.reshape(shape + (nb, 3, n))
 
     def tip_velocity(self, q: ArrayLike, qd: ArrayLike) -> tuple[Array, Array]:
         """Tip velocity ``J_P qd`` (m/s) and end-effector angular velocity (rad/s), ``(..., 3)`` each."""
-        shape, (v, w) = self._evaluate("velocity", [("q", q, self.n_joints), ("qd", qd, self.n_joints)])
+        n = self.n_joints
+        shape, (v, w) = self._evaluate("tip_velocity", "velocity", [("q", q, n), ("qd", qd, n)], outputs=6)
         return v.reshape(shape + (3,)), w.reshape(shape + (3,))
 
     def bias_accelerations(self, q: ArrayLike, qd: ArrayLike) -> BiasAccelerations:
         """Accelerations due to ``qd`` alone (``qdd = 0``): ``Jdot qd`` of the tip and bodies."""
         n = self.n_joints
-        shape, (tip, ang, com, body_ang) = self._evaluate("bias_acc", [("q", q, n), ("qd", qd, n)])
+        outputs = 6 + 6 * len(self.body_names)
+        shape, (tip, ang, com, body_ang) = self._evaluate(
+            "bias_accelerations", "bias_acc", [("q", q, n), ("qd", qd, n)], outputs=outputs
+        )
         return BiasAccelerations(
             tip=tip.reshape(shape + (3,)),
             angular=ang.reshape(shape + (3,)),
@@ -328,13 +486,15 @@ class Robot:
 
     def mass_matrix(self, q: ArrayLike) -> Array:
         """Mass matrix ``M(q)`` of eq. 15, ``(..., n, n)``."""
-        shape, (m,) = self._evaluate("mass", [("q", q, self.n_joints)])
-        return m.reshape(shape + (self.n_joints, self.n_joints))
+        n = self.n_joints
+        shape, (m,) = self._evaluate("mass_matrix", "mass", [("q", q, n)], outputs=n * n)
+        return m.reshape(shape + (n, n))
 
     def bias_forces(self, q: ArrayLike, qd: ArrayLike) -> Array:
         """``C(q, qd)`` of eq. 15: velocity products + gravity + viscous friction, ``(..., n)``."""
-        shape, (c,) = self._evaluate("bias_forces", [("q", q, self.n_joints), ("qd", qd, self.n_joints)])
-        return c.reshape(shape + (self.n_joints,))
+        n = self.n_joints
+        shape, (c,) = self._evaluate("bias_forces", "bias_forces", [("q", q, n), ("qd", qd, n)], outputs=n)
+        return c.reshape(shape + (n,))
 
     def forward_dynamics(self, q: ArrayLike, qd: ArrayLike, F: ArrayLike, f_tip: ArrayLike | None = None) -> Array:
         """Joint accelerations ``M^-1 (F + J_P^T f_tip - C)``, ``(..., n)``.
@@ -344,19 +504,22 @@ class Robot:
         """
         f = np.zeros(3) if f_tip is None else f_tip
         n = self.n_joints
-        shape, (qdd,) = self._evaluate("fd", [("q", q, n), ("qd", qd, n), ("F", F, n), ("f_tip", f, 3)])
+        named: list[tuple[str, ArrayLike, int]] = [("q", q, n), ("qd", qd, n), ("F", F, n), ("f_tip", f, 3)]
+        shape, (qdd,) = self._evaluate("forward_dynamics", "fd", named, outputs=n)
         return qdd.reshape(shape + (self.n_joints,))
 
     def inverse_dynamics(self, q: ArrayLike, qd: ArrayLike, qdd: ArrayLike, f_tip: ArrayLike | None = None) -> Array:
         """Actuator efforts ``M qdd + C - J_P^T f_tip`` that produce ``qdd``, ``(..., n)``."""
         f = np.zeros(3) if f_tip is None else f_tip
         n = self.n_joints
-        shape, (F,) = self._evaluate("id", [("q", q, n), ("qd", qd, n), ("qdd", qdd, n), ("f_tip", f, 3)])
+        named: list[tuple[str, ArrayLike, int]] = [("q", q, n), ("qd", qd, n), ("qdd", qdd, n), ("f_tip", f, 3)]
+        shape, (F,) = self._evaluate("inverse_dynamics", "id", named, outputs=n)
         return F.reshape(shape + (self.n_joints,))
 
     def energy(self, q: ArrayLike, qd: ArrayLike) -> tuple[Array, Array]:
         """Kinetic and potential (gravity) energy, each of shape ``(...)`` (J)."""
-        shape, (t, v) = self._evaluate("energy", [("q", q, self.n_joints), ("qd", qd, self.n_joints)])
+        n = self.n_joints
+        shape, (t, v) = self._evaluate("energy", "energy", [("q", q, n), ("qd", qd, n)], outputs=2)
         return t.reshape(shape), v.reshape(shape)
 
 

@@ -6,6 +6,9 @@
 - the initial state must be a configuration of the plant (shape, finite, in the accepted range,
   assemblable): a bad one is a bad input, not a divergence;
 - ``limit_tolerance`` must be a positive distance that keeps the run inside the accepted range;
+- the controller's model must be a model of the plant: its total mass, inertia and friction
+  within :data:`~vgtarm.model.factors.MODEL_FACTOR_RANGE` of the plant's (a ratio, named with its
+  value and the range, never "not finite");
 - every other argument of ``simulate`` must have the right type (one line, not a ``TypeError``).
 """
 
@@ -19,9 +22,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import InputError, VgtarmError, escape, shown
+from ..model.factors import MODEL_FACTOR_RANGE
 from ..model.parameters import RobotParameters
 from ..model.robot import Robot
-from ..model.sanity import check_joint_range
+from ..model.sanity import (
+    RANGE_REASONS,
+    as_float,
+    check_input,
+    check_joint_range,
+    real_array,
+    user_finite,
+)
 from ..model.stack import Stack
 from .external import ExternalForce
 from .reference import JointReference
@@ -79,19 +90,29 @@ def initial_state(plant: Robot, reference: JointReference, state: Any) -> tuple[
         raise InputError(f"initial_state = {shown(state)}: expected a pair (q0, qd0) of {n} joint values each")
     arrays = []
     for label, value in zip(("q0", "qd0"), state, strict=True):
+        name = f"initial_state {label}"
+        if isinstance(value, str | bytes):
+            raise InputError(f"{name} = {shown(value)}: expected {n} numbers")
         try:
-            array = np.asarray(value, dtype=float)
-        except (TypeError, ValueError, OverflowError):
-            raise InputError(f"initial_state {label} = {shown(value)}: expected {n} numbers") from None
-        if array.shape != (n,):
-            raise InputError(f"initial_state {label}: expected shape ({n},), got {array.shape}")
+            shape = np.shape(value)
+        except (TypeError, ValueError, RecursionError):  # ragged nesting
+            raise InputError(f"{name} = {shown(value)}: expected {n} numbers") from None
+        if shape != (n,):
+            raise InputError(f"{name}: expected shape ({n},), got {shape}")
+        raw = real_array(value, name, n, plant.joint_names)  # complex, None, booleans, text: one line each
+        array = as_float(raw)
         if not np.isfinite(array).all():
             i = int(np.argwhere(~np.isfinite(array))[0][0])
-            raise InputError(f"initial_state {label}[{i}] = {float(array[i])!r}: expected a finite number")
-        arrays.append(array)
-    q0, qd0 = arrays
-    check_joint_range(q0, plant.parameters, plant.joint_range(), where="initial_state q0")
+            user = raw[i].item() if isinstance(raw[i], np.generic) and raw.dtype != np.longdouble else raw[i]
+            if not user_finite(user):  # a whole number too large for a float is refused as out of range below
+                raise InputError(f"{name}[{i}] = {shown(user)}: expected a finite number")
+        arrays.append((array, raw))
+    (q0, raw_q0), (qd0, raw_qd0) = arrays
+    check_joint_range(q0, plant.parameters, plant.joint_range(), where="initial_state q0", raw=raw_q0)
     plant.check_assembly(q0, where="initial_state q0")
+    units = tuple(f"{unit}/s" for unit in plant.joint_units)
+    qd_range = plant.input_ranges()["qd"]
+    check_input(qd0, "initial_state qd0", qd_range, plant.joint_names, units, raw=raw_qd0, explain=RANGE_REASONS["qd"])
     return q0, qd0
 
 
@@ -128,6 +149,8 @@ def arguments(
         raise InputError(
             f"controller_model = {shown(controller_model)}: expected None, a Robot, RobotParameters or a Stack"
         )
+    if controller_model is not None:
+        model_of_plant(plant, controller_model)
     if external_force is not None and not isinstance(external_force, ExternalForce):
         raise InputError(
             f"external_force = {shown(external_force)}: expected None or a vgtarm.simulation.ExternalForce"
@@ -155,3 +178,34 @@ def gains(plant: Robot, Kp: Array) -> None:
             f"{plant.n_joints} joints (give gains for its joints, e.g. ComputedForceControl.with_gains(kp, kv, "
             f"{plant.n_joints}))"
         )
+
+
+def _totals(parameters: RobotParameters | Stack) -> dict[str, float]:
+    """Total mass (kg), inertia (sum of the bodies' traces, kg m^2) and viscous friction of a robot."""
+    bodies = parameters.bodies
+    return {
+        "mass": float(sum(body.mass for body in bodies)),
+        "inertia": float(sum(np.trace(np.asarray(body.inertia, dtype=float)) for body in bodies)),
+        "friction": float(np.sum(parameters.viscous)),
+    }
+
+
+def model_of_plant(plant: Robot, controller_model: Robot | RobotParameters | Stack) -> None:
+    """Refuse, with one :class:`InputError` line, a controller model whose total mass, inertia or
+    friction is not within :data:`~vgtarm.model.factors.MODEL_FACTOR_RANGE` of the plant's (for
+    example a model of a ten-thousandth of the plant's mass): the line names the ratio and the
+    accepted range."""
+    model = controller_model.parameters if isinstance(controller_model, Robot) else controller_model
+    low, high = MODEL_FACTOR_RANGE
+    ours, theirs = _totals(plant.parameters), _totals(model)
+    for quantity, value in theirs.items():
+        reference = ours[quantity]
+        if reference == 0.0:  # nothing to compare with (a robot without friction)
+            continue
+        ratio = value / reference
+        if not low * (1 - 1e-9) <= ratio <= high * (1 + 1e-9):
+            raise InputError(
+                f"controller_model: its {quantity} is {ratio:.3g} times the plant's (robot "
+                f"{shown(plant.parameters.name)}); expected a ratio in [{low:g}, {high:g}] (a model off by more "
+                "is no model of the plant)"
+            )

@@ -57,6 +57,7 @@ from numpy.typing import NDArray
 from ...errors import ConfigError, cut, shown
 from ...fileio import parse_toml, read_text_limited
 from ..assembly import TRIANGLE_INEQUALITIES, linear_form
+from ..factors import model_factor
 from ..parameters import (
     _SOURCE_LENGTH,
     MAX_FRICTION,
@@ -279,11 +280,11 @@ class Stack:
 
     def scaled(self, *, mass: float = 1.0, inertia: float = 1.0, friction: float = 1.0) -> Stack:
         """A copy with every body mass, inertia and friction coefficient multiplied by a factor
-        (as :meth:`RobotParameters.scaled`; each factor a finite number > 0)."""
-        for label, factor in (("mass", mass), ("inertia", inertia), ("friction", friction)):
-            real = isinstance(factor, int | float | np.integer | np.floating) and not isinstance(factor, bool)
-            if not (real and 0 < factor < 1e300):
-                raise ConfigError(f"scaled: {label} = {shown(factor)}: expected a finite factor > 0")
+        (as :meth:`RobotParameters.scaled`; each factor in :data:`~vgtarm.model.factors.MODEL_FACTOR_RANGE`)."""
+        mass, inertia, friction = (
+            model_factor(label, factor, error=ConfigError)
+            for label, factor in (("mass", mass), ("inertia", inertia), ("friction", friction))
+        )
 
         def body(b: Body) -> Body:
             return replace(b, mass=b.mass * mass, inertia=tuple(tuple(x * inertia for x in row) for row in b.inertia))
