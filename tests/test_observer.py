@@ -199,6 +199,7 @@ def test_observer_stays_stable_with_encoders_and_a_wrong_model(robot):
         ({"observer": "momentum", "force_sensor": True}, "choose one way"),
         ({"encoder_resolution": -1e-6}, "encoder_resolution = -1e-06"),
         ({"velocity_noise": "loud"}, "velocity_noise = 'loud': expected a number"),
+        ({"velocity_noise": 5.0}, "velocity_noise = 5.0: expected a standard deviation of at most 1"),
     ],
 )
 def test_bad_observer_and_sensing_arguments_are_one_clear_line(robot, kwargs, message):

@@ -210,6 +210,19 @@ def test_divergence_stops_with_when_and_why_and_keeps_the_samples(robot):
     assert np.isfinite(result.q[reached]).all() and np.isnan(result.q[~reached]).all()
 
 
+def test_a_diverging_run_ends_as_a_divergence_in_the_numpy_loop_too(robot):
+    """Absurd gains drive the NumPy twin's measured state beyond what the model accepts: the run
+    ends as a divergence with its samples (SimulationError), as the compiled loop's does, not as a
+    bad-argument error of a model call inside the loop."""
+    slow = vgtarm.Robot(robot.parameters, InterpretedBackend(build_functions()))
+    ref = smooth_reference(robot, duration=0.05)
+    wild = ComputedForceControl.with_gains(1e12, 1e12)
+    for plant in (robot, slow):
+        with pytest.raises(vgtarm.SimulationError, match=r"diverged at t = ") as info:
+            simulate(plant, ref, wild, velocity_noise=0.5, seed=1)
+        assert not info.value.result.success and info.value.result.mode[0] != MODE_NOT_RUN
+
+
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [

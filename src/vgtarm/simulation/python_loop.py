@@ -14,6 +14,7 @@ from numpy.typing import NDArray
 
 from ..control.law import computed_force
 from ..control.scm import predict_tip_error
+from ..errors import AssemblyError, InputError
 from ..model.closedloop import (
     ABOVE_THRESHOLD,
     DONE,
@@ -131,15 +132,23 @@ class PythonLoop:
         inp = arrays.inputs
         for k in range(k0, k1):
             q, qd = arrays.q[k], arrays.qd[k]
-            arrays.tip[k], velocity = self._tip_state(q, qd)
+            try:
+                arrays.tip[k], velocity = self._tip_state(q, qd)
+            except InputError:  # a diverging run's state beyond any the model accepts
+                return NOT_FINITE, k
             arrays.error[k] = np.linalg.norm(inp["tip_d"][k] - arrays.tip[k])
             self._measure(settings, arrays, k)
             if settings.threshold > 0 and arrays.error[k] > settings.threshold:
                 return ABOVE_THRESHOLD, k
-            self._observe(settings, arrays, k)
-            qm, vm = arrays.q_meas[k], arrays.qd_meas[k]
-            e, e_dot = inp["q_d"][k] - qm, inp["qd_d"][k] - vm
-            M, C = self.model.mass_matrix(qm), self.model.bias_forces(qm, vm)
+            try:
+                self._observe(settings, arrays, k)
+                qm, vm = arrays.q_meas[k], arrays.qd_meas[k]
+                e, e_dot = inp["q_d"][k] - qm, inp["qd_d"][k] - vm
+                M, C = self.model.mass_matrix(qm), self.model.bias_forces(qm, vm)
+            except AssemblyError:  # the measured legs cannot be assembled
+                return NOT_ASSEMBLABLE, k
+            except InputError:  # a diverging run's measured state beyond any the model accepts
+                return NOT_FINITE, k
             arrays.F[k] = computed_force(M, C, inp["qdd_d"][k], e, e_dot, Kp, Kv, arrays.tau_hat[k])
             dist = inp["disturbance"][k]
             arrays.f_ext[k] = self._tool_force(settings, velocity, dist)
@@ -147,8 +156,10 @@ class PythonLoop:
                 continue
             try:
                 q1, qd1 = self._integrate(settings, q, qd, arrays.F[k], dist)
-            except ValueError:  # an RK4 stage left the assemblable set
+            except AssemblyError:  # an RK4 stage left the assemblable set
                 return NOT_ASSEMBLABLE, k + 1
+            except InputError:  # a stage's state or efforts beyond any the model accepts: diverging
+                return NOT_FINITE, k + 1
             arrays.q[k + 1], arrays.qd[k + 1] = q1, qd1
             status = self._check(settings, arrays, q1, qd1)
             if status != DONE:

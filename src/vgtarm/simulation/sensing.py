@@ -29,6 +29,9 @@ DEFAULT_TWIST_RESOLUTION = 2.0 * math.pi / 2**20
 #: extreme they measure every leg as zero.
 MAX_LEG_RESOLUTION = 1e-2
 MAX_TWIST_RESOLUTION = 0.1
+#: Largest velocity noise accepted (m/s, rad/s, standard deviation of each differenced velocity):
+#: a thousand times what a 1 um encoder differenced at 1 ms gives (1 mm/s); more is a unit mistake.
+MAX_VELOCITY_NOISE = 1.0
 #: Observers by name.
 OBSERVERS = ("none", "momentum")
 
@@ -134,6 +137,11 @@ def sensing_settings(
         if step > largest:
             raise InputError(f"{label} = {step!r}: expected an encoder step of at most {largest:g} {unit}")
     noise = _number("velocity_noise", velocity_noise)
+    if noise > MAX_VELOCITY_NOISE:
+        raise InputError(
+            f"velocity_noise = {velocity_noise!r}: expected a standard deviation of at most {MAX_VELOCITY_NOISE:g} "
+            "(m/s, rad/s) on each differenced velocity"
+        )
     cutoff = _number("velocity_filter_hz", velocity_filter_hz, strict=True)
     resolution = np.array([legs if unit == "m" else twist for unit in units])
     return Sensing(
