@@ -391,9 +391,24 @@ def test_a_stack_built_directly_is_checked_too():
 
 
 def test_the_model_refuses_bad_configurations(planar):
-    with pytest.raises(InputError, match=r"q must have shape \(3,\)"):
+    with pytest.raises(InputError, match=r"q must have shape \(\.\.\., 3\), got shape \(7,\)"):
         planar.tip_position(np.zeros(7))
     with pytest.raises(InputError, match=r"q\[1\] \(v1\) = nan"):
         planar.tip_position([0.3, math.nan, 0.4])
     with pytest.raises(AssemblyError, match="module 1 cannot be assembled: 's \\+ 2d > p'"):
         planar.tip_position([0.22, 0.36, 0.46])
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        (lambda n: [None] * n, r"q\[0\] \(s1\) = None is not a number"),
+        (lambda n: np.full(n, 0.3 + 0j), "complex"),
+        (lambda n: ["0.3"] * n, "'0.3'"),
+    ],
+)
+def test_the_interpreted_stack_model_refuses_what_is_not_a_real_number(planar, value, message):
+    """The second algorithm refuses the inputs the Robot refuses, naming the user's own value
+    (it used to turn None into nan and drop an imaginary part)."""
+    with pytest.raises(InputError, match=message):
+        planar.tip_position(value(planar.n))

@@ -16,6 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ...errors import AssemblyError, InputError, shown
 from ..assembly import TRIANGLE_INEQUALITIES
+from ..sanity import as_float, real_array
 from ..symbolic import SX, row_major
 from .description import LEG_NAMES, Stack, stack_margins
 from .symbolic import stack_dynamics, stack_kinematics
@@ -82,12 +83,13 @@ class StackModel:
     # -- checks ----------------------------------------------------------------------------
 
     def _vector(self, value: ArrayLike, name: str, size: int) -> Array:
-        try:
-            array = np.asarray(value, dtype=float)
-        except (TypeError, ValueError, OverflowError):
-            raise InputError(f"{name} must be an array of numbers, got {shown(value)}") from None
-        if array.shape != (size,):
-            raise InputError(f"{name} must have shape ({size},), got shape {array.shape}")
+        """``value`` as ``(size,)`` floats: real numbers only (complex, ``None``, text and booleans
+        refused with the user's own value, as :class:`~vgtarm.model.robot.Robot` does), finite."""
+        names = self.stack.joint_names if size == self.n else ()
+        raw = real_array(value, name, size, names)
+        if raw.shape != (size,):
+            raise InputError(f"{name} must have shape ({size},), got shape {raw.shape}")
+        array = as_float(raw)
         if not np.isfinite(array).all():
             i = int(np.argmin(np.isfinite(array)))
             label = f" ({self.stack.joint_names[i]})" if size == self.n else ""
