@@ -257,7 +257,9 @@ def from_samples(
     return _fit_spline(times, points, dt, name, "t", lambda i: f"index {i}")
 
 
-def from_csv(file: str | os.PathLike[str], dt: float | None = None, *, name: str | None = None) -> Path:
+def from_csv(
+    file: str | os.PathLike[str], dt: float | None = None, *, name: str | None = None, quote: bool = True
+) -> Path:
     """Path read from a CSV file of sampled positions, fitted as in :func:`from_samples`.
 
     The file has a header row ``t,x,y,z`` (case-insensitive, whitespace around the names
@@ -267,6 +269,9 @@ def from_csv(file: str | os.PathLike[str], dt: float | None = None, *, name: str
         file: Path of the CSV file.
         dt: Output sampling period, s, > 0; defaults to the rows' spacing if it is uniform.
         name: Label of the path; defaults to the file's stem.
+        quote: Whether a message about a bad header, row or value quotes it. False for a file named
+            by someone other than the user (a study file's ``path``): a file that is not a valid
+            path file is then never shown, only its line and column.
 
     Returns:
         A :class:`Path` sampled at ``t[0] + k*dt`` up to the last row's time.
@@ -289,8 +294,8 @@ def from_csv(file: str | os.PathLike[str], dt: float | None = None, *, name: str
     found = tuple(cell.strip().lower() for cell in header)
     if found != _CSV_COLUMNS:
         raise PathError(
-            f"path file {shown_label}: line {header_line}: header must be the columns t,x,y,z, "
-            f"found {shown(','.join(cell.strip() for cell in header))}"
+            f"path file {shown_label}: line {header_line}: header must be the columns t,x,y,z"
+            + (f", found {shown(','.join(cell.strip() for cell in header))}" if quote else "")
         )
     if len(rows) < 3:
         raise PathError(f"path file {shown_label}: need at least 2 data rows after the header, got {len(rows) - 1}")
@@ -298,22 +303,25 @@ def from_csv(file: str | os.PathLike[str], dt: float | None = None, *, name: str
         raise PathError(f"path file {shown_label}: {len(rows) - 1} data rows; at most {MAX_SAMPLES:,} are read")
     data = np.empty((len(rows) - 1, 4))
     lines = []
+
+    def value(cell: str) -> str:
+        return shown(cell.strip()) if quote else "the value"
+
     for k, (line, row) in enumerate(rows[1:]):
         if len(row) != len(_CSV_COLUMNS):
             raise PathError(
-                f"path file {shown_label}: line {line}: expected 4 fields (t,x,y,z), found {len(row)}: {shown(row)}"
+                f"path file {shown_label}: line {line}: expected 4 fields (t,x,y,z), found {len(row)}"
+                + (f": {shown(row)}" if quote else "")
             )
         for j, (column, cell) in enumerate(zip(_CSV_COLUMNS, row, strict=True)):
             try:
                 data[k, j] = float(cell)
             except ValueError:
                 raise PathError(
-                    f"path file {shown_label}: line {line}, column {column!r}: {shown(cell.strip())} is not a number"
+                    f"path file {shown_label}: line {line}, column {column!r}: {value(cell)} is not a number"
                 ) from None
             if not math.isfinite(data[k, j]):
-                raise PathError(
-                    f"path file {shown_label}: line {line}, column {column!r}: {shown(cell.strip())} is not finite"
-                )
+                raise PathError(f"path file {shown_label}: line {line}, column {column!r}: {value(cell)} is not finite")
         lines.append(line)
 
     def where(i: int) -> str:

@@ -3,7 +3,9 @@
 Each worker process keeps the robot (its compiled model) and the joint references it has built in
 a per-process cache, so a study loads the model once per worker, not once per run. A point runs
 exactly as ``vgtarm simulate`` would run it with the same inputs (:func:`simulate_command` gives
-that command line), so any row of a study can be re-run by hand.
+that command line), so any row of a study can be re-run by hand. Importing this module registers
+the MuJoCo plant (``plant_engine = "mujoco"``; MuJoCo itself is needed only to run it), here and
+in every worker, which imports it by name.
 """
 
 from __future__ import annotations
@@ -21,7 +23,10 @@ from typing import Any
 
 import numpy as np
 
-from .. import paths
+from .. import (
+    mujoco_bridge,  # noqa: F401  (registers the MuJoCo plant, in workers too)
+    paths,
+)
 from ..control import ComputedForceControl, SwitchingControl
 from ..errors import InputError
 from ..ga import GAOptions
@@ -68,7 +73,7 @@ def _path_of(text: str, dt: float) -> paths.Path:
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as stream:
             stream.write(text)
-        return paths.from_csv(name, dt, name=f"path {digest}")
+        return paths.from_csv(name, dt, name=f"path {digest}", quote=False)  # named by the study: never shown
     finally:
         os.unlink(name)
 
@@ -183,9 +188,14 @@ def check_point(inputs: Inputs, files: Mapping[str, str]) -> None:
         robot = _robot(files.get("robot"))
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"study.robot = {inputs['robot']!r}: TOML syntax error: {exc}") from None
-    if inputs["path"] is not None:
-        _path_of(files["path"], float(inputs["dt"]))  # type: ignore[arg-type]
     dt = float(inputs["dt"])  # type: ignore[arg-type]
+    if inputs["path"] is not None:
+        _path_of(files["path"], dt)
+    else:
+        try:  # sampling the case's path (no inverse kinematics): a dt longer than the path is refused
+            case_path(robot, int(inputs["case"]), dt)  # type: ignore[arg-type]
+        except paths.PathError as exc:
+            raise ConfigError(f"study.dt = {dt!r}: case {inputs['case']}'s path cannot be sampled: {exc}") from None
     n_joints = len(robot.parameters.home)
     q = np.tile(np.asarray(robot.parameters.home, dtype=float), (3, 1))
     still = JointReference(np.arange(3.0) * dt, q, np.zeros_like(q), np.zeros_like(q), name="check")
@@ -220,6 +230,7 @@ _FLAGS = {
     "encoder_resolution": "--encoder-resolution",
     "velocity_noise": "--velocity-noise",
     "velocity_filter_hz": "--velocity-filter",
+    "plant_engine": "--plant",
 }
 _SWITCHES = {"external_force": "--external-force", "force_sensor": "--force-sensor"}
 _STUDY_ONLY = {"kp": None, "kv": None, "threshold": None, "kp_max": None, "kv_max": None, "path": None, "dt": 1e-3}

@@ -25,7 +25,8 @@ seeds = 4               # seeds 0..3 of the disturbance and the GA; or [0, 7, 9]
 # cutting_force (N), disturbance (N per axis), model_mass, model_inertia, model_friction
 # (factors on the controller's model), integrator ("euler" | "semi_implicit_euler" | "rk4"),
 # substeps, and the simulator's own options where it has them (observer = "momentum",
-# observer_gain, force_sensor, encoder_resolution, velocity_noise, ...).
+# observer_gain, force_sensor, encoder_resolution, velocity_noise, plant_engine = "mujoco"
+# for the MuJoCo plant with vgtarm[mujoco], ...).
 [grid]
 controller = ["cfc", "scm"]
 external_force = true

@@ -5,27 +5,49 @@ not stored yet, and stores each result as it arrives (:class:`~vgtarm.study.stor
 the client, so workers need no shared file system. ``execute`` must be a module-level function
 (workers import it by name) that returns a failed run as a summary with ``success`` False and an
 error name instead of raising; ``check(inputs, files)`` refuses bad inputs before any run starts.
+
+Before the results folder is created, a given scheduler's address is checked
+(:func:`scheduler_address`) and connected to within :data:`CONNECT_TIMEOUT`, or the local
+cluster is started; a failure is one line and leaves no folder behind. The local cluster is
+started from a thread that blocks SIGINT: Dask's threads, and the worker processes they start,
+inherit the blocked signal (a signal mask survives ``exec``), so the terminal's Ctrl-C reaches
+only this process, which stays interruptible during the start and stops the workers at once.
+Dask's workers end by themselves, at once, when this process dies (a pipe from it closes).
 """
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
+import ipaddress
 import logging
+import multiprocessing
 import os
+import re
 import signal
 import threading
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from multiprocessing import resource_tracker
 from pathlib import Path
 from typing import Any
 
-from ..errors import InputError
+from ..errors import InputError, cut, shown
 from .spec import Point, Study, Value
 from .store import Store
 
 #: ``execute(inputs, files) -> (summary, error)``: error "" for a successful run.
 Execute = Callable[[Mapping[str, Value], Mapping[str, str]], tuple[dict[str, Any], str]]
 Check = Callable[[Mapping[str, Value], Mapping[str, str]], None]
+
+#: Longest wait (s) for a given scheduler to answer before the study is refused.
+CONNECT_TIMEOUT = 10.0
+#: Dask's protocols a scheduler may be reached by (``inproc://`` lives inside one process only).
+SCHEDULER_SCHEMES = ("tcp", "tls", "ws", "wss")
+_ADDRESS = re.compile(r"(?:(?P<scheme>[A-Za-z][A-Za-z0-9+.-]*)://)?(?P<host>\[[^\]]*\]|[^:/\[\]]*):(?P<port>[0-9]+)")
+_LABEL = r"[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,61}[A-Za-z0-9_])?"
+_HOST_NAME = re.compile(rf"(?=.{{1,253}}$){_LABEL}(?:\.{_LABEL})*\.?")
 
 
 @dataclass(frozen=True)
@@ -78,9 +100,9 @@ def run_study(
     if workers is not None and not (isinstance(workers, int) and workers >= 1):
         raise InputError(f"workers = {workers!r}: expected a whole number >= 1")
     start = time.perf_counter()
+    address = None if scheduler is None else scheduler_address(scheduler)
     points = check_study(study, check) if check is not None else study.points()
     store = Store(out)
-    store.prepare()
     done = store.done()
     todo = [p for p in points if p.id not in done]
     failed = sum(1 for row in store.rows([p for p in points if p.id in done]) if not row.get("success"))
@@ -90,13 +112,14 @@ def run_study(
         from tqdm import tqdm
 
         with (
-            _client(scheduler, workers) as client,
+            _client(address, workers) as client,  # connected or started before the folder is made
             tqdm(
                 total=len(points), initial=len(points) - len(todo), unit="run", disable=not progress, desc=study.name
             ) as bar,
         ):
             from distributed import as_completed
 
+            store.prepare()
             bar.set_postfix(failed=failed)
             files = client.scatter(dict(study.files), broadcast=True) if study.files else {}
             store.note("submit", [p.id for p in todo])
@@ -116,6 +139,7 @@ def run_study(
                 bar.set_postfix(failed=failed)
                 bar.update(1)
     rows = store.rows(points)
+    store.prepare()  # every run stored already: the tables are written all the same
     store.write_tables(rows)
     return StudyRun(
         rows,
@@ -133,61 +157,201 @@ def _run_point(execute: Execute, inputs: Mapping[str, Value], files: Mapping[str
     return execute(inputs, files)
 
 
+def scheduler_address(value: object) -> str:
+    """``value`` checked as the address of a Dask scheduler, ``SCHEME://HOST:PORT`` (the scheme one
+    of :data:`SCHEDULER_SCHEMES`, ``tcp://`` when left out); :class:`InputError` otherwise."""
+    expected = (
+        f"expected the address of a running Dask scheduler, SCHEME://HOST:PORT with SCHEME one of"
+        f" {', '.join(SCHEDULER_SCHEMES)} (e.g. tcp://10.0.0.5:8786)"
+    )
+    match = _ADDRESS.fullmatch(value) if isinstance(value, str) else None
+    if match is None:
+        raise InputError(f"--scheduler {shown(value)}: {expected}")
+    scheme, host, port = (match["scheme"] or "tcp").lower(), match["host"], int(match["port"])
+    if scheme not in SCHEDULER_SCHEMES:
+        raise InputError(f"--scheduler {shown(value)}: protocol {shown(scheme)}: {expected}")
+    if host.startswith("["):
+        try:
+            ipaddress.IPv6Address(host[1:-1])
+        except ValueError:
+            raise InputError(
+                f"--scheduler {shown(value)}: host {shown(host)} is not an IPv6 address: {expected}"
+            ) from None
+    elif not _HOST_NAME.fullmatch(host):
+        raise InputError(f"--scheduler {shown(value)}: host {shown(host)} is not a host name or address: {expected}")
+    if not 1 <= port <= 65535:
+        raise InputError(f"--scheduler {shown(value)}: port {port} is not from 1 to 65535: {expected}")
+    return f"{scheme}://{host}:{port}"
+
+
+def connect(address: str, timeout: float | None = None) -> Any:
+    """A Dask client of the scheduler at ``address`` (checked by :func:`scheduler_address`), or one
+    :class:`InputError` line when no Dask scheduler answers there within ``timeout`` s (default
+    :data:`CONNECT_TIMEOUT`).
+
+    The scheduler is first asked who it is, the whole exchange bounded by ``timeout``: Dask's own
+    client bounds the connection but then waits without end for a peer that never answers (an
+    HTTP server waiting for a request line), and reads another server's reply as sizes of
+    exabytes (a MemoryError)."""
+    timeout = CONNECT_TIMEOUT if timeout is None else timeout
+    fail = f"--scheduler {shown(address)}: no Dask scheduler answered within {timeout:g} s"
+    try:
+        identity = _run_apart(lambda: asyncio.run(asyncio.wait_for(_identify(address, timeout), timeout)))
+    except TimeoutError:
+        raise InputError(f"{fail}; expected the address of a running Dask scheduler") from None
+    except MemoryError:  # another protocol's bytes read as Dask's frame sizes
+        raise InputError(f"{fail}: the server there speaks another protocol than Dask's") from None
+    except Exception as exc:  # noqa: BLE001 - refused, reset, not Dask
+        raise InputError(
+            f"{fail} ({type(exc).__name__}: {cut(str(exc), 120)}); expected the address of a running Dask scheduler"
+        ) from None
+    if not (isinstance(identity, Mapping) and identity.get("type") == "Scheduler"):
+        raise InputError(f"{fail}: the server there is not a Dask scheduler")
+    from distributed import Client
+
+    try:
+        return Client(address, timeout=timeout)
+    except Exception as exc:  # noqa: BLE001 - it answered a moment ago: gone or refusing this client
+        raise InputError(f"{fail} ({type(exc).__name__}: {cut(str(exc), 120)})") from None
+
+
+def _run_apart(call: Callable[[], Any]) -> Any:
+    """``call()`` here, or in a thread of its own when this thread runs an event loop already
+    (``asyncio.run`` cannot be nested: a study run from a notebook)."""
+    try:
+        asyncio.get_running_loop()
+    except RuntimeError:
+        return call()
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(1) as apart:
+        return apart.submit(call).result()
+
+
+async def _identify(address: str, timeout: float) -> Any:
+    """What the server at ``address`` says it is (Dask's ``identity`` call)."""
+    from distributed.comm import connect as open_comm
+
+    comm = await open_comm(address, timeout=timeout)
+    try:
+        await comm.write({"op": "identity", "reply": True})
+        return await comm.read()
+    finally:
+        comm.abort()
+
+
 class _client:
-    """A Dask client on ``scheduler``, or on a local cluster it starts and stops."""
+    """A Dask client on ``scheduler`` (an address checked by :func:`scheduler_address`), or on a
+    local cluster it starts and stops."""
 
     def __init__(self, scheduler: str | None, workers: int | None) -> None:
         self.scheduler, self.workers = scheduler, workers
         self.cluster: Any = None
         self.client: Any = None
+        self.level: int | None = None
 
     def __enter__(self) -> Any:
-        from distributed import Client, LocalCluster
+        from distributed import Client
 
         if self.scheduler is not None:
-            try:
-                self.client = Client(self.scheduler, timeout=10)
-            except OSError as exc:
-                raise InputError(f"--scheduler {self.scheduler!r}: cannot connect: {exc}") from None
+            self.client = connect(self.scheduler)
             return self.client
-        # The worker processes start with SIGINT ignored (inherited through exec), so a terminal's
-        # Ctrl-C, sent to the whole process group, reaches only this process, which stops them
-        # (no traceback from each worker). Meanwhile SIGINT is also blocked here: a Ctrl-C during
-        # the start stays pending (Linux never discards a blocked signal) and arrives below.
-        posix = hasattr(signal, "pthread_sigmask") and threading.current_thread() is threading.main_thread()
-        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if posix else set()
-        handler = signal.signal(signal.SIGINT, signal.SIG_IGN) if posix else None
+        # The local cluster's scheduler lives here: its notes on workers that went away (after a
+        # Ctrl-C, as tracebacks at level INFO) are not the user's business, until the loop stops.
+        logger = logging.getLogger("distributed")
+        self.level = logger.level
+        logger.setLevel(max(logging.ERROR, logger.getEffectiveLevel()))
         try:
-            self.cluster = LocalCluster(
-                n_workers=self.workers or os.cpu_count() or 1,
+            self.cluster = _start_local_cluster(self.workers or os.cpu_count() or 1)
+            try:
+                self.client = Client(self.cluster)
+            except BaseException:
+                _kill_workers(self.cluster)
+                self.cluster.close()
+                raise
+        except BaseException:
+            logger.setLevel(self.level)
+            raise
+        return self.client
+
+    def __exit__(self, kind: type[BaseException] | None, *exc: object) -> None:
+        try:
+            if kind is not None and issubclass(kind, KeyboardInterrupt) and self.cluster is not None:
+                _kill_workers(self.cluster)  # Ctrl-C: the runs under way are lost anyway; do not wait for them
+            if self.client is not None:
+                self.client.close()
+            if self.cluster is not None:
+                self.cluster.close()
+        finally:
+            if self.level is not None:
+                logging.getLogger("distributed").setLevel(self.level)
+
+
+def _start_local_cluster(workers: int) -> Any:
+    """A local cluster of ``workers`` processes, one thread each, started from a thread that blocks
+    SIGINT (see the module's docstring); a Ctrl-C while it starts is raised here at once, and the
+    cluster is stopped as soon as it is up."""
+    from distributed import LocalCluster
+
+    if os.name == "posix":  # started now, outside the blocked thread: its start unblocks SIGINT there
+        resource_tracker.ensure_running()
+    lock = threading.Lock()
+    outcome: dict[str, Any] = {}
+
+    def start() -> None:
+        try:
+            cluster = LocalCluster(
+                n_workers=workers,
                 threads_per_worker=1,
                 processes=True,
                 dashboard_address=None,
                 silence_logs=logging.ERROR,
                 env={"VGTARM_THREADS": "1"},  # the workers fill the CPUs; no GA threads on top
             )
-        finally:
-            if posix:
-                signal.signal(signal.SIGINT, signal.default_int_handler if handler is None else handler)
-                signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
-        self.client = Client(self.cluster)
-        return self.client
+        except BaseException as exc:  # noqa: BLE001 - handed to the waiting thread
+            outcome["error"] = exc
+            return
+        with lock:
+            if not outcome.get("abandoned"):
+                outcome["cluster"] = cluster
+                return
+        _kill_workers(cluster)  # the caller was interrupted meanwhile
+        cluster.close()
 
-    def __exit__(self, kind: type[BaseException] | None, *exc: object) -> None:
-        if kind is not None and issubclass(kind, KeyboardInterrupt) and self.cluster is not None:
-            self._kill_workers()  # Ctrl-C: the runs under way are lost anyway; do not wait for them
-        if self.client is not None:
-            self.client.close()
-        if self.cluster is not None:
-            self.cluster.close()
+    posix = hasattr(signal, "pthread_sigmask")
+    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if posix else set()
+    try:
+        thread = threading.Thread(target=start, name="vgtarm local cluster start", daemon=True)
+        thread.start()  # inherits the blocked SIGINT
+    finally:
+        if posix:
+            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+    try:
+        while thread.is_alive():
+            thread.join(0.05)  # short waits: a Ctrl-C is raised between two
+    except BaseException:
+        with lock:
+            outcome["abandoned"] = True
+            cluster = outcome.pop("cluster", None)
+        if cluster is not None:
+            _kill_workers(cluster)
+            cluster.close()
+        else:  # still starting: its workers go now, not after this process (one just started would print)
+            for child in multiprocessing.active_children():
+                if child.name.startswith("Dask Worker process"):
+                    with contextlib.suppress(OSError, ValueError):
+                        child.kill()
+        raise
+    if "error" in outcome:
+        raise outcome["error"]
+    return outcome["cluster"]
 
-    def _kill_workers(self) -> None:
-        """Kill the local cluster's worker processes at once (a graceful close waits a second or
-        more for workers busy in compiled code); the close that follows then finds them gone."""
-        for nanny in list(self.cluster.workers.values()):
-            pid = getattr(nanny, "pid", None)  # the worker process a nanny watches
-            if isinstance(pid, int) and pid > 0:
-                try:
-                    os.kill(pid, signal.SIGKILL)
-                except OSError:  # already gone
-                    pass
+
+def _kill_workers(cluster: Any) -> None:
+    """Kill a local cluster's worker processes at once (a graceful close waits a second or more
+    for workers busy in compiled code); the close that follows then finds them gone."""
+    for nanny in list(cluster.workers.values()):
+        pid = getattr(nanny, "pid", None)  # the worker process a nanny watches
+        if isinstance(pid, int) and pid > 0:
+            with contextlib.suppress(OSError):  # already gone
+                os.kill(pid, signal.SIGKILL)

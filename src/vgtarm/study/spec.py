@@ -31,7 +31,7 @@ import itertools
 import json
 import math
 import tempfile
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -42,7 +42,7 @@ from ..errors import ConfigError, VgtarmError, cut, shown
 from ..fileio import parse_toml, read_text_limited
 from ..model.parameters import ROBOT_FILE_LIMIT
 from ..model.robot import robot_parameters_from_dict
-from ..paths import CSV_FILE_LIMIT, from_csv
+from ..paths import CSV_FILE_LIMIT, MIN_DT, from_csv
 from ..simulation import INTEGRATORS, simulate
 from ..simulation.simulator import MAX_SUBSTEPS
 
@@ -270,6 +270,11 @@ def parse_study(data: Mapping[str, Any], *, source: str = "<study>", folder: Pat
     dt = head.get("dt", 1e-3)
     if not (_is_number(dt) and _positive(float(dt))):
         raise ConfigError(f"{source}: study.dt = {shown(dt)}: expected a period > 0 (s)")
+    if float(dt) < MIN_DT:
+        raise ConfigError(
+            f"{source}: study.dt = {shown(dt)}: expected a period >= {MIN_DT:g} s (closer samples turn rounding"
+            " into huge rates)"
+        )
     shared["dt"] = float(dt)
     rates = head.get("rates", "exact")
     if rates not in _RATES:
@@ -303,12 +308,15 @@ def parse_study(data: Mapping[str, Any], *, source: str = "<study>", folder: Pat
         random[key] = _distribution(f"{source}: random.{key}", value, params[key])
     if random and draws == 0:
         raise ConfigError(f"{source}: random.draws = 0: expected a whole number >= 1 with random parameters")
-    total = math.prod(len(values) for values in grid.values()) * max(draws, 1) * len(seeds)
+    combinations = math.prod(len(values) for values in grid.values())
+    n_seeds = seeds.stop - seeds.start if isinstance(seeds, range) else len(seeds)  # len() of a vast range fails
+    total = combinations * max(draws, 1) * n_seeds
     if total > MAX_POINTS:
         raise ConfigError(
-            f"{source}: {total:,} runs (grid combinations x random.draws x study.seeds); at most {MAX_POINTS:,}"
+            f"{source}: {total:,} runs = {combinations:,} grid combinations x {max(draws, 1):,} random.draws x"
+            f" {n_seeds:,} seeds (study.seeds = {shown(head.get('seeds', 1))}); at most {MAX_POINTS:,}"
         )
-    study = Study(name, shared, grid, random, draws, random_seed, seeds, files, source)
+    study = Study(name, shared, grid, random, draws, random_seed, tuple(seeds), files, source)
     study.points()  # draws are checked here, before any run
     return study
 
@@ -352,29 +360,30 @@ def _check_files(source: str, head: Mapping[str, Any], files: Mapping[str, str],
             copy = Path(folder) / "path.csv"
             copy.write_text(files["path"], encoding="utf-8")
             try:
-                from_csv(copy, dt)
+                from_csv(copy, dt, quote=False)  # a file named by the study's author: never shown
             except VgtarmError as exc:
                 label = f"path file {shown(str(copy), 200)}"
                 message = str(exc).replace(f"{label}: ", "").replace(label, "the file")
                 raise ConfigError(f"{source}: study.path = {shown(head['path'])}: {message}") from None
 
 
-def _seeds(source: str, value: object) -> tuple[int, ...]:
+def _seeds(source: str, value: object) -> Sequence[int]:
+    """The seeds of ``study.seeds``: a range (not expanded, however long) or a list."""
     where = f"{source}: study.seeds = {shown(value)}"
 
     def whole(v: object) -> bool:
         return isinstance(v, int) and not isinstance(v, bool) and v >= 0
 
     if whole(value) and value:
-        return tuple(range(min(int(value), MAX_POINTS + 1)))  # type: ignore[call-overload]
+        return range(int(value))  # type: ignore[call-overload]
     if isinstance(value, list) and value and all(whole(v) for v in value):
         if len(set(value)) != len(value):
             raise ConfigError(f"{where}: expected distinct seeds")
-        return tuple(int(v) for v in value)
+        return [int(v) for v in value]
     if isinstance(value, Mapping) and set(value) == {"start", "count"} and whole(value["start"]):
         if whole(value["count"]) and value["count"] >= 1:
-            start, count = int(value["start"]), min(int(value["count"]), MAX_POINTS + 1)
-            return tuple(range(start, start + count))
+            start, count = int(value["start"]), int(value["count"])
+            return range(start, start + count)
     raise ConfigError(
         f"{where}: expected a count >= 1, a list of distinct whole numbers >= 0 or {{start = S, count = N}}"
     )

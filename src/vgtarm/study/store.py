@@ -8,7 +8,14 @@ Layout of ``DIR``::
     results.parquet       the same table (pyarrow)
 
 A run file either exists complete or not at all (written to a temporary name, then renamed), so
-an interrupted study resumes by running exactly the ids without a file.
+an interrupted study resumes by running exactly the ids without a file. A run file is read only
+if it holds the run its name gives (a copy of another run's file under another id is refused).
+
+``results.csv`` is written for spreadsheets too: a text cell that would start a formula (its
+first character one of ``= + - @``, a tab or a carriage return: robot and file names, error
+messages) is written with a leading ``'``, so that it shows as the text it is
+(:func:`spreadsheet_text`); numbers are written as they are. ``results.parquet`` keeps every
+value as it is.
 """
 
 from __future__ import annotations
@@ -22,9 +29,13 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-from ..errors import InputError
+from ..errors import InputError, cut, shown
 from ..fileio import atomic_path, atomic_write_text
 from .spec import Point
+
+#: First characters that make a spreadsheet read a cell as a formula (or, tab and carriage
+#: return, that some of them drop before reading the rest as one).
+FORMULA_STARTS = ("=", "+", "-", "@", "\t", "\r")
 
 #: Summary figures that measure the machine, not the run (they differ between two runs of a row).
 TIMING_COLUMNS = (
@@ -73,12 +84,31 @@ class Store:
                 os.close(fd)
 
     def read(self, point_id: str) -> dict[str, Any]:
-        """One stored run."""
+        """One stored run: a record ``{"id", "inputs", "summary", "error"}`` whose id is ``point_id``
+        (InputError, one line, for anything else: a run file copied under another id, a damaged or
+        foreign file)."""
         path = self.runs / f"{point_id}.json"
+        shown_path = cut(str(path), 200)
+        redo = "remove it and run the study again to redo that run"
         try:
-            return dict(json.loads(path.read_text("utf-8")))
+            record = json.loads(path.read_text("utf-8"))
         except (OSError, ValueError) as exc:
-            raise InputError(f"run file {path}: cannot read it: {exc}") from None
+            raise InputError(f"run file {shown_path}: cannot read it ({type(exc).__name__}); {redo}") from None
+        if not (
+            isinstance(record, dict)
+            and isinstance(record.get("inputs"), dict)
+            and isinstance(record.get("summary"), dict)
+            and isinstance(record.get("error", ""), str)
+        ):
+            raise InputError(
+                f"run file {shown_path}: not a run record (a table of id, inputs, summary and error); {redo}"
+            )
+        if record.get("id") != point_id:
+            raise InputError(
+                f"run file {shown_path}: holds the run id = {shown(record.get('id'))}, not {point_id!r} as its name"
+                f" says (a copy of another run's file?); {redo}"
+            )
+        return record
 
     def rows(self, points: list[Point] | None = None) -> list[dict[str, Any]]:
         """The table: one row per point (in the study's order) or per stored run (by id); every row
@@ -93,10 +123,10 @@ class Store:
         """Write ``results.csv`` and ``results.parquet`` atomically."""
         columns = table_columns(rows)
         buffer = io.StringIO()
-        writer = csv.DictWriter(buffer, fieldnames=columns, lineterminator="\n")
-        writer.writeheader()
+        writer = csv.writer(buffer, lineterminator="\n")
+        writer.writerow([spreadsheet_text(c) for c in columns])
         for row in rows:
-            writer.writerow({c: _cell(row.get(c)) for c in columns})
+            writer.writerow([_cell(row.get(c)) for c in columns])
         csv_file = atomic_write_text(self.folder / "results.csv", buffer.getvalue())
         import pyarrow as pa
         import pyarrow.parquet as pq
@@ -135,11 +165,22 @@ def read_table(folder: str | Path) -> list[dict[str, Any]]:
     return list(pq.read_table(file).to_pylist())
 
 
+def spreadsheet_text(text: str) -> str:
+    """``text`` as a CSV cell a spreadsheet shows as text: with a leading ``'`` when its first
+    character is one of :data:`FORMULA_STARTS` (the usual defence against formula injection; the
+    spreadsheet hides the quote), else unchanged."""
+    return f"'{text}" if text.startswith(FORMULA_STARTS) else text
+
+
 def _cell(value: Any) -> Any:
+    """A table value as a CSV cell: numbers as they are (floats in full), text made safe for
+    spreadsheets, None and non-finite numbers empty."""
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return ""
     if isinstance(value, float):
         return repr(value)
+    if isinstance(value, str):
+        return spreadsheet_text(value)
     return value
 
 
