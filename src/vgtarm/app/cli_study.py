@@ -48,7 +48,7 @@ def cmd_study_run(args: argparse.Namespace) -> int:
         f"{outcome.points} runs: {outcome.skipped} already stored, {outcome.executed} run now, {outcome.failed} failed;"
         f" {outcome.wall_time_s:.1f} s"
     )
-    print(f"results written to {args.out / 'results.csv'} and {args.out / 'results.parquet'}")
+    print(f"results written to {escape(str(args.out / 'results.csv'))} and {escape(str(args.out / 'results.parquet'))}")
     if outcome.lost:
         print(f"{len(outcome.lost)} runs were lost with their workers; run the same command again to finish them")
         return 1
@@ -60,7 +60,7 @@ def cmd_study_report(args: argparse.Namespace) -> int:
     from ..study.report import write_report
 
     report = write_report(args.folder)
-    print(f"report written to {report}")
+    print(f"report written to {escape(str(report))}")
     return 0
 
 
