@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError
+from ..machine import usable_cpus
 from .spec import Point, Study, Value
 from .store import Store
 
@@ -159,7 +160,7 @@ class _client:
         handler = signal.signal(signal.SIGINT, signal.SIG_IGN) if posix else None
         try:
             self.cluster = LocalCluster(
-                n_workers=self.workers or os.cpu_count() or 1,
+                n_workers=self.workers or usable_cpus(),
                 threads_per_worker=1,
                 processes=True,
                 dashboard_address=None,
