@@ -20,7 +20,7 @@ import vgtarm
 from vgtarm.app.cases import case_study, joint_reference, run_case
 from vgtarm.model import closedloop
 from vgtarm.model.closedloop import ClosedLoopDriver, ga_threads
-from vgtarm.simulation import simulator
+from vgtarm.simulation import engines
 
 from .common import Row, print_table
 
@@ -38,12 +38,12 @@ def _capture(robot: vgtarm.Robot, reference) -> list[tuple]:
         return original(self, k, q0, qd0, seed)
 
     closedloop.CompiledGA.activate = record  # type: ignore[method-assign]
-    simulator.GA_IN_LOOP = False  # one call per activation, so that each state can be captured
+    engines.GA_IN_LOOP = False  # one call per activation, so that each state can be captured
     try:
         run_case(robot, 2, controller="scm", external_force=True, reference=reference)
     finally:
         closedloop.CompiledGA.activate = original  # type: ignore[method-assign]
-        simulator.GA_IN_LOOP = True
+        engines.GA_IN_LOOP = True
     return captured
 
 

@@ -4,6 +4,7 @@ and the C interface as cffi reads it matches the compiler's layout."""
 from __future__ import annotations
 
 import ast
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -18,7 +19,7 @@ PACKAGE = Path(vgtarm.__file__).resolve().parent
 ROOT = "__root__"
 #: Layers from the bottom up; a module may import its own layer and the layers below.
 LAYERS: tuple[frozenset[str], ...] = (
-    frozenset({"errors", "fileio", "memory", "markup"}),
+    frozenset({"errors", "fileio", "memory", "markup", "machine"}),
     frozenset({"model", ROOT}),
     frozenset({"paths", "ga"}),
     frozenset({"ik"}),
@@ -232,3 +233,18 @@ def test_status_and_integrator_codes_come_from_the_header():
     for name, code in interface.enum("vgt_status").items():
         assert f"{name} = {code}" in header.replace("  ", " ")
     assert closedloop.INTEGRATOR_CODES == {"euler": 0, "semi_implicit_euler": 1, "rk4": 2}
+
+
+def test_one_cpu_count_sizes_the_workers_and_the_ga_threads():
+    """A process pinned to one CPU (its affinity mask, as ``taskset`` sets it) gets one reproduce
+    worker and one GA thread; the count is written once (``vgtarm.machine``)."""
+    code = (
+        "import os; os.sched_setaffinity(0, {min(os.sched_getaffinity(0))}); "
+        "from vgtarm.machine import usable_cpus; from vgtarm.app.pool import default_workers; "
+        "from vgtarm.model.closedloop import ga_threads; print(usable_cpus(), default_workers(), ga_threads())"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "VGTARM_THREADS"}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env)
+    assert done.stdout.split() == ["1", "1", "1"]
+    sources = [p.read_text() for p in PACKAGE.rglob("*.py") if p.name != "machine.py"]
+    assert not [s for s in sources if "sched_getaffinity" in s or "cpu_count(" in s]

@@ -21,7 +21,8 @@ from vgtarm.model.closedloop import PREDICTIONS, ClosedLoopDriver, bit_words, pa
 from vgtarm.model.compiled import CompiledBackend, InterpretedBackend, build_functions
 from vgtarm.model.interface import ffi
 from vgtarm.simulation import ExternalForce, JointReference, simulate
-from vgtarm.simulation.simulator import _compiled_ga, loop_arrays
+from vgtarm.simulation.engines import compiled_ga
+from vgtarm.simulation.simulator import loop_arrays
 
 from .conftest import assert_close
 from .test_ga import SIGMAS, binomial_bound
@@ -267,7 +268,7 @@ def _ga(robot, ref, scm, model=None):
     model = model or robot
 
     arrays = loop_arrays(robot, model, ref, initial_state=(ref.q[0], ref.qd[0]))
-    return _compiled_ga(scm, ClosedLoopDriver(robot.backend), model, arrays, ref.dt)
+    return compiled_ga(scm, ClosedLoopDriver(robot.backend), model, arrays, ref.dt)
 
 
 @pytest.mark.parametrize("stable_scale", [0.05, 0.3])
@@ -491,14 +492,14 @@ def test_the_ga_inside_the_compiled_loop_gives_the_per_activation_run_bit_for_bi
     """One compiled call per chunk (the GA called by the loop) against one call per activation
     from Python: the same states, efforts, modes and activation records, to the last bit, with
     the tool force, the observer and sensing where asked, up to the last sample of the path."""
-    from vgtarm.simulation import simulator
+    from vgtarm.simulation import engines
 
     ref = reference(robot, duration=0.12)
     scm = SwitchingControl.with_gains(5000.0, 300.0, threshold=threshold)
     options = dict(observer="momentum", encoder_resolution=1e-6, velocity_filter_hz=100.0) if sensing else {}
     runs = []
     for in_loop in (True, False):
-        monkeypatch.setattr(simulator, "GA_IN_LOOP", in_loop)
+        monkeypatch.setattr(engines, "GA_IN_LOOP", in_loop)
         runs.append(simulate(robot, ref, scm, external_force=ExternalForce(), seed=7, **options))
     inside, outside = runs
     assert len(inside.activations) > 5
@@ -543,7 +544,7 @@ def test_the_switching_loop_in_slices_is_bit_for_bit_the_loop_in_one_call(lib, r
     for budget in (10**12, 2, 1):
         arrays = loop_arrays(robot, robot, ref, np.random.default_rng(1).normal(scale=5.0, size=(n, 3)))
         driver = ClosedLoopDriver(robot.backend, slice_budget=budget)
-        compiled = _compiled_ga(scm, driver, robot, arrays, ref.dt)
+        compiled = compiled_ga(scm, driver, robot, arrays, ref.dt)
         compiled.bind_switching(np.random.default_rng(2).integers(0, 2**63, size=n, dtype=np.int64))
         gains = scm.gains
         status, stop = driver.simulate_switching(settings, unswitched, arrays, gains.Kp, gains.Kv, compiled, 0, n)

@@ -41,6 +41,7 @@ from multiprocessing.connection import Connection
 from types import FrameType
 from typing import Any, TypeVar
 
+from ..machine import usable_cpus
 from ..model.parameters import RobotParameters
 from ..model.robot import Robot, definition_of
 from ..model.stack import Stack
@@ -54,11 +55,7 @@ START_METHOD = "spawn"
 
 def default_workers() -> int:
     """Worker processes for this machine: the CPUs this process may use, at most :data:`MAX_WORKERS`."""
-    try:
-        cpus = len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):  # not Linux
-        cpus = os.cpu_count() or 1
-    return max(1, min(cpus, MAX_WORKERS))
+    return min(usable_cpus(), MAX_WORKERS)
 
 
 class Inline:

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import functools
 import hashlib
-import inspect
 import os
 import tempfile
 import tomllib
@@ -120,9 +119,8 @@ def _model(robot: Robot, inputs: Inputs) -> RobotParameters | None:
 
 
 def _options(inputs: Inputs) -> dict[str, Any]:
-    """The inputs that are keyword arguments of the installed simulate()."""
-    accepted = inspect.signature(simulate).parameters
-    return {k: inputs[k] for k in simulate_options() if k in inputs and k in accepted}
+    """The inputs that are options of the installed simulation's Scenario."""
+    return {k: inputs[k] for k in simulate_options() if k in inputs}
 
 
 def _metadata(robot: Robot, inputs: Inputs) -> dict[str, Any]:

@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import ConfigError, shown
+from ..machine import usable_cpus
 from .compiled import CompiledBackend
 from .interface import enum, ffi
 
@@ -367,11 +368,7 @@ def ga_threads() -> int:
         if not 1 <= value <= 256:
             raise ConfigError(f"VGTARM_THREADS = {shown(text)}: expected a whole number of threads from 1 to 256")
         return value
-    try:
-        cpus = len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):  # not Linux
-        cpus = os.cpu_count() or 1
-    return max(1, min(cpus, MAX_GA_THREADS))
+    return min(usable_cpus(), MAX_GA_THREADS)
 
 
 class CompiledGA:

@@ -7,7 +7,7 @@ and stepped by MuJoCo as the plant of our closed loop (:mod:`.plant`,
 """
 
 from ..model.robot import Robot
-from ..simulation.simulator import register_plant_engine
+from ..simulation.engines import register_plant_engine
 from .export import to_mjcf
 from .plant import MujocoLoop
 

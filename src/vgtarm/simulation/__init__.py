@@ -3,6 +3,7 @@
 from .external import ExternalForce
 from .reference import JointReference
 from .result import GAActivation, SimulationResult
+from .scenario import Scenario
 from .simulator import INTEGRATORS, simulate
 
-__all__ = ["INTEGRATORS", "ExternalForce", "GAActivation", "JointReference", "SimulationResult", "simulate"]
+__all__ = ["INTEGRATORS", "ExternalForce", "GAActivation", "JointReference", "Scenario", "SimulationResult", "simulate"]

@@ -9,7 +9,8 @@
 - the controller's model must be a model of the plant: its total mass, inertia and friction
   within :data:`~vgtarm.model.factors.MODEL_FACTOR_RANGE` of the plant's (a ratio, named with its
   value and the range, never "not finite");
-- every other argument of ``simulate`` must have the right type (one line, not a ``TypeError``).
+- every other argument of ``simulate`` must have the right type (one line, not a ``TypeError``);
+  the scenario's own fields are checked by :class:`~vgtarm.simulation.scenario.Scenario`.
 """
 
 from __future__ import annotations
@@ -34,7 +35,6 @@ from ..model.sanity import (
     user_finite,
 )
 from ..model.stack import Stack
-from .external import ExternalForce
 from .reference import JointReference
 
 Array = NDArray[np.float64]
@@ -132,42 +132,18 @@ def limit_tolerance(plant: Robot, value: Any) -> float:
     return number
 
 
-def arguments(
-    plant: Any,
-    controller_model: Any,
-    external_force: Any,
-    integrator: Any,
-    plant_engine: Any,
-    metadata: Any,
-    progress: Any,
-    transient_s: Any,
-) -> None:
-    """Refuse, with one :class:`InputError` line, arguments of ``simulate`` of the wrong type."""
+def arguments(plant: Any, controller_model: Any, metadata: Any, progress: Any) -> None:
+    """Refuse, with one :class:`InputError` line, arguments of ``simulate`` of the wrong type (the
+    scenario's fields are checked when the :class:`~vgtarm.simulation.Scenario` is built), and a
+    controller model that is no model of the plant (:func:`model_of_plant`)."""
     if not isinstance(plant, Robot):
         raise InputError(f"plant = {shown(plant)}: expected a vgtarm.Robot (see vgtarm.load_robot)")
-    if controller_model is not None and not isinstance(controller_model, Robot | RobotParameters | Stack):
-        raise InputError(
-            f"controller_model = {shown(controller_model)}: expected None, a Robot, RobotParameters or a Stack"
-        )
     if controller_model is not None:
         model_of_plant(plant, controller_model)
-    if external_force is not None and not isinstance(external_force, ExternalForce):
-        raise InputError(
-            f"external_force = {shown(external_force)}: expected None or a vgtarm.simulation.ExternalForce"
-        )
-    for label, value in (("integrator", integrator), ("plant_engine", plant_engine)):
-        if not isinstance(value, str):
-            raise InputError(f"{label} = {shown(value)}: expected a name (str)")
     if metadata is not None and not isinstance(metadata, Mapping):
         raise InputError(f"metadata = {shown(metadata)}: expected None or a mapping of summary entries")
     if progress is not None and not callable(progress):
         raise InputError(f"progress = {shown(progress)}: expected None or a callable progress(done, total)")
-    if (
-        isinstance(transient_s, bool)
-        or not isinstance(transient_s, int | float | np.integer | np.floating)
-        or not (math.isfinite(transient_s) and transient_s >= 0)
-    ):
-        raise InputError(f"transient_s = {shown(transient_s)}: expected a duration >= 0 (s)")
 
 
 def gains(plant: Robot, Kp: Array) -> None:

@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError, cut, shown
+from ..machine import usable_cpus
 from .spec import Point, Study, Value
 from .store import Store
 
@@ -262,7 +263,7 @@ class _client:
         self.level = logger.level
         logger.setLevel(max(logging.ERROR, logger.getEffectiveLevel()))
         try:
-            self.cluster = _start_local_cluster(self.workers or os.cpu_count() or 1)
+            self.cluster = _start_local_cluster(self.workers or usable_cpus())
             try:
                 self.client = Client(self.cluster)
             except BaseException:

@@ -17,16 +17,16 @@ every parameter (defaults filled in) and its id is a hash of its inputs, so the 
 the same ids on any machine and a changed input gives a new id.
 
 Parameters: :data:`PARAMETERS` (controller, gains, GA, tool force, controller-model errors,
-integrator) and every scalar keyword argument of :func:`vgtarm.simulation.simulate` not listed
+integrator) and every scalar option of the simulation's :class:`~vgtarm.simulation.Scenario` not listed
 there (observer, observer_gain, force_sensor, encoder_resolution, velocity_noise, ... whatever
 the installed simulator accepts), passed to it unchanged.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import hashlib
-import inspect
 import itertools
 import json
 import math
@@ -43,8 +43,7 @@ from ..fileio import parse_toml, read_text_limited
 from ..model.parameters import ROBOT_FILE_LIMIT
 from ..model.robot import robot_parameters_from_dict
 from ..paths import CSV_FILE_LIMIT, MIN_DT, from_csv
-from ..simulation import INTEGRATORS, simulate
-from ..simulation.simulator import MAX_SUBSTEPS
+from ..simulation.scenario import INTEGRATORS, MAX_SUBSTEPS, Scenario
 
 Value = bool | int | float | str | None
 
@@ -94,40 +93,37 @@ PARAMETERS: dict[str, Parameter] = {
     ),
 }
 
-#: Keyword arguments of simulate() that the study sets itself (or that are not run inputs).
+#: Fields of the simulation's :class:`~vgtarm.simulation.Scenario` that the study sets itself.
 _MANAGED = {
-    "plant",
-    "reference",
-    "controller",
     "controller_model",
     "external_force",
     "integrator",
     "substeps",
     "seed",
     "initial_state",
-    "metadata",
-    "progress",
 }
 
 
 def simulate_options() -> dict[str, Parameter]:
-    """The scalar keyword arguments of the installed :func:`simulate` the study passes through.
+    """The scalar options of the installed simulation's :class:`~vgtarm.simulation.Scenario` that
+    the study passes through.
 
-    Found by inspection, so options added to the simulator (observer, sensing, ...) become study
-    parameters without a change here. The type comes from the default (``None``: a number).
+    Found from the record's fields, so options added to the simulator (observer, sensing, ...)
+    become study parameters without a change here. The type comes from the default (``None``: a
+    number).
     """
     found: dict[str, Parameter] = {}
-    for name, p in inspect.signature(simulate).parameters.items():
-        if name in _MANAGED or p.kind is not inspect.Parameter.KEYWORD_ONLY:
+    for f in dataclasses.fields(Scenario):
+        if f.name in _MANAGED or f.default is dataclasses.MISSING:
             continue
-        default = p.default
+        default = f.default
         if isinstance(default, bool):
-            found[name] = Parameter(bool, default, "true or false")
+            found[f.name] = Parameter(bool, default, "true or false")
         elif isinstance(default, int | float) or default is None:
             kind: type = int if isinstance(default, int) else float
-            found[name] = Parameter(kind, default, "a number" if kind is float else "a whole number")
+            found[f.name] = Parameter(kind, default, "a number" if kind is float else "a whole number")
         elif isinstance(default, str):
-            found[name] = Parameter(str, default, "a string")
+            found[f.name] = Parameter(str, default, "a string")
     return found
 
 

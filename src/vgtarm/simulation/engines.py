@@ -1,0 +1,269 @@
+"""The loops that advance a run, one small class per engine behind one interface.
+
+Every engine answers :meth:`Engine.advance`: run the samples ``k .. k_end - 1`` (or until the run
+fails) and say how it ended and which GA activations it made on the way. The simulator calls it
+chunk by chunk and does all the bookkeeping once (:mod:`.activations`); an engine only steps.
+
+- :class:`CompiledLoop`: our equations in the compiled loop (``csrc/closed_loop.c``), at fixed
+  gains; under switching control the loop stops where the tip error crosses the threshold, the
+  GA tunes the gains from Python (one compiled activation, or the NumPy GA for options the
+  compiled one lacks) and the loop runs that sample with them.
+- :class:`CompiledSwitchingLoop`: the same loop with the compiled GA inside it, one call per
+  chunk whatever the activations (the default for switching control with a compiler).
+- :class:`NumpyLoop`: our equations in NumPy (:mod:`.python_loop`), without a compiler.
+- :class:`RegisteredLoop`: a plant other than our equations, registered by name
+  (``import vgtarm.mujoco_bridge`` registers ``"mujoco"``); it steps like :class:`NumpyLoop`.
+
+All of them give the same run bit for bit where their arithmetic is the same (tested).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from ..control.gains import Gains
+from ..control.scm import SwitchingControl
+from ..errors import InputError
+from ..model.closedloop import ABOVE_THRESHOLD, DONE, ClosedLoopDriver, CompiledGA, LoopArrays, LoopSettings
+from ..model.compiled import CompiledBackend
+from ..model.robot import Robot
+from .python_loop import PythonLoop
+from .scenario import MODEL_ENGINE
+
+#: Plants other than our own model, by name: ``factory(plant, controller_model)`` returns a loop
+#: with the interface of :class:`PythonLoop`. Packages above this layer register themselves
+#: (``import vgtarm.mujoco_bridge`` adds ``"mujoco"``), so the simulator never imports them.
+PLANT_ENGINES: dict[str, Callable[[Robot, Robot], PythonLoop]] = {}
+
+
+def register_plant_engine(name: str, factory: Callable[[Robot, Robot], PythonLoop]) -> None:
+    """Make ``simulate(..., plant_engine=name)`` run its loop on the plant ``factory`` builds."""
+    if not isinstance(name, str) or not name or name == MODEL_ENGINE:
+        raise InputError(f"plant engine name {name!r}: expected a name other than {MODEL_ENGINE!r}")
+    PLANT_ENGINES[name] = factory
+
+
+def check_plant_engine(name: str) -> None:
+    """Refuse, in one line, a plant engine that is neither ours nor registered."""
+    if name != MODEL_ENGINE and name not in PLANT_ENGINES:
+        raise InputError(
+            f"plant_engine = {name!r}: expected {MODEL_ENGINE!r} or a registered engine {sorted(PLANT_ENGINES)}"
+            " (the MuJoCo plant registers with `import vgtarm.mujoco_bridge`, pip install 'vgtarm[mujoco]')"
+        )
+
+
+#: Whether the compiled GA runs inside the compiled loop (one call per chunk) rather than one call
+#: per activation from Python; both give the same run bit for bit (a test compares them).
+GA_IN_LOOP = True
+
+
+@dataclass(frozen=True)
+class RawActivation:
+    """One GA activation as an engine reports it (the simulator adds the errors around it)."""
+
+    sample: int
+    generations: int
+    evaluations: int
+    best_cost: float
+    seeded_cost: float
+    wall_time_s: float
+
+
+@dataclass(frozen=True)
+class Advance:
+    """How :meth:`Engine.advance` ended: the loop's status code, the sample where it stopped
+    (``k_end`` when done), and the activations made on the way, in order."""
+
+    status: int
+    stop: int
+    activations: tuple[RawActivation, ...] = ()
+
+
+@dataclass(frozen=True)
+class Job:
+    """What every engine steps on: the validated loop settings (``unswitched``: the same with the
+    threshold off, for the sample run with tuned gains), the run's arrays, the fixed gains, the
+    controller and its model, the control period and the generator of the GA's seeds."""
+
+    settings: LoopSettings
+    unswitched: LoopSettings
+    arrays: LoopArrays
+    gains: Gains
+    controller: Any
+    model: Robot
+    dt: float
+    ga_rng: np.random.Generator
+
+
+class Engine(Protocol):
+    """The one interface of the loops: run samples ``k .. k_end - 1`` or until the run fails."""
+
+    def advance(self, k: int, k_end: int) -> Advance: ...
+
+
+class _SteppedLoop:
+    """An engine over a loop with ``simulate`` and ``ga_predictor`` (:class:`PythonLoop`'s
+    interface, which :class:`ClosedLoopDriver` shares): fixed gains until the threshold, then one
+    GA activation tuned from Python and one sample with its gains."""
+
+    def __init__(self, loop: ClosedLoopDriver | PythonLoop, job: Job) -> None:
+        self.loop = loop
+        self.job = job
+        self._compiled_ga: CompiledGA | None = None
+
+    def advance(self, k: int, k_end: int) -> Advance:
+        job = self.job
+        found: list[RawActivation] = []
+        while True:
+            status, stop = self.loop.simulate(job.settings, job.arrays, job.gains.Kp, job.gains.Kv, k, k_end)
+            if status != ABOVE_THRESHOLD:
+                return Advance(status, k_end if status == DONE else stop, tuple(found))
+            started = time.perf_counter()
+            gains, activation = self._tune(stop)
+            status, after = self.loop.simulate(job.unswitched, job.arrays, gains.Kp, gains.Kv, stop, stop + 1)
+            found.append(RawActivation(stop, *activation, time.perf_counter() - started))
+            if status != DONE:
+                return Advance(status, after, tuple(found))
+            k = stop + 1
+            if k >= k_end:
+                return Advance(DONE, k_end, tuple(found))
+
+    def _tune(self, k: int) -> tuple[Gains, tuple[int, int, float, float]]:
+        """Run the GA at sample ``k``; returns the gains and (generations, evaluations, best, fixed).
+
+        With the compiled loop the whole activation runs in C (``csrc/ga.c``, bound once per run);
+        otherwise the NumPy GA (:func:`vgtarm.ga.minimize`) runs on the NumPy prediction. Each
+        activation draws one 64-bit seed from the run's generator, so a seed gives the same run.
+        """
+        job = self.job
+        controller: SwitchingControl = job.controller
+        arrays = job.arrays
+        end = min(k + controller.horizon, arrays.n - 1)
+        if end == k:  # the last sample: nothing left to predict, keep the fixed gains
+            return controller.gains, (0, 0, 0.0, 0.0)
+        if isinstance(self.loop, ClosedLoopDriver) and controller.ga.stall_generations is None:
+            if self._compiled_ga is None:
+                self._compiled_ga = compiled_ga(controller, self.loop, job.model, arrays, job.dt)
+            seed = int(job.ga_rng.integers(0, 2**63, dtype=np.int64))
+            out = self._compiled_ga.activate(k, arrays.q_meas[k], arrays.qd_meas[k], seed)
+            Kp, Kv = controller.split(out.genes)
+            return Gains.of(Kp, Kv), (out.generations, out.evaluations, out.best_cost, out.seeded_cost)
+        window = slice(k, end + 1)
+        inp = arrays.inputs
+        predict = self.loop.ga_predictor(
+            job.model.parameter_vector,
+            job.dt,
+            arrays.q_meas[k],
+            arrays.qd_meas[k],
+            inp["q_d"][window],
+            inp["qd_d"][window],
+            inp["qdd_d"][window],
+            inp["tip_d"][window],
+        )
+        fixed_fitness = float(predict(controller.gains.Kp[None], controller.gains.Kv[None])[0])
+        gains, result = controller.tune(predict, job.ga_rng)
+        return gains, (result.generations, result.n_evaluations, float(result.cost), fixed_fitness)
+
+
+class CompiledLoop(_SteppedLoop):
+    """Our equations in the compiled loop; the GA, if any, called from Python per activation."""
+
+    def __init__(self, plant: Robot, job: Job) -> None:
+        assert isinstance(plant.backend, CompiledBackend)
+        super().__init__(ClosedLoopDriver(plant.backend), job)
+
+
+class NumpyLoop(_SteppedLoop):
+    """Our equations in NumPy (no compiler), with the NumPy GA."""
+
+    def __init__(self, plant: Robot, job: Job) -> None:
+        super().__init__(PythonLoop(plant, job.model), job)
+
+
+class RegisteredLoop(_SteppedLoop):
+    """A registered plant engine (such as MuJoCo), stepped as :class:`NumpyLoop` steps."""
+
+    def __init__(self, name: str, plant: Robot, job: Job) -> None:
+        super().__init__(PLANT_ENGINES[name](plant, job.model), job)
+
+
+class CompiledSwitchingLoop:
+    """Our equations in the compiled loop with the compiled GA inside it: one call per chunk."""
+
+    def __init__(self, plant: Robot, job: Job) -> None:
+        self.job = job
+        assert isinstance(plant.backend, CompiledBackend)
+        self.loop = ClosedLoopDriver(plant.backend)
+        self.ga = compiled_ga(job.controller, self.loop, job.model, job.arrays, job.dt)
+        # one seed per sample, drawn as the stepped loop draws them one by one (the same numbers)
+        self.ga.bind_switching(np.asarray(job.ga_rng.integers(0, 2**63, size=int(job.arrays.n), dtype=np.int64)))
+
+    def advance(self, k: int, k_end: int) -> Advance:
+        job = self.job
+        first = int(self.ga.switching.count)
+        status, stop = self.loop.simulate_switching(
+            job.settings, job.unswitched, job.arrays, job.gains.Kp, job.gains.Kv, self.ga, k, k_end
+        )
+        assert status != ABOVE_THRESHOLD  # the records hold one activation per sample
+        records = self.ga.records(first, int(self.ga.switching.count))
+        found = tuple(
+            RawActivation(
+                sample=int(sample),
+                generations=int(records["generations"][i]),
+                evaluations=int(records["evaluations"][i]),
+                best_cost=float(records["best_cost"][i]),
+                seeded_cost=float(records["seeded_cost"][i]),
+                wall_time_s=float(records["wall_time"][i]),
+            )
+            for i, sample in enumerate(records["sample"].tolist())
+        )
+        return Advance(status, k_end if status == DONE else stop, found)
+
+
+def engine_for(plant: Robot, plant_engine: str, job: Job) -> Engine:
+    """The engine of a run: a registered plant's, else the compiled loop (with the GA inside it
+    under switching control) when both models are compiled, else the NumPy loop."""
+    if plant_engine != MODEL_ENGINE:
+        return RegisteredLoop(plant_engine, plant, job)
+    if not (isinstance(plant.backend, CompiledBackend) and isinstance(job.model.backend, CompiledBackend)):
+        return NumpyLoop(plant, job)
+    switching = isinstance(job.controller, SwitchingControl)
+    if switching and GA_IN_LOOP and job.controller.ga.stall_generations is None:
+        return CompiledSwitchingLoop(plant, job)
+    return CompiledLoop(plant, job)
+
+
+def compiled_ga(
+    controller: SwitchingControl, loop: ClosedLoopDriver, model: Robot, arrays: LoopArrays, dt: float
+) -> CompiledGA:
+    """The compiled GA of one run: the reference and the model's tip derivatives along it."""
+    inp = arrays.inputs
+    lower, upper = controller.bounds()
+    options = controller.ga
+    return CompiledGA(
+        loop,
+        dt=dt,
+        lower=lower,
+        upper=upper,
+        initial_bits=controller.initial_bits(),
+        n_bits=options.n_bits,
+        population=options.population_size,
+        generations=options.max_generations,
+        elite=options.elite_count,
+        p_crossover=options.crossover_probability,
+        p_mutation=options.mutation_probability,
+        horizon=controller.horizon,
+        prediction=controller.prediction,
+        exact_above=controller.exact_above,
+        p_ctrl=model.parameter_vector,
+        q_d=inp["q_d"],
+        qd_d=inp["qd_d"],
+        qdd_d=inp["qdd_d"],
+        tip_d=inp["tip_d"],
+        quadratic=controller.prediction == "quadratic",
+    )

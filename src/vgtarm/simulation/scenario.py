@@ -1,0 +1,196 @@
+"""What a run is, beside its plant, reference and controller: one frozen, validated record.
+
+:class:`Scenario` holds every option of :func:`vgtarm.simulation.simulate` that describes the
+run (the tool force, the controller's model, sensing and the observer, the integrator and its
+substeps, the plant engine, the seed, the start transient). It is checked once when built, and
+stored whole in the run's ``summary.json`` (key ``scenario``, :meth:`Scenario.record`), so a run
+says exactly what it was. Options that need the plant or the reference (the observer's default
+gain needs the control period, the encoder steps the robot's joint units, the initial state and
+the limit tolerance the robot's joint range) are resolved with them in the simulator.
+
+A new option is one field here, one check in :meth:`Scenario.__post_init__` (or where it meets
+the plant) and one use in the simulator.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+import numpy as np
+
+from ..errors import InputError, shown
+from ..model.parameters import RobotParameters
+from ..model.robot import Robot
+from ..model.stack import Stack
+from .external import ExternalForce
+from .sensing import DEFAULT_VELOCITY_FILTER_HZ, OBSERVERS
+
+#: Integrators by name.
+INTEGRATORS: dict[str, str] = {
+    "euler": "explicit Euler at the control period (the paper's)",
+    "semi_implicit_euler": "semi-implicit (symplectic) Euler at the control period",
+    "rk4": "classical Runge-Kutta, `substeps` steps per control period",
+}
+#: Most integration steps per control period: a step of dt / 1e6 (1 ns at the paper's 1 ms) is
+#: far below any time scale of the robot; more only add round-off and hours of work.
+MAX_SUBSTEPS = 1_000_000
+#: The plant engine of our own equations (the compiled loop, or its NumPy twin without a compiler).
+MODEL_ENGINE = "model"
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """The options of one closed-loop run (see :func:`vgtarm.simulation.simulate` for each).
+
+    Attributes:
+        external_force: the tool force (default: none).
+        controller_model: the controller's parameters (default: the plant's, an exact model).
+        integrator: a name of :data:`INTEGRATORS`; ``substeps`` integration steps per period.
+        seed: seeds the disturbance, the sensor noise and the genetic algorithm.
+        initial_state: ``(q0, qd0)``; default: at rest at ``q_d(0)``.
+        limit_tolerance: distance (m, rad) outside a joint limit at which the run is stopped.
+        observer, observer_gain, force_sensor: how the controller cancels the tool force.
+        encoder_resolution, twist_resolution, velocity_noise, velocity_filter_hz: realistic sensing.
+        plant_engine: ``"model"`` or a registered engine (``"mujoco"``).
+        transient_s: start transient excluded from the "after transient" figures (s).
+    """
+
+    external_force: ExternalForce = field(default_factory=ExternalForce.none)
+    controller_model: RobotParameters | Stack | Robot | None = None
+    integrator: str = "euler"
+    substeps: int = 1
+    seed: int = 0
+    initial_state: tuple[Any, Any] | None = None
+    limit_tolerance: float = 0.05
+    observer: str = "none"
+    observer_gain: float | None = None
+    force_sensor: bool = False
+    encoder_resolution: float = 0.0
+    twist_resolution: float | None = None
+    velocity_noise: float = 0.0
+    velocity_filter_hz: float = DEFAULT_VELOCITY_FILTER_HZ
+    plant_engine: str = MODEL_ENGINE
+    transient_s: float = 0.2
+
+    def __post_init__(self) -> None:
+        if self.external_force is None:  # the keyword form's default
+            object.__setattr__(self, "external_force", ExternalForce.none())
+        if not isinstance(self.external_force, ExternalForce):
+            raise InputError(
+                f"external_force = {shown(self.external_force)}: expected None or a vgtarm.simulation.ExternalForce"
+            )
+        if self.controller_model is not None and not isinstance(self.controller_model, Robot | RobotParameters | Stack):
+            raise InputError(
+                f"controller_model = {shown(self.controller_model)}: expected None, a Robot, RobotParameters or a Stack"
+            )
+        for label, value in (("integrator", self.integrator), ("plant_engine", self.plant_engine)):
+            if not isinstance(value, str):
+                raise InputError(f"{label} = {shown(value)}: expected a name (str)")
+        if self.integrator not in INTEGRATORS:
+            raise InputError(f"integrator = {self.integrator!r}: expected one of {sorted(INTEGRATORS)}")
+        if not (isinstance(self.substeps, int) and not isinstance(self.substeps, bool)):
+            raise InputError(f"substeps = {shown(self.substeps)}: expected a whole number from 1 to {MAX_SUBSTEPS:,}")
+        if not 1 <= self.substeps <= MAX_SUBSTEPS:
+            raise InputError(f"substeps = {shown(self.substeps)}: expected a whole number from 1 to {MAX_SUBSTEPS:,}")
+        if not (isinstance(self.seed, int | np.integer) and not isinstance(self.seed, bool) and self.seed >= 0):
+            raise InputError(f"seed = {self.seed!r}: expected a whole number >= 0")
+        if self.observer not in OBSERVERS:
+            raise InputError(f"observer = {self.observer!r}: expected one of {list(OBSERVERS)}")
+        transient = self.transient_s
+        if (
+            isinstance(transient, bool)
+            or not isinstance(transient, int | float | np.integer | np.floating)
+            or not (math.isfinite(transient) and transient >= 0)
+        ):
+            raise InputError(f"transient_s = {shown(transient)}: expected a duration >= 0 (s)")
+
+    @classmethod
+    def of(cls, scenario: Scenario | None, options: Mapping[str, Any]) -> Scenario:
+        """``scenario``, or the one the keyword ``options`` describe (not both).
+
+        An unknown keyword is refused with the list of the valid ones.
+        """
+        if scenario is not None:
+            if not isinstance(scenario, Scenario):
+                raise InputError(f"scenario = {shown(scenario)}: expected None or a vgtarm.simulation.Scenario")
+            if options:
+                raise InputError(
+                    f"simulate got a scenario and the options {sorted(options)}: give the options in the "
+                    "scenario (dataclasses.replace(scenario, ...)) or as keywords, not both"
+                )
+            return scenario
+        unknown = sorted(set(options) - set(cls.option_names()))
+        if unknown:
+            raise InputError(
+                f"simulate got the unknown option {unknown[0]!r}: expected one of {list(cls.option_names())}"
+                " (or metadata, progress)"
+            )
+        return cls(**options)
+
+    @classmethod
+    def option_names(cls) -> tuple[str, ...]:
+        """The names of the options, in their order."""
+        return tuple(f.name for f in fields(cls))
+
+    def replace(self, **changes: Any) -> Scenario:
+        """A copy with ``changes`` (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+    def record(self) -> dict[str, Any]:
+        """The scenario as JSON values, as stored in ``summary.json``: the tool force's fields, the
+        controller model's name (``None``: the plant's), the initial state as lists."""
+        out: dict[str, Any] = {}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name == "external_force":
+                value = {key: _plain(v) for key, v in dataclasses.asdict(value).items()}
+            elif f.name == "controller_model":
+                value = None if value is None else _model_name(value)
+            else:
+                value = _plain(value)
+            out[f.name] = value
+        return out
+
+    @classmethod
+    def from_record(
+        cls, record: Mapping[str, Any], controller_model: RobotParameters | Stack | Robot | None = None
+    ) -> Scenario:
+        """The scenario a :meth:`record` describes (as read from a run's ``summary.json``), to run
+        it again. The record keeps only the controller model's name: pass the model itself as
+        ``controller_model`` (``None``: the plant's own). An unknown field is refused in one line."""
+        if not isinstance(record, Mapping):
+            raise InputError(f"scenario record = {shown(record)}: expected a mapping of scenario fields")
+        unknown = sorted(set(record) - set(cls.option_names()))
+        if unknown:
+            raise InputError(f"scenario record field {unknown[0]!r}: expected one of {list(cls.option_names())}")
+        values = {key: value for key, value in record.items() if key != "controller_model"}
+        force = values.get("external_force")
+        if isinstance(force, Mapping):
+            fixed: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in force.items()}
+            try:
+                values["external_force"] = ExternalForce(**fixed)
+            except TypeError as exc:
+                raise InputError(f"scenario record field 'external_force' = {shown(force)}: {exc}") from None
+        state = values.get("initial_state")
+        if isinstance(state, list):
+            values["initial_state"] = tuple(np.asarray(part, dtype=float) for part in state)
+        return cls(**values, controller_model=controller_model)
+
+
+def _model_name(model: RobotParameters | Stack | Robot) -> str:
+    return str(model.parameters.name if isinstance(model, Robot) else model.name)
+
+
+def _plain(value: Any) -> Any:
+    """``value`` as JSON values (tuples and arrays as lists, NumPy scalars as Python's)."""
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, tuple | list):
+        return [_plain(v) for v in value]
+    return value
