@@ -21,7 +21,7 @@ import os
 import shutil
 import subprocess
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -240,7 +240,7 @@ def _c_number(x: float) -> str:
     return float(x).hex()
 
 
-def _c_array(name: str, values: Sequence[float], indent: str = "    ") -> str:
+def _c_array(name: str, values: Iterable[float], indent: str = "    ") -> str:
     body = ", ".join(_c_number(float(v)) for v in values)
     return f"{indent}static const double {name}[] = {{{body}}};\n"
 
@@ -377,24 +377,31 @@ def _write_readme(folder: Path, robot: Robot, settings: dict[str, Any], descript
     n = robot.n_joints
     observer_text = {
         "none": "without an estimate of the external efforts",
-        "momentum": f"minus the generalised-momentum observer's estimate (K_O = {settings['observer_gain_per_s']:g} 1/s)",
+        "momentum": "minus the generalised-momentum observer's estimate "
+        f"(K_O = {settings['observer_gain_per_s']:g} 1/s)",
         "force": "minus the measured tool force fed forward through J_P^T",
     }[settings["observer"]]
-    text = (TEMPLATE_DIR / "README.md.in").read_text().format(
-        robot=settings["robot"],
-        version=version,
-        date=datetime.date.today().isoformat(),
-        description=description,
-        observer_text=observer_text,
-        n=n,
-        joint_list=", ".join(f"{name} ({unit})" for name, unit in zip(robot.joint_names, robot.joint_units, strict=True)),
-        fingerprint=settings["fingerprint"],
-        dt=f"{settings['dt_s']:g}",
-        n_params=n_params,
-        context_bytes="sizeof(vgtc_context)",
-        velocity_text=settings["velocity"],
-        ref_columns=1 + 3 * n,
-        meas_columns=1 + 2 * n + 3,
+    text = (
+        (TEMPLATE_DIR / "README.md.in")
+        .read_text()
+        .format(
+            robot=settings["robot"],
+            version=version,
+            date=datetime.date.today().isoformat(),
+            description=description,
+            observer_text=observer_text,
+            n=n,
+            joint_list=", ".join(
+                f"{name} ({unit})" for name, unit in zip(robot.joint_names, robot.joint_units, strict=True)
+            ),
+            fingerprint=settings["fingerprint"],
+            dt=f"{settings['dt_s']:g}",
+            n_params=n_params,
+            context_bytes="sizeof(vgtc_context)",
+            velocity_text=settings["velocity"],
+            ref_columns=1 + 3 * n,
+            meas_columns=1 + 2 * n + 3,
+        )
     )
     (folder / "README.md").write_text(text)
 
@@ -423,7 +430,9 @@ def run_compiler(command: list[str], what: str) -> None:
             timeout=COMPILE_TIMEOUT,
         )
     except subprocess.TimeoutExpired:
-        raise ExportError(f"the C compiler {shown(compiler, 80)} ran longer than {COMPILE_TIMEOUT:.0f} s on {what}") from None
+        raise ExportError(
+            f"the C compiler {shown(compiler, 80)} ran longer than {COMPILE_TIMEOUT:.0f} s on {what}"
+        ) from None
     except OSError as exc:
         raise ExportError(f"cannot run the C compiler {shown(compiler, 80)}: {exc.strerror or exc}") from None
     if done.returncode != 0:
@@ -432,4 +441,3 @@ def run_compiler(command: list[str], what: str) -> None:
         raise ExportError(
             f"the C compiler {shown(compiler, 80)} failed on {what} (exit status {done.returncode}): {cut(first, 160)}"
         )
-
