@@ -13,6 +13,7 @@ from vgtarm._entry import single_threaded_blas
 single_threaded_blas()  # as the vgtarm command does, before NumPy is imported
 
 from . import (  # noqa: E402
+    bench_export,
     bench_ga,
     bench_ik,
     bench_model,
@@ -33,6 +34,7 @@ MODULES = {
     "mujoco": bench_mujoco,
     "reproduce": bench_reproduce,
     "stacks": bench_stacks,
+    "export": bench_export,
 }
 #: Groups run when none is named (``stacks`` is long: it compiles ten libraries from cold).
 DEFAULT = [name for name in MODULES if name != "stacks"]

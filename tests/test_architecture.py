@@ -26,7 +26,7 @@ LAYERS: tuple[frozenset[str], ...] = (
     frozenset({"control"}),
     frozenset({"simulation"}),
     frozenset({"mujoco_bridge"}),
-    frozenset({"study"}),
+    frozenset({"study", "export"}),
     frozenset({"app"}),
 )
 #: Imports a lower layer may make inside a function body, resolved at call time (documented).

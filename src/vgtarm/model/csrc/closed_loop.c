@@ -13,6 +13,7 @@
 #include <string.h>
 
 #include "vgtarm.h"
+#include "vgt_control.h" /* the controller's per-period arithmetic, shared with the exported controller */
 
 typedef struct {
     const double **arg;
@@ -150,9 +151,6 @@ static int check_state(const vgt_settings *s, const vgt_run *r, const double *q,
     return VGT_DONE;
 }
 
-/* Encoder reading of joint value x with step `step` (0: exact): the nearest count. */
-static double quantise(double x, double step) { return step > 0.0 ? step * floor(x / step + 0.5) : x; }
-
 /* What the controller sees at sample k: encoder-quantised joints, and velocities from their
  * differences (plus noise) through a first-order filter; the true state without sensing. */
 static void measure(const vgt_settings *s, const vgt_run *r, long k)
@@ -165,14 +163,13 @@ static void measure(const vgt_settings *s, const vgt_run *r, long k)
         memcpy(vm, qd, sizeof(double) * (size_t)nj);
         return;
     }
-    for (int i = 0; i < nj; ++i) qm[i] = quantise(q[i], r->resolution[i]);
+    for (int i = 0; i < nj; ++i) qm[i] = vgt_quantise(q[i], r->resolution[i]);
     if (k == 0) { /* the run starts from a known state */
         memcpy(vm, qd, sizeof(double) * (size_t)nj);
         return;
     }
     const double *qm0 = qm - nj, *vm0 = vm - nj, *noise = r->velocity_noise + nj * k;
-    const double a = s->velocity_filter;
-    for (int i = 0; i < nj; ++i) vm[i] = a * vm0[i] + (1.0 - a) * ((qm[i] - qm0[i]) / s->dt + noise[i]);
+    vgt_filtered_velocity(nj, s->velocity_filter, s->dt, qm, qm0, vm0, noise, vm);
 }
 
 /* The velocity of sample j >= 1 differenced from the encoder readings, (q_meas_j - q_meas_{j-1})
@@ -185,7 +182,7 @@ static void differenced(const vgt_settings *s, const vgt_run *r, long j, double 
         return;
     }
     const double *qm = r->q_meas + nj * j, *qm0 = qm - nj, *noise = r->velocity_noise + nj * j;
-    for (int i = 0; i < nj; ++i) v[i] = (qm[i] - qm0[i]) / s->dt + noise[i];
+    vgt_differenced_velocity(nj, s->dt, qm, qm0, noise, v);
 }
 
 /* Estimated external joint efforts at sample k (enum vgt_observer), from what the controller saw
@@ -213,7 +210,7 @@ static int observe(const vgt_model *m, const vgt_settings *s, const vgt_run *r, 
         double *out_j[2] = {J, Jw};
         if (call(&m->jac, wk, 2, in_j, 2, out_j)) return VGT_FUNCTION_FAILED;
         const double *f = r->f_ext + 3 * (k - 1);
-        for (int i = 0; i < nj; ++i) tau[i] = J[i] * f[0] + J[nj + i] * f[1] + J[2 * nj + i] * f[2];
+        vgt_force_feedforward(nj, J, f, tau);
         return VGT_DONE;
     }
     double acc[nj], raw[nj], applied[nj], va[nj], vb[nj], zero[3] = {0.0, 0.0, 0.0};
@@ -223,19 +220,19 @@ static int observe(const vgt_model *m, const vgt_settings *s, const vgt_run *r, 
         differenced(s, r, k - 1, va);
         differenced(s, r, k, vb);
         qa = r->q_meas + nj * (k - 2);
-        for (int i = 0; i < nj; ++i) applied[i] = 0.5 * (F2[i] + F1[i]);
+        vgt_mean_effort(nj, F2, F1, applied);
     } else {
         memcpy(va, r->qd_meas + nj * (k - 1), sizeof(double) * (size_t)nj);
         memcpy(vb, r->qd_meas + nj * k, sizeof(double) * (size_t)nj);
         qa = r->q_meas + nj * (k - 1);
         memcpy(applied, F1, sizeof(double) * (size_t)nj);
     }
-    for (int i = 0; i < nj; ++i) acc[i] = (vb[i] - va[i]) / s->dt;
+    vgt_window_acceleration(nj, s->dt, va, vb, acc);
     const double *in_id[5] = {qa, va, acc, zero, r->p_ctrl};
     double *out_id[1] = {raw};
     if (call(&m->id, wk, 5, in_id, 1, out_id)) return VGT_FUNCTION_FAILED;
     const double keep = exp(-s->observer_gain * s->dt), *tau0 = tau - nj;
-    for (int i = 0; i < nj; ++i) tau[i] = keep * tau0[i] + (1.0 - keep) * (raw[i] - applied[i]);
+    vgt_observer_filter(nj, keep, tau0, raw, applied, tau);
     return VGT_DONE;
 }
 
@@ -289,7 +286,7 @@ int vgt_simulate_slice(const vgt_model *m, const vgt_settings *s, const vgt_run 
             const double *in_c[8] = {qm, vm, r->q_d + nj * k, r->qd_d + nj * k, r->qdd_d + nj * k, Kp, Kv, r->p_ctrl};
             double *out_c[1] = {F};
             if (call(&m->cfc, &wk, 8, in_c, 1, out_c)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
-            for (int i = 0; i < nj; ++i) F[i] -= tau[i];
+            vgt_subtract_estimate(nj, tau, F);
             tool_force(s, V, dist, r->f_ext + 3 * k);
             ++used;
             if (k + 1 >= r->n) continue;

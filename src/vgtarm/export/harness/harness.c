@@ -1,0 +1,68 @@
+/* The simulated closed loop through the exported controller (vgtarm.export.loop; not exported).
+ *
+ * The plant is vgtarm's: this file includes the simulation's own closed_loop.c, so the tool force,
+ * the integrator and the divergence checks are the very functions vgt_simulate runs. Per sample it
+ * does what vgt_simulate_slice does, with the controller's part (measure, observe, computed force
+ * control) replaced by one vgtc_step of the exported controller, handed the true joints (it rounds
+ * them to its encoder steps), the true velocity (or, with differenced velocities, only at the
+ * start) and the tool force of the previous period.
+ */
+#include "closed_loop.c"
+#include "vgtarm_controller.h"
+
+/* Run samples k0 .. k1-1 with the exported controller ctx; returns a vgt_status (*stop as
+ * vgt_simulate) and, when the controller refused a step, its status in *controller_status. */
+int vgtc_harness_run(const vgt_model *m, const vgt_settings *s, const vgt_run *r, vgtc_context *ctx,
+                     const double *t, long k0, long k1, long *stop, int *controller_status)
+{
+    const int nj = s->n_joints;
+    double qi[nj], vi[nj], ref[3 * nj];
+    long used = 0, substep = 0;
+    vgt_work wk;
+    int status = VGT_DONE;
+    *stop = k1;
+    *controller_status = 0;
+    if (nj != VGTC_NJ) return VGT_FUNCTION_FAILED;
+    if (!work_alloc(&wk, m)) {
+        work_free(&wk);
+        return VGT_NO_MEMORY;
+    }
+    for (long k = k0; k < k1; ++k) {
+        const double *q = r->q + nj * k, *qd = r->qd + nj * k;
+        double *F = r->F + nj * k;
+        const double *dist = r->disturbance + 3 * k;
+        double V[3];
+        double *tip = r->tip + 3 * k;
+        const double *in_ts[3] = {q, qd, r->p_plant};
+        double *out_ts[2] = {tip, V};
+        if (call(&m->tip_state, &wk, 3, in_ts, 2, out_ts)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
+        const double *td = r->tip_d + 3 * k;
+        double e0 = td[0] - tip[0], e1 = td[1] - tip[1], e2 = td[2] - tip[2];
+        r->error[k] = sqrt(e0 * e0 + e1 * e1 + e2 * e2);
+        memcpy(ref, r->q_d + nj * k, sizeof(double) * (size_t)nj);
+        memcpy(ref + nj, r->qd_d + nj * k, sizeof(double) * (size_t)nj);
+        memcpy(ref + 2 * nj, r->qdd_d + nj * k, sizeof(double) * (size_t)nj);
+        const double *velocity = s->sensing && k > 0 ? NULL : qd;
+        const double *force = s->observer == VGT_OBSERVER_FORCE && k > 0 ? r->f_ext + 3 * (k - 1) : NULL;
+        int cs = vgtc_step(ctx, t[k], q, velocity, ref, force, F);
+        if (cs < 0) { *controller_status = cs; status = VGT_FUNCTION_FAILED; *stop = k; break; }
+        memcpy(r->q_meas + nj * k, vgtc_joint_readings(ctx), sizeof(double) * (size_t)nj);
+        memcpy(r->qd_meas + nj * k, vgtc_joint_velocities(ctx), sizeof(double) * (size_t)nj);
+        memcpy(r->tau_hat + nj * k, vgtc_effort_estimate(ctx), sizeof(double) * (size_t)nj);
+        tool_force(s, V, dist, r->f_ext + 3 * k);
+        if (k + 1 >= r->n) continue;
+        memcpy(qi, q, sizeof(double) * (size_t)nj);
+        memcpy(vi, qd, sizeof(double) * (size_t)nj);
+        substep = 0;
+        status = integrate(m, s, r, &wk, F, dist, qi, vi, &substep, &used, 0);
+        double *q1 = r->q + nj * (k + 1), *qd1 = r->qd + nj * (k + 1);
+        if (status == VGT_DONE) {
+            memcpy(q1, qi, sizeof(double) * (size_t)nj);
+            memcpy(qd1, vi, sizeof(double) * (size_t)nj);
+            status = check_state(s, r, q1, qd1);
+        }
+        if (status != VGT_DONE) { *stop = k + 1; break; }
+    }
+    work_free(&wk);
+    return status;
+}

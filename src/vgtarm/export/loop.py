@@ -1,0 +1,214 @@
+"""The simulated closed loop through the exported controller: vgtarm's plant, the export's C.
+
+:class:`CompiledExport` compiles an exported folder (:func:`~.controller.export_controller`) into a
+shared library together with ``harness/harness.c``, which includes the simulation's own
+``closed_loop.c``: the plant is stepped by the very functions ``vgt_simulate`` uses (tool force,
+integrator, divergence checks) while each period's efforts come from ``vgtc_step`` of the export.
+:func:`simulate_exported` runs it on a plant and a reference with the options of
+:func:`vgtarm.simulation.simulate` and returns the same record, so a test can hold the two runs to
+each other sample by sample.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import shutil
+import tempfile
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from cffi import FFI
+
+from ..control.cfc import ComputedForceControl
+from ..errors import InputError, SimulationError, shown
+from ..model import interface
+from ..model.closedloop import DONE, ClosedLoopDriver
+from ..model.compiled import CompiledBackend, find_compiler
+from ..model.robot import Robot
+from ..simulation.reference import HasJointReference
+from ..simulation.result import MODE_FIXED, MODE_NOT_RUN, SimulationResult
+from ..simulation.scenario import MODEL_ENGINE, Scenario
+from ..simulation.simulator import Outcome, prepare
+from .controller import ExportError, run_compiler
+
+HARNESS = Path(__file__).resolve().parent / "harness" / "harness.c"
+MODEL_CSRC = Path(__file__).resolve().parent.parent / "model" / "csrc"
+#: The programs of an export (each has its own main): not part of the library.
+PROGRAMS = ("replay.c", "rt_loop.c")
+#: Flags of the shared library: the compiled model library's (no contraction, no fast math).
+LIBRARY_FLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off")
+
+_CDEF = """
+typedef struct vgtc_params_opaque vgtc_params;
+typedef struct vgtc_context_opaque vgtc_context;
+void vgtc_default_params(vgtc_params *params);
+int vgtc_init(vgtc_context *ctx, const vgtc_params *params);
+int vgtc_step(vgtc_context *ctx, double t, const double *q_meas, const double *qd_meas, const double *ref_row,
+              const double *f_meas, double *efforts);
+const double *vgtc_effort_estimate(const vgtc_context *ctx);
+double vgtc_tip_error(const vgtc_context *ctx);
+const char *vgtc_status_text(int status);
+size_t vgtc_context_size(void);
+size_t vgtc_params_size(void);
+int vgtc_harness_run(const vgt_model *m, const vgt_settings *s, const vgt_run *r, vgtc_context *ctx,
+                     const double *t, long k0, long k1, long *stop, int *controller_status);
+"""
+
+
+class CompiledExport:
+    """An exported folder compiled, with the simulation's harness, into a shared library.
+
+    Attributes:
+        folder: the export.
+        settings: its ``export.json``.
+        n_joints: its joint count.
+    """
+
+    def __init__(self, folder: str | os.PathLike[str], *, compiler: str | None = None) -> None:
+        self.folder = Path(folder).absolute()
+        try:
+            self.settings: dict[str, Any] = json.loads((self.folder / "export.json").read_text())
+        except (OSError, ValueError) as exc:
+            raise InputError(
+                f"exported controller {shown(str(folder), 200)}: no readable export.json ({exc}); "
+                "expected a folder written by vgtarm export controller"
+            ) from None
+        self.n_joints = int(self.settings["n_joints"])
+        chosen = compiler or find_compiler()
+        if chosen is None:
+            raise ExportError("no C compiler found (cc, gcc or clang, or $CC) to compile the exported controller")
+        sources = [str(p) for p in sorted(self.folder.glob("*.c")) if p.name not in PROGRAMS]
+        scratch = tempfile.mkdtemp(prefix="vgtc-harness-")
+        try:
+            library = Path(scratch) / "libvgtc_harness.so"
+            # the export's folder first: its vgt_control.h is the copy the controller uses
+            command = [chosen, *LIBRARY_FLAGS, "-I", str(self.folder), "-I", str(MODEL_CSRC)]
+            command += ["-o", str(library), *sources, str(HARNESS), "-lm"]
+            run_compiler(command, "the exported controller with the simulation harness")
+            self.ffi = FFI()
+            self.ffi.include(interface.ffi())
+            self.ffi.cdef(_CDEF)
+            self.lib: Any = self.ffi.dlopen(str(library))
+        finally:
+            shutil.rmtree(scratch, ignore_errors=True)  # the loaded library stays mapped
+
+    def new_context(self) -> Any:
+        """A context initialised with the export's own values (``vgtc_default_params``)."""
+        owner = self.ffi.new("char[]", int(self.lib.vgtc_params_size()))  # a cast does not keep its owner
+        params = self.ffi.cast("vgtc_params *", owner)
+        self.lib.vgtc_default_params(params)
+        buffer = self.ffi.new("char[]", int(self.lib.vgtc_context_size()))
+        context = self.ffi.cast("vgtc_context *", buffer)
+        status = self.lib.vgtc_init(context, params)
+        if status != 0:
+            raise ExportError(f"vgtc_init of {shown(str(self.folder), 200)}: {self._text(status)}")
+        self._keep = buffer  # the context lives as long as the last one made
+        return context
+
+    def _text(self, status: int) -> str:
+        return str(self.ffi.string(self.lib.vgtc_status_text(status)).decode())
+
+
+def _check_agrees(settings: Mapping[str, Any], run: Any, plant: Robot) -> None:
+    """Refuse, in one line, a run whose options are not the ones the controller was exported with."""
+    sensing, job = run.sensing, run.job
+    wanted = {
+        "dt_s": job.dt,
+        "observer": sensing.loop_observer,
+        "observer_gain_per_s": sensing.observer_gain,
+        "velocity": "differenced" if sensing.active else "measured",
+        "resolution": sensing.resolution.tolist(),
+        "controller_model_fingerprint": job.model.fingerprint,
+        "n_joints": plant.n_joints,
+    }
+    if sensing.active:
+        wanted["velocity_filter"] = sensing.velocity_filter
+    for key, value in wanted.items():
+        if settings.get(key) != value:
+            raise InputError(
+                f"the exported controller has {key} = {shown(settings.get(key))}, the run {shown(value)}: "
+                "export it with the run's options"
+            )
+    if sensing.velocity_noise > 0:
+        raise InputError(
+            f"velocity_noise = {sensing.velocity_noise!r}: the exported controller is closed without simulated "
+            "velocity noise (expected 0)"
+        )
+    if run.scenario.plant_engine != MODEL_ENGINE:
+        raise InputError(f"plant_engine = {run.scenario.plant_engine!r}: expected {MODEL_ENGINE!r}")
+
+
+def simulate_exported(
+    exported: CompiledExport | str | os.PathLike[str],
+    plant: Robot,
+    reference: HasJointReference,
+    scenario: Scenario | None = None,
+    *,
+    metadata: Mapping[str, Any] | None = None,
+    **options: Any,
+) -> SimulationResult:
+    """Close vgtarm's simulated plant through the exported controller; the record of
+    :func:`vgtarm.simulation.simulate` (``options`` are its scenario's).
+
+    The plant is stepped by ``closed_loop.c`` itself; each period, ``vgtc_step`` gets the true
+    joints (it rounds them to its encoder steps), the true velocity (with differenced velocities,
+    only at the start) and the tool force of the previous period (force sensor). The run's options
+    must be those the controller was exported with (dt, observer and gain, sensing, controller
+    model; refused in one line otherwise); simulated velocity noise is not supported.
+
+    Raises:
+        SimulationError: the run diverged or the controller refused a step (``.result`` keeps the
+            samples up to then); InputError: options that differ from the export's.
+    """
+    compiled = exported if isinstance(exported, CompiledExport) else CompiledExport(exported)
+    if not isinstance(plant, Robot) or not isinstance(plant.backend, CompiledBackend):
+        raise InputError(f"plant = {shown(plant)}: expected a vgtarm.Robot with the compiled backend")
+    scenario = Scenario.of(scenario, options)
+    s = compiled.settings
+    n = plant.n_joints
+    controller = ComputedForceControl.with_gains(np.array(s["Kp"]), np.array(s["Kv"]), n)
+    run = prepare(plant, reference, controller, scenario, metadata)
+    _check_agrees(s, run, plant)
+    arrays = run.job.arrays
+    driver = ClosedLoopDriver(plant.backend)
+    loop_settings = run.job.settings.struct(arrays.n_joints, arrays.n_margins)
+    context = compiled.new_context()
+    t = np.ascontiguousarray(run.reference.t, dtype=np.float64)
+    ffi = compiled.ffi
+    stop, refused = ffi.new("long *"), ffi.new("int *")
+    started = time.perf_counter()
+    status = int(
+        compiled.lib.vgtc_harness_run(
+            driver.model,
+            loop_settings,
+            arrays.struct,
+            context,
+            ffi.cast("double *", t.ctypes.data),
+            0,
+            arrays.n,
+            stop,
+            refused,
+        )
+    )
+    wall = time.perf_counter() - started
+    at = int(stop[0])
+    mode = np.full(arrays.n, MODE_FIXED, dtype=np.int8)
+    success = status == DONE
+    if not success:
+        mode[at:] = MODE_NOT_RUN
+    outcome = Outcome(status, at, success, mode, (), wall)
+    extra = {"exported_controller": str(compiled.folder), **dict(metadata or {})}
+    result = run.result(outcome, extra)
+    if int(refused[0]) < 0:
+        text = compiled._text(int(refused[0]))
+        result = dataclasses.replace(
+            result, message=f"the exported controller refused sample {at} (t = {t[min(at, len(t) - 1)]:.4f} s): {text}"
+        )
+    if not success:
+        raise SimulationError(result.message, result)
+    return result

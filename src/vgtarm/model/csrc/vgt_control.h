@@ -1,0 +1,64 @@
+/* The controller's per-period arithmetic, shared by the simulation and the exported controller.
+ *
+ * closed_loop.c (the simulated closed loop) and the exported controller (vgtarm.export, whose
+ * vgtarm_controller.c includes a copy of this file) run the controller side of a control period
+ * through these functions, so the two compute the same numbers in the same order: the tests hold
+ * the exported controller to the simulation bit for bit. Only C99 and libm; no state, no I/O.
+ * Every array is n joint values unless said otherwise.
+ */
+#ifndef VGT_CONTROL_H
+#define VGT_CONTROL_H
+
+#include <math.h>
+
+/* Encoder reading of joint value x with step `step` (0: exact): the nearest count. */
+static inline double vgt_quantise(double x, double step) { return step > 0.0 ? step * floor(x / step + 0.5) : x; }
+
+/* The velocity the controller sees from two encoder readings qm0 -> qm one period dt apart: their
+ * difference plus `noise` through the first-order filter of weight a on the previous estimate vm0. */
+static inline void vgt_filtered_velocity(int n, double a, double dt, const double *qm, const double *qm0,
+                                         const double *vm0, const double *noise, double *vm)
+{
+    for (int i = 0; i < n; ++i) vm[i] = a * vm0[i] + (1.0 - a) * ((qm[i] - qm0[i]) / dt + noise[i]);
+}
+
+/* The unfiltered velocity differenced from two encoder readings, plus `noise`. */
+static inline void vgt_differenced_velocity(int n, double dt, const double *qm, const double *qm0,
+                                            const double *noise, double *v)
+{
+    for (int i = 0; i < n; ++i) v[i] = (qm[i] - qm0[i]) / dt + noise[i];
+}
+
+/* The momentum observer's window: the mean acceleration (vb - va) / dt over it. */
+static inline void vgt_window_acceleration(int n, double dt, const double *va, const double *vb, double *acc)
+{
+    for (int i = 0; i < n; ++i) acc[i] = (vb[i] - va[i]) / dt;
+}
+
+/* The effort applied over a window of two periods: the mean of F2 (older) and F1. */
+static inline void vgt_mean_effort(int n, const double *F2, const double *F1, double *applied)
+{
+    for (int i = 0; i < n; ++i) applied[i] = 0.5 * (F2[i] + F1[i]);
+}
+
+/* The observer's first-order filter, exact at the samples: tau = keep tau0 + (1 - keep)(raw - applied),
+ * keep = exp(-K_O dt). */
+static inline void vgt_observer_filter(int n, double keep, const double *tau0, const double *raw,
+                                       const double *applied, double *tau)
+{
+    for (int i = 0; i < n; ++i) tau[i] = keep * tau0[i] + (1.0 - keep) * (raw[i] - applied[i]);
+}
+
+/* The force sensor fed forward: tau = J_P^T f (J_P 3 x n, row-major; f 3 values). */
+static inline void vgt_force_feedforward(int n, const double *J, const double *f, double *tau)
+{
+    for (int i = 0; i < n; ++i) tau[i] = J[i] * f[0] + J[n + i] * f[1] + J[2 * n + i] * f[2];
+}
+
+/* Computed force control minus the estimate of the external efforts: F -= tau. */
+static inline void vgt_subtract_estimate(int n, const double *tau, double *F)
+{
+    for (int i = 0; i < n; ++i) F[i] -= tau[i];
+}
+
+#endif
