@@ -151,6 +151,7 @@ class PathPlacement:
             c + self.scale * (path.position - c0),
             self.scale * path.velocity,
             self.scale * path.acceleration,
+            None if path.jerk is None else self.scale * path.jerk,
         )
 
     def metadata(self) -> dict[str, Any]:
