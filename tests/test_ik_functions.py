@@ -7,6 +7,7 @@ import pytest
 
 from vgtarm import paths
 from vgtarm.ik.effort import effort_terms
+from vgtarm.ik.options import IKOptions
 from vgtarm.ik.problem import BatchState, IKProblem, Task
 from vgtarm.ik.rates import exact
 from vgtarm.ik.solve import _task
@@ -57,8 +58,11 @@ def test_fused_rates_match_the_general_path(robot, criterion):
     options = {"criterion": "effort", "tool_force": 20.0} if criterion == "effort" else {}
     result = robot.inverse_kinematics(path, **options)
     effort = criterion == "effort"
-    problem = IKProblem.from_parameters(robot.parameters, joint_limit_weight=0.3 if effort else 1.0)
-    terms = effort_terms(robot, path, 20.0, 0.01) if effort else None
+    defaults = IKOptions(criterion="effort")
+    problem = IKProblem.from_parameters(
+        robot.parameters, joint_limit_weight=defaults.joint_limit_weight if effort else 1.0
+    )
+    terms = effort_terms(robot, path, 20.0, defaults.tool_force_speed) if effort else None
     task = _task(robot, path, None, terms)
     n = len(path)
     idx = np.arange(n)

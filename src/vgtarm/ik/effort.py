@@ -20,7 +20,7 @@ twist angle would be free and the optimum not unique.
 **The expected tool force** is the path's cutting-force model (paper eq. 16) with the disturbance's
 mean, zero: ``f = -F0 v / sqrt(|v|^2 + v_s^2)`` along the desired tip velocity ``v``. The cutting
 force the plant applies switches on at a small speed (``ExternalForce.cutting_speed``); the expected
-force is smoothed over ``v_s`` (option ``tool_force_speed``, 1 cm/s by default) so that the
+force is smoothed over ``v_s`` (option ``tool_force_speed``, 5 cm/s by default) so that the
 optimum, and with it the reference, moves smoothly at the rest-to-rest corners of a path. Its first
 and second time derivatives (for the exact rates) follow from the path's acceleration and jerk by
 automatic differentiation.
@@ -46,9 +46,9 @@ CRITERIA = ("joint_limits", "effort")
 #: Standard gravity used in the normalisation (m/s^2).
 STANDARD_GRAVITY = 9.81
 #: Default weight of the joint-limit cost in the effort criterion.
-DEFAULT_JOINT_LIMIT_WEIGHT = 0.3
+DEFAULT_JOINT_LIMIT_WEIGHT = 0.5
 #: Default smoothing speed of the expected tool force (m/s).
-DEFAULT_TOOL_FORCE_SPEED = 0.01
+DEFAULT_TOOL_FORCE_SPEED = 0.05
 
 
 @dataclass(frozen=True, eq=False)
