@@ -156,7 +156,7 @@ def test_path_without_jerk_refused(robot):
 
 
 def test_cli_effort_criterion(tmp_path, capsys):
-    """``vgtarm ik --criterion effort --tool-force 20`` writes the effort reference; ``--tool-force`` alone is refused."""
+    """`vgtarm ik --criterion effort --tool-force 20` writes the reference; `--tool-force` alone is refused."""
     from vgtarm.app.cli import main
 
     out = tmp_path / "ref.csv"
