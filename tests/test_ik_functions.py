@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from vgtarm import paths
+from vgtarm.ik.effort import effort_terms
+from vgtarm.ik.options import IKOptions
 from vgtarm.ik.problem import BatchState, IKProblem, Task
 from vgtarm.ik.rates import exact
 from vgtarm.ik.solve import _task
@@ -48,18 +51,27 @@ def test_second_directional_derivative(robot):
     assert_close(d2, (F(h) - 2 * F(0) + F(-h)) / h**2, rtol=1e-5, atol=1e-6)
 
 
-def test_fused_rates_match_the_general_path(robot):
-    path = paths.case1(0.05)
-    result = robot.inverse_kinematics(path)
-    problem = IKProblem.from_parameters(robot.parameters)
-    task = _task(robot, path, None)
+@pytest.mark.parametrize("criterion", ["joint_limits", "effort"])
+def test_fused_rates_match_the_general_path(robot, criterion):
+    """The compiled rates (``ik_*_rates``) equal the general path (``ik_*_dt``/``_d2`` and NumPy solves)."""
+    path = paths.case2(0.05) if criterion == "effort" else paths.case1(0.05)
+    options = {"criterion": "effort", "tool_force": 20.0} if criterion == "effort" else {}
+    result = robot.inverse_kinematics(path, **options)
+    effort = criterion == "effort"
+    defaults = IKOptions(criterion="effort")
+    problem = IKProblem.from_parameters(
+        robot.parameters, joint_limit_weight=defaults.joint_limit_weight if effort else 1.0
+    )
+    terms = effort_terms(robot, path, 20.0, defaults.tool_force_speed) if effort else None
+    task = _task(robot, path, None, terms)
     n = len(path)
     idx = np.arange(n)
     fused = task.evaluate_with_rates(idx, result.q, result.samples.multipliers, problem.weight)
-    state = BatchState.empty(n, 3, 16)
+    state = BatchState.empty(n, 3, 16, with_gradient=effort)
     state.q[:], state.lam[:] = result.q, result.samples.multipliers
     state.residual[:], state.J[:], state.H[:] = task.evaluate(idx, result.q, state.lam)
     exact(problem, task, state, idx)
-    assert_close(fused[3], state.qd, rtol=1e-9, atol=1e-12, what="qd")
-    assert_close(fused[5], state.qdd, rtol=1e-8, atol=1e-11, what="qdd")
-    assert_close(fused[3], result.qd, rtol=1e-9, atol=1e-12)
+    qd, _, qdd, _ = fused[4]
+    assert_close(qd, state.qd, rtol=1e-9, atol=1e-12, what="qd")
+    assert_close(qdd, state.qdd, rtol=1e-8, atol=1e-11, what="qdd")
+    assert_close(qd, result.qd, rtol=1e-9, atol=1e-12)

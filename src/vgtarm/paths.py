@@ -61,6 +61,9 @@ class Path:
         position: Tip position in the base frame, shape ``(N, 3)``, m.
         velocity: Tip velocity, shape ``(N, 3)``, m/s.
         acceleration: Tip acceleration, shape ``(N, 3)``, m/s^2.
+        jerk: Tip jerk, shape ``(N, 3)``, m/s^3, or None when unknown. Every constructor below
+            gives it (the exact third derivative); it is needed only by the exact rates of the
+            inverse kinematics' effort criterion, whose expected tool force follows the velocity.
 
     The arrays are copied to float64 on construction and made read-only. Invalid shapes,
     non-finite values or non-uniform times raise :class:`~vgtarm.errors.PathError`.
@@ -71,6 +74,7 @@ class Path:
     position: FloatArray
     velocity: FloatArray
     acceleration: FloatArray
+    jerk: FloatArray | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str):
@@ -80,7 +84,9 @@ class Path:
             raise PathError(f"t must have shape (N,) with N >= 2, got shape {t.shape}")
         _require_finite("t", t)
         n = t.shape[0]
-        for field in ("position", "velocity", "acceleration"):
+        for field in ("position", "velocity", "acceleration", "jerk"):
+            if field == "jerk" and self.jerk is None:
+                continue
             values = _frozen_array(field, getattr(self, field))
             if values.shape != (n, 3):
                 raise PathError(f"{field} must have shape ({n}, 3) to match t, got shape {values.shape}")
@@ -146,7 +152,8 @@ def case1(
     position = np.column_stack((x0 + ax * sin_t, y0 + ay * cos_t, z0 + 0.5 * az * sin_4t))
     velocity = np.column_stack((ax * cos_t, -ay * sin_t, 2 * az * cos_4t))
     acceleration = np.column_stack((-ax * sin_t, -ay * cos_t, -8 * az * sin_4t))
-    return Path("case1", t, position, velocity, acceleration)
+    jerk = np.column_stack((-ax * cos_t, ay * sin_t, -32 * az * cos_4t))
+    return Path("case1", t, position, velocity, acceleration, jerk)
 
 
 def case2(
@@ -223,9 +230,9 @@ def waypoints(
     dt = _check_dt(dt)
     knots, pts = _check_samples(times, points, "times", "points", lambda i: f"index {i}")
     t = _sample_times(knots[0], knots[-1] - knots[0], dt, "times[-1] - times[0]")
-    position, velocity, acceleration = sampler(knots, pts, t, dt)
+    position, velocity, acceleration, jerk = sampler(knots, pts, t, dt)
     label = name if name is not None else f"waypoints-{blend}"
-    return Path(label, t, position, velocity, acceleration)
+    return Path(label, t, position, velocity, acceleration, jerk)
 
 
 def from_samples(
@@ -372,27 +379,27 @@ def _fit_spline(
     t = _sample_times(times[0], times[-1] - times[0], dt, f"{field}[-1] - {field}[0]")
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is found below, as a non-finite value
         spline = CubicSpline(times, points, axis=0, bc_type="not-a-knot")
-        samples = spline(t), spline(t, 1), spline(t, 2)
+        samples = spline(t), spline(t, 1), spline(t, 2), spline(t, 3)
     return Path(name, t, *samples)
 
 
 def _sample_cubic(
     knots: FloatArray, points: FloatArray, t: FloatArray, dt: float
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Rest-to-rest cubic ``s = 3 tau^2 - 2 tau^3`` per segment; returns (N, 3) x, v, a."""
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Rest-to-rest cubic ``s = 3 tau^2 - 2 tau^3`` per segment; returns (N, 3) x, v, a, jerk."""
     return _sample_segments(
         knots,
         points,
         t,
         dt,
-        lambda u: (3 * u**2 - 2 * u**3, 6 * u - 6 * u**2, 6 - 12 * u),
+        lambda u: (3 * u**2 - 2 * u**3, 6 * u - 6 * u**2, 6 - 12 * u, np.full_like(u, -12.0)),
     )
 
 
 def _sample_quintic(
     knots: FloatArray, points: FloatArray, t: FloatArray, dt: float
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Rest-to-rest quintic ``s = 10 tau^3 - 15 tau^4 + 6 tau^5``; returns (N, 3) x, v, a."""
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Rest-to-rest quintic ``s = 10 tau^3 - 15 tau^4 + 6 tau^5``; returns (N, 3) x, v, a, jerk."""
     return _sample_segments(
         knots,
         points,
@@ -402,16 +409,17 @@ def _sample_quintic(
             10 * u**3 - 15 * u**4 + 6 * u**5,
             30 * u**2 - 60 * u**3 + 30 * u**4,
             60 * u - 180 * u**2 + 120 * u**3,
+            60 - 360 * u + 360 * u**2,
         ),
     )
 
 
 def _sample_spline(
     knots: FloatArray, points: FloatArray, t: FloatArray, dt: float
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """C2 cubic spline through all points, zero velocity at both ends; (N, 3) x, v, a."""
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """C2 cubic spline through all points, zero velocity at both ends; (N, 3) x, v, a, jerk."""
     spline = CubicSpline(knots, points, axis=0, bc_type="clamped")
-    return spline(t), spline(t, 1), spline(t, 2)
+    return spline(t), spline(t, 1), spline(t, 2), spline(t, 3)
 
 
 def _sample_segments(
@@ -419,27 +427,28 @@ def _sample_segments(
     points: FloatArray,
     t: FloatArray,
     dt: float,
-    profile: Callable[[FloatArray], tuple[FloatArray, FloatArray, FloatArray]],
-) -> tuple[FloatArray, FloatArray, FloatArray]:
+    profile: Callable[[FloatArray], tuple[FloatArray, FloatArray, FloatArray, FloatArray]],
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Evaluate a per-segment blend ``x = Pa + s(tau)(Pb - Pa)`` at times ``t``.
 
-    ``profile(tau)`` returns ``s``, ``ds/dtau`` and ``d2s/dtau2``. A sample within a
+    ``profile(tau)`` returns ``s``, ``ds/dtau``, ``d2s/dtau2`` and ``d3s/dtau3``. A sample within a
     millionth of ``dt`` below a knot counts as on it and goes to the later segment.
     """
     segment = np.searchsorted(knots, t + 1e-6 * dt, side="right") - 1
     segment = np.clip(segment, 0, knots.shape[0] - 2)
     span = knots[segment + 1] - knots[segment]
     tau = np.clip((t - knots[segment]) / span, 0.0, 1.0)
-    s, ds, dds = profile(tau)
+    s, ds, dds, ddds = profile(tau)
     delta = points[segment + 1] - points[segment]
     position = points[segment] + s[:, None] * delta
     velocity = (ds / span)[:, None] * delta
     acceleration = (dds / span**2)[:, None] * delta
-    return position, velocity, acceleration
+    jerk = (ddds / span**3)[:, None] * delta
+    return position, velocity, acceleration, jerk
 
 
 _BLENDS = MappingProxyType({"cubic": _sample_cubic, "quintic": _sample_quintic, "spline": _sample_spline})
-"""Waypoint blends by name: ``sampler(knots, points, t, dt) -> (position, velocity, accel)``."""
+"""Waypoint blends by name: ``sampler(knots, points, t, dt) -> (position, velocity, accel, jerk)``."""
 
 
 def _check_samples(

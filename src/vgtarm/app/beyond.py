@@ -152,6 +152,10 @@ def _mm(value: float | None) -> str:
     return "—" if value is None else f"{value * 1e3:.4f}"
 
 
+def _n(value: float | None, digits: int) -> str:
+    return "—" if value is None else f"{value:.{digits}f}"
+
+
 def _force_steps(result: SimulationResult) -> list[float]:
     """Times at which the cutting force steps: it switches on or off, or turns by more than 60
     degrees within one period (the tool starts, stops, or reverses at a corner)."""
@@ -209,8 +213,12 @@ def beyond_section(results: dict[BeyondRun, SimulationResult], figure: str) -> l
         f" differences, and a controller model {round((MODEL_MASS - 1) * 100)} % heavier than the robot."
         " The paper's best figure for this case is below 0.4 mm (switching control).",
         "",
-        "| run | sensing | max (mm) | RMS (mm) | peak force (N) | GA activations | folder |",
-        "| --- | --- | --- | --- | --- | --- | --- |",
+        "Forces are the six legs' (the twist torque apart); chatter is the RMS of the change of the leg forces"
+        " from one control period to the next, energy the integral of the actuators' absolute power |F qd|.",
+        "",
+        "| run | sensing | max (mm) | RMS (mm) | peak force (N) | RMS force (N) | chatter (N) | RMS twist torque"
+        " (N m) | energy (J) | GA activations | folder |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for spec, s in summaries.items():
         if not spec.in_table:
@@ -218,8 +226,9 @@ def beyond_section(results: dict[BeyondRun, SimulationResult], figure: str) -> l
         largest = _mm(s["max_tip_error_m"]) if s["success"] else md_cell(str(s["message"]).split(":")[0])
         lines.append(
             f"| {md_cell(spec.label)} | {'realistic' if spec.realistic else 'perfect'} | {largest} |"
-            f" {_mm(s['rms_tip_error_m'])} | {s['peak_force_n']:.1f} | {s['ga_activations']} |"
-            f" {md_code(spec.folder + '/')} |"
+            f" {_mm(s['rms_tip_error_m'])} | {_n(s['peak_force_n'], 1)} | {_n(s['rms_force_n'], 1)} |"
+            f" {_n(s['chatter_n'], 2)} | {_n(s['rms_twist_torque_nm'], 3)} | {_n(s['actuator_energy_j'], 2)} |"
+            f" {s['ga_activations']} | {md_code(spec.folder + '/')} |"
         )
     lines += ["", f"![tip error beyond the paper]({figure})", "", "### What bounds the remaining error", ""]
     by_label = {(spec.label, spec.realistic): s for spec, s in summaries.items()}

@@ -151,6 +151,7 @@ class PathPlacement:
             c + self.scale * (path.position - c0),
             self.scale * path.velocity,
             self.scale * path.acceleration,
+            None if path.jerk is None else self.scale * path.jerk,
         )
 
     def metadata(self) -> dict[str, Any]:
@@ -186,10 +187,12 @@ def joint_reference(
     rates: str = "exact",
     solver: str = "fast",
     duration: float | None = None,
+    **ik_options: Any,
 ) -> JointReference:
     """The case's joint reference from the redundancy-resolving inverse kinematics; with
-    ``duration`` (s) only its first ``duration`` seconds (:func:`truncate_reference`)."""
-    ik = robot.inverse_kinematics(case_path(robot, number, dt), solver=solver, rates=rates)
+    ``duration`` (s) only its first ``duration`` seconds (:func:`truncate_reference`). ``ik_options``
+    go to the inverse kinematics (``criterion="effort"``, ``tool_force``, ...)."""
+    ik = robot.inverse_kinematics(case_path(robot, number, dt), solver=solver, rates=rates, **ik_options)
     reference = JointReference.of(ik, name=f"case {number}")
     return reference if duration is None else truncate_reference(reference, duration)
 

@@ -14,6 +14,7 @@ import re
 import select
 import sys
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -135,8 +136,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                 rates=args.rates,
                 horizon=args.horizon,
                 reference=None
-                if args.duration is None
-                else joint_reference(robot, args.case, rates=args.rates, duration=args.duration),
+                if args.duration is None and args.criterion == "joint_limits"
+                else joint_reference(robot, args.case, rates=args.rates, duration=args.duration, **_criterion(args)),
                 controller_model=None if exact_model else model,
                 progress=progress,
                 observer=args.observer,
@@ -167,9 +168,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                 # one line: the failure (cut so that the note is never cut off), then where its results are
                 raise SimulationError(f"{cut(str(exc), 200)}; {note}", exc.result) from exc
             raise
+    if args.criterion != "joint_limits":  # recorded in summary.json; the paper's runs stay as they were
+        result = replace(result, metadata={**result.metadata, "ik_criterion": args.criterion})
     summary = result.summary()
     for key in (
         "case",
+        "ik_criterion",
         "controller",
         "external_force",
         "integrator",
@@ -187,6 +191,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         "max_tip_error_after_transient_m",
         "peak_force_n",
         "rms_force_n",
+        "chatter_n",
+        "actuator_energy_j",
         "ga_activations",
         "ga_time_s",
         "path_centre_m",
@@ -372,6 +378,19 @@ def _check_ik_memory(args: argparse.Namespace, path: DesiredPath) -> None:
     )
 
 
+def _criterion(args: argparse.Namespace) -> dict[str, Any]:
+    """The inverse kinematics' criterion options of ``--criterion`` (and ``--tool-force``; ``simulate``: the
+    case's cutting force when ``--external-force`` is given)."""
+    force = getattr(args, "tool_force", None)
+    if args.criterion == "joint_limits":  # a --tool-force is refused by the options, with its reason
+        return {} if force is None else {"tool_force": force}
+    if force is None:
+        from ..simulation import ExternalForce
+
+        force = ExternalForce().cutting_force if getattr(args, "external_force", False) else 0.0
+    return {"criterion": args.criterion, "tool_force": force}
+
+
 def cmd_ik(args: argparse.Namespace) -> int:
     """Inverse kinematics of a desired path: write the joint reference as CSV and print a summary."""
     if args.output is not None:  # before the work; never over the path file it reads
@@ -384,7 +403,8 @@ def cmd_ik(args: argparse.Namespace) -> int:
 
         placement = path_placement(robot)
         path = path if placement is None else placement.apply(path)
-    result = robot.inverse_kinematics(path, solver=args.solver, rates=args.rates, pose="hold" if args.pose else None)
+    pose = "hold" if args.pose else None
+    result = robot.inverse_kinematics(path, solver=args.solver, rates=args.rates, pose=pose, **_criterion(args))
     if not result.success:
         raise UnreachableError(f"inverse kinematics did not verify every sample: {result.message}; nothing written")
     if args.output is not None:
@@ -479,6 +499,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="how the reference rates are computed (default: exact)",
     )
     simulate.add_argument(
+        "--criterion",
+        choices=("joint_limits", "effort"),
+        default="joint_limits",
+        help="redundancy criterion of the reference: eq. 12 (default) or the static actuator efforts",
+    )
+    simulate.add_argument(
         "--horizon",
         type=_positive_int,
         default=20,
@@ -514,6 +540,7 @@ def build_parser() -> argparse.ArgumentParser:
     again.add_argument(
         "--out", type=Path, default=Path("results"), metavar="DIR", help="output folder (default: results)"
     )
+
     def seed_count(text: str) -> int:
         from .seeds import MAX_SEEDS
 
@@ -550,6 +577,10 @@ def build_parser() -> argparse.ArgumentParser:
     ik.add_argument("--solver", default="fast", metavar="NAME", help="fast (default), reference, slsqp or ipopt")
     ik.add_argument("--rates", default="exact", metavar="MODE", help="exact (default) or finite_difference")
     ik.add_argument("--dt", default=None, metavar="DT", help="sampling period in s (case: 0.001; file: its own)")
+    ik.add_argument(
+        "--criterion", choices=("joint_limits", "effort"), default="joint_limits", help="eq. 12 (default) or effort"
+    )
+    ik.add_argument("--tool-force", type=float, default=None, metavar="N", help="expected cutting force (effort; 0)")
     ik.add_argument("-o", "--output", type=Path, default=None, metavar="FILE", help="CSV file to write")
     _add_config(ik)
     ik.set_defaults(run=cmd_ik)

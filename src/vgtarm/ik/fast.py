@@ -69,15 +69,16 @@ def approach(problem: IKProblem, task: Task, state: BatchState, i: int, q_start:
     if task.rotation is not None and ends is not None:
         rotations = Slerp([0.0, 1.0], ends)(s).as_matrix().reshape(pieces, 9)
         rotations[-1] = task.rotation[i]
-    line = task.with_targets(points, rotations)
-    sub = BatchState.empty(pieces, task.m, state.mu.shape[1], state.q.shape[1])
+    line = task.with_targets(points, rotations, like=i)
+    sub = BatchState.empty(pieces, task.m, state.mu.shape[1], state.q.shape[1], state.g is not None)
     start = _rest_start(q_start, task.m, state.mu.shape[1])
     newton.solve_in_order(problem, line, sub, np.arange(pieces, dtype=np.intp), start, settings.newton)
     state.iterations[i] += int(sub.iterations.sum())
     ok = bool(sub.converged[-1])
     if ok:
-        for name in ("q", "lam", "mu", "active", "residual", "J", "H"):
-            getattr(state, name)[i] = getattr(sub, name)[-1]
+        for name in ("q", "lam", "mu", "active", "residual", "J", "H", "g"):
+            if getattr(sub, name) is not None:
+                getattr(state, name)[i] = getattr(sub, name)[-1]
     state.converged[i] = ok
     return ok
 

@@ -51,6 +51,12 @@ Array = NDArray[np.float64]
 Mask = NDArray[np.bool_]
 
 
+def cost_gradient(problem: IKProblem, q: Array, g: Array | None = None) -> Array:
+    """Gradient ``(n, nj)`` of the whole cost: ``grad Phi`` plus the model part ``g`` (effort criterion) if given."""
+    gradient = problem.phi_gradient(q)
+    return gradient if g is None else gradient + g
+
+
 def hessian(problem: IKProblem, H: Array) -> Array:
     """``W = grad^2 Phi + H``, ``(n, nj, nj)``, for the constraint Hessian ``H`` ``(n, nj, nj)``."""
     nj = problem.n
@@ -81,13 +87,14 @@ def kkt_matrix(problem: IKProblem, W: Array, J: Array, active: Mask) -> Array:
     return K
 
 
-def newton_rhs(problem: IKProblem, q: Array, residual: Array, active: Mask) -> Array:
-    """Right-hand side ``(n, nj + m + k)`` of the Newton step at ``q`` with equality residual ``residual``."""
+def newton_rhs(problem: IKProblem, q: Array, residual: Array, active: Mask, g: Array | None = None) -> Array:
+    """Right-hand side ``(n, nj + m + k)`` of the Newton step at ``q`` with equality residual ``residual``
+    (``g``: the model part of the cost gradient, :func:`cost_gradient`)."""
     nj = problem.n
     n, m = residual.shape
     k = problem.n_triangle
     rhs = np.zeros((n, nj + m + k))
-    rhs[:, :nj] = -problem.phi_gradient(q)
+    rhs[:, :nj] = -cost_gradient(problem, q, g)
     lower, upper = active[:, :nj], active[:, nj : 2 * nj]
     rhs[:, :nj] = np.where(lower, problem.lower - q, rhs[:, :nj])
     rhs[:, :nj] = np.where(upper, problem.upper - q, rhs[:, :nj])
@@ -133,17 +140,19 @@ def solve(K: Array, rhs: Array) -> tuple[Array, Mask]:
         return x, ok
 
 
-def stationarity(problem: IKProblem, q: Array, J: Array, lam: Array, mu: Array) -> Array:
+def stationarity(problem: IKProblem, q: Array, J: Array, lam: Array, mu: Array, g: Array | None = None) -> Array:
     """Gradient of the Lagrangian ``grad Phi + J^T lam - A^T mu`` ``(n, nj)`` (``A`` = inequality rows)."""
-    return problem.phi_gradient(q) + np.einsum("nmi,nm->ni", J, lam) - rows_times(mu, problem.A.T)
+    return cost_gradient(problem, q, g) + np.einsum("nmi,nm->ni", J, lam) - rows_times(mu, problem.A.T)
 
 
-def bound_multipliers(problem: IKProblem, q: Array, W: Array, J: Array, x: Array, active: Mask) -> Array:
+def bound_multipliers(
+    problem: IKProblem, q: Array, W: Array, J: Array, x: Array, active: Mask, g: Array | None = None
+) -> Array:
     """All inequality multipliers ``(n, 2 nj + k)`` after a step ``x = (dq, lam, mu_g)`` of the condensed system."""
     nj = problem.n
     m = J.shape[1]
     dq, lam, mu_g = x[:, :nj], x[:, nj : nj + m], x[:, nj + m :]
-    r = problem.phi_gradient(q) + np.einsum("nij,nj->ni", W, dq) + np.einsum("nmi,nm->ni", J, lam)
+    r = cost_gradient(problem, q, g) + np.einsum("nij,nj->ni", W, dq) + np.einsum("nmi,nm->ni", J, lam)
     r -= rows_times(mu_g, problem.G.T)
     mu = np.zeros(active.shape)
     mu[:, :nj] = np.where(active[:, :nj], r, 0.0)
@@ -167,7 +176,7 @@ def predict_active(problem: IKProblem, q: Array, mu: Array, active: Mask, tolera
 
 
 def estimate_multipliers(
-    problem: IKProblem, q: Array, J: Array, active_tolerance: float
+    problem: IKProblem, q: Array, J: Array, active_tolerance: float, g: Array | None = None
 ) -> tuple[Array, Array, NDArray[np.bool_]]:
     """``lam`` ``(n, m)``, ``mu`` ``(n, 2 nj + k)`` and active flags of solutions ``q`` ``(n, nj)``."""
     n, m = J.shape[0], J.shape[1]
@@ -178,7 +187,7 @@ def estimate_multipliers(
     unused = np.concatenate([np.zeros((n, m), dtype=bool), ~active], axis=1)
     rows, cols = np.nonzero(unused)
     normal[rows, cols, cols] = 1.0
-    rhs = -np.einsum("nij,ni->nj", columns, problem.phi_gradient(q))
+    rhs = -np.einsum("nij,ni->nj", columns, cost_gradient(problem, q, g))
     y, _ = solve(normal, rhs)
     return y[:, :m], np.where(active, y[:, m:], 0.0), active
 
@@ -260,7 +269,7 @@ def verify(problem: IKProblem, state: BatchState, tolerances: Tolerances) -> Ver
     q, lam, mu, active = state.q, state.lam, state.mu, state.active
     residual, J, H = state.residual, state.J, state.H
     primal = np.abs(residual).max(axis=1)
-    gradient = np.abs(stationarity(problem, q, J, lam, mu)).max(axis=1)
+    gradient = np.abs(stationarity(problem, q, J, lam, mu, state.g)).max(axis=1)
     violation = np.maximum(0.0, -problem.slacks(q)).max(axis=1)
     wrong_sign = np.where(active, np.maximum(0.0, -mu), np.abs(mu)).max(axis=1)
     curvature = reduced_curvature(problem, hessian(problem, H), J, active)

@@ -59,14 +59,15 @@ def stopping_test(
     active: NDArray[np.bool_],
     model: tuple[Array, Array, Array],
     settings: NewtonSettings,
+    g: Array | None = None,
 ) -> tuple[NDArray[np.bool_], NDArray[np.bool_], NDArray[np.bool_]]:
     """Which samples have converged, the predicted active sets, and which model values are finite.
 
-    ``model`` is ``(residual, J, H)`` at ``(q, lam)``.
+    ``model`` is ``(residual, J, H)`` at ``(q, lam)``; ``g`` the model part of the cost gradient (effort).
     """
     residual, J, H = model
     primal = np.abs(residual).max(axis=1)
-    stationarity = np.abs(kkt.stationarity(problem, q, J, lam, mu)).max(axis=1)
+    stationarity = np.abs(kkt.stationarity(problem, q, J, lam, mu, g)).max(axis=1)
     # NaN in the model values propagates into these maxima; H comes from the same expressions as J.
     finite = np.isfinite(primal + stationarity) & np.isfinite(H[:, :, 0]).all(axis=1)
     predicted = kkt.predict_active(problem, q, mu, active, settings.tol_active)
@@ -112,14 +113,16 @@ def iterate(
             break
         q, lam, mu, active = state.q[working], state.lam[working], state.mu[working], state.active[working]
         if with_rates:
-            residual, J, H, *rates = task.evaluate_with_rates(working, q, lam, problem.weight)
+            residual, J, H, g, rates = task.evaluate_with_rates(working, q, lam, problem.weight)
         else:
-            residual, J, H = task.evaluate(working, q, lam)
+            residual, J, H, g = task.evaluate_cost(working, q, lam)
         state.residual[working], state.J[working], state.H[working] = residual, J, H
-        done, predicted, finite = stopping_test(problem, q, lam, mu, active, (residual, J, H), settings)
+        if g is not None and state.g is not None:
+            state.g[working] = g
+        done, predicted, finite = stopping_test(problem, q, lam, mu, active, (residual, J, H), settings, g)
         state.converged[working[done]] = True
         if with_rates:
-            _store_rates(state, working, done & ~active.any(axis=1), tuple(rates))
+            _store_rates(state, working, done & ~active.any(axis=1), rates)
         keep = finite & ~done
         if step == settings.max_iterations:
             break
@@ -127,15 +130,17 @@ def iterate(
         if working.size == 0:
             break
         q, residual, J, H, active = q[keep], residual[keep], J[keep], H[keep], predicted[keep]
+        g = None if g is None else g[keep]
         W = kkt.hessian(problem, H)
         K = kkt.kkt_matrix(problem, W, J, active)
-        x, solvable = kkt.solve(K, kkt.newton_rhs(problem, q, residual, active))
+        x, solvable = kkt.solve(K, kkt.newton_rhs(problem, q, residual, active, g))
         solvable &= np.isfinite(x).all(axis=1)
         if not solvable.all():
             working, q, W, J, x, active = (a[solvable] for a in (working, q, W, J, x, active))  # type: ignore[assignment]
+            g = None if g is None else g[solvable]
         m = J.shape[1]
         dq = x[:, :nj]
-        mu_new = kkt.bound_multipliers(problem, q, W, J, x, active)
+        mu_new = kkt.bound_multipliers(problem, q, W, J, x, active, g)
         alpha = _step_length(problem, q, dq, settings.max_step)[:, None]
         q_new = q + alpha * dq
         full = alpha[:, 0] == 1.0

@@ -11,6 +11,7 @@ from numpy.typing import NDArray
 
 from ..errors import InputError
 from ..model.parameters import N_JOINTS
+from .effort import CRITERIA, DEFAULT_JOINT_LIMIT_WEIGHT, DEFAULT_TOOL_FORCE_SPEED
 from .problem import DEFAULT_MARGIN
 
 
@@ -79,6 +80,12 @@ class IKOptions:
         reference_maxiter: SLSQP's and IPOPT's iteration limit per sample.
         accept_primal: Largest equality residual of an accepted sample (m; rad-like).
         accept_stationarity: Largest Lagrangian gradient of a verified sample.
+        criterion: The redundancy criterion: ``"joint_limits"`` (paper eq. 12, the default) or
+            ``"effort"`` (the static actuator efforts, :mod:`vgtarm.ik.effort`).
+        joint_limit_weight: Weight of eq. 12's cost in the effort criterion (> 0).
+        tool_force: Magnitude ``F0`` (N, >= 0) of the expected cutting force along the path
+            (effort criterion; 0: gravity alone).
+        tool_force_speed: Speed (m/s, > 0) over which the expected tool force is smoothed.
     """
 
     margin: float = DEFAULT_MARGIN
@@ -93,6 +100,10 @@ class IKOptions:
     reference_maxiter: int = 200
     accept_primal: float = 1e-10
     accept_stationarity: float = 1e-6
+    criterion: str = "joint_limits"
+    joint_limit_weight: float = DEFAULT_JOINT_LIMIT_WEIGHT
+    tool_force: float = 0.0
+    tool_force_speed: float = DEFAULT_TOOL_FORCE_SPEED
 
     @classmethod
     def from_keywords(cls, options: dict[str, Any], n_joints: int = N_JOINTS) -> IKOptions:
@@ -106,9 +117,22 @@ class IKOptions:
         for name in ("margin", "tol_primal", "tol_stationarity", "max_step", "coarse_step", "reference_ftol"):
             if name in values:
                 values[name] = _positive(name, values[name])
-        for name in ("accept_primal", "accept_stationarity"):
+        for name in ("accept_primal", "accept_stationarity", "joint_limit_weight", "tool_force_speed"):
             if name in values:
                 values[name] = _positive(name, values[name])
+        if "criterion" in values and values["criterion"] not in CRITERIA:
+            raise InputError(f"criterion must be one of {', '.join(CRITERIA)}, got {values['criterion']!r}")
+        if "tool_force" in values:
+            force = values["tool_force"]
+            if isinstance(force, bool) or not isinstance(force, int | float | np.floating | np.integer):
+                raise InputError(f"tool_force must be a force >= 0 (N), got {force!r}")
+            if not (math.isfinite(float(force)) and float(force) >= 0):
+                raise InputError(f"tool_force must be a finite force >= 0 (N), got {force!r}")
+            values["tool_force"] = float(force)
+        if values.get("criterion", "joint_limits") == "joint_limits":
+            given = sorted({"joint_limit_weight", "tool_force", "tool_force_speed"} & set(values))
+            if given:
+                raise InputError(f"{given[0]} applies to criterion='effort' only; criterion is 'joint_limits'")
         for name in ("max_iterations", "reference_maxiter"):
             if name in values:
                 value = values[name]

@@ -35,6 +35,7 @@ from ..model.assembly import TRIANGLE_INEQUALITIES
 from ..model.parameters import JOINT_NAMES, N_JOINTS, RobotParameters
 from ..model.robot import Robot
 from ..model.stack import Stack
+from .effort import EffortTerms
 
 Array = NDArray[np.float64]
 
@@ -105,8 +106,13 @@ class IKProblem:
         return int(self.lower.shape[0])
 
     @classmethod
-    def from_parameters(cls, parameters: RobotParameters | Stack, margin: float = DEFAULT_MARGIN) -> IKProblem:
-        """The problem of a robot, keeping the triangle rows that the joint limits do not imply."""
+    def from_parameters(
+        cls, parameters: RobotParameters | Stack, margin: float = DEFAULT_MARGIN, joint_limit_weight: float = 1.0
+    ) -> IKProblem:
+        """The problem of a robot, keeping the triangle rows that the joint limits do not imply.
+
+        ``joint_limit_weight`` multiplies ``Phi`` (the effort criterion's weight of eq. 12; 1 for eq. 12 alone).
+        """
         if isinstance(margin, bool) or not isinstance(margin, int | float) or not math.isfinite(margin) or margin <= 0:
             raise InputError(
                 f"margin must be a finite length > 0 (m), got {margin!r} (at zero margin the truss is flat and "
@@ -123,6 +129,8 @@ class IKProblem:
         )
         G, h = G_all[keep], h_all[keep]
         weight = 2.0 / (n * (upper - lower) ** 2)
+        if joint_limit_weight != 1.0:
+            weight = joint_limit_weight * weight
         return cls(
             lower=lower,
             upper=upper,
@@ -197,6 +205,8 @@ class Task:
             :meth:`vgtarm.Robot.evaluate`).
         evaluations: a one-element counter of samples evaluated through the compiled functions,
             shared by the task and every task derived from it (a solver's work counter).
+        effort: the effort criterion's terms (:mod:`vgtarm.ik.effort`), or None for eq. 12 alone.
+            With them the cost is ``Phi_e + Phi`` and the Hessians ``H`` include ``Phi_e``'s.
     """
 
     kind: str
@@ -209,6 +219,7 @@ class Task:
     angular_acceleration: Array | None
     model: Robot
     evaluations: list[int] = field(default_factory=lambda: [0])
+    effort: EffortTerms | None = None
 
     def _evaluate(self, name: str, inputs: dict[str, Array], n: int) -> dict[str, Array]:
         self.evaluations[0] += n
@@ -239,10 +250,12 @@ class Task:
             pick(self.angular_acceleration),
             self.model,
             self.evaluations,
+            None if self.effort is None else self.effort.subset(idx),
         )
 
-    def with_targets(self, position: Array, rotation: Array | None) -> Task:
-        """A task with other target points ``(n, 3)`` (and orientations ``(n, 9)``), at rest, times ``0..n-1``."""
+    def with_targets(self, position: Array, rotation: Array | None, like: int = 0) -> Task:
+        """A task with other target points ``(n, 3)`` (and orientations ``(n, 9)``), at rest, times ``0..n-1``
+        (with sample ``like``'s tool force, for the effort criterion)."""
         n = position.shape[0]
         zeros = np.zeros((n, 3))
         moving = None if rotation is None else zeros
@@ -257,6 +270,7 @@ class Task:
             moving,
             self.model,
             self.evaluations,
+            None if self.effort is None else self.effort.at_rest(like, n),
         )
 
     def forward(self, q: Array) -> tuple[Array, Array]:
@@ -275,10 +289,22 @@ class Task:
     def evaluate(self, idx: Index, q: Array, lam: Array) -> tuple[Array, Array, Array]:
         """Residual ``c(q) - c_d`` ``(n, m)``, Jacobian ``(n, m, nj)``, ``d^2(lam^T c)/dq^2`` ``(n, nj, nj)``.
 
-        ``idx`` selects the samples (their targets); ``q`` ``(n, nj)`` and ``lam`` ``(n, m)``.
+        ``idx`` selects the samples (their targets); ``q`` ``(n, nj)`` and ``lam`` ``(n, m)``. With the
+        effort criterion the Hessian is that of ``Phi_e + lam^T c`` (see :meth:`evaluate_cost`).
         """
+        residual, J, H, _ = self.evaluate_cost(idx, q, lam)
+        return residual, J, H
+
+    def evaluate_cost(self, idx: Index, q: Array, lam: Array) -> tuple[Array, Array, Array, Array | None]:
+        """As :meth:`evaluate`, plus the gradient ``(n, nj)`` of the model part of the cost, ``Phi_e``
+        (None for eq. 12 alone, whose cost the problem evaluates)."""
         n, nj = idx.shape[0], q.shape[1]
-        if self.kind == "position":
+        g = None
+        if self.effort is not None:
+            out = self._evaluate("ik_effort", {"q": q, "lam": lam, **self._effort_inputs(idx)}, n)
+            c, J, H, g = out["c"], out["J"], out["H"], out["g"]
+            c -= self.position[idx]
+        elif self.kind == "position":
             out = self._evaluate("ik_position", {"q": q, "lam": lam}, n)
             c, J, H = out["c"], out["J"], out["H"]
             c -= self.position[idx]
@@ -286,18 +312,42 @@ class Task:
             out = self._evaluate("ik_pose", {"q": q, "lam": lam, **self._orientation_inputs(idx)}, n)
             c, J, H = out["c"], out["J"], out["H"]
             c[:, :3] -= self.position[idx]
-        return c, J.reshape(n, self.m, nj), H.reshape(n, nj, nj)
+        return c, J.reshape(n, self.m, nj), H.reshape(n, nj, nj), g
 
-    def evaluate_with_rates(self, idx: Index, q: Array, lam: Array, weight: Array) -> tuple[Array, ...]:
-        """As :meth:`evaluate`, plus the exact ``qd, lam_d, qdd, lam_dd`` for no active inequality.
+    def effort_cost(self, idx: Index, q: Array) -> Array:
+        """``Phi_e`` ``(n,)`` of ``q`` ``(n, nj)`` at samples ``idx`` (zeros without the effort criterion)."""
+        if self.effort is None:
+            return np.zeros(q.shape[0])
+        return self.static_efforts(idx, q)[1]
 
-        One compiled call (``ik_position_rates`` / ``ik_pose_rates``) per sample; ``weight`` ``(nj,)``
-        is the diagonal of the Hessian of ``Phi``. The rates are valid only where ``(q, lam)`` is
-        a solution with no active limit or triangle row.
+    def static_efforts(self, idx: Index, q: Array) -> tuple[Array, Array]:
+        """Static efforts ``tau`` ``(n, nj)`` against gravity and the expected tool force, and ``Phi_e`` ``(n,)``."""
+        assert self.effort is not None
+        out = self._evaluate("ik_effort_static", {"q": q, **self._effort_inputs(idx)}, q.shape[0])
+        return out["tau"], out["phi"][:, 0]
+
+    def _effort_inputs(self, idx: Index, rates: bool = False) -> dict[str, Array]:
+        assert self.effort is not None
+        inputs = {"f": self.effort.force[idx], "s": self.effort.scale}
+        if rates:
+            inputs.update(fd=self.effort.force_rate[idx], fdd=self.effort.force_acceleration[idx])
+        return inputs
+
+    def evaluate_with_rates(
+        self, idx: Index, q: Array, lam: Array, weight: Array
+    ) -> tuple[Array, Array, Array, Array | None, tuple[Array, Array, Array, Array]]:
+        """As :meth:`evaluate_cost`, plus the exact ``(qd, lam_d, qdd, lam_dd)`` for no active inequality.
+
+        One compiled call (``ik_position_rates`` / ``ik_pose_rates`` / ``ik_effort_rates``) per sample;
+        ``weight`` ``(nj,)`` is the diagonal of the Hessian of ``Phi``. The rates are valid only where
+        ``(q, lam)`` is a solution with no active limit or triangle row.
         """
         n, nj = idx.shape[0], q.shape[1]
         inputs = {"q": q, "lam": lam, "w": weight, "xd": self.velocity[idx], "xdd": self.acceleration[idx]}
-        if self.kind == "position":
+        if self.effort is not None:
+            out = self._evaluate("ik_effort_rates", {**inputs, **self._effort_inputs(idx, rates=True)}, n)
+            out["c"] -= self.position[idx]
+        elif self.kind == "position":
             out = self._evaluate("ik_position_rates", inputs, n)
             out["c"] -= self.position[idx]
         else:
@@ -305,14 +355,18 @@ class Task:
             out = self._evaluate("ik_pose_rates", inputs, n)
             out["c"][:, :3] -= self.position[idx]
         rates = (out["qd"], out["lam_d"], out["qdd"], out["lam_dd"])
-        return (out["c"], out["J"].reshape(n, self.m, nj), out["H"].reshape(n, nj, nj), *rates)
+        g = out.get("g")
+        return out["c"], out["J"].reshape(n, self.m, nj), out["H"].reshape(n, nj, nj), g, rates
 
     def first_order_rhs(self, idx: Index, q: Array, lam: Array) -> Array:
         """``-dF/dt`` at fixed ``(q, lam)`` of the KKT residual ``F = [grad L; c - c_d]``, ``(n, nj + m)``."""
         n, nj = idx.shape[0], q.shape[1]
         rhs = np.zeros((n, nj + self.m))
         rhs[:, nj : nj + 3] = self.velocity[idx]
-        if self.kind == "pose":
+        if self.effort is not None:
+            inputs = {"q": q, "lam": lam, **self._effort_inputs(idx), "fd": self.effort.force_rate[idx]}
+            rhs -= self._evaluate("ik_effort_dt", inputs, n)["dt"]
+        elif self.kind == "pose":
             inputs = {"q": q, "lam": lam, **self._orientation_inputs(idx), **self._motion_inputs(idx)}
             rhs -= self._evaluate("ik_pose_dt", inputs, n)["dt"]
         return rhs
@@ -325,7 +379,9 @@ class Task:
         """
         n = idx.shape[0]
         inputs = {"q": q, "lam": lam, "qd": qd, "lam_d": lam_d}
-        if self.kind == "position":
+        if self.effort is not None:
+            d2 = self._evaluate("ik_effort_d2", {**inputs, **self._effort_inputs(idx, rates=True)}, n)["d2"]
+        elif self.kind == "position":
             d2 = self._evaluate("ik_position_d2", inputs, n)["d2"]
         else:
             inputs.update(self._orientation_inputs(idx), **self._motion_inputs(idx))
@@ -352,6 +408,8 @@ class BatchState:
         method: ``(N,)`` name of the method that produced each sample.
         qd, qdd, lam_d, lam_dd: exact rates of ``q`` and ``lam`` where ``rates_ready``.
         rates_ready: ``(N,)`` whether the exact rates of a sample are computed.
+        g: ``(N, n)`` gradient of the model part of the cost (``Phi_e``, effort criterion) at ``q``
+            (valid where ``evaluated``), or None for eq. 12 alone.
     """
 
     q: Array
@@ -369,9 +427,12 @@ class BatchState:
     lam_d: Array
     lam_dd: Array
     rates_ready: NDArray[np.bool_]
+    g: Array | None = None
 
     @classmethod
-    def empty(cls, n: int, m: int, n_inequalities: int, n_joints: int = N_JOINTS) -> BatchState:
+    def empty(
+        cls, n: int, m: int, n_inequalities: int, n_joints: int = N_JOINTS, with_gradient: bool = False
+    ) -> BatchState:
         nj = n_joints
         return cls(
             q=np.zeros((n, nj)),
@@ -389,4 +450,5 @@ class BatchState:
             lam_d=np.zeros((n, m)),
             lam_dd=np.zeros((n, m)),
             rates_ready=np.zeros(n, dtype=bool),
+            g=np.full((n, nj), np.nan) if with_gradient else None,
         )

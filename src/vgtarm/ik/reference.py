@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import Bounds, OptimizeResult, minimize
 
-from ..model.codegen.ik import pose_constraints, rotation_from_row_major
+from ..model.codegen.ik import effort_cost, pose_constraints, rotation_from_row_major
 from ..model.definition import PAPER, Definition
 from . import kkt
 from .options import IKOptions
@@ -123,9 +123,15 @@ def _minimize(
 def solve_sample(problem: IKProblem, task: Task, i: int, q0: Array, options: IKOptions) -> SampleSolution:
     """Solve sample ``i`` from ``q0``: the optimum of ``Phi`` on the task's constraints."""
     model = _Model(task, i)
+    one = np.array([i], dtype=np.intp)
 
     def objective(q: Array) -> tuple[float, Array]:
-        return float(problem.phi(q)), problem.phi_gradient(q)
+        if task.effort is None:
+            return float(problem.phi(q)), problem.phi_gradient(q)
+        at = np.ascontiguousarray(q[None])
+        g = task.evaluate_cost(one, at, np.zeros((1, task.m)))[3]
+        assert g is not None
+        return float(problem.phi(q)) + float(task.effort_cost(one, at)[0]), problem.phi_gradient(q) + g[0]
 
     result = _minimize(problem, objective, q0, model, options)
     q = np.clip(problem.centre + (problem.upper - problem.lower) * result.x, problem.lower, problem.upper)
@@ -163,11 +169,13 @@ def finish(problem: IKProblem, task: Task, state: BatchState, idx: NDArray[np.in
     if idx.size == 0:
         return
     q = state.q[idx]
-    _, J, _ = task.evaluate(idx, q, np.zeros((idx.size, task.m)))
-    lam, mu, active = kkt.estimate_multipliers(problem, q, J, ACTIVE_TOLERANCE)
-    residual, J, H = task.evaluate(idx, q, lam)
+    _, J, _, g = task.evaluate_cost(idx, q, np.zeros((idx.size, task.m)))
+    lam, mu, active = kkt.estimate_multipliers(problem, q, J, ACTIVE_TOLERANCE, g)
+    residual, J, H, g = task.evaluate_cost(idx, q, lam)
     state.lam[idx], state.mu[idx], state.active[idx] = lam, mu, active
     state.residual[idx], state.J[idx], state.H[idx] = residual, J, H
+    if g is not None and state.g is not None:
+        state.g[idx] = g
 
 
 def solve_path(
@@ -201,13 +209,22 @@ def solve_slsqp(problem: IKProblem, task: Task, state: BatchState, q_start: Arra
 METHOD_IPOPT = "ipopt"
 
 
-def build_ipopt(problem: IKProblem, kind: str, options: IKOptions, definition: Definition = PAPER) -> ca.Function:
+def build_ipopt(
+    problem: IKProblem, kind: str, options: IKOptions, definition: Definition = PAPER, effort: bool = False
+) -> ca.Function:
     """The IPOPT solver of one sample of the robot ``definition`` (default the paper's); its parameter
-    is ``[target point (3), R_d row-major (9, pose only), p]``."""
+    is ``[target point (3), R_d row-major (9, pose only), p]``, and with ``effort`` (the effort
+    criterion, position task) ``[target point (3), tool force (3), inverse scales (n), p]``."""
     q = ca.SX.sym("q", definition.n_joints)
     point = ca.SX.sym("point", 3)
     p = ca.SX.sym("p", definition.n_parameters)
-    if kind == "position":
+    extra = None
+    if effort:
+        force, scale = ca.SX.sym("f", 3), ca.SX.sym("s", definition.n_joints)
+        parameters = ca.vertcat(point, force, scale, p)
+        c = definition.kinematics(q, p).tip - point
+        extra = effort_cost(q, force, scale, p, definition)
+    elif kind == "position":
         parameters = ca.vertcat(point, p)
         c = definition.kinematics(q, p).tip - point
     else:
@@ -215,6 +232,8 @@ def build_ipopt(problem: IKProblem, kind: str, options: IKOptions, definition: D
         parameters = ca.vertcat(point, rd, p)
         c = pose_constraints(q, rotation_from_row_major(rd), p, definition) - ca.vertcat(point, ca.SX.zeros(3))
     cost = 0.5 * ca.sum1(ca.DM(problem.weight) * (q - ca.DM(problem.centre)) ** 2)
+    if extra is not None:
+        cost = cost + extra
     g = ca.vertcat(c, ca.DM(problem.G) @ q + ca.DM(problem.h))
     settings: dict[str, Any] = {
         "print_time": False,
@@ -230,7 +249,7 @@ def build_ipopt(problem: IKProblem, kind: str, options: IKOptions, definition: D
 
 def solve_ipopt(problem: IKProblem, task: Task, state: BatchState, q_start: Array, options: IKOptions) -> None:
     """The IPOPT reference solver (solver contract: :class:`vgtarm.ik.Solver`)."""
-    solver = build_ipopt(problem, task.kind, options, task.model.definition)
+    solver = build_ipopt(problem, task.kind, options, task.model.definition, task.effort is not None)
     m, k = task.m, problem.n_triangle
     lbg = np.concatenate([np.zeros(m), np.full(k, problem.margin)])
     ubg = np.concatenate([np.zeros(m), np.full(k, np.inf)])
@@ -239,6 +258,7 @@ def solve_ipopt(problem: IKProblem, task: Task, state: BatchState, q_start: Arra
         parts = (
             [task.position[i]]
             + ([task.rotation[i]] if task.rotation is not None else [])
+            + ([task.effort.force[i], task.effort.scale] if task.effort is not None else [])
             + [task.model.parameter_vector]
         )
         result = solver(

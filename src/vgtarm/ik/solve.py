@@ -26,6 +26,7 @@ from ..model.robot import Robot
 from ..paths import MAX_COORDINATE, Path
 from . import fast, kkt, reference
 from . import rates as rate_modes
+from .effort import EffortTerms, effort_terms
 from .options import IKOptions
 from .pose import HOLD, OrientationTarget, angle_error, orientation_target
 from .problem import BatchState, IKProblem, Task
@@ -60,10 +61,10 @@ def _check_start(robot: Robot, problem: IKProblem, q: Array) -> Array:
     return q
 
 
-def _task(robot: Robot, path: Path, target: OrientationTarget | None) -> Task:
+def _task(robot: Robot, path: Path, target: OrientationTarget | None, effort: EffortTerms | None = None) -> Task:
     common = (path.t, path.position, path.velocity, path.acceleration)
     if target is None:
-        return Task("position", *common, None, None, None, robot)
+        return Task("position", *common, None, None, None, robot, effort=effort)
     rotation = target.rotation.reshape(-1, 9)
     return Task(
         "pose",
@@ -196,7 +197,12 @@ def inverse_kinematics(
     if rates not in rate_modes.RATE_MODES:
         raise InputError(f"unknown rates mode {rates!r}; valid modes are {', '.join(rate_modes.RATE_MODES)}")
     settings = IKOptions.from_keywords(options, robot.n_joints)
-    problem = IKProblem.from_parameters(robot.parameters, settings.margin)
+    effort = settings.criterion == "effort"
+    if effort and pose is not None:
+        raise InputError("criterion='effort' supports the tip-position task only (pose=None), got a pose")
+    problem = IKProblem.from_parameters(
+        robot.parameters, settings.margin, settings.joint_limit_weight if effort else 1.0
+    )
     q_start = _check_start(
         robot, problem, robot.parameters.home if settings.initial_guess is None else settings.initial_guess
     )
@@ -219,7 +225,8 @@ def inverse_kinematics(
         elif isinstance(pose, str):
             raise InputError(f"pose must be None, {HOLD!r}, rotation matrices or an OrientationPath, got {pose!r}")
         target = orientation_target(pose, n, rates == "exact")
-    task = _task(robot, path, target)
+    terms = effort_terms(robot, path, settings.tool_force, settings.tool_force_speed) if effort else None
+    task = _task(robot, path, target, terms)
     solved = _checked(solve(problem, task, q_start, settings), task)
     state = solved.state
     _recover(problem, task, state, q_start, settings)
@@ -246,9 +253,7 @@ def _checked(result: object, task: Task) -> SolverResult:
         raise InputError(f"an inverse-kinematics solver must return a SolverResult, got {type(result).__name__}")
     n_joints = task.model.n_joints
     if result.state.q.shape != (len(task), n_joints):
-        raise InputError(
-            f"the solver returned q of shape {result.state.q.shape}, expected ({len(task)}, {n_joints})"
-        )
+        raise InputError(f"the solver returned q of shape {result.state.q.shape}, expected ({len(task)}, {n_joints})")
     return result
 
 
@@ -263,7 +268,7 @@ def _samples(
         success=state.converged & check.passed,
         residual=np.linalg.norm(state.residual[:, :3], axis=1),
         orientation_error=orientation,
-        phi=problem.phi(state.q),
+        phi=problem.phi(state.q) + task.effort_cost(np.arange(len(task), dtype=np.intp), state.q),
         active=state.active.copy(),
         constraint_labels=problem.constraint_labels,
         multipliers=state.lam.copy(),
@@ -389,7 +394,8 @@ def in_place(step: InPlace) -> Solver:
 
     def solver(problem: IKProblem, task: Task, q_start: Array, options: IKOptions) -> SolverResult:
         started, evaluations = time.perf_counter(), task.evaluations[0]
-        state = BatchState.empty(len(task), task.m, 2 * problem.n + problem.n_triangle, problem.n)
+        n_inequalities = 2 * problem.n + problem.n_triangle
+        state = BatchState.empty(len(task), task.m, n_inequalities, problem.n, task.effort is not None)
         step(problem, task, state, q_start, options)
         return SolverResult(
             state=state,

@@ -116,6 +116,7 @@ class SimulationResult:
             peak_force_n=_max(np.abs(forces)),
             rms_force_n=_rms(forces),
             peak_twist_torque_nm=_max(np.abs(torque)),
+            **force_figures(forces, torque, self.effort[:n], self.qd[:n], self.dt),
             peak_external_force_n=_max(np.linalg.norm(self.f_ext[:n], axis=1)),
             ga_activations=len(self.activations),
             ga_time_s=self.ga_time_s,
@@ -164,9 +165,7 @@ class SimulationResult:
         except (OSError, UnicodeDecodeError, ValueError) as exc:
             raise InputError(f"run folder {where}: cannot read the run: {exc}") from None
         joints = [str(n) for n in summary.get("joint_names", JOINT_NAMES)]  # a stack's run records its joints
-        layouts = [
-            cls._columns(estimate, measured, joints) for estimate in (False, True) for measured in (False, True)
-        ]
+        layouts = [cls._columns(estimate, measured, joints) for estimate in (False, True) for measured in (False, True)]
         columns = next((c for c in layouts if header == c), layouts[0])
         if header != columns or table.shape[1:] != (len(columns),):
             raise InputError(
@@ -250,6 +249,33 @@ class SimulationResult:
             ]
         )
         return columns, table
+
+
+def force_figures(forces: Array, torque: Array, effort: Array, qd: Array, dt: float) -> dict[str, Any]:
+    """Figures of the actuator efforts of a run (issue 22), from the arrays.
+
+    ``forces`` ``(N, legs)`` leg forces (N), ``torque`` ``(N,)`` or ``(N, twists)`` twist torques (N m),
+    ``effort`` and ``qd`` ``(N, n)`` every joint's effort and rate, ``dt`` the control period (s).
+
+    - ``rms_force_per_leg_n``, ``peak_force_per_leg_n``: per leg, over the run;
+    - ``rms_twist_torque_nm``;
+    - ``chatter_n``: RMS of the change of the leg forces from one period to the next (over every
+      leg and period), the "vibration on the actuators" the paper warns of;
+    - ``actuator_energy_j``: ``dt sum_k sum_i |F_i qd_i|``, the rectangle rule of the integral of the
+      absolute actuator power (legs and twist; energy spent, none recovered).
+    """
+    per_leg_rms = [_rms(forces[:, j]) for j in range(forces.shape[1])]
+    per_leg_peak = [_max(np.abs(forces[:, j])) for j in range(forces.shape[1])]
+    change = np.diff(forces, axis=0)
+    power = np.abs(effort * qd).sum(axis=1)
+    known = power[~np.isnan(power)]
+    return {
+        "rms_force_per_leg_n": per_leg_rms,
+        "peak_force_per_leg_n": per_leg_peak,
+        "rms_twist_torque_nm": _rms(torque),
+        "chatter_n": _rms(change) if change.size else None,
+        "actuator_energy_j": float(known.sum() * dt) if known.size else None,
+    }
 
 
 def _percentile(activations: tuple[GAActivation, ...], q: float) -> float | None:
