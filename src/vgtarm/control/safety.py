@@ -39,7 +39,13 @@ SCAN = (1.0, 1e8, 801)
 
 
 def loop_matrix(
-    Kp: ArrayLike, Kv: ArrayLike, dt: float, velocity_filter: float | None, gamma: float = 1.0, *, exact_hold: bool = True
+    Kp: ArrayLike,
+    Kv: ArrayLike,
+    dt: float,
+    velocity_filter: float | None,
+    gamma: float = 1.0,
+    *,
+    exact_hold: bool = True,
 ) -> Array:
     """Matrix of the linearised discrete error loop (see the module's docstring).
 

@@ -138,7 +138,9 @@ class SwitchingControl:
         compiled-GA prediction (the admission lives in ``csrc/ga.c``)."""
         Kp, Kv = self.fixed.Kp, self.fixed.Kv
         if not np.array_equal(Kv, Kv[0, 0] * np.eye(len(Kv))) or not Kv[0, 0] > 0:
-            raise InputError(f"fixed Kv = {shown(Kv.tolist())}: the safe variant expects a positive multiple of the identity")
+            raise InputError(
+                f"fixed Kv = {shown(Kv.tolist())}: the safe variant expects a positive multiple of the identity"
+            )
         if not np.array_equal(Kp, Kp.T):
             raise InputError(f"fixed Kp = {shown(Kp.tolist())}: the safe variant expects a symmetric matrix")
         if not self.seed_fixed_gains:
@@ -154,7 +156,8 @@ class SwitchingControl:
     def admitted_interval(self, dt: float, velocity_filter: float | None) -> tuple[float, float]:
         """The safe variant's interval of admitted eigenvalues of ``Kp`` (1/s^2) for a loop of
         period ``dt`` with velocities filtered by ``velocity_filter`` (``None``: measured)."""
-        return admitted_interval(float(self.fixed.Kv[0, 0]), dt, velocity_filter, self.model_error, self.stability_radius)
+        kv = float(self.fixed.Kv[0, 0])
+        return admitted_interval(kv, dt, velocity_filter, self.model_error, self.stability_radius)
 
     @classmethod
     def with_gains(
