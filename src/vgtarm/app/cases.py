@@ -55,10 +55,17 @@ class CaseStudy:
         return self.path_factory(dt)
 
     def controller(
-        self, name: str, *, horizon: int = 20, ga: GAOptions | None = None, n_joints: int = N_JOINTS
+        self,
+        name: str,
+        *,
+        horizon: int = 20,
+        ga: GAOptions | None = None,
+        n_joints: int = N_JOINTS,
+        variant: str = "paper",
     ) -> ComputedForceControl | SwitchingControl:
         """``"cfc"``: computed force control with the case's gains (the same on each of the robot's
-        ``n_joints`` joints); ``"scm"``: the switching method around the same gains, with ``2 n_joints^2`` genes."""
+        ``n_joints`` joints); ``"scm"``: the switching method around the same gains, with ``2 n_joints^2``
+        genes, in its ``variant`` (``"paper"``, the reproduction's, or ``"safe"``)."""
         if name == "cfc":
             return ComputedForceControl.with_gains(self.kp, self.kv, n_joints)
         if name == "scm":
@@ -71,6 +78,7 @@ class CaseStudy:
                 kv_bounds=self.kv_bounds,
                 horizon=horizon,
                 ga=ga or GAOptions(),
+                variant=variant,
             )
         raise InputError(f"controller = {name!r}: expected one of {list(CONTROLLERS)}")
 
@@ -228,9 +236,13 @@ def run_case(
     controller_model: RobotParameters | Stack | None = None,
     reference: JointReference | None = None,
     progress: Callable[[int, int], None] | None = None,
+    scm_variant: str = "paper",
     **options: Any,
 ) -> SimulationResult:
     """Run one case study; the robot starts at rest at ``q_d(0)`` (the paper's start).
+
+    ``scm_variant``: the switching method's variant (``"paper"``: the paper's, as the
+    reproduction runs it; ``"safe"``: gains admitted on the discrete loop first).
 
     ``reference`` reuses a joint reference computed before (it must match ``dt`` and ``rates``);
     ``options`` go to :func:`vgtarm.simulation.simulate` (observer, force sensor, sensing, ...).
@@ -244,7 +256,7 @@ def run_case(
     return simulate(
         robot,
         ref,
-        case.controller(controller, horizon=horizon, ga=ga, n_joints=robot.n_joints),
+        case.controller(controller, horizon=horizon, ga=ga, n_joints=robot.n_joints, variant=scm_variant),
         controller_model=controller_model,
         external_force=case.external_force if external_force else None,
         integrator=integrator,

@@ -135,6 +135,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                 seed=args.seed,
                 rates=args.rates,
                 horizon=args.horizon,
+                scm_variant=args.scm_variant,
                 reference=None
                 if args.duration is None and args.criterion == "joint_limits"
                 else joint_reference(robot, args.case, rates=args.rates, duration=args.duration, **_criterion(args)),
@@ -509,6 +510,12 @@ def build_parser() -> argparse.ArgumentParser:
         type=_positive_int,
         default=20,
         help="GA fitness prediction horizon in control periods (default 20)",
+    )
+    simulate.add_argument(
+        "--scm-variant",
+        choices=("paper", "safe"),
+        default="safe",
+        help="switching method: the paper's GA, or safe (gains admitted on the discrete loop first; default)",
     )
     for name in ("mass", "inertia", "friction"):
         simulate.add_argument(

@@ -291,6 +291,7 @@ def _paper_run(
         external_force=spec.external_force,
         rates=spec.rates,
         reference=reference,
+        scm_variant="paper",  # the paper's runs and figures: its variant, bit for bit
         **options,
     )
     result.save(folder / spec.folder)

@@ -93,6 +93,7 @@ def _controller(inputs: Inputs, n_joints: int) -> ComputedForceControl | Switchi
             kv_bounds=(case.kv_bounds[0], _number(inputs["kv_max"], case.kv_bounds[1])),
             horizon=int(inputs["horizon"]),  # type: ignore[arg-type]
             prediction=inputs["prediction"],
+            variant=inputs["scm_variant"],
             ga=GAOptions(population_size=int(inputs["ga_population"]), max_generations=int(inputs["ga_generations"])),  # type: ignore[arg-type]
         )
     raise InputError(f"controller = {inputs['controller']!r}: expected one of ['cfc', 'scm']")
@@ -219,6 +220,7 @@ _FLAGS = {
     "seed": "--seed",
     "rates": "--rates",
     "horizon": "--horizon",
+    "scm_variant": "--scm-variant",
     "duration": "--duration",
     "model_mass": "--model-mass",
     "model_inertia": "--model-inertia",

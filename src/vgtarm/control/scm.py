@@ -34,11 +34,15 @@ from ..model.parameters import N_JOINTS
 from ..model.robot import Robot
 from .gains import Gains, check_within, real_number
 from .law import commanded_acceleration
+from .safety import admitted_interval
 
 Array = NDArray[np.float64]
 
 #: Longest GA prediction horizon, in control periods (10 s at 1 ms; the GA's work grows with it).
 MAX_HORIZON = 10_000
+
+#: Variants of the method: the paper's, and the safe one whose gains are admitted first.
+VARIANTS = ("paper", "safe")
 
 #: Prediction of the tip error of candidate gains: ``(Kp (P, 7, 7), Kv (P, 7, 7)) -> (P,)``.
 Predictor = Callable[[Array, Array], Array]
@@ -63,6 +67,17 @@ class SwitchingControl:
             NumPy GA always does). See ``docs/control.md`` for how far apart they are.
         exact_above: with ``"linear"``/``"quadratic"``, a candidate whose predicted joint-error
             norm exceeds this (m, rad) is predicted exactly instead (0: never).
+        variant: ``"paper"`` (the paper's GA over full 7x7 matrices, bit for bit as before) or
+            ``"safe"``: ``Kp`` symmetrised and ``Kv`` held at the fixed damping, a candidate admitted
+            only when the discrete loop it closes (hold, velocity filter, model error up to
+            ``model_error``) has every pole inside ``stability_radius``, and a tuned set not
+            predicted to lower the error below the fixed gains' dropped for them
+            (:mod:`vgtarm.control.safety`, ``docs/control.md``). The library's default stays
+            ``"paper"`` so that existing scripts run unchanged; ``vgtarm simulate`` defaults to
+            ``safe``.
+        model_error: safe variant: bound of the controller model's relative mass error (0.1: the
+            model's mass within 10 % of the plant's).
+        stability_radius: safe variant: every pole of the admitted loop lies inside this circle.
 
     The GA runs at every control period whose error exceeds the threshold, as in the paper.
     Reusing its gains for several periods is not offered: gains tuned over a short horizon can
@@ -79,6 +94,9 @@ class SwitchingControl:
     seed_fixed_gains: bool = True
     prediction: str = "quadratic"
     exact_above: float = 3e-3
+    variant: str = "paper"
+    model_error: float = 0.1
+    stability_radius: float = 0.99
     name: str = "scm"
 
     def __post_init__(self) -> None:
@@ -103,6 +121,43 @@ class SwitchingControl:
         real_number("exact_above", self.exact_above, "a joint-error norm >= 0 (m, rad; 0 = never)", strict=False)
         if not isinstance(self.prediction, str) or self.prediction not in PREDICTIONS:
             raise InputError(f"prediction = {shown(self.prediction)}: expected one of {list(PREDICTIONS)}")
+        if not isinstance(self.variant, str) or self.variant not in VARIANTS:
+            raise InputError(f"variant = {shown(self.variant)}: expected one of {list(VARIANTS)}")
+        error = real_number("model_error", self.model_error, "a relative mass error in [0, 1)", strict=False)
+        if not error < 1.0:
+            raise InputError(f"model_error = {shown(self.model_error)}: expected a relative mass error in [0, 1)")
+        radius = real_number("stability_radius", self.stability_radius, "a pole radius in (0, 1)")
+        if not radius < 1.0:
+            raise InputError(f"stability_radius = {shown(self.stability_radius)}: expected a pole radius in (0, 1)")
+        if self.variant == "safe":
+            self._check_safe()
+
+    def _check_safe(self) -> None:
+        """The safe variant's structure: the fixed ``Kv`` is a multiple of the identity (the
+        damping every candidate gets), the fixed ``Kp`` symmetric, the fixed gains seeded and a
+        compiled-GA prediction (the admission lives in ``csrc/ga.c``)."""
+        Kp, Kv = self.fixed.Kp, self.fixed.Kv
+        if not np.array_equal(Kv, Kv[0, 0] * np.eye(len(Kv))) or not Kv[0, 0] > 0:
+            raise InputError(
+                f"fixed Kv = {shown(Kv.tolist())}: the safe variant expects a positive multiple of the identity"
+            )
+        if not np.array_equal(Kp, Kp.T):
+            raise InputError(f"fixed Kp = {shown(Kp.tolist())}: the safe variant expects a symmetric matrix")
+        if not self.seed_fixed_gains:
+            raise InputError("seed_fixed_gains = False: the safe variant falls back to the seeded fixed gains")
+        if self.prediction == "exact":
+            raise InputError('prediction = "exact": the safe variant runs with "linear" or "quadratic"')
+        if self.ga.stall_generations is not None:
+            raise InputError(
+                f"ga.stall_generations = {self.ga.stall_generations}: the safe variant runs in the compiled GA,"
+                " expected None"
+            )
+
+    def admitted_interval(self, dt: float, velocity_filter: float | None) -> tuple[float, float]:
+        """The safe variant's interval of admitted eigenvalues of ``Kp`` (1/s^2) for a loop of
+        period ``dt`` with velocities filtered by ``velocity_filter`` (``None``: measured)."""
+        kv = float(self.fixed.Kv[0, 0])
+        return admitted_interval(kv, dt, velocity_filter, self.model_error, self.stability_radius)
 
     @classmethod
     def with_gains(

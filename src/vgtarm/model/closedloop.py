@@ -348,6 +348,7 @@ class GAActivationResult:
     exact_candidates: int = 0
     exact_steps: int = 0
     threads: int = 1  #: threads predicting at the end of the activation
+    dropped: bool = False  #: safe variant: the fixed gains replaced the GA's best (see ``csrc/ga.c``)
 
 
 
@@ -390,6 +391,9 @@ class CompiledGA:
             first time an activation's window needs them (``ensure_rows`` in ``csrc/ga.c``).
         threads: threads that predict a generation's candidates (default :func:`ga_threads`);
             any count gives the same activation bit for bit.
+        safe: ``(kv, lo, hi)`` for the safe variant of switching control (``Kp`` symmetrised, ``Kv
+            = kv I``, admitted iff the eigenvalues of ``Kp`` lie in ``[lo, hi]``); ``None``: the
+            paper's GA.
     """
 
     def __init__(
@@ -416,6 +420,7 @@ class CompiledGA:
         tip_d: Array,
         quadratic: bool,
         threads: int | None = None,
+        safe: tuple[float, float, float] | None = None,
     ) -> None:
         if prediction not in PREDICTIONS:
             raise ValueError(f"prediction = {prediction!r}: expected one of {sorted(PREDICTIONS)}")
@@ -459,6 +464,11 @@ class CompiledGA:
                 "horizon": horizon,
                 "exact_above": exact_above,
                 "threads": ga_threads() if threads is None else threads,
+                **(
+                    {"safe": 1, "safe_kv": safe[0], "safe_lo": safe[1], "safe_hi": safe[2]}
+                    if safe is not None
+                    else {}
+                ),
             },
         )
         self._best = np.empty(n_genes)
@@ -505,6 +515,7 @@ class CompiledGA:
             exact_candidates=int(self._result.exact_candidates),
             exact_steps=int(self._result.exact_steps),
             threads=int(self._result.threads),
+            dropped=bool(self._result.dropped),
         )
 
     def bind_switching(self, seeds: NDArray[np.int64]) -> None:

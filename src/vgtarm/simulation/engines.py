@@ -148,11 +148,13 @@ class _SteppedLoop:
             return controller.gains, (0, 0, 0.0, 0.0)
         if isinstance(self.loop, ClosedLoopDriver) and controller.ga.stall_generations is None:
             if self._compiled_ga is None:
-                self._compiled_ga = compiled_ga(controller, self.loop, job.model, arrays, job.dt)
+                self._compiled_ga = compiled_ga(controller, self.loop, job.model, arrays, job.dt, job.settings)
             seed = int(job.ga_rng.integers(0, 2**63, dtype=np.int64))
             out = self._compiled_ga.activate(k, arrays.q_meas[k], arrays.qd_meas[k], seed)
             Kp, Kv = controller.split(out.genes)
             return Gains.of(Kp, Kv), (out.generations, out.evaluations, out.best_cost, out.seeded_cost)
+        if controller.variant == "safe":
+            raise InputError('variant = "safe": switching control\'s safe variant needs the compiled GA (a C compiler)')
         window = slice(k, end + 1)
         inp = arrays.inputs
         predict = self.loop.ga_predictor(
@@ -199,7 +201,7 @@ class CompiledSwitchingLoop:
         self.job = job
         assert isinstance(plant.backend, CompiledBackend)
         self.loop = ClosedLoopDriver(plant.backend)
-        self.ga = compiled_ga(job.controller, self.loop, job.model, job.arrays, job.dt)
+        self.ga = compiled_ga(job.controller, self.loop, job.model, job.arrays, job.dt, job.settings)
         # one seed per sample, drawn as the stepped loop draws them one by one (the same numbers)
         self.ga.bind_switching(np.asarray(job.ga_rng.integers(0, 2**63, size=int(job.arrays.n), dtype=np.int64)))
 
@@ -239,10 +241,28 @@ def engine_for(plant: Robot, plant_engine: str, job: Job) -> Engine:
 
 
 def compiled_ga(
-    controller: SwitchingControl, loop: ClosedLoopDriver, model: Robot, arrays: LoopArrays, dt: float
+    controller: SwitchingControl,
+    loop: ClosedLoopDriver,
+    model: Robot,
+    arrays: LoopArrays,
+    dt: float,
+    settings: LoopSettings | None = None,
 ) -> CompiledGA:
-    """The compiled GA of one run: the reference and the model's tip derivatives along it."""
+    """The compiled GA of one run: the reference and the model's tip derivatives along it. The
+    safe variant admits gains on the loop of ``settings`` (its sensing and velocity filter;
+    ``None``: perfect sensing)."""
     inp = arrays.inputs
+    safe = None
+    if controller.variant == "safe":
+        sensing = settings is not None and settings.sensing
+        lo, hi = controller.admitted_interval(dt, settings.velocity_filter if settings and sensing else None)
+        eig = np.linalg.eigvalsh(controller.fixed.Kp)
+        if not (lo <= eig[0] and eig[-1] <= hi):
+            raise InputError(
+                f"fixed Kp eigenvalues [{eig[0]:g}, {eig[-1]:g}]: the safe variant expects them in the admitted"
+                f" interval [{lo:g}, {hi:g}] (stability_radius {controller.stability_radius:g})"
+            )
+        safe = (float(controller.fixed.Kv[0, 0]), lo, hi)
     lower, upper = controller.bounds()
     options = controller.ga
     return CompiledGA(
@@ -266,4 +286,5 @@ def compiled_ga(
         qdd_d=inp["qdd_d"],
         tip_d=inp["tip_d"],
         quadratic=controller.prediction == "quadratic",
+        safe=safe,
     )

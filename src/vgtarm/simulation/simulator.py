@@ -258,6 +258,12 @@ class Run:
         if isinstance(controller, SwitchingControl):
             info.update(
                 threshold_m=controller.threshold,
+                scm_variant=controller.variant,
+                **(
+                    {"scm_model_error": controller.model_error, "scm_stability_radius": controller.stability_radius}
+                    if controller.variant == "safe"
+                    else {}
+                ),
                 ga_horizon=controller.horizon,
                 kp_bounds=list(controller.kp_bounds),
                 kv_bounds=list(controller.kv_bounds),

@@ -20,8 +20,8 @@ seeds = 4               # seeds 0..3 of the disturbance and the GA; or [0, 7, 9]
 
 # Every combination of the values below is run (a single value is a list of one).
 # Parameters: controller ("cfc" | "scm"), kp, kv (gains, default the case's), threshold (m, SCM),
-# horizon (control periods, SCM), prediction ("quadratic" | "linear" | "exact"), kp_max, kv_max
-# (upper GA bounds), ga_population, ga_generations, external_force (true | false),
+# horizon (control periods, SCM), scm_variant ("safe" | "paper", SCM), prediction ("quadratic" |
+# "linear" | "exact"), kp_max, kv_max (upper GA bounds), ga_population, ga_generations, external_force (true | false),
 # cutting_force (N), disturbance (N per axis), model_mass, model_inertia, model_friction
 # (factors on the controller's model), integrator ("euler" | "semi_implicit_euler" | "rk4"),
 # substeps, and the simulator's own options where it has them (observer = "momentum",

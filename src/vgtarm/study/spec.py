@@ -74,6 +74,7 @@ PARAMETERS: dict[str, Parameter] = {
     "kv": Parameter(float, None, "a gain > 0 (1/s; default: the case's)", _positive),
     "threshold": Parameter(float, None, "a tip error > 0 (m; SCM; default: the case's)", _positive),
     "horizon": Parameter(int, 20, "a whole number >= 1 (control periods; SCM)", lambda v: v >= 1),
+    "scm_variant": Parameter(str, "safe", "one of ['paper', 'safe'] (SCM)", choices=("paper", "safe")),
     "prediction": Parameter(
         str, "quadratic", "one of ['exact', 'linear', 'quadratic']", choices=("exact", "linear", "quadratic")
     ),

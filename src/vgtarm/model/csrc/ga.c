@@ -412,6 +412,8 @@ typedef struct {
     float *lo, *step, *hi; /* 8-bit genes in the prediction: lo + code * step in single precision, at */
                            /*   most hi, hi for the top code (see gains_from_bytes)                    */
     int avx2;            /* the CPU has AVX2 (gains_from_bytes_avx2)                                 */
+    int safe;            /* the safe variant (see safe_repair)                                       */
+    double safe_kv, safe_lo, safe_hi;
     int threads;         /* threads that predict blocks of candidates (OpenMP), each with a scratch */
     int n_scratch;       /* scratches allocated (the threads asked for; `threads` may drop to 1)     */
     struct scratch *sc;  /* (n_scratch) */
@@ -622,6 +624,80 @@ static void gains_from_bytes(const predictor *x, int n_genes, int count, const u
     gains_from_bytes_scalar(x, n_genes, count, rows, K);
 }
 
+/* ---- the safe variant's admission --------------------------------------------------------- */
+
+/* Whether the symmetric nj x nj matrix S (row-major) is positive definite: a Cholesky
+ * factorisation whose pivots stay positive (exact test, about nj^3 / 6 multiplications). */
+static int positive_definite(int nj, double *S)
+{
+    for (int j = 0; j < nj; ++j) {
+        double d = S[j * nj + j];
+        for (int k = 0; k < j; ++k) d -= S[j * nj + k] * S[j * nj + k];
+        if (!(d > 0.0)) return 0;
+        d = sqrt(d);
+        S[j * nj + j] = d;
+        for (int i = j + 1; i < nj; ++i) {
+            double v = S[i * nj + j];
+            for (int k = 0; k < j; ++k) v -= S[i * nj + k] * S[j * nj + k];
+            S[i * nj + j] = v / d;
+        }
+    }
+    return 1;
+}
+
+/* The safe variant's repair and admission of one candidate: kp (nj x nj, row-major) is replaced by
+ * its symmetric part Ks and kv by safe_kv I. With Kv a multiple of the identity, Ks and Kv share
+ * their eigenvectors, so the discrete loop (hold, velocity filter, model error) splits into one
+ * scalar loop per eigenvalue of Ks; control/safety.py computes the interval [lo, hi] of the
+ * eigenvalues whose scalar loops have every pole inside the margin circle for every model error
+ * in the bound. Admitted iff Ks - lo I and hi I - Ks are positive definite. Returns 0 when
+ * admitted, else a penalty in (1, 3] that grows with Gershgorin's estimate of the violation, so
+ * the GA's ranking leads the population back into the admitted set. */
+static double safe_admit(int nj, double lo, double hi, double *kp, double *kv, double kv0)
+{
+    double below[nj * nj], above[nj * nj], gmin = INFINITY, gmax = -INFINITY;
+    for (int i = 0; i < nj; ++i)
+        for (int l = i; l < nj; ++l) {
+            double v = 0.5 * (kp[i * nj + l] + kp[l * nj + i]);
+            kp[i * nj + l] = kp[l * nj + i] = v;
+        }
+    for (int i = 0; i < nj; ++i) {
+        double radius = 0.0;
+        for (int l = 0; l < nj; ++l) {
+            kv[i * nj + l] = i == l ? kv0 : 0.0;
+            below[i * nj + l] = kp[i * nj + l] - (i == l ? lo : 0.0);
+            above[i * nj + l] = (i == l ? hi : 0.0) - kp[i * nj + l];
+            if (l != i) radius += fabs(kp[i * nj + l]);
+        }
+        gmin = fmin(gmin, kp[i * nj + i] - radius);
+        gmax = fmax(gmax, kp[i * nj + i] + radius);
+    }
+    if (positive_definite(nj, below) && positive_definite(nj, above)) return 0.0;
+    const double scale = hi - lo;
+    return 1.0 + fmin(1.0, fmax(0.0, lo - gmin) / scale) + fmin(1.0, fmax(0.0, gmax - hi) / scale) + 1e-9;
+}
+
+/* safe_admit on the BLOCK lanes of K (gene-major, one float per lane): the repaired gains are
+ * written back (so the prediction is that of the gains that would be applied), penalty[c] set. */
+static void safe_repair(const predictor *x, int count, vf *K, double *penalty)
+{
+    const int nj = x->nj, nn = nj * nj;
+    double kp[nn], kv[nn];
+    for (int c = 0; c < BLOCK; ++c) {
+        penalty[c] = 0.0;
+        if (c >= count) continue;
+        for (int gi = 0; gi < nn; ++gi) {
+            kp[gi] = (double)K[gi][c];
+            kv[gi] = (double)K[nn + gi][c];
+        }
+        penalty[c] = safe_admit(nj, x->safe_lo, x->safe_hi, kp, kv, x->safe_kv);
+        for (int gi = 0; gi < nn; ++gi) {
+            K[gi][c] = (float)kp[gi];
+            K[nn + gi][c] = (float)kv[gi];
+        }
+    }
+}
+
 /* Exact prediction of the candidates listed in `which` (all when which is NULL). */
 static int predict_exact(const vgt_model *m, const vgt_settings *s, const predictor *x, long n, const long *which,
                          const double *genes, double *cost)
@@ -661,6 +737,8 @@ static int predict_one_block(const vgt_ga_settings *g, const vgt_model *m, const
         gains_from_genes(g->n_genes, count, genes + c * g->n_genes, sc->K);
     else
         gains_from_bytes(x, g->n_genes, count, rows + c, sc->K);
+    double penalty[BLOCK];
+    if (x->safe) safe_repair(x, count, sc->K, penalty);
     predict_block(x, count, sc->K, sum, sc->far, sc->far_at, &n_far);
     /* the steps outside the trust region: the exact forward kinematics of the predicted joints */
     for (long f = 0; f < n_far; ++f) {
@@ -679,6 +757,9 @@ static int predict_one_block(const vgt_ga_settings *g, const vgt_model *m, const
         seen[lane] = 1;
     }
     for (int k = 0; k < count; ++k) cost[c + k] = isfinite(sum[k]) ? sqrt(sum[k]) : INFINITY;
+    if (x->safe)
+        for (int k = 0; k < count; ++k)
+            if (penalty[k] > 0.0) cost[c + k] = penalty[k];
     return VGT_DONE;
 }
 
@@ -762,6 +843,10 @@ static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *
     x->exact_above2 = g->exact_above * g->exact_above;
     x->pb = pb;
     x->threads = g->threads > 0 ? g->threads : 1;
+    x->safe = g->safe;
+    x->safe_kv = g->safe_kv;
+    x->safe_lo = g->safe_lo;
+    x->safe_hi = g->safe_hi;
     const int nj = x->nj;
     x->r = malloc(sizeof(float) * (size_t)(g->horizon * nj + 1));
     x->s = malloc(sizeof(float) * (size_t)(g->horizon * nj + 1));
@@ -1092,6 +1177,19 @@ int vgt_ga_activation(const vgt_model *m, const vgt_settings *s, const vgt_ga_se
     }
     out->best_cost = best_cost;
     decode_one(g, best_bits, pb->lower, pb->upper, out->best);
+    out->dropped = 0;
+    if (g->safe) {
+        /* the gains applied are the repaired ones, admitted again in double precision; a set that
+         * is not admitted, or not predicted to lower the error below the fixed gains' from the
+         * same measured state, is dropped for the fixed gains (the first seeded row) */
+        const int nn = x.nj * x.nj;
+        int admitted = safe_admit(x.nj, g->safe_lo, g->safe_hi, out->best, out->best + nn, g->safe_kv) == 0.0;
+        if (!admitted || !(best_cost < out->seeded_cost)) {
+            decode_one(g, pb->initial_bits, pb->lower, pb->upper, out->best);
+            out->best_cost = out->seeded_cost;
+            out->dropped = 1;
+        }
+    }
 
 done:
     predictor_free(&x);

@@ -152,6 +152,13 @@ typedef struct {
                             /* any count gives the same activation bit for bit; a generation    */
                             /* whose prediction stalls (another thread not scheduled: a busy     */
                             /* machine) makes the rest of the activation use one                 */
+    int safe;               /* 1: the safe variant (control/safety.py): Kp symmetrised, Kv = safe_kv */
+                            /* times the identity, a candidate admitted only when the eigenvalues */
+                            /* of its Kp lie in [safe_lo, safe_hi], others penalised (cost > 1);  */
+                            /* the result falls back to the seeded (fixed) gains unless admitted  */
+                            /* and predicted better than them. 0: the paper's GA, unchanged       */
+    double safe_kv;         /* the damping of the safe variant (1/s)                              */
+    double safe_lo, safe_hi;/* the admitted interval of the eigenvalues of Kp (1/s^2)             */
 } vgt_ga_settings;
 
 /* One activation: the state at sample k and the reference rows k .. k+H. */
@@ -179,6 +186,8 @@ typedef struct {
     long exact_candidates;  /* of those, recomputed for leaving the trust region                  */
     long exact_steps;       /* steps of those mapped by the exact forward kinematics              */
     int threads;            /* threads predicting at the end (fewer than asked after a stall)    */
+    int dropped;            /* safe variant: the GA's best was not admitted or not better than the */
+                            /* fixed gains, which `best` then holds                               */
 } vgt_ga_result;
 
 /* One GA activation: evolve the gains from a seeded first population, all in C. */

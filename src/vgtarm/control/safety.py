@@ -1,0 +1,128 @@
+"""Admission of switching-control gains: the discrete loop the controller really closes.
+
+The safe variant of switching control (``SwitchingControl(variant="safe")``) lets the GA apply a
+candidate ``(Kp, Kv)`` only when the closed loop it makes is stable with margin, judged on what
+the controller has: a control period ``dt`` with the effort held over it, velocities from
+encoder differences through the first-order filter of weight ``a`` (``a = exp(-2 pi f dt)``), and
+a controller model whose mass is off by at most ``model_error`` (relative). Linearised at the
+current state, computed force control leaves on each error coordinate
+
+    e_{k+1} = e_k + dt ed_k - h u_k,   ed_{k+1} = ed_k - dt u_k,
+    w_k = a w_{k-1} + (1 - a) (e_k - e_{k-1}) / dt   (perfect sensing: w_k = ed_k),
+    u_k = gamma (Kp e_k + Kv w_k),     gamma = M^-1 M^ in [1 - model_error, 1 + model_error],
+
+with ``h = dt^2 / 2`` for a plant that integrates exactly over the period and ``h = 0`` for the
+paper's explicit Euler; the state ``(e, ed, e_{k-1}, w_{k-1})`` has the matrix of
+:func:`loop_matrix`. The safe variant uses ``Kv = kv I`` and a symmetric ``Kp``: the two share
+their eigenvectors, so the ``4n`` loop splits into one scalar loop per eigenvalue ``lambda`` of
+``Kp`` with gains ``(lambda, kv)``. :func:`admitted_interval` finds the interval of ``lambda``
+whose scalar loops have every pole inside the circle of radius ``radius`` (< 1) for both holds and
+every ``gamma`` of a grid over the bound; the compiled GA admits a candidate iff the eigenvalues
+of its ``Kp`` lie in it (two Cholesky factorisations, ``csrc/ga.c``).
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..errors import InputError, shown
+
+Array = NDArray[np.float64]
+
+#: Model errors (``gamma``) checked across the bound: this many evenly spaced values.
+GAMMA_POINTS = 21
+#: Eigenvalues of ``Kp`` scanned for the admitted interval (1/s^2), log-spaced, before bisection.
+SCAN = (1.0, 1e8, 801)
+
+
+def loop_matrix(
+    Kp: ArrayLike,
+    Kv: ArrayLike,
+    dt: float,
+    velocity_filter: float | None,
+    gamma: float = 1.0,
+    *,
+    exact_hold: bool = True,
+) -> Array:
+    """Matrix of the linearised discrete error loop (see the module's docstring).
+
+    ``Kp``, ``Kv`` (n, n); ``velocity_filter``: the filter weight ``a`` in [0, 1) of velocities
+    differenced from encoders, or ``None`` for measured velocities (perfect sensing). Returns
+    ``(4n, 4n)`` for the state ``(e, ed, e_prev, w_prev)``, or ``(2n, 2n)`` for ``(e, ed)``.
+    """
+    kp, kv = np.atleast_2d(np.asarray(Kp, dtype=float)), np.atleast_2d(np.asarray(Kv, dtype=float))
+    n = kp.shape[0]
+    eye, zero = np.eye(n), np.zeros((n, n))
+    h = dt * dt / 2.0 if exact_hold else 0.0
+    if velocity_filter is None:
+        up, uv = gamma * kp, gamma * kv
+        return np.block([[eye - h * up, dt * eye - h * uv], [-dt * up, eye - dt * uv]])
+    a = float(velocity_filter)
+    c = (1.0 - a) / dt
+    ue, uprev, uw = gamma * (kp + c * kv), -gamma * c * kv, gamma * a * kv
+    return np.block(
+        [
+            [eye - h * ue, dt * eye, -h * uprev, -h * uw],
+            [-dt * ue, eye, -dt * uprev, -dt * uw],
+            [eye, zero, zero, zero],
+            [c * eye, zero, -c * eye, a * eye],
+        ]
+    )
+
+
+def spectral_radius(
+    Kp: ArrayLike, Kv: ArrayLike, dt: float, velocity_filter: float | None, model_error: float = 0.0
+) -> float:
+    """Largest pole modulus of :func:`loop_matrix` over both holds and ``gamma`` across the bound."""
+    worst = 0.0
+    for gamma in np.linspace(1.0 - model_error, 1.0 + model_error, GAMMA_POINTS if model_error > 0 else 1):
+        for exact in (True, False):
+            poles = np.linalg.eigvals(loop_matrix(Kp, Kv, dt, velocity_filter, float(gamma), exact_hold=exact))
+            worst = max(worst, float(np.max(np.abs(poles))))
+    return worst
+
+
+@lru_cache(maxsize=64)
+def admitted_interval(
+    kv: float, dt: float, velocity_filter: float | None, model_error: float, radius: float
+) -> tuple[float, float]:
+    """Interval ``(lo, hi)`` (1/s^2) of the eigenvalues of ``Kp`` whose scalar loops with damping
+    ``kv`` have every pole inside ``radius`` for every model error within ``model_error``.
+
+    Raises:
+        InputError: no eigenvalue is admitted, or the admitted set is not one interval.
+    """
+    for label, value, ok in (
+        ("kv", kv, kv > 0),
+        ("radius", radius, 0 < radius < 1),
+        ("model_error", model_error, 0 <= model_error < 1),
+    ):
+        if not (np.isfinite(value) and ok):
+            raise InputError(f"{label} = {shown(value)}: out of range for the admission test")
+
+    def inside(lam: float) -> bool:
+        return spectral_radius([[lam]], [[kv]], dt, velocity_filter, model_error) < radius
+
+    grid = np.geomspace(*SCAN[:2], int(SCAN[2]))
+    flags = np.array([inside(float(lam)) for lam in grid])
+    where = np.flatnonzero(flags)
+    if where.size == 0:
+        raise InputError(
+            f"kv = {kv:g}: no Kp eigenvalue gives poles inside radius {radius:g} with dt = {dt:g} s and a model"
+            f" error up to {model_error:g}; expected a damping that the loop can hold"
+        )
+    if np.any(np.diff(where) != 1):
+        raise InputError(f"kv = {kv:g}: the admitted Kp eigenvalues are not one interval; refusing the safe variant")
+
+    def edge(good: float, bad: float) -> float:
+        for _ in range(60):
+            mid = float(np.sqrt(good * bad))
+            good, bad = (mid, bad) if inside(mid) else (good, mid)
+        return good
+
+    lo = edge(float(grid[where[0]]), float(grid[where[0] - 1])) if where[0] > 0 else float(grid[0])
+    hi = edge(float(grid[where[-1]]), float(grid[where[-1] + 1])) if where[-1] < len(grid) - 1 else float(grid[-1])
+    return lo, hi
