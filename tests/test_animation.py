@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from tests.viz_support import SHORT_RUN_S, short_case1_run
-from vgtarm.app import cli
-from vgtarm.app.animation import check_same_robot, frame_plan, render_animation
+from vgtarm.app.cli import command as cli
+from vgtarm.app.pictures.animation import check_same_robot, frame_plan, render_animation
 from vgtarm.errors import InputError
 from vgtarm.simulation import SimulationResult
 from vgtarm.simulation.result import MODE_NOT_RUN

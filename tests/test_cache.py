@@ -33,7 +33,7 @@ from vgtarm.model.definition import PAPER, Definition, StackDefinition
 from vgtarm.model.stack import load_stack
 
 #: Runs the command line in a fresh interpreter (``python -c``): exit status and streams as a user sees them.
-CLI = "import sys; from vgtarm.app.cli import main; sys.exit(main())"
+CLI = "import sys; from vgtarm.app.cli.command import main; sys.exit(main())"
 #: Prints where the process's backend came from.
 WHICH = "import vgtarm; b = vgtarm.load_robot().backend; print(b.kind, getattr(b, 'library_path', ''))"
 FALLBACK = "VGTARM_BACKEND=interpreted chooses it without this line"

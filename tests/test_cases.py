@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from vgtarm.app.cases import PAPER_RESULTS, case_study, joint_reference, run_case
-from vgtarm.app.report import paper_runs, reproduce
+from vgtarm.app.reports.reproduce import paper_runs, reproduce
 
 
 @pytest.fixture(scope="module")

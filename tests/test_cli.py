@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from vgtarm.app.cli import main
+from vgtarm.app.cli.command import main
 
 
 def run(capsys, *argv):
@@ -115,7 +115,7 @@ def test_mujoco_commands_without_mujoco_say_what_to_install_in_one_line(argv, tm
     (the export alone needs no MuJoCo; only its --validate loads the model in it)."""
     script = (
         "import sys; sys.modules['mujoco'] = None\n"
-        "from vgtarm.app.cli import main\n"
+        "from vgtarm.app.cli.command import main\n"
         f"sys.exit(main({argv!r}))\n"
     )
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path, timeout=120)

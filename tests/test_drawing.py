@@ -10,9 +10,9 @@ from matplotlib.figure import Figure
 from mpl_toolkits.mplot3d.art3d import Line3D
 
 from tests.conftest import random_configurations
-from vgtarm.app import cli
-from vgtarm.app.drawing import CLOSENESS_NORM, MM, VIEWS, draw_mechanism, pose_figure
-from vgtarm.app.geometry import (
+from vgtarm.app.cli import command as cli
+from vgtarm.app.pictures.drawing import CLOSENESS_NORM, MM, VIEWS, draw_mechanism, pose_figure
+from vgtarm.app.pictures.geometry import (
     SEGMENT_KINDS,
     leg_joints,
     limit_closeness,
@@ -179,7 +179,7 @@ def test_draw_command_reports_bad_input_in_one_line(argv, message, tmp_path, mon
 
 
 def test_readme_images_are_small_pngs(robot, tmp_path):
-    from vgtarm.app.readme_images import make_images
+    from vgtarm.app.pictures.readme_images import make_images
 
     for path in make_images(robot, tmp_path):
         data = path.read_bytes()

@@ -282,3 +282,29 @@ def test_command_writes_the_folder(tmp_path, capsys):  # type: ignore[no-untyped
     # the shared arithmetic is the simulation's own header, copied unchanged
     shared = Path(vgtarm.__file__).parent / "model" / "csrc" / "vgt_control.h"
     assert (tmp_path / "ctl" / "vgt_control.h").read_text() == shared.read_text()
+
+
+def test_the_vgtarm_command_exports_a_controller_and_refuses_a_pipe(tmp_path, capsys):  # type: ignore[no-untyped-def]
+    from vgtarm.app.cli import main
+
+    assert main(["export", "controller", "--out", str(tmp_path / "ctl"), "--observer", "momentum"]) == 0
+    assert "wrote" in capsys.readouterr().out and (tmp_path / "ctl" / "vgtarm_controller.c").is_file()
+    os.mkfifo(tmp_path / "pipe")
+    assert main(["export", "controller", "--out", str(tmp_path / "pipe")]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "pipe" in err
+    assert (tmp_path / "pipe").is_fifo()
+
+
+def test_a_stack_robot_file_exports_and_closes_the_loop_like_simulate(tmp_path):  # type: ignore[no-untyped-def]
+    """The paper's robot written as a stack file goes through the stack's code generation (a
+    library of its own, generic in the joint count); its export equals simulate bit for bit."""
+    stack = vgtarm.load_robot(Path(__file__).resolve().parents[1] / "examples" / "paper_robot.toml")
+    assert stack.is_stack
+    ref = joint_reference(stack, 2, duration=0.2)
+    folder = export_controller(stack, tmp_path / "stack", kp=CASE.kp, kv=CASE.kv, observer="momentum").folder
+    options = {"external_force": CASE.external_force, "observer": "momentum"}
+    through = simulate_exported(folder, stack, ref, **options)
+    direct = simulate(stack, ref, CASE.controller("cfc"), **options)
+    np.testing.assert_array_equal(through.effort, direct.effort)
+    np.testing.assert_array_equal(through.q, direct.q)

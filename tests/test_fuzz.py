@@ -30,7 +30,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from vgtarm import paths
-from vgtarm.app.cli import main
+from vgtarm.app.cli.command import main
 from vgtarm.errors import ConfigError, PathError, VgtarmError
 from vgtarm.model.parameters import JOINT_NAMES, RobotParameters, load_parameters
 from vgtarm.model.robot import load_robot

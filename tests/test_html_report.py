@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 
 from tests.viz_support import short_case1_run
-from vgtarm.app import cli
-from vgtarm.app.geometry import mechanism_geometry
-from vgtarm.app.html_report import (
+from vgtarm.app.cli import command as cli
+from vgtarm.app.pictures.geometry import mechanism_geometry
+from vgtarm.app.reports.html import (
     PLOTLY_JS,
     decimate_min_max,
     figure_errors,
@@ -28,7 +28,7 @@ from vgtarm.app.html_report import (
     runs_from_reproduction,
     write_html_report,
 )
-from vgtarm.app.report import TABLE_COLUMNS, RunSpec, render_report
+from vgtarm.app.reports.reproduce import TABLE_COLUMNS, RunSpec, render_report
 from vgtarm.errors import InputError
 
 #: The browser: Debian's chromium (``VGTARM_CHROMIUM`` points elsewhere).

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vgtarm.app.cli import main
+from vgtarm.app.cli.command import main
 
 HEADER = "t,x,y,z,s1,v1,p1,s2,v2,p2,psi3,ds1,dv1,dp1,ds2,dv2,dp2,dpsi3,dds1,ddv1,ddp1,dds2,ddv2,ddp2,ddpsi3"
 

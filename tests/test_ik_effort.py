@@ -157,7 +157,7 @@ def test_path_without_jerk_refused(robot):
 
 def test_cli_effort_criterion(tmp_path, capsys):
     """`vgtarm ik --criterion effort --tool-force 20` writes the reference; `--tool-force` alone is refused."""
-    from vgtarm.app.cli import main
+    from vgtarm.app.cli.command import main
 
     out = tmp_path / "ref.csv"
     assert (

@@ -27,9 +27,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from tests.viz_support import short_case1_run
-from vgtarm.app import cli
-from vgtarm.app.html_report import load_runs, page_figures, render_html
-from vgtarm.app.report import TABLE_COLUMNS, RunSpec, render_report
+from vgtarm.app.cli import command as cli
+from vgtarm.app.reports.html import load_runs, page_figures, render_html
+from vgtarm.app.reports.reproduce import TABLE_COLUMNS, RunSpec, render_report
 from vgtarm.errors import InputError, escape
 from vgtarm.markup import html_text, md_cell, md_code, md_text, mpl_text, plotly_text
 from vgtarm.model.parameters import NAME_LENGTH
@@ -372,9 +372,9 @@ def test_a_saved_run_whose_case_is_not_a_number_is_refused_in_one_line(robot: Ro
 
 
 def test_drawing_and_animation_titles_of_a_hostile_robot_draw_as_written(robot: Robot, tmp_path: Path) -> None:
-    from vgtarm.app.animation import animation_frame
-    from vgtarm.app.drawing import pose_figure
-    from vgtarm.app.plotting import label_of, save_figure
+    from vgtarm.app.pictures.animation import animation_frame
+    from vgtarm.app.pictures.drawing import pose_figure
+    from vgtarm.app.pictures.plotting import label_of, save_figure
 
     name = r"a $\frac$ robot <script>"  # Matplotlib's math would fail to parse it
     hostile_robot = named(robot, name)
@@ -439,7 +439,7 @@ def test_hostile_page_in_a_real_browser_shows_the_names_and_runs_nothing(robot: 
     """Headless Chromium: no dialog, no error, no element of the names; the legend and a plot's
     title show the run's label as written (Plotly reads the character references as characters)."""
     from tests.test_html_report import browser_tab
-    from vgtarm.app.html_report import write_html_report
+    from vgtarm.app.reports.html import write_html_report
 
     name = "<script>alert(1)</script> {{x}} %{y} &amp; <b>b</b>"
     hostile_robot = named(robot, name)

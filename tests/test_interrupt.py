@@ -182,7 +182,7 @@ def test_a_simulation_too_large_for_memory_is_refused_before_it_starts(robot, mo
 
 
 def test_animations_too_large_are_refused_before_anything_is_drawn(robot, tmp_path, monkeypatch):
-    from vgtarm.app.animation import frame_plan, render_animation
+    from vgtarm.app.pictures.animation import frame_plan, render_animation
 
     t = np.arange(50) * 1e-3
     still = JointReference(t, np.tile(robot.parameters.home, (50, 1)), np.zeros((50, 7)), np.zeros((50, 7)))
@@ -200,7 +200,7 @@ def test_animations_too_large_are_refused_before_anything_is_drawn(robot, tmp_pa
 
 def _cli(*argv: str, env: dict[str, str] | None = None, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-c", "import sys; from vgtarm.app.cli import main; sys.exit(main())", *argv],
+        [sys.executable, "-c", "import sys; from vgtarm.app.cli.command import main; sys.exit(main())", *argv],
         capture_output=True,
         text=True,
         timeout=300,

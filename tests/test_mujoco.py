@@ -114,7 +114,7 @@ def assert_accelerations_are_second_differences(bridge, configurations) -> None:
 
 
 def test_export_command_writes_a_model_mujoco_loads(tmp_path, capsys):
-    from vgtarm.app.cli import main
+    from vgtarm.app.cli.command import main
 
     out = tmp_path / "robot.xml"
     assert main(["export", "mjcf", "--out", str(out), "--validate"]) == 0

@@ -201,7 +201,7 @@ def test_bad_export_options_are_refused_in_one_line(six, option, value):
 
 
 def test_the_commands_export_and_check_a_stack(tmp_path, capsys):
-    from vgtarm.app.cli import main
+    from vgtarm.app.cli.command import main
 
     out = tmp_path / "six.xml"
     config = str(EXAMPLES / "six_modules.toml")
@@ -235,7 +235,7 @@ def test_cfc_on_the_mujoco_plant_tracks_the_six_module_arm_like_ours_and_is_dete
 
 
 def test_the_simulate_command_runs_a_stack_on_the_mujoco_plant(capsys):
-    from vgtarm.app.cli import main
+    from vgtarm.app.cli.command import main
 
     config = str(EXAMPLES / "six_modules.toml")
     args = ["simulate", "--config", config, "--case", "1", "--controller", "cfc", "--plant", "mujoco"]

@@ -209,8 +209,8 @@ def test_bad_observer_and_sensing_arguments_are_one_clear_line(robot, kwargs, me
 
 
 def test_report_section_beyond_the_paper(robot, tmp_path):
-    from vgtarm.app.beyond import beyond_figure, beyond_runs, beyond_section, run_beyond
     from vgtarm.app.cases import joint_reference
+    from vgtarm.app.reports.beyond import beyond_figure, beyond_runs, beyond_section, run_beyond
 
     full = joint_reference(robot, 2)
     keep = slice(0, 401)
@@ -239,7 +239,7 @@ def _summary_of(folder):
 
 
 def test_command_line_observer_and_sensing(capsys, tmp_path):
-    from vgtarm.app.cli import main
+    from vgtarm.app.cli.command import main
 
     argv = ["simulate", "--case", "2", "--external-force", "--observer", "momentum", "--quiet"]
     status = main([*argv, "--encoder-resolution", "1e-6", "--model-mass", "1.1", "--out", str(tmp_path)])

@@ -23,7 +23,7 @@ from unittest.mock import ANY
 import pytest
 
 from vgtarm import fileio
-from vgtarm.app.cli import CLOSED_PIPE, main
+from vgtarm.app.cli.command import CLOSED_PIPE, main
 from vgtarm.errors import InputError
 from vgtarm.fileio import MANIFEST, atomic_folder, atomic_path, check_output_file, check_output_folder, clean_stale
 
@@ -385,7 +385,7 @@ def test_ctrl_c_while_the_figure_is_drawn_leaves_the_earlier_run(tmp_path, capsy
         Path(path).write_bytes(b"half a figure")
         raise KeyboardInterrupt
 
-    monkeypatch.setattr("vgtarm.app.plotting.save_figure", interrupted)
+    monkeypatch.setattr("vgtarm.app.pictures.plotting.save_figure", interrupted)
     assert main([*SHORT, "--seed", "3", "--out", str(out)]) == 130
     assert _listing(out) == before
     assert [p.name for p in tmp_path.iterdir()] == ["run"]
@@ -437,7 +437,8 @@ def test_a_users_file_added_during_simulate_is_kept_and_the_line_names_where_the
 ):
     """The folder was checked before the run; a file the user adds to it afterwards (while the run
     computes, or while its files are written) is kept, and the run goes beside it."""
-    from vgtarm.app import cases, plotting
+    from vgtarm.app import cases
+    from vgtarm.app.pictures import plotting as plotting
 
     out = tmp_path / "run"
     assert main([*SHORT, "--out", str(out)]) == 0
@@ -467,7 +468,7 @@ def test_the_line_saying_where_the_run_went_reaches_the_terminal(tmp_path):
     out = tmp_path / "run"
     assert main([*SHORT, "--out", str(out)]) == 0
     script = (
-        "import sys\nfrom vgtarm.app import cases\nfrom vgtarm.app.cli import main\n"
+        "import sys\nfrom vgtarm.app import cases\nfrom vgtarm.app.cli.command import main\n"
         "run_case = cases.run_case\n"
         "def with_notes(*args, **kwargs):\n"
         "    open(sys.argv[1] + '/NOTES.txt', 'w').write('mine')\n"
@@ -486,8 +487,8 @@ def test_the_line_saying_where_the_run_went_reaches_the_terminal(tmp_path):
 
 def test_reproduce_names_the_folder_beside_when_its_folder_gained_a_file(tmp_path, capsys, monkeypatch):
     """``vgtarm reproduce --out X &``, then ``echo notes > X/NOTES.txt`` during the run."""
-    from vgtarm.app import report
-    from vgtarm.app.report import REPRODUCE_FILES, Reproduction
+    from vgtarm.app.reports import reproduce as report
+    from vgtarm.app.reports.reproduce import REPRODUCE_FILES, Reproduction
 
     out = tmp_path / "results"
     with atomic_folder(out) as folder:
@@ -515,7 +516,7 @@ def test_a_closed_pipe_ends_quietly(argv, status):
     os.close(read)
     try:
         done = subprocess.run(
-            [sys.executable, "-c", "import sys; from vgtarm.app.cli import main; sys.exit(main())", *argv],
+            [sys.executable, "-c", "import sys; from vgtarm.app.cli.command import main; sys.exit(main())", *argv],
             stdout=write,
             stderr=subprocess.PIPE,
             timeout=120,
@@ -529,7 +530,7 @@ def test_a_closed_pipe_ends_quietly(argv, status):
 def test_a_broken_pipe_that_is_not_standard_output_is_still_an_error():
     """An encoder's or a socket's broken pipe is a failure, not a reader that went away."""
     script = (
-        "import sys\nfrom vgtarm.app import cli\n"
+        "import sys\nfrom vgtarm.app.cli import command as cli\n"
         "def broken(args):\n    raise BrokenPipeError(32, 'Broken pipe')\n"
         "cli.cmd_describe = broken\nsys.exit(cli.main(['describe']))\n"
     )
@@ -579,7 +580,7 @@ def test_a_failing_video_encoder_is_one_line_and_leaves_no_file(tmp_path, saved_
 
 def test_ctrl_c_while_a_video_is_encoded_stops_ffmpeg_and_leaves_no_file(tmp_path, saved_run, capfd, monkeypatch):
     pytest.importorskip("imageio_ffmpeg")
-    from vgtarm.app import animation
+    from vgtarm.app.pictures import animation as animation
 
     started: list[int] = []
     start = animation._FfmpegWriter._start

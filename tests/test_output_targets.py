@@ -30,7 +30,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from vgtarm import fileio
-from vgtarm.app.cli import main
+from vgtarm.app.cli.command import main
 from vgtarm.errors import InputError, escape
 from vgtarm.fileio import (
     OutputPathError,
@@ -116,9 +116,9 @@ def no_work(monkeypatch: pytest.MonkeyPatch) -> None:
     def started(*args: Any, **kwargs: Any) -> None:
         raise AssertionError("the work started although the output path is refused")
 
-    for where in ("cli", "cli_visual", "cli_mujoco"):
+    for where in ("cli.command", "cli.visual", "cli.mujoco"):
         monkeypatch.setattr(f"vgtarm.app.{where}.load_robot", started)
-    monkeypatch.setattr("vgtarm.app.cli_stack.load_parameters", started)
+    monkeypatch.setattr("vgtarm.app.cli.stack.load_parameters", started)
     monkeypatch.setattr("vgtarm.study.spec.load_study", started)
 
 

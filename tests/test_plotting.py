@@ -10,7 +10,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from mpl_toolkits.mplot3d.axes3d import Axes3D
 
-from vgtarm.app.plotting import (
+from vgtarm.app.pictures.plotting import (
     comparison_figure,
     label_of,
     plot_efforts,

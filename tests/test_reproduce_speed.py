@@ -21,10 +21,10 @@ import numpy as np
 import pytest
 
 from tests.test_interrupt import ENDS_WITHIN, _alive_in_group, _assert_interrupted, _Command, warm  # noqa: F401
-from vgtarm.app.beyond import ENCODER_RESOLUTION, beyond_runs
 from vgtarm.app.cases import joint_reference
 from vgtarm.app.pool import Inline, Workers
-from vgtarm.app.report import RunSpec, _beyond_run, reproduce
+from vgtarm.app.reports.beyond import ENCODER_RESOLUTION, beyond_runs
+from vgtarm.app.reports.reproduce import RunSpec, _beyond_run, reproduce
 from vgtarm.errors import InputError
 from vgtarm.simulation.result import GAActivation, _csv
 from vgtarm.study.store import TIMING_COLUMNS

@@ -17,7 +17,7 @@ import pytest
 
 import vgtarm
 from vgtarm import ga, paths
-from vgtarm.app.cli import build_parser, main
+from vgtarm.app.cli.command import build_parser, main
 from vgtarm.control import ComputedForceControl, Gains, SwitchingControl
 from vgtarm.errors import AssemblyError, InputError, PathError, SimulationError, VgtarmError
 from vgtarm.ik import rates as rate_modes

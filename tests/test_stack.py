@@ -124,7 +124,7 @@ def test_the_shipped_examples_read_back_bit_for_bit():
 
 
 def test_convert_robot_writes_the_reference_robot_as_a_stack(tmp_path, capsys):
-    from vgtarm.app.cli import main
+    from vgtarm.app.cli.command import main
 
     out = tmp_path / "sub" / "paper.toml"
     assert main(["convert-robot", "--out", str(out)]) == 0

@@ -12,7 +12,7 @@ import pytest
 import vgtarm
 from vgtarm import paths
 from vgtarm.app.cases import PAPER_HOME_TIP, case_path, case_study, joint_reference, path_placement, run_case
-from vgtarm.app.cli import main
+from vgtarm.app.cli.command import main
 from vgtarm.errors import ConfigError
 from vgtarm.model.stack import StackModel
 
@@ -296,7 +296,7 @@ def test_the_observer_and_the_force_sensor_work_on_the_six_module_arm(six):
 
 
 def test_the_report_of_a_stack_names_the_robot_and_the_placement_of_the_paths(six, six_run, six_scm_run):
-    from vgtarm.app.report import RunSpec, render_report
+    from vgtarm.app.reports.reproduce import RunSpec, render_report
 
     _, cfc = six_run
     runs = {RunSpec(1, "cfc", False, "exact"): cfc, RunSpec(1, "scm", False, "exact"): six_scm_run}

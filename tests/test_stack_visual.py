@@ -15,19 +15,19 @@ from matplotlib.colors import to_rgba
 from PIL import Image
 
 import vgtarm
-from vgtarm.app import cli
-from vgtarm.app.animation import check_same_robot, render_animation
-from vgtarm.app.cli_visual import robot_file_of_runs
-from vgtarm.app.drawing import CLOSENESS_COLOURS, CLOSENESS_NORM, draw_mechanism, plane_views, pose_figure
-from vgtarm.app.geometry import (
+from vgtarm.app.cli import command as cli
+from vgtarm.app.cli.visual import robot_file_of_runs
+from vgtarm.app.pictures.animation import check_same_robot, render_animation
+from vgtarm.app.pictures.drawing import CLOSENESS_COLOURS, CLOSENESS_NORM, draw_mechanism, plane_views, pose_figure
+from vgtarm.app.pictures.geometry import (
     SEGMENT_KINDS,
     limit_closeness,
     mechanism_geometries,
     mechanism_geometry,
     twist_joints,
 )
-from vgtarm.app.html_report import figure_errors, load_runs, page_figures
-from vgtarm.app.plotting import plot_efforts, plot_joint_errors
+from vgtarm.app.pictures.plotting import plot_efforts, plot_joint_errors
+from vgtarm.app.reports.html import figure_errors, load_runs, page_figures
 from vgtarm.errors import InputError
 from vgtarm.simulation import SimulationResult
 

@@ -19,7 +19,7 @@ import pytest
 pytest.importorskip("distributed")
 pytest.importorskip("pyarrow")
 
-from vgtarm.app.cli import main  # noqa: E402
+from vgtarm.app.cli.command import main  # noqa: E402
 from vgtarm.app.study_points import check_point, execute_point, simulate_command  # noqa: E402
 from vgtarm.errors import ConfigError  # noqa: E402
 from vgtarm.study import TIMING_COLUMNS, Store, load_study, parse_study  # noqa: E402
@@ -278,8 +278,8 @@ def test_report_statistics_and_figures(local_run: Any) -> None:
 def test_reproduce_seeds_section_matches_single_runs(tmp_path: Path) -> None:
     from vgtarm import load_robot
     from vgtarm.app.cases import joint_reference, run_case
-    from vgtarm.app.report import RunSpec
-    from vgtarm.app.seeds import seed_rows, seed_section
+    from vgtarm.app.reports.reproduce import RunSpec
+    from vgtarm.app.reports.seeds import seed_rows, seed_section
 
     specs = [RunSpec(1, "cfc", True, "exact")]
     section = seed_section(tmp_path / "seeds", 3, specs)

@@ -28,7 +28,7 @@ from hypothesis import strategies as st
 pytest.importorskip("distributed")
 pytest.importorskip("pyarrow")
 
-from vgtarm.app.cli import main  # noqa: E402
+from vgtarm.app.cli.command import main  # noqa: E402
 from vgtarm.app.study_points import check_point, execute_point, simulate_command  # noqa: E402
 from vgtarm.errors import ConfigError, InputError  # noqa: E402
 from vgtarm.study import TIMING_COLUMNS, Store, load_study, runner  # noqa: E402

@@ -1,13 +1,13 @@
 """The ``vgtarm`` program's entry point (the console script and ``python -m vgtarm``).
 
 It imports nothing but the standard library's ``os``, ``signal`` and ``sys`` and installs the
-Ctrl-C handling first, before the command line (:mod:`vgtarm.app.cli`) pulls in NumPy, CasADi and
+Ctrl-C handling first, before the command line (:mod:`vgtarm.app.cli.command`) pulls in NumPy, CasADi and
 matplotlib, which takes the best part of a second. A Ctrl-C at any moment from here on prints the
 one line ``vgtarm: interrupted`` on standard error and ends with status 130, without a traceback:
 
 - during the imports, the import is abandoned (its ``finally`` clauses run; nothing of the
   command has been written yet) and the program ends;
-- while the command runs, :func:`vgtarm.app.cli.main` handles it, undoing what the command had
+- while the command runs, :func:`vgtarm.app.cli.command.main` handles it, undoing what the command had
   begun (temporary files and folders, worker processes);
 - after the command has finished, during the interpreter's clean-up, the program ends at once.
 

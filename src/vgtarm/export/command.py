@@ -10,6 +10,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..errors import escape
+from ..fileio import check_output_folder
 from ..model.robot import load_robot
 from .controller import export_controller
 
@@ -41,6 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Export the controller as the options say; prints the folder and what it holds."""
+    check_output_folder(args.out, "--out", inputs=[args.config, args.model_config])
     robot = load_robot(args.config)
     model = load_robot(args.model_config).parameters if args.model_config is not None else None
     done = export_controller(
@@ -60,7 +63,8 @@ def run(args: argparse.Namespace) -> int:
     )
     settings = done.settings
     print(
-        f"wrote {done.folder}: controller of {settings['robot']} ({done.n_joints} joints, observer "
+        f"wrote {escape(str(done.folder))}: controller of {escape(str(settings['robot']))} ({done.n_joints} joints,"
+        f" observer "
         f"{settings['observer']}, velocities {settings['velocity']}, dt = {settings['dt_s']:g} s); "
         f"checked with {done.compiler or 'no compiler'}; build it with make or cmake (README.md)"
     )

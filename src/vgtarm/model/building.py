@@ -2,7 +2,7 @@
 
 CasADi's symbolic construction and code generation are long calls into C++ that do not return to
 Python for seconds to hours, so a build run in vgtarm's own process could not be interrupted.
-:func:`run` starts ``python -m vgtarm.model.building`` instead, in a session of its own (a
+:func:`run` starts the build process (:mod:`.build_process`) instead, in a session of its own (a
 terminal's Ctrl-C does not reach it), hands it the model definition on its standard input and
 waits for it in short polls: on Ctrl-C (or any other exception) it kills the build's whole process
 group (the build and its compiler) and lets the caller remove the build folder, so the command ends
@@ -27,23 +27,19 @@ the limit, and not as a compiler error. On a terminal, a build estimated longer 
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import json
 import os
 import pickle
-import resource
 import signal
 import subprocess
 import sys
-import threading
 import time
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from ..errors import cut
 from ..memory import size_text
-from .budget import LONG_BUILD, BuildEstimate, time_limit, time_text
+from .budget import LONG_BUILD, BuildEstimate, time_text
 from .definition import Definition
 
 #: What the build process writes last into its folder: the result, or the reason it failed.
@@ -149,7 +145,7 @@ def run(
         raise BuildFailed("no Python interpreter to build the model with (sys.executable is empty)")
     code = (
         f"import sys; sys.path.insert(0, {str(_PACKAGE_ROOT)!r}); "
-        "from vgtarm.model.building import main; sys.exit(main(sys.argv[1:]))"
+        "from vgtarm.model.build_process import main; sys.exit(main(sys.argv[1:]))"
     )
     # the same interpreter and environment (where CasADi and NumPy are found); the package this
     # process runs comes first, and the current folder of ``-c`` is the private build folder
@@ -202,85 +198,3 @@ def _result(folder: Path) -> dict[str, Any] | None:
     except (OSError, ValueError):
         return None
     return payload if isinstance(payload, dict) else None
-
-
-# ----------------------------------------------------------------------------- the build process
-
-
-def _end_with(parent: int) -> None:
-    """End this build (and its compiler) when the process that started it ends, however it ends."""
-    with contextlib.suppress(OSError, AttributeError):
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG: this process
-    if os.getppid() != parent:  # the parent died before the line above
-        os._exit(1)
-
-    def watch() -> None:  # the compiler too (runs while this process waits for it)
-        while os.getppid() == parent:
-            time.sleep(0.5)
-        with contextlib.suppress(OSError):
-            os.killpg(0, signal.SIGKILL)
-
-    threading.Thread(target=watch, daemon=True).start()
-
-
-def _file_limit(folder: Path, failure: str) -> str | None:
-    """The reason to give when the file size limit (``ulimit -f``) stopped the build, else None."""
-    soft, _ = resource.getrlimit(resource.RLIMIT_FSIZE)
-    if soft == resource.RLIM_INFINITY:
-        return None
-    stopped = sorted(p.name for p in folder.iterdir() if p.is_file() and p.stat().st_size >= soft)
-    # EFBIG ("File too large") where the limit applies, or the compiler killed by SIGXFSZ ("File
-    # size limit exceeded": Python's subprocess restores the signal's default for the compiler)
-    told = any(text in failure.lower() for text in ("file too large", "file size limit exceeded"))
-    if not (stopped or told):
-        return None
-    where = f"{stopped[0]} stopped at {soft:,} bytes" if stopped else "the compiler could not write its output"
-    return (
-        f"the file size limit (ulimit -f) of {soft:,} bytes ({size_text(soft)}) stopped the build: {where}; "
-        "raise it (ulimit -f unlimited) and run the command again"
-    )
-
-
-def _compile(compiler: str, folder: Path, definition: Definition, key: str) -> dict[str, Any]:
-    from . import compiled
-
-    if compiled._cache_key(compiler, definition) != key:
-        return {"failure": "the model's source files changed while the library was being built; run the command again"}
-    compiled._COMPILE_TIMEOUT = max(compiled._COMPILE_TIMEOUT, time_limit())
-    library, signatures = compiled._compile(compiler, folder, definition)
-    return {"library": library.name, "functions": {name: sig.__dict__ for name, sig in signatures.items()}}
-
-
-def _functions(folder: Path, definition: Definition) -> dict[str, Any]:
-    from . import compiled
-
-    built = compiled.build_functions(definition)
-    for name, f in built.items():
-        f.save(str(folder / f"{name}.casadi"))
-    return {"functions": sorted(built)}
-
-
-def main(argv: Sequence[str]) -> int:
-    """The build process: ``KIND COMPILER FOLDER KEY PARENT_PID``, the definition (pickled) on
-    standard input; writes :data:`RESULT` into ``FOLDER`` (module docstring)."""
-    kind, compiler, folder_text, key, parent = argv
-    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # writes beyond ulimit -f fail with EFBIG instead
-    _end_with(int(parent))
-    folder = Path(folder_text)
-    definition = pickle.load(sys.stdin.buffer)
-    try:
-        result = _compile(compiler, folder, definition, key) if kind == "compile" else _functions(folder, definition)
-    except Exception as exc:  # the reason, in one line, for the caller
-        lines = str(exc).strip().splitlines()
-        failure = lines[0] if lines else type(exc).__name__
-        if type(exc).__name__ != "_Unavailable":
-            failure = f"{type(exc).__name__}: {failure}"
-        result = {"failure": _file_limit(folder, str(exc)) or failure}
-    partial = folder / f".{RESULT}"
-    try:
-        partial.write_text(json.dumps(result))
-        os.replace(partial, folder / RESULT)
-    except OSError as exc:  # the caller reports a build that wrote no result
-        print(f"cannot write the build's result: {exc.strerror or exc}", file=sys.stderr)
-        return 1
-    return 0

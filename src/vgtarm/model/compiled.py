@@ -97,6 +97,7 @@ RUNTIME_ONLY = frozenset(
         "stack/model.py",
         "budget.py",
         "building.py",
+        "build_process.py",
         "outline.py",
     }
 )

@@ -20,51 +20,20 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from ..errors import ConfigError, InputError, shown
-from ..fileio import atomic_folder, atomic_write_text, read_text_limited
-from ..markup import md_cell, md_code, md_text
-from ..model.parameters import ROBOT_FILE_LIMIT
-from ..model.robot import Robot
-from ..simulation import JointReference, SimulationResult
-from ..simulation.result import MODE_GA, ROBOT_COPY
+from ...errors import ConfigError, InputError, shown
+from ...fileio import atomic_folder, atomic_write_text, read_text_limited
+from ...markup import md_cell, md_code, md_text
+from ...model.parameters import ROBOT_FILE_LIMIT
+from ...model.robot import Robot
+from ...simulation import JointReference, SimulationResult
+from ...simulation.result import MODE_GA, ROBOT_COPY
+from ..cases import case_study, joint_reference, run_case
+from ..pictures.plotting import plot_efforts, plot_path_3d, plot_tip_error, save_figure
+from ..pool import Inline, Workers
 from .beyond import BeyondRun, beyond_figure, beyond_runs, beyond_section, run_beyond_one
-from .cases import PAPER_RESULTS, case_study, joint_reference, run_case
-from .plotting import plot_efforts, plot_path_3d, plot_tip_error, save_figure
-from .pool import Inline, Workers
-
-
-@dataclass(frozen=True)
-class RunSpec:
-    """One run of the reproduction."""
-
-    case: int
-    controller: str
-    external_force: bool
-    rates: str
-
-    @property
-    def folder(self) -> str:
-        force = "_force" if self.external_force else ""
-        rates = "" if self.rates == "exact" else "_fd"
-        return f"case{self.case}_{self.controller}{force}{rates}"
-
-    @property
-    def label(self) -> str:
-        text = self.controller.upper() + (" + tool force" if self.external_force else "")
-        return text + (" (FD rates)" if self.rates == "finite_difference" else "")
-
-
-def paper_runs(rates: Iterable[str] = ("exact", "finite_difference")) -> list[RunSpec]:
-    """Every combination the paper reports, for each way of computing the reference rates."""
-    combos = [
-        (1, "cfc", False),
-        (1, "scm", False),
-        (2, "cfc", False),
-        (2, "scm", False),
-        (2, "cfc", True),
-        (2, "scm", True),
-    ]
-    return [RunSpec(c, ctrl, force, r) for r in rates for c, ctrl, force in combos]
+from .html import runs_from_reproduction, write_html_report
+from .runs import TABLE_COLUMNS, RunSpec, mm, paper_runs, table_row
+from .seeds import seed_section
 
 
 @dataclass(frozen=True)
@@ -201,8 +170,6 @@ def _reproduce_into(
         def write_page() -> None:
             if progress:
                 progress("figures and report", len(specs), len(specs))
-            from .html_report import runs_from_reproduction, write_html_report  # it imports this module
-
             page.append(
                 write_html_report(
                     robot,
@@ -228,8 +195,6 @@ def _reproduce_into(
     if beyond:
         text += "\n" + "\n".join(beyond) + "\n"
     if seeds:
-        from .seeds import seed_section
-
         if progress:
             progress(f"{seeds} seeds of every run (Dask)", len(specs), len(specs))
         section = seed_section(folder / "seeds", seeds, specs, integrator=integrator, substeps=substeps, config=config)
@@ -378,50 +343,6 @@ def _figures(results: dict[RunSpec, SimulationResult], folder: Path) -> dict[str
     return {p.caption: draw_figure(p, results, folder) for p in figure_plan(results)}
 
 
-def _mm(value: float | None) -> str:
-    return "—" if value is None else f"{value * 1e3:.4f}"
-
-
-#: Columns of the report's table (``report.md`` and ``report.html`` show the same table).
-TABLE_COLUMNS = (
-    "case",
-    "controller",
-    "tool force",
-    "rates",
-    "paper",
-    "ours: max (mm)",
-    "ours: max after 0.2 s (mm)",
-    "ours: RMS (mm)",
-    "peak force (N)",
-    "GA activations",
-    "GA time (s)",
-    "wall (s)",
-    "folder",
-)
-
-
-def table_row(spec: RunSpec, summary: dict[str, Any], folder: str | None = None) -> list[str]:
-    """The cells of one run in the report's table (:data:`TABLE_COLUMNS`), as plain text (each
-    format escapes them: :mod:`vgtarm.markup`); ``folder`` defaults to the spec's folder name."""
-    s = summary
-    paper = PAPER_RESULTS.get((spec.case, spec.controller, spec.external_force))
-    return [
-        str(spec.case),
-        spec.controller.upper(),
-        "yes" if spec.external_force else "no",
-        "exact" if spec.rates == "exact" else "finite diff.",
-        paper.text if paper else "—",
-        _mm(s["max_tip_error_m"]),
-        _mm(s["max_tip_error_after_transient_m"]),
-        _mm(s["rms_tip_error_m"]),
-        "—" if s["peak_force_n"] is None else f"{s['peak_force_n']:.1f}",
-        str(s["ga_activations"]),
-        f"{s['ga_time_s']:.2f}",
-        f"{s['wall_time_s']:.2f}",
-        folder if folder is not None else spec.folder,
-    ]
-
-
 def render_report(
     results: dict[RunSpec, SimulationResult],
     figures: dict[str, str],
@@ -483,19 +404,19 @@ def _reading(results: dict[RunSpec, SimulationResult], summaries: dict[RunSpec, 
         ref = results[RunSpec(1, "cfc", False, "exact")]
         v0 = float(np.linalg.norm(ref.tip_desired[1] - ref.tip_desired[0]) / ref.dt)
         out.append(
-            f"- **Case 1, CFC.** Our maximum error, {_mm(c1['max_tip_error_m'])} mm at t = "
+            f"- **Case 1, CFC.** Our maximum error, {mm(c1['max_tip_error_m'])} mm at t = "
             f"{c1['time_of_max_tip_error_s']:.3f} s, is the start transient: the robot starts at rest at q_d(0) while"
             " the"
             f" path already moves at about {v0 * 1e3:.0f} mm/s, and the slow pole of s^2 + 300 s + 5000 (about 18 1/s)"
             f" takes tens of milliseconds to absorb it. After 0.2 s the error stays below "
-            f"{_mm(c1['max_tip_error_after_transient_m'])} mm. The paper reports 0.53 mm with errors below 0.2 mm after"
+            f"{mm(c1['max_tip_error_after_transient_m'])} mm. The paper reports 0.53 mm with errors below 0.2 mm after"
             " the start: the same shape."
         )
     out += _rates_reading(results, summaries)
     c2 = _find(summaries, 2, "cfc", False, "exact")
     if c2:
         out.append(
-            f"- **Case 2, CFC without force.** {_mm(c2['max_tip_error_m'])} mm (largest at t ="
+            f"- **Case 2, CFC without force.** {mm(c2['max_tip_error_m'])} mm (largest at t ="
             f" {c2['time_of_max_tip_error_s']:.3f} s) against the paper's 0.31 mm. The path starts and ends at rest, so"
             " with an exact model and a consistent start there is no transient; what is left is the sampling of the"
             " control (efforts held over each 1 ms period), largest where the cubic blends' acceleration jumps at"
@@ -506,8 +427,8 @@ def _reading(results: dict[RunSpec, SimulationResult], summaries: dict[RunSpec, 
     if c2f and c2:
         out.append(
             f"- **Tool force.** The cutting force (20 N against the motion) and the disturbance (5 N per axis), which"
-            f" the controller does not know, raise case 2's maximum error from {_mm(c2['max_tip_error_m'])} mm to"
-            f" {_mm(c2f['max_tip_error_m'])} mm (paper: 0.31 mm to 0.68 mm). Computed force control has no integral"
+            f" the controller does not know, raise case 2's maximum error from {mm(c2['max_tip_error_m'])} mm to"
+            f" {mm(c2f['max_tip_error_m'])} mm (paper: 0.31 mm to 0.68 mm). Computed force control has no integral"
             " action, so a steady force F leaves an offset of about M^-1 J^T F / Kp in the joints."
         )
     for case, force in ((1, False), (2, False), (2, True)):
@@ -527,8 +448,8 @@ def _reading(results: dict[RunSpec, SimulationResult], summaries: dict[RunSpec, 
         out.append(
             f"- **SCM, {where}.** The GA ran {scm['ga_activations']} times ({scm['ga_time_s']:.2f} s in all,"
             f" {scm['ga_time_per_activation_s'] * 1e3:.1f} ms each, inside a run of {scm['wall_time_s']:.2f} s for"
-            f" {scm['simulated_time_s']:.2f} s simulated). Maximum error {_mm(scm['max_tip_error_m'])} mm against"
-            f" CFC's {_mm(cfc['max_tip_error_m'])} mm; peak actuator force {scm['peak_force_n']:.0f} N against"
+            f" {scm['simulated_time_s']:.2f} s simulated). Maximum error {mm(scm['max_tip_error_m'])} mm against"
+            f" CFC's {mm(cfc['max_tip_error_m'])} mm; peak actuator force {scm['peak_force_n']:.0f} N against"
             f" {cfc['peak_force_n']:.0f} N, and the sample-to-sample force changes are {rms_change:.1f} times CFC's"
             " (the paper also reports more fluctuating forces)."
         )
@@ -565,7 +486,7 @@ def _rates_reading(results: dict[RunSpec, SimulationResult], summaries: dict[Run
         where = f"case {case}{' with the tool force' if force else ''}"
         parts.append(
             f"{where}: reference rates differ by at most {velocity:.1e} (m/s, rad/s), maximum error"
-            f" {_mm(e_exact)} mm with exact rates and {_mm(e_fd)} mm with finite differences"
+            f" {mm(e_exact)} mm with exact rates and {mm(e_fd)} mm with finite differences"
         )
     if not parts:
         return []

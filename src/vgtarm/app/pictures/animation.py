@@ -1,7 +1,7 @@
 """A closed-loop run animated: the mechanism moving along the run's ``q(t)``, rendered to MP4 or GIF.
 
 Each frame shows, on the left, the robot in an isometric view (drawn by
-:func:`vgtarm.app.drawing.draw_mechanism` from the run's measured ``q`` at that instant) with the
+:func:`vgtarm.app.pictures.drawing.draw_mechanism` from the run's measured ``q`` at that instant) with the
 desired and actual tip paths behind it; on the right, the tip path seen from above magnified around
 the path, and the tip error against time with a cursor. A line of text gives the time, the current
 tip error and, for runs of the switching method, whether the GA's gains are in use.
@@ -33,12 +33,12 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import InputError, cut, escape
-from ..fileio import atomic_path
-from ..markup import mpl_text
-from ..memory import check_memory
-from ..model.robot import Robot
-from ..simulation.result import MODE_GA, SimulationResult
+from ...errors import InputError, cut, escape
+from ...fileio import atomic_path
+from ...markup import mpl_text
+from ...memory import check_memory
+from ...model.robot import Robot
+from ...simulation.result import MODE_GA, SimulationResult
 from .drawing import MM, draw_mechanism, label_axes, set_equal_extent
 from .geometry import MechanismGeometry, mechanism_geometries
 

@@ -1,6 +1,6 @@
 """``vgtarm draw``, ``vgtarm animate`` and ``vgtarm report``: see the robot.
 
-Registered in :func:`vgtarm.app.cli.build_parser` by :func:`add_parsers`. Plotly and
+Registered in :func:`vgtarm.app.cli.command.build_parser` by :func:`add_parsers`. Plotly and
 imageio-ffmpeg (the ``viz`` extra) are imported only when a command needs them.
 """
 
@@ -11,10 +11,10 @@ import math
 from pathlib import Path
 from typing import Any
 
-from ..errors import InputError, escape
-from ..fileio import atomic_folder, check_output_file, check_output_folder, placements
-from ..model.parameters import JOINT_NAMES
-from ..model.robot import load_robot
+from ...errors import InputError, escape
+from ...fileio import atomic_folder, check_output_file, check_output_folder, placements
+from ...model.parameters import JOINT_NAMES
+from ...model.robot import load_robot
 
 #: Picture formats of ``vgtarm draw``.
 PICTURE_FORMATS = (".png", ".svg", ".pdf")
@@ -38,8 +38,8 @@ def _config(parser: argparse.ArgumentParser) -> None:
 
 def cmd_draw(args: argparse.Namespace) -> int:
     """Draw the robot at one configuration: its operating planes and an isometric view."""
-    from .drawing import pose_figure
-    from .plotting import save_figure
+    from ..pictures.drawing import pose_figure
+    from ..pictures.plotting import save_figure
 
     if args.out.suffix.lower() not in PICTURE_FORMATS:
         raise InputError(f"--out {args.out}: expected a file name ending in one of {list(PICTURE_FORMATS)}")
@@ -72,7 +72,7 @@ def robot_file_of_runs(config: Path | None, runs: list[Path]) -> Path | None:
 def _robot_copy(run: Path) -> Path | None:
     """The ``robot.toml`` of a run's folder, or of the reproduction (a folder with ``report.md``,
     one or two levels up) that holds it; None when there is none."""
-    from ..simulation.result import ROBOT_COPY
+    from ...simulation.result import ROBOT_COPY
 
     if (run / ROBOT_COPY).is_file():
         return run / ROBOT_COPY
@@ -83,14 +83,14 @@ def _robot_copy(run: Path) -> Path | None:
 
 
 def _load_run(folder: Path) -> Any:
-    from ..simulation import SimulationResult
+    from ...simulation import SimulationResult
 
     return SimulationResult.load(folder)
 
 
 def cmd_animate(args: argparse.Namespace) -> int:
     """Render a saved run as MP4 or GIF."""
-    from .animation import render_animation
+    from ..pictures.animation import render_animation
 
     check_output_file(args.out, "--out", inputs=[args.config])
     robot = load_robot(robot_file_of_runs(args.config, [args.run_dir]))
@@ -106,7 +106,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     """Write report.html for saved runs."""
-    from .html_report import PLOTLY_JS, load_runs, write_html_report
+    from ..reports.html import PLOTLY_JS, load_runs, write_html_report
 
     inputs, owned = [*args.runs, args.config], ("*.html", PLOTLY_JS)
     check_output_folder(args.out, "--out", inputs=inputs, owned=owned)  # before the work; never over a run

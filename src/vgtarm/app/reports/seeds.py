@@ -9,16 +9,14 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
-from ..errors import InputError
-from .cases import PAPER_RESULTS
-from .study_points import check_point, execute_point
-
-if TYPE_CHECKING:
-    from .report import RunSpec
+from ...errors import InputError
+from ..cases import PAPER_RESULTS
+from ..study_points import check_point, execute_point
+from .runs import RunSpec
 
 #: Most seeds of ``reproduce --seeds``: 120,000 runs of about a second, a day and more of work.
 MAX_SEEDS = 10_000
@@ -34,8 +32,8 @@ def seed_rows(
     config: str | Path | None = None,
 ) -> list[dict[str, Any]]:
     """Run every spec with seeds ``0..seeds-1`` (a study per case and rates); returns the rows."""
-    from ..study.runner import run_study
-    from ..study.spec import parse_study
+    from ...study.runner import run_study
+    from ...study.spec import parse_study
 
     if not (isinstance(seeds, int) and 1 <= seeds <= MAX_SEEDS):
         raise InputError(f"seeds = {seeds!r}: expected a whole number from 1 to {MAX_SEEDS:,}")

@@ -1,6 +1,6 @@
 """``vgtarm convert-robot`` and what ``vgtarm describe`` prints without building a model.
 
-Registered in :func:`vgtarm.app.cli.build_parser` by :func:`add_parsers`. The stack format
+Registered in :func:`vgtarm.app.cli.command.build_parser` by :func:`add_parsers`. The stack format
 (``vgtarm.model.stack``) describes any stack of VGT modules; ``convert-robot`` turns a robot file
 of the fixed 7-joint format (default: the shipped reference robot) into it, value for value, so the
 stack's model gives the fixed model's numbers (see ``docs/modelling.md``, "Stacks of modules").
@@ -22,13 +22,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import ConfigError, cut, escape
-from ..fileio import atomic_write_text, check_output_file, parse_toml, read_text_limited
-from ..memory import size_text
-from ..model import budget, compiled
-from ..model.parameters import ROBOT_FILE_LIMIT, RobotParameters, load_parameters
-from ..model.robot import definition_of, robot_parameters_from_dict
-from ..model.stack import Stack, stack_from_parameters, stack_to_toml
+from ...errors import ConfigError, cut, escape
+from ...fileio import atomic_write_text, check_output_file, parse_toml, read_text_limited
+from ...memory import size_text
+from ...model import budget, compiled
+from ...model.parameters import ROBOT_FILE_LIMIT, RobotParameters, load_parameters
+from ...model.robot import definition_of, robot_parameters_from_dict
+from ...model.stack import Stack, stack_from_parameters, stack_to_toml
 
 #: ``vgtarm describe`` evaluates the mass matrix at home when building its function alone is
 #: estimated shorter than this (s): about 11 modules (a stack of 50 would take minutes).

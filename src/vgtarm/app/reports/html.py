@@ -1,6 +1,6 @@
 """``report.html``: the runs on one interactive page that opens from disk, written with Plotly.
 
-The page holds the same table as ``report.md`` (:func:`vgtarm.app.report.table_row`), zoomable
+The page holds the same table as ``report.md`` (:func:`vgtarm.app.reports.runs.table_row`), zoomable
 plots of the tip error and of every actuator's effort (runs toggled from the legend: one legend
 entry per run controls all of its traces), the desired and actual tip paths in 3-D, and the
 mechanism animated along the first run of each case study, with a time slider and a play button.
@@ -33,16 +33,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .. import errors
-from ..errors import InputError
-from ..fileio import atomic_write_text
-from ..markup import html_text, plotly_text
-from ..model.robot import Robot
-from ..simulation.result import MODE_GA, SimulationResult
-from .animation import check_same_robot
-from .drawing import CLOSENESS_COLOURS, MM
-from .geometry import MechanismGeometry, mechanism_geometries
-from .report import TABLE_COLUMNS, RunSpec, table_row
+from ... import errors
+from ...errors import InputError
+from ...fileio import atomic_write_text
+from ...markup import html_text, plotly_text
+from ...model.robot import Robot
+from ...simulation.result import MODE_GA, SimulationResult
+from ..pictures.animation import check_same_robot
+from ..pictures.drawing import CLOSENESS_COLOURS, MM
+from ..pictures.geometry import MechanismGeometry, mechanism_geometries
+from .runs import TABLE_COLUMNS, RunSpec, table_row
 
 Array = NDArray[np.float64]
 

@@ -1,6 +1,6 @@
 """The mechanism drawn with Matplotlib: legs, platforms, twist axis, tool and frames, to scale.
 
-:func:`draw_mechanism` draws one :class:`~vgtarm.app.geometry.MechanismGeometry` into a 3-D Axes
+:func:`draw_mechanism` draws one :class:`~vgtarm.app.pictures.geometry.MechanismGeometry` into a 3-D Axes
 and returns the artists, which :meth:`MechanismArtists.update` moves to another configuration
 (the animation uses that). :func:`pose_figure` makes the picture of ``vgtarm draw``: the plane of
 module 1, the plane of module 2 and an isometric view side by side (a stack: module 1's plane, the
@@ -29,9 +29,9 @@ from mpl_toolkits.mplot3d.art3d import Line3D, Poly3DCollection
 from mpl_toolkits.mplot3d.axes3d import Axes3D
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import InputError
-from ..markup import mpl_text
-from ..model.robot import Robot
+from ...errors import InputError
+from ...markup import mpl_text
+from ...model.robot import Robot
 from .geometry import MechanismGeometry, mechanism_geometry
 
 #: Drawing unit: metres to millimetres.

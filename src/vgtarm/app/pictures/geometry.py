@@ -2,8 +2,8 @@
 
 One plain record, :class:`MechanismGeometry`, is built from the model's forward kinematics and
 the robot's dimensions, and everything that shows the robot reads it: the Matplotlib drawing
-(:mod:`vgtarm.app.drawing`), the animation (:mod:`vgtarm.app.animation`) and the interactive page
-(:mod:`vgtarm.app.html_report`). Nothing here is a sketch: the joints follow the spec's module
+(:mod:`vgtarm.app.pictures.drawing`), the animation (:mod:`vgtarm.app.pictures.animation`) and the interactive page
+(:mod:`vgtarm.app.reports.html`). Nothing here is a sketch: the joints follow the spec's module
 (``shared/spec/mechanism.md``) from the passive angles the model returns.
 
 Any robot is drawn the same way, as a stack of modules (the paper's robot is the stack of
@@ -29,11 +29,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import InputError, shown
-from ..model.parameters import JOINT_NAMES, JOINT_UNITS, RobotParameters
-from ..model.robot import ForwardKinematics, Robot
-from ..model.stack.description import Stack, stack_from_parameters
-from ..model.stack.symbolic import plane_direction
+from ...errors import InputError, shown
+from ...model.parameters import JOINT_NAMES, JOINT_UNITS, RobotParameters
+from ...model.robot import ForwardKinematics, Robot
+from ...model.stack.description import Stack, stack_from_parameters
+from ...model.stack.symbolic import plane_direction
 
 Array = NDArray[np.float64]
 

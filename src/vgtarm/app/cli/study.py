@@ -6,13 +6,13 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from ..errors import InputError, cut, escape
-from ..fileio import atomic_write_text, check_output_file, check_writable_parent
+from ...errors import InputError, cut, escape
+from ...fileio import atomic_write_text, check_output_file, check_writable_parent
 
 
 def cmd_study_init(args: argparse.Namespace) -> int:
     """Write the commented example study."""
-    from ..study.example import EXAMPLE
+    from ...study.example import EXAMPLE
 
     check_output_file(args.file, "FILE")  # a name, not a folder, in a folder we may write in
     if args.file.exists() and not args.force:
@@ -25,9 +25,9 @@ def cmd_study_init(args: argparse.Namespace) -> int:
 
 def cmd_study_run(args: argparse.Namespace) -> int:
     """Run (or resume) a study and write its tables."""
-    from ..study.runner import run_study
-    from ..study.spec import load_study
-    from .study_points import check_point, execute_point
+    from ...study.runner import run_study
+    from ...study.spec import load_study
+    from ..study_points import check_point, execute_point
 
     # The folder keeps finished runs to resume from (each run file is atomic): it grows, it is not
     # replaced; check it before the work.
@@ -57,7 +57,7 @@ def cmd_study_run(args: argparse.Namespace) -> int:
 
 def cmd_study_report(args: argparse.Namespace) -> int:
     """Write report.md and the figures of a study's results."""
-    from ..study.report import write_report
+    from ...study.report import write_report
 
     report = write_report(args.folder)
     print(f"report written to {escape(str(report))}")

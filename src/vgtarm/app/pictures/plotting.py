@@ -34,10 +34,10 @@ from matplotlib.ticker import MaxNLocator
 from mpl_toolkits.mplot3d.axes3d import Axes3D
 from numpy.typing import NDArray
 
-from ..errors import InputError
-from ..fileio import atomic_path
-from ..markup import mpl_text
-from ..simulation.result import MODE_GA, SimulationResult
+from ...errors import InputError
+from ...fileio import atomic_path
+from ...markup import mpl_text
+from ...simulation.result import MODE_GA, SimulationResult
 
 __all__ = [
     "comparison_figure",

@@ -20,12 +20,13 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from ..errors import SimulationError
-from ..markup import md_cell, md_code, md_text
-from ..model.robot import Robot
-from ..simulation import ExternalForce, JointReference, SimulationResult, simulate
-from .cases import case_study, run_case
-from .plotting import save_figure
+from ...errors import SimulationError
+from ...markup import md_cell, md_code, md_text
+from ...model.robot import Robot
+from ...simulation import ExternalForce, JointReference, SimulationResult, simulate
+from ..cases import case_study, run_case
+from ..pictures.plotting import save_figure
+from .runs import mm
 
 #: Realistic sensing: leg encoder step (m) and the controller model's mass factor.
 ENCODER_RESOLUTION = 1e-6
@@ -148,10 +149,6 @@ def run_beyond_one(
     return result
 
 
-def _mm(value: float | None) -> str:
-    return "—" if value is None else f"{value * 1e3:.4f}"
-
-
 def _n(value: float | None, digits: int) -> str:
     return "—" if value is None else f"{value:.{digits}f}"
 
@@ -223,10 +220,10 @@ def beyond_section(results: dict[BeyondRun, SimulationResult], figure: str) -> l
     for spec, s in summaries.items():
         if not spec.in_table:
             continue
-        largest = _mm(s["max_tip_error_m"]) if s["success"] else md_cell(str(s["message"]).split(":")[0])
+        largest = mm(s["max_tip_error_m"]) if s["success"] else md_cell(str(s["message"]).split(":")[0])
         lines.append(
             f"| {md_cell(spec.label)} | {'realistic' if spec.realistic else 'perfect'} | {largest} |"
-            f" {_mm(s['rms_tip_error_m'])} | {_n(s['peak_force_n'], 1)} | {_n(s['rms_force_n'], 1)} |"
+            f" {mm(s['rms_tip_error_m'])} | {_n(s['peak_force_n'], 1)} | {_n(s['rms_force_n'], 1)} |"
             f" {_n(s['chatter_n'], 2)} | {_n(s['rms_twist_torque_nm'], 3)} | {_n(s['actuator_energy_j'], 2)} |"
             f" {s['ga_activations']} | {md_code(spec.folder + '/')} |"
         )
@@ -248,23 +245,23 @@ def beyond_section(results: dict[BeyondRun, SimulationResult], figure: str) -> l
         )
         lines += [
             f"- Computed force control has no integral action: the 20 N cutting force leaves an offset"
-            f" (max {_mm(cfc['max_tip_error_m'])} mm). The observer ({gain:g} 1/s) estimates the external joint"
-            f" efforts and cancels them: max {_mm(observed['max_tip_error_m'])} mm, RMS"
-            f" {_mm(observed['rms_tip_error_m'])} mm.",
+            f" (max {mm(cfc['max_tip_error_m'])} mm). The observer ({gain:g} 1/s) estimates the external joint"
+            f" efforts and cancels them: max {mm(observed['max_tip_error_m'])} mm, RMS"
+            f" {mm(observed['rms_tip_error_m'])} mm.",
             f"- The cutting force points against the tool's actual velocity. Where the tool is slow (desired"
             f" speed below {SLOW_SPEED * 1e3:g} mm/s: it starts, turns at the corner, stops; {slow.mean():.1%} of"
             " the run) that velocity is mostly the tracking error's, and the 20 N force turns within a few"
             f" periods, or flips from one period to the next (steps at t = {steps} s), faster than the"
             f" observer's time constant 1/K_O = {1e3 / gain:.1f} ms. With the cutting force alone the error is"
-            f" max {_mm(alone[0])} mm there and {_mm(alone[1])} mm elsewhere (RMS {_mm(alone[2])} mm).",
+            f" max {mm(alone[0])} mm there and {mm(alone[1])} mm elsewhere (RMS {mm(alone[2])} mm).",
             f"- The random disturbance alone (5 N per axis, a new value each period, faster than any observer"
-            f" can follow) leaves max {_mm(noise['max_tip_error_m'])} mm, RMS {_mm(noise['rms_tip_error_m'])} mm,"
+            f" can follow) leaves max {mm(noise['max_tip_error_m'])} mm, RMS {mm(noise['rms_tip_error_m'])} mm,"
             " everywhere on the path: it sets the floor.",
-            f"- Together: max {_mm(both[0])} mm in the slow phases, {_mm(both[1])} mm elsewhere (RMS"
-            f" {_mm(both[2])} mm).",
+            f"- Together: max {mm(both[0])} mm in the slow phases, {mm(both[1])} mm elsewhere (RMS"
+            f" {mm(both[2])} mm).",
             f"- The force sensor knows the tool force one period late, with no filter lag: max"
-            f" {_mm(sensor['max_tip_error_m'])} mm, RMS {_mm(sensor['rms_tip_error_m'])} mm ({_mm(late[0])} mm in"
-            f" the slow phases, {_mm(late[1])} mm elsewhere). What is left is the one-period delay, of the"
+            f" {mm(sensor['max_tip_error_m'])} mm, RMS {mm(sensor['rms_tip_error_m'])} mm ({mm(late[0])} mm in"
+            f" the slow phases, {mm(late[1])} mm elsewhere). What is left is the one-period delay, of the"
             " disturbance that changes every period and of the force flipping at low speed.",
         ]
     scm_realistic = by_label.get(("SCM", True))
@@ -289,8 +286,8 @@ def beyond_section(results: dict[BeyondRun, SimulationResult], figure: str) -> l
     if realistic:
         lines.append(
             f"- With {ENCODER_RESOLUTION * 1e6:g} um encoders and a model {round((MODEL_MASS - 1) * 100)} % off in"
-            f" mass the observer still tracks to max {_mm(realistic['max_tip_error_m'])} mm, RMS"
-            f" {_mm(realistic['rms_tip_error_m'])} mm: it estimates the model's error together with the tool force."
+            f" mass the observer still tracks to max {mm(realistic['max_tip_error_m'])} mm, RMS"
+            f" {mm(realistic['rms_tip_error_m'])} mm: it estimates the model's error together with the tool force."
         )
         named = {(spec.label, spec.realistic): r for spec, r in results.items()}
         chain = [
@@ -304,7 +301,7 @@ def beyond_section(results: dict[BeyondRun, SimulationResult], figure: str) -> l
         ]
         if all(r is not None and r.success for r in chain):
             slow = _slow(chain[0])  # type: ignore[arg-type]
-            exact, unfiltered, filtered, real = (_mm(_split(r, slow)[2]) for r in chain)  # type: ignore[arg-type]
+            exact, unfiltered, filtered, real = (mm(_split(r, slow)[2]) for r in chain)  # type: ignore[arg-type]
             lines.append(
                 f"- What realistic sensing costs, RMS away from the slow phases: {exact} mm with perfect sensing;"
                 f" {unfiltered} mm with velocities differenced from 1 nm encoders and a nearly transparent filter"
@@ -317,8 +314,8 @@ def beyond_section(results: dict[BeyondRun, SimulationResult], figure: str) -> l
     sensor_realistic = by_label.get(("CFC + force sensor", True))
     if sensor_realistic and sensor_realistic["success"]:
         lines.append(
-            f"- The force sensor with the same sensing and model: max {_mm(sensor_realistic['max_tip_error_m'])} mm,"
-            f" RMS {_mm(sensor_realistic['rms_tip_error_m'])} mm. It measures the tool force only, so the offset"
+            f"- The force sensor with the same sensing and model: max {mm(sensor_realistic['max_tip_error_m'])} mm,"
+            f" RMS {mm(sensor_realistic['rms_tip_error_m'])} mm. It measures the tool force only, so the offset"
             " from the model's wrong mass (gravity and inertia) stays; the observer removes both."
         )
     return lines

@@ -1,8 +1,8 @@
-"""Regenerate the README's pictures: ``python -m vgtarm.app.readme_images [--out docs/images]``.
+"""Regenerate the README's pictures: ``python -m vgtarm.app.pictures.readme_images [--out docs/images]``.
 
-- ``robot_home.png``: the reference robot at its home pose (:func:`vgtarm.app.drawing.pose_figure`);
+- ``robot_home.png``: the reference robot at its home pose (:func:`vgtarm.app.pictures.drawing.pose_figure`);
 - ``animation_frame.png``: one frame of the animation of case 1 under the switching method
-  (:func:`vgtarm.app.animation.animation_frame`), from a seeded run of the whole path.
+  (:func:`vgtarm.app.pictures.animation.animation_frame`), from a seeded run of the whole path.
 
 Both are reduced to a palette of :data:`COLOURS` colours so that they stay a few tens of kB.
 """
@@ -19,10 +19,10 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-from ..fileio import atomic_path
-from ..model.robot import Robot, load_robot
+from ...fileio import atomic_path
+from ...model.robot import Robot, load_robot
+from ..cases import run_case
 from .animation import animation_frame
-from .cases import run_case
 from .drawing import pose_figure
 
 #: Palette size of the written PNGs.
@@ -62,8 +62,10 @@ def make_images(robot: Robot, out: str | Path) -> list[Path]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``python -m vgtarm.app.readme_images``."""
-    parser = argparse.ArgumentParser(prog="python -m vgtarm.app.readme_images", description=__doc__.splitlines()[0])
+    """Entry point of ``python -m vgtarm.app.pictures.readme_images``."""
+    parser = argparse.ArgumentParser(
+        prog="python -m vgtarm.app.pictures.readme_images", description=__doc__.splitlines()[0]
+    )
     parser.add_argument("--out", type=Path, default=Path("docs/images"), help="folder (default: docs/images)")
     parser.add_argument("--config", type=Path, default=None, help="robot TOML file (default: the reference robot)")
     args = parser.parse_args(argv)

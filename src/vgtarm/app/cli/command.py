@@ -20,9 +20,9 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from .. import __version__, paths
-from ..errors import MESSAGE_LENGTH, ConfigError, InputError, UnreachableError, VgtarmError, cut, escape, shown
-from ..fileio import (
+from ... import __version__, paths
+from ...errors import MESSAGE_LENGTH, ConfigError, InputError, UnreachableError, VgtarmError, cut, escape, shown
+from ...fileio import (
     atomic_folder,
     atomic_write_text,
     check_output_file,
@@ -30,11 +30,15 @@ from ..fileio import (
     placements,
     read_text_limited,
 )
-from ..ik import CSV_COLUMNS, write_csv
-from ..model.parameters import JOINT_NAMES, JOINT_UNITS, ROBOT_FILE_LIMIT
-from ..model.robot import load_robot
-from ..paths import Path as DesiredPath
-from . import cli_mujoco, cli_stack, cli_study, cli_visual
+from ...ik import CSV_COLUMNS, write_csv
+from ...model.parameters import JOINT_NAMES, JOINT_UNITS, ROBOT_FILE_LIMIT
+from ...model.robot import load_robot
+from ...paths import Path as DesiredPath
+from . import mujoco as cli_mujoco
+from . import stack as cli_stack
+from . import study as cli_study
+from . import visual as cli_visual
+from .options import add_config, non_negative_int, positive_float, positive_int
 
 
 def _format_vector(values: Sequence[float] | np.ndarray, digits: int = 6) -> str:
@@ -43,8 +47,8 @@ def _format_vector(values: Sequence[float] | np.ndarray, digits: int = 6) -> str
 
 def cmd_describe(args: argparse.Namespace) -> int:
     """Print the robot: dimensions, limits, home pose, tip at home, mass-matrix eigenvalues."""
-    from ..model.stack import Stack
-    from .cli_stack import describe_stack, home_figures, model_state, robot_description
+    from ...model.stack import Stack
+    from .stack import describe_stack, home_figures, model_state, robot_description
 
     p = robot_description(args.config)  # no model is built: see cli_stack
     if isinstance(p, Stack):
@@ -106,17 +110,17 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     """Run one case study, print its summary, write its results and figures."""
     from tqdm import tqdm
 
-    from ..errors import SimulationError
-    from ..simulation.result import ROBOT_COPY, RUN_FILES
-    from .cases import joint_reference, run_case
-    from .plotting import comparison_figure, save_figure
+    from ...errors import SimulationError
+    from ...simulation.result import ROBOT_COPY, RUN_FILES
+    from ..cases import joint_reference, run_case
+    from ..pictures.plotting import comparison_figure, save_figure
 
     if args.out is not None:
         check_output_folder(args.out, "--out", inputs=[args.config], owned=RUN_FILES)  # before the work
     robot = load_robot(args.config)
     robot_text = _robot_text(args.config)
     if args.plant == "mujoco":
-        from .. import mujoco_bridge  # noqa: F401  (registers the MuJoCo plant)
+        from ... import mujoco_bridge  # noqa: F401  (registers the MuJoCo plant)
     model = robot.parameters.scaled(mass=args.model_mass, inertia=args.model_inertia, friction=args.model_friction)
     exact_model = (args.model_mass, args.model_inertia, args.model_friction) == (1.0, 1.0, 1.0)
     with tqdm(total=100, desc=f"case {args.case} {args.controller}", unit="%", disable=args.quiet, leave=False) as bar:
@@ -221,8 +225,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     """Run every combination the paper reports and write report.md."""
     from tqdm import tqdm
 
-    from .pool import default_workers
-    from .report import REPRODUCE_FILES, paper_runs, reproduce
+    from ..pool import default_workers
+    from ..reports.reproduce import REPRODUCE_FILES, paper_runs, reproduce
 
     check_output_folder(args.out, "--out", inputs=[args.config], owned=REPRODUCE_FILES)  # before the work
     robot = load_robot(args.config)
@@ -258,11 +262,11 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 
 
 def _add_run_options(parser: argparse.ArgumentParser) -> None:
-    from ..simulation import INTEGRATORS
-    from ..simulation.simulator import MAX_SUBSTEPS
+    from ...simulation import INTEGRATORS
+    from ...simulation.simulator import MAX_SUBSTEPS
 
     def substeps(text: str) -> int:
-        value = _positive_int(text)
+        value = positive_int(text)
         if value > MAX_SUBSTEPS:
             raise argparse.ArgumentTypeError(f"expected at most {MAX_SUBSTEPS:,} steps per control period, got {text}")
         return value
@@ -277,13 +281,13 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
         "--substeps", type=substeps, default=1, help=f"integration steps per control period (1 to {MAX_SUBSTEPS:,})"
     )
     parser.add_argument(
-        "--seed", type=_non_negative_int, default=0, help="seed of the disturbance and the GA (default 0)"
+        "--seed", type=non_negative_int, default=0, help="seed of the disturbance and the GA (default 0)"
     )
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
 
 
 def _add_observer_options(parser: argparse.ArgumentParser) -> None:
-    from ..simulation.sensing import DEFAULT_OBSERVER_GAIN_DT, DEFAULT_VELOCITY_FILTER_HZ, OBSERVERS
+    from ...simulation.sensing import DEFAULT_OBSERVER_GAIN_DT, DEFAULT_VELOCITY_FILTER_HZ, OBSERVERS
 
     parser.add_argument(
         "--observer",
@@ -324,27 +328,6 @@ def _add_observer_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _positive_int(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text}")
-    return value
-
-
-def _non_negative_int(text: str) -> int:
-    value = int(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text}")
-    return value
-
-
-def _positive_float(text: str) -> float:
-    value = float(text)
-    if not (np.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text}")
-    return value
-
-
 def _ik_path(args: argparse.Namespace) -> DesiredPath:
     """The desired path of ``vgtarm ik``: ``--case 1|2`` or ``--path FILE``, sampled at ``--dt``."""
     dt = None
@@ -367,8 +350,8 @@ def _ik_path(args: argparse.Namespace) -> DesiredPath:
 
 def _check_ik_memory(args: argparse.Namespace, path: DesiredPath) -> None:
     """Refuse, naming the flags, a path whose inverse kinematics will not fit in memory."""
-    from ..ik.solve import memory_estimate
-    from ..memory import check_memory
+    from ...ik.solve import memory_estimate
+    from ...memory import check_memory
 
     source = f"--path {shown(str(args.path), 200)}" if args.path is not None else f"--case {args.case}"
     spacing = f"--dt {path.dt:g} s" if args.dt is not None else f"dt {path.dt:g} s"
@@ -386,7 +369,7 @@ def _criterion(args: argparse.Namespace) -> dict[str, Any]:
     if args.criterion == "joint_limits":  # a --tool-force is refused by the options, with its reason
         return {} if force is None else {"tool_force": force}
     if force is None:
-        from ..simulation import ExternalForce
+        from ...simulation import ExternalForce
 
         force = ExternalForce().cutting_force if getattr(args, "external_force", False) else 0.0
     return {"criterion": args.criterion, "tool_force": force}
@@ -400,7 +383,7 @@ def cmd_ik(args: argparse.Namespace) -> int:
     _check_ik_memory(args, path)
     robot = load_robot(args.config)
     if args.case is not None and robot.is_stack:  # the case paths placed on the robot (app/cases.py)
-        from .cases import path_placement
+        from ..cases import path_placement
 
         placement = path_placement(robot)
         path = path if placement is None else placement.apply(path)
@@ -438,16 +421,6 @@ def cmd_ik(args: argparse.Namespace) -> int:
     return 0
 
 
-def _add_config(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--config",
-        type=Path,
-        default=None,
-        metavar="FILE",
-        help="robot TOML file (default: the shipped reference robot)",
-    )
-
-
 class _Parser(argparse.ArgumentParser):
     """argparse whose usage errors echo a user's text escaped and cut, and which takes no
     abbreviated options (``--force`` silently meant ``--force-sensor``); subcommands inherit it."""
@@ -471,7 +444,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     describe = sub.add_parser("describe", help="print the robot and its model at the home pose")
-    _add_config(describe)
+    add_config(describe)
     describe.set_defaults(run=cmd_describe)
 
     fk = sub.add_parser("fk", help="forward kinematics of one configuration")
@@ -482,7 +455,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="Q",
         help=f"joint values in the order {' '.join(JOINT_NAMES)} (m, rad); a stack: one per joint, in its order",
     )
-    _add_config(fk)
+    add_config(fk)
     fk.set_defaults(run=cmd_fk)
 
     simulate = sub.add_parser("simulate", help="run one of the paper's case studies")
@@ -507,7 +480,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     simulate.add_argument(
         "--horizon",
-        type=_positive_int,
+        type=positive_int,
         default=20,
         help="GA fitness prediction horizon in control periods (default 20)",
     )
@@ -520,13 +493,13 @@ def build_parser() -> argparse.ArgumentParser:
     for name in ("mass", "inertia", "friction"):
         simulate.add_argument(
             f"--model-{name}",
-            type=_positive_float,
+            type=positive_float,
             default=1.0,
             metavar="FACTOR",
             help=f"scale the controller model's {name} (a wrong model; default 1)",
         )
     simulate.add_argument(
-        "--duration", type=_positive_float, default=None, metavar="S", help="run only the first S seconds of the path"
+        "--duration", type=positive_float, default=None, metavar="S", help="run only the first S seconds of the path"
     )
     _add_observer_options(simulate)
     simulate.add_argument(
@@ -540,7 +513,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", type=Path, default=None, metavar="DIR", help="write summary.json, the time series and a figure here"
     )
     _add_run_options(simulate)
-    _add_config(simulate)
+    add_config(simulate)
     simulate.set_defaults(run=cmd_simulate)
 
     again = sub.add_parser("reproduce", help="run every case the paper reports and write report.md")
@@ -549,9 +522,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
 
     def seed_count(text: str) -> int:
-        from .seeds import MAX_SEEDS
+        from ..reports.seeds import MAX_SEEDS
 
-        value = _positive_int(text)
+        value = positive_int(text)
         if value > MAX_SEEDS:
             raise argparse.ArgumentTypeError(f"expected at most {MAX_SEEDS:,} seeds, got {text}")
         return value
@@ -565,13 +538,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     again.add_argument(
         "--workers",
-        type=_positive_int,
+        type=positive_int,
         default=None,
         metavar="N",
         help="worker processes for the runs and figures (default: the CPUs, at most 4; 1: all in this process)",
     )
     _add_run_options(again)
-    _add_config(again)
+    add_config(again)
     again.set_defaults(run=cmd_reproduce)
     ik = sub.add_parser("ik", help="joint reference of a desired tip path (inverse kinematics, paper eq. 12)")
     ik.add_argument("--case", default=None, metavar="1|2", help="the paper's case study path 1 or 2")
@@ -589,7 +562,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ik.add_argument("--tool-force", type=float, default=None, metavar="N", help="expected cutting force (effort; 0)")
     ik.add_argument("-o", "--output", type=Path, default=None, metavar="FILE", help="CSV file to write")
-    _add_config(ik)
+    add_config(ik)
     ik.set_defaults(run=cmd_ik)
     cli_mujoco.add_parsers(sub)  # export mjcf, check mujoco
     cli_visual.add_parsers(sub)  # draw, animate, report

@@ -1,0 +1,68 @@
+"""``vgtarm export mjcf``, ``vgtarm export controller`` and ``vgtarm check mujoco``: the MuJoCo bridge
+and the exported controller from the command line."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from ...errors import escape
+from ...export import command as export_command
+from ...fileio import atomic_write_text, check_output_file
+from ...model.robot import load_robot
+from .options import add_config, non_negative_int, positive_float, positive_int
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    """Write the robot as MJCF."""
+    from ...mujoco_bridge.export import to_mjcf
+
+    check_output_file(args.out, "--out", inputs=[args.config])
+    robot = load_robot(args.config)
+    text = to_mjcf(robot, timestep=args.timestep)
+    if args.validate:
+        from ...mujoco_bridge.model import require_mujoco
+
+        require_mujoco().MjModel.from_xml_string(text)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(args.out, text + "\n")
+    print(f"MJCF of {robot.parameters.name!r} written to {escape(str(args.out))}")
+    return 0
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    """Compare our dynamics with MuJoCo's on random states and print the worst differences."""
+    from ...mujoco_bridge.check import cross_validate, table
+    from ...mujoco_bridge.model import require_mujoco
+
+    require_mujoco()
+    robot = load_robot(args.config)
+    print(table(cross_validate(robot, n=args.states, seed=args.seed)))
+    return 0
+
+
+def add_parsers(sub: Any) -> None:
+    """Register ``export`` and ``check`` on the ``vgtarm`` command's subparsers."""
+    export = sub.add_parser("export", help="export the robot or its controller for another engine or a target")
+    formats = export.add_subparsers(dest="format", required=True, metavar="FORMAT")
+    mjcf = formats.add_parser("mjcf", help="the robot in MuJoCo's XML model format")
+    mjcf.add_argument("--out", type=Path, required=True, metavar="FILE", help="the file to write (robot.xml)")
+    mjcf.add_argument("--timestep", type=positive_float, default=1e-3, metavar="DT", help="MuJoCo's time step (s)")
+    mjcf.add_argument(
+        "--validate", action="store_true", help="load the result in MuJoCo before writing (needs vgtarm[mujoco])"
+    )
+    add_config(mjcf)
+    mjcf.set_defaults(run=cmd_export)
+    controller = formats.add_parser(
+        "controller", help="computed force control (with the observer) as dependency-free C99 for a real-time target"
+    )
+    export_command.add_arguments(controller)
+    controller.set_defaults(run=export_command.run)
+
+    check = sub.add_parser("check", help="cross-check our dynamics against another engine")
+    check.add_argument("engine", choices=("mujoco",), help="mujoco: the exported model stepped by MuJoCo")
+    check.add_argument("--states", type=positive_int, default=1000, help="random states (default 1000)")
+    check.add_argument("--seed", type=non_negative_int, default=0, help="seed of the states (default 0)")
+    add_config(check)
+    check.set_defaults(run=cmd_check)

@@ -1,0 +1,1 @@
+"""The pictures: plots of runs, drawings and animations of the mechanism, and their geometry."""
