@@ -132,7 +132,8 @@ def test_admitted_pairs_decay_in_a_simulation_of_the_error_recursion():
         for lam in (lo[j] * 1.0001, hi[j] * 0.9999):
             for gamma, h in cases:
                 rate = run(lam, j * step, gamma, h)
-                assert rate < RADIUS * (1 + 1e-4), f"kv = {j * step}, lambda = {lam}, gamma = {gamma}: decay {rate}, expected < {RADIUS}"
+                where = f"kv = {j * step}, lambda = {lam}, gamma = {gamma}, h = {h}"
+                assert rate < RADIUS * (1 + 1e-4), f"{where}: decay {rate}, expected < {RADIUS}"
         slow = max(run(hi[j] * 1.05, j * step, gamma, h) for gamma, h in cases)
         assert slow > RADIUS * (1 + 1e-4), f"kv = {j * step}: decay {slow} 5 % above {hi[j]}, expected > {RADIUS}"
 

@@ -24,6 +24,7 @@ from ..errors import SimulationError
 from ..markup import md_cell, md_code, md_text
 from ..model.robot import Robot
 from ..simulation import ExternalForce, JointReference, SimulationResult, simulate
+from . import safe_study
 from .cases import case_study, run_case
 from .plotting import save_figure
 
@@ -199,6 +200,7 @@ def beyond_figure(results: dict[BeyondRun, SimulationResult], folder: Path, name
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7, ncol=2)
     save_figure(fig, folder / name)
+    save_figure(safe_study.study_figure(safe_study.load_summary()), folder / "safe_study.png")  # issue 23
     return name
 
 
@@ -230,6 +232,7 @@ def beyond_section(results: dict[BeyondRun, SimulationResult], figure: str) -> l
             f" {_n(s['chatter_n'], 2)} | {_n(s['rms_twist_torque_nm'], 3)} | {_n(s['actuator_energy_j'], 2)} |"
             f" {s['ga_activations']} | {md_code(spec.folder + '/')} |"
         )
+    lines += safe_study.section_lines(safe_study.load_summary(), "safe_study.png")  # issue 23: the 60 runs
     lines += ["", f"![tip error beyond the paper]({figure})", "", "### What bounds the remaining error", ""]
     by_label = {(spec.label, spec.realistic): s for spec, s in summaries.items()}
     cfc = by_label.get(("CFC", False))
