@@ -17,7 +17,7 @@ import pytest
 
 from vgtarm.app.cases import case_study, joint_reference, run_case
 from vgtarm.control import SwitchingControl
-from vgtarm.control.safety import admitted_interval, loop_matrix, spectral_radius
+from vgtarm.control.safety import admitted_interval, damping_table, loop_matrix, spectral_radius
 from vgtarm.errors import InputError, SimulationError
 from vgtarm.model.closedloop import ClosedLoopDriver, LoopSettings
 from vgtarm.model.compiled import CompiledBackend
@@ -72,12 +72,81 @@ def test_loop_matrix_is_the_linear_error_dynamics():
         np.testing.assert_allclose(x, np.concatenate([e, ed, e_prev, w_prev]), rtol=1e-9, atol=1e-15)
 
 
-@pytest.fixture(scope="module")
-def safe_ga(robot):
+@pytest.mark.parametrize("velocity_filter", [FILTER, None], ids=["realistic", "perfect"])
+def test_damping_table_agrees_with_the_eigenvalues_of_the_full_loop(velocity_filter):
+    """Each grid damping's interval: symmetric Kp with eigenvalues inside and Kv = kv_j I give a
+    28 x 28 loop with every pole inside the radius (NumPy eigenvalues, every model error of the
+    bound); one eigenvalue 1 % above the top puts a pole outside; the held damping's interval is
+    :func:`admitted_interval`'s."""
+    step, count = KV / 30, 31
+    lo, hi = damping_table(step, count, DT, velocity_filter, MODEL_ERROR, RADIUS)
+    assert math.isnan(lo[0]), f"lo[0] = {lo[0]}: expected no interval without damping"
+    held = admitted_interval(KV, DT, velocity_filter, MODEL_ERROR, RADIUS)
+    np.testing.assert_allclose([lo[-1], hi[-1]], held, rtol=1e-6, err_msg="the grid's top point vs admitted_interval")
+    assert np.isfinite(lo).sum() >= 25, f"{np.isfinite(lo).sum()} grid dampings with an interval: expected >= 25"
+    rng = np.random.default_rng(11)
+    for j in (1, 2, 5, 15, 22, 30):
+        if math.isnan(lo[j]):
+            continue
+        kv = j * step * np.eye(7)
+        top = min(hi[j], 5e5)
+        inside = np.exp(rng.uniform(np.log(lo[j] * 1.001), np.log(top / 1.001), size=7))
+        radius = spectral_radius(_random_symmetric(rng, inside), kv, DT, velocity_filter, MODEL_ERROR)
+        assert radius < RADIUS, f"kv = {j * step}: spectral radius {radius}, expected < {RADIUS} for {inside}"
+        if hi[j] < 5e5:
+            above = inside.copy()
+            above[rng.integers(7)] = hi[j] * 1.01
+            radius = spectral_radius(_random_symmetric(rng, above), kv, DT, velocity_filter, MODEL_ERROR)
+            assert radius >= RADIUS, f"kv = {j * step}: spectral radius {radius}, expected >= {RADIUS} above {hi[j]}"
+
+
+def test_admitted_pairs_decay_in_a_simulation_of_the_error_recursion():
+    """The scalar error recursion written out by hand (hold, 100 Hz filter on differenced errors,
+    model error across the bound, both holds), run 20,000 periods from a unit error with an admitted
+    (lambda, kv) pair at each interval's edges: the decay per period over the last 10,000 periods
+    is below the radius (within 1e-4, a double pole's polynomial factor); 5 % above the top it is
+    not."""
+    step, count = KV / 30, 31
+    lo, hi = damping_table(step, count, DT, FILTER, MODEL_ERROR, RADIUS)
+
+    def run(lam: float, kv: float, gamma: float, h: float, periods: int = 20000) -> float:
+        """The decay per period over the last 10,000 periods (the largest pole's modulus, within
+        the factor 2^(1/10000) a double pole's k r^k leaves); the state is rescaled every 100
+        periods (its logarithm kept) so that nothing underflows."""
+        e, ed, e_prev, w_prev = 1.0, 0.0, 1.0, 0.0
+        log_size, logs = 0.0, []
+        for k in range(periods):
+            w = FILTER * w_prev + (1 - FILTER) * (e - e_prev) / DT
+            u = gamma * (lam * e + kv * w)
+            e, ed, e_prev, w_prev = e + DT * ed - h * u, ed - DT * u, e, w
+            if k % 100 == 99:
+                size = abs(e) + abs(e_prev) + DT * abs(ed) + DT * abs(w_prev)
+                e, ed, e_prev, w_prev = e / size, ed / size, e_prev / size, w_prev / size
+                log_size += math.log(size)
+                if k in (periods - 10001, periods - 1):
+                    logs.append(log_size)
+        return math.exp((logs[1] - logs[0]) / 10000)
+
+    cases = [(g, h) for g in (1 - MODEL_ERROR, 1.0, 1 + MODEL_ERROR) for h in (DT * DT / 2, 0.0)]
+    for j in (3, 15, 30):
+        for lam in (lo[j] * 1.0001, hi[j] * 0.9999):
+            for gamma, h in cases:
+                rate = run(lam, j * step, gamma, h)
+                where = f"kv = {j * step}, lambda = {lam}, gamma = {gamma}, h = {h}"
+                assert rate < RADIUS * (1 + 1e-4), f"{where}: decay {rate}, expected < {RADIUS}"
+        slow = max(run(hi[j] * 1.05, j * step, gamma, h) for gamma, h in cases)
+        assert slow > RADIUS * (1 + 1e-4), f"kv = {j * step}: decay {slow} 5 % above {hi[j]}, expected > {RADIUS}"
+
+
+@pytest.fixture(scope="module", params=["fixed", "tuned"])
+def safe_ga(robot, request):
     if not isinstance(robot.backend, CompiledBackend):
         pytest.skip("no C compiler: the safe variant runs in the compiled GA")
     ref = joint_reference(robot, 2, duration=0.1)
-    scm = replace(case_study(2).controller("scm"), variant="safe", stability_radius=RADIUS, model_error=MODEL_ERROR)
+    scm = replace(
+        case_study(2).controller("scm"), variant="safe", stability_radius=RADIUS, model_error=MODEL_ERROR,
+        damping=request.param,
+    )  # fmt: skip
     arrays = loop_arrays(robot, robot, ref, initial_state=(ref.q[0], ref.qd[0]))
     settings = LoopSettings(
         dt=ref.dt, integrator="euler", substeps=1, cutting=False, cutting_force=0.0, cutting_speed=0.0,
@@ -86,13 +155,22 @@ def safe_ga(robot):
     return scm, compiled_ga(scm, ClosedLoopDriver(robot.backend), robot, arrays, ref.dt, settings), ref
 
 
+def _damping_of(scm, kv_genes):
+    """The damping and interval ga.c gives a candidate (grid point nearest to the mean diagonal)."""
+    table = scm.damping_table(DT, FILTER)
+    if table is None:
+        return KV, scm.admitted_interval(DT, FILTER)
+    step, lo, hi = table
+    j = min(max(int(np.floor(np.mean(np.diag(kv_genes)) / step + 0.5)), 0), len(lo) - 1)
+    return j * step, (lo[j], hi[j])
+
+
 def test_compiled_ga_never_admits_an_unstable_candidate(safe_ga):
     """Seeded samples around the fixed gains and across the GA's box: every candidate the
     compiled GA admits (a cost below the penalty) closes a loop with every pole inside the radius
-    (NumPy's eigenvalues of the full loop, repaired gains); every rejected one has an eigenvalue of
-    its symmetrised Kp outside the admitted interval."""
+    (NumPy's eigenvalues of the full loop, repaired gains: the damping of its grid point); every
+    rejected one has an eigenvalue of its symmetrised Kp outside its admitted interval."""
     scm, ga, ref = safe_ga
-    lo, hi = scm.admitted_interval(DT, FILTER)
     rng = np.random.default_rng(0)
     lower, upper = scm.bounds()
     fixed = np.concatenate([scm.fixed.Kp.ravel(), scm.fixed.Kv.ravel()])
@@ -103,14 +181,15 @@ def test_compiled_ga_never_admits_an_unstable_candidate(safe_ga):
     admitted = cost < 1.0
     assert 10 < admitted.sum() < len(genes), f"admitted {admitted.sum()} of {len(genes)}: expected a mix"
     for g, ok in zip(genes, admitted, strict=True):
-        kp, _ = scm.split(g)
+        kp, kv_genes = scm.split(g)
+        kv, (lo, hi) = _damping_of(scm, kv_genes)
         sym = (kp + kp.T) / 2
         eig = np.linalg.eigvalsh(sym)
         if ok:
-            radius = spectral_radius(sym, KV * np.eye(7), DT, FILTER, MODEL_ERROR)
-            assert radius < RADIUS, f"admitted candidate with spectral radius {radius}: expected < {RADIUS}"
+            radius = spectral_radius(sym, kv * np.eye(7), DT, FILTER, MODEL_ERROR)
+            assert radius < RADIUS, f"admitted candidate (kv {kv}) with spectral radius {radius}: expected < {RADIUS}"
         else:
-            assert eig[0] < lo * (1 + 1e-6) or eig[-1] > hi * (1 - 1e-6), (
+            assert not lo < hi or eig[0] < lo * (1 + 1e-6) or eig[-1] > hi * (1 - 1e-6), (
                 f"rejected candidate with Kp eigenvalues [{eig[0]}, {eig[-1]}]: expected one outside [{lo}, {hi}]"
             )
 
@@ -125,6 +204,11 @@ def test_safe_variant_is_checked_at_the_boundary():
         SwitchingControl.with_gains(15000.0, [600.0, 500, 600, 600, 600, 600, 600], variant="safe",
                                     kp_bounds=(0.0, 15000.0), kv_bounds=(0.0, 600.0))  # fmt: skip
     assert SwitchingControl.with_gains(5000.0, 300.0).variant == "paper"
+    with pytest.raises(InputError, match="damping = 'soft'"):
+        replace(scm, variant="safe", damping="soft")
+    with pytest.raises(InputError, match="stiffness_box = 6: the fixed gains are not exactly representable"):
+        replace(scm, variant="safe", stiffness_box=6)
+    assert replace(scm, variant="safe").bounds()[1][0] == 5 * 15000.0
 
 
 def _case2(robot, variant, seed, duration, **options):

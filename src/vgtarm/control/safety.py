@@ -19,6 +19,11 @@ their eigenvectors, so the ``4n`` loop splits into one scalar loop per eigenvalu
 whose scalar loops have every pole inside the circle of radius ``radius`` (< 1) for both holds and
 every ``gamma`` of a grid over the bound; the compiled GA admits a candidate iff the eigenvalues
 of its ``Kp`` lie in it (two Cholesky factorisations, ``csrc/ga.c``).
+
+When the GA tunes the damping too, ``Kv = kv I`` with ``kv`` on a grid ``j * step``: the pairs
+``(lambda, kv)`` are tested the same way, with one interval per grid point
+(:func:`damping_table`, vectorised over ``lambda``; the compiled GA snaps a candidate's damping to
+the grid point nearest to the mean of its ``Kv`` diagonal and looks its interval up).
 """
 
 from __future__ import annotations
@@ -126,3 +131,77 @@ def admitted_interval(
     lo = edge(float(grid[where[0]]), float(grid[where[0] - 1])) if where[0] > 0 else float(grid[0])
     hi = edge(float(grid[where[-1]]), float(grid[where[-1] + 1])) if where[-1] < len(grid) - 1 else float(grid[-1])
     return lo, hi
+
+
+def _scalar_radii(lams: Array, kv: float, dt: float, velocity_filter: float | None, model_error: float) -> Array:
+    """:func:`spectral_radius` of the scalar loops ``(lambda, kv)`` for every ``lambda`` of ``lams`` at
+    once (the same grid of ``gamma`` and both holds; batched eigenvalues of the 4x4 or 2x2 loops)."""
+    lam = np.asarray(lams, dtype=float)
+    gammas = np.linspace(1.0 - model_error, 1.0 + model_error, GAMMA_POINTS if model_error > 0 else 1)
+    g = gammas[:, None, None]
+    h = np.array([dt * dt / 2.0, 0.0])[None, :, None]
+    shape = (len(gammas), 2, len(lam))
+    lp = np.broadcast_to(g * lam[None, None, :], shape)
+    one, zero = np.ones(shape), np.zeros(shape)
+    hb = np.broadcast_to(h, shape)
+    if velocity_filter is None:
+        uv = np.broadcast_to(g * kv, shape)
+        rows = [[one - hb * lp, dt - hb * uv], [-dt * lp, one - dt * uv]]
+    else:
+        a = float(velocity_filter)
+        c = (1.0 - a) / dt
+        ue = lp + np.broadcast_to(g * c * kv, shape)
+        uprev = np.broadcast_to(-g * c * kv, shape)
+        uw = np.broadcast_to(g * a * kv, shape)
+        rows = [
+            [one - hb * ue, dt * one, -hb * uprev, -hb * uw],
+            [-dt * ue, one, -dt * uprev, -dt * uw],
+            [one, zero, zero, zero],
+            [c * one, zero, -c * one, a * one],
+        ]
+    mats = np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
+    radii = np.abs(np.linalg.eigvals(mats)).max(axis=-1)
+    return np.asarray(radii.max(axis=(0, 1)), dtype=float)
+
+
+#: The damping grid of the tuned safe variant: this many steps between 0 and the fixed damping.
+DAMPING_STEPS = 30
+#: Scan of the tuned variant's table: eigenvalues of ``Kp`` (1/s^2), log-spaced, and bisection steps.
+TABLE_SCAN = (10.0, 1e7, 241, 40)
+
+
+@lru_cache(maxsize=16)
+def damping_table(
+    step: float, count: int, dt: float, velocity_filter: float | None, model_error: float, radius: float
+) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Admitted intervals of the eigenvalues of ``Kp`` for the dampings ``kv_j = j step``,
+    ``j = 0 .. count - 1``: ``(lo, hi)`` tuples, NaN where no eigenvalue (or no single interval of
+    them) has every pole of the scalar loop inside ``radius`` for every model error in the bound.
+    The edges are bisected to 2^-40 relative and then moved inwards by 1e-9 relative."""
+    for label, value, ok in (
+        ("step", step, step > 0),
+        ("count", count, 1 <= count <= 10_000),
+        ("radius", radius, 0 < radius < 1),
+        ("model_error", model_error, 0 <= model_error < 1),
+    ):
+        if not (np.isfinite(value) and ok):
+            raise InputError(f"{label} = {shown(value)}: out of range for the damping table")
+    grid = np.geomspace(TABLE_SCAN[0], TABLE_SCAN[1], int(TABLE_SCAN[2]))
+    los, his = [], []
+    for j in range(count):
+        kv = j * step
+        flags = _scalar_radii(grid, kv, dt, velocity_filter, model_error) < radius
+        where = np.flatnonzero(flags)
+        if where.size == 0 or np.any(np.diff(where) != 1) or where[0] == 0 or where[-1] == len(grid) - 1:
+            los.append(float("nan"))
+            his.append(float("nan"))
+            continue
+        good = np.array([grid[where[0]], grid[where[-1]]])
+        bad = np.array([grid[where[0] - 1], grid[where[-1] + 1]])
+        for _ in range(int(TABLE_SCAN[3])):
+            mid = np.sqrt(good * bad)
+            inside = _scalar_radii(mid, kv, dt, velocity_filter, model_error) < radius
+            good, bad = np.where(inside, mid, good), np.where(inside, bad, mid)
+        los.append(float(good[0] * (1 + 1e-9)))
+        his.append(float(good[1] * (1 - 1e-9)))
+    return tuple(los), tuple(his)

@@ -28,13 +28,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError, shown
-from ..ga import GAOptions, GAResult, encode, minimize
+from ..ga import GAOptions, GAResult, decode, encode, minimize
 from ..model.closedloop import PREDICTIONS
 from ..model.parameters import N_JOINTS
 from ..model.robot import Robot
 from .gains import Gains, check_within, real_number
 from .law import commanded_acceleration
-from .safety import admitted_interval
+from .safety import DAMPING_STEPS, admitted_interval, damping_table
 
 Array = NDArray[np.float64]
 
@@ -43,6 +43,9 @@ MAX_HORIZON = 10_000
 
 #: Variants of the method: the paper's, and the safe one whose gains are admitted first.
 VARIANTS = ("paper", "safe")
+
+#: The safe variant's damping: tuned by the GA on a grid (default) or held at the fixed gains'.
+DAMPINGS = ("tuned", "fixed")
 
 #: Prediction of the tip error of candidate gains: ``(Kp (P, 7, 7), Kv (P, 7, 7)) -> (P,)``.
 Predictor = Callable[[Array, Array], Array]
@@ -78,6 +81,15 @@ class SwitchingControl:
         model_error: safe variant: bound of the controller model's relative mass error (0.1: the
             model's mass within 10 % of the plant's).
         stability_radius: safe variant: every pole of the admitted loop lies inside this circle.
+        damping: safe variant: ``"tuned"`` (default): ``Kv = kv I`` with ``kv`` the GA's mean ``Kv``
+            diagonal snapped to a grid of :data:`~vgtarm.control.safety.DAMPING_STEPS` steps up to
+            the fixed damping (beyond it as far as ``kv_bounds`` reach), each grid point with its
+            own admitted interval of ``Kp`` eigenvalues; ``"fixed"``: ``Kv`` held at the fixed
+            damping (the first safe variant).
+        stiffness_box: safe variant: the GA searches ``Kp`` elements in ``[kp_bounds[0],
+            stiffness_box * kp_bounds[1]]`` (a whole number; the fixed gains must stay exactly
+            representable by the GA's codes, e.g. 1, 3, 5, 15 with 8-bit genes on the bound);
+            stability is the admission's business, the box only says where to search.
 
     The GA runs at every control period whose error exceeds the threshold, as in the paper.
     Reusing its gains for several periods is not offered: gains tuned over a short horizon can
@@ -97,6 +109,8 @@ class SwitchingControl:
     variant: str = "paper"
     model_error: float = 0.1
     stability_radius: float = 0.99
+    damping: str = "tuned"
+    stiffness_box: int = 5
     name: str = "scm"
 
     def __post_init__(self) -> None:
@@ -129,6 +143,11 @@ class SwitchingControl:
         radius = real_number("stability_radius", self.stability_radius, "a pole radius in (0, 1)")
         if not radius < 1.0:
             raise InputError(f"stability_radius = {shown(self.stability_radius)}: expected a pole radius in (0, 1)")
+        if not isinstance(self.damping, str) or self.damping not in DAMPINGS:
+            raise InputError(f"damping = {shown(self.damping)}: expected one of {list(DAMPINGS)}")
+        box = self.stiffness_box
+        if not (isinstance(box, int | np.integer) and not isinstance(box, bool) and 1 <= box <= 100):
+            raise InputError(f"stiffness_box = {shown(box)}: expected a whole number in [1, 100]")
         if self.variant == "safe":
             self._check_safe()
 
@@ -147,6 +166,13 @@ class SwitchingControl:
             raise InputError("seed_fixed_gains = False: the safe variant falls back to the seeded fixed gains")
         if self.prediction == "exact":
             raise InputError('prediction = "exact": the safe variant runs with "linear" or "quadratic"')
+        lower, upper = self.bounds()
+        fixed = np.concatenate([Kp.ravel(), Kv.ravel()])
+        if not np.array_equal(decode(self.initial_bits(), lower, upper, self.ga.n_bits)[0], fixed):
+            raise InputError(
+                f"stiffness_box = {self.stiffness_box}: the fixed gains are not exactly representable by"
+                f" {self.ga.n_bits}-bit genes in [{lower[0]:g}, {upper[0]:g}]; expected a box whose codes hit them"
+            )
         if self.ga.stall_generations is not None:
             raise InputError(
                 f"ga.stall_generations = {self.ga.stall_generations}: the safe variant runs in the compiled GA,"
@@ -158,6 +184,19 @@ class SwitchingControl:
         period ``dt`` with velocities filtered by ``velocity_filter`` (``None``: measured)."""
         kv = float(self.fixed.Kv[0, 0])
         return admitted_interval(kv, dt, velocity_filter, self.model_error, self.stability_radius)
+
+    def damping_table(
+        self, dt: float, velocity_filter: float | None
+    ) -> tuple[float, tuple[float, ...], tuple[float, ...]] | None:
+        """The tuned safe variant's damping grid: ``(step, lo, hi)`` (``kv_j = j step``, its interval
+        ``[lo[j], hi[j]]``, NaN where none); ``None`` for a held damping."""
+        if self.damping != "tuned":
+            return None
+        kv = float(self.fixed.Kv[0, 0])
+        step = kv / DAMPING_STEPS
+        count = int(np.floor(self.kv_bounds[1] / step + 1e-9)) + 1
+        lo, hi = damping_table(step, count, dt, velocity_filter, self.model_error, self.stability_radius)
+        return step, lo, hi
 
     @classmethod
     def with_gains(
@@ -175,8 +214,9 @@ class SwitchingControl:
     def bounds(self) -> tuple[Array, Array]:
         """Lower and upper bounds of the ``2 n^2`` genes: ``Kp`` row by row, then ``Kv``."""
         nn = self.fixed.Kp.size
+        kp_top = self.kp_bounds[1] * (self.stiffness_box if self.variant == "safe" else 1)
         lower = np.concatenate([np.full(nn, self.kp_bounds[0]), np.full(nn, self.kv_bounds[0])])
-        upper = np.concatenate([np.full(nn, self.kp_bounds[1]), np.full(nn, self.kv_bounds[1])])
+        upper = np.concatenate([np.full(nn, kp_top), np.full(nn, self.kv_bounds[1])])
         return lower, upper
 
     @staticmethod

@@ -394,6 +394,9 @@ class CompiledGA:
         safe: ``(kv, lo, hi)`` for the safe variant of switching control (``Kp`` symmetrised, ``Kv
             = kv I``, admitted iff the eigenvalues of ``Kp`` lie in ``[lo, hi]``); ``None``: the
             paper's GA.
+        damping: with ``safe``, ``(step, lo, hi)``: the damping is tuned on the grid ``j step`` with
+            the admitted interval ``[lo[j], hi[j]]`` of each grid point (``SwitchingControl.
+            damping_table``); ``None``: ``Kv = kv I`` held.
     """
 
     def __init__(
@@ -421,6 +424,7 @@ class CompiledGA:
         quadratic: bool,
         threads: int | None = None,
         safe: tuple[float, float, float] | None = None,
+        damping: tuple[float, tuple[float, ...], tuple[float, ...]] | None = None,
     ) -> None:
         if prediction not in PREDICTIONS:
             raise ValueError(f"prediction = {prediction!r}: expected one of {sorted(PREDICTIONS)}")
@@ -471,6 +475,12 @@ class CompiledGA:
                 ),
             },
         )
+        if safe is not None and damping is not None:
+            self._damping = np.ascontiguousarray([damping[1], damping[2]], dtype=np.float64)
+            self._ga.safe_nkv = self._damping.shape[1]
+            self._ga.safe_kv_step = damping[0]
+            self._ga.safe_lo_tab = _ptr(self._damping[0])
+            self._ga.safe_hi_tab = _ptr(self._damping[1])
         self._best = np.empty(n_genes)
         self._state = np.empty((2, n_joints))
         self._result = ffi().new("vgt_ga_result *", {"best": _ptr(self._best)})

@@ -253,6 +253,7 @@ def compiled_ga(
     ``None``: perfect sensing)."""
     inp = arrays.inputs
     safe = None
+    damping = None
     if controller.variant == "safe":
         sensing = settings is not None and settings.sensing
         lo, hi = controller.admitted_interval(dt, settings.velocity_filter if settings and sensing else None)
@@ -263,6 +264,7 @@ def compiled_ga(
                 f" interval [{lo:g}, {hi:g}] (stability_radius {controller.stability_radius:g})"
             )
         safe = (float(controller.fixed.Kv[0, 0]), lo, hi)
+        damping = controller.damping_table(dt, settings.velocity_filter if settings and sensing else None)
     lower, upper = controller.bounds()
     options = controller.ga
     return CompiledGA(
@@ -287,4 +289,5 @@ def compiled_ga(
         tip_d=inp["tip_d"],
         quadratic=controller.prediction == "quadratic",
         safe=safe,
+        damping=damping,
     )

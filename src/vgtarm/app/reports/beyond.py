@@ -26,6 +26,7 @@ from ...model.robot import Robot
 from ...simulation import ExternalForce, JointReference, SimulationResult, simulate
 from ..cases import case_study, run_case
 from ..pictures.plotting import save_figure
+from . import safe_study
 from .runs import mm
 
 #: Realistic sensing: leg encoder step (m) and the controller model's mass factor.
@@ -196,6 +197,7 @@ def beyond_figure(results: dict[BeyondRun, SimulationResult], folder: Path, name
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7, ncol=2)
     save_figure(fig, folder / name)
+    save_figure(safe_study.study_figure(safe_study.load_summary()), folder / "safe_study.png")  # issue 23
     return name
 
 
@@ -227,6 +229,7 @@ def beyond_section(results: dict[BeyondRun, SimulationResult], figure: str) -> l
             f" {_n(s['chatter_n'], 2)} | {_n(s['rms_twist_torque_nm'], 3)} | {_n(s['actuator_energy_j'], 2)} |"
             f" {s['ga_activations']} | {md_code(spec.folder + '/')} |"
         )
+    lines += safe_study.section_lines(safe_study.load_summary(), "safe_study.png")  # issue 23: the 60 runs
     lines += ["", f"![tip error beyond the paper]({figure})", "", "### What bounds the remaining error", ""]
     by_label = {(spec.label, spec.realistic): s for spec, s in summaries.items()}
     cfc = by_label.get(("CFC", False))

@@ -414,6 +414,7 @@ typedef struct {
     int avx2;            /* the CPU has AVX2 (gains_from_bytes_avx2)                                 */
     int safe;            /* the safe variant (see safe_repair)                                       */
     double safe_kv, safe_lo, safe_hi;
+    const vgt_ga_settings *g; /* the safe variant's damping grid (safe_nkv, safe_kv_step, tables)      */
     int threads;         /* threads that predict blocks of candidates (OpenMP), each with a scratch */
     int n_scratch;       /* scratches allocated (the threads asked for; `threads` may drop to 1)     */
     struct scratch *sc;  /* (n_scratch) */
@@ -646,16 +647,29 @@ static int positive_definite(int nj, double *S)
 }
 
 /* The safe variant's repair and admission of one candidate: kp (nj x nj, row-major) is replaced by
- * its symmetric part Ks and kv by safe_kv I. With Kv a multiple of the identity, Ks and Kv share
- * their eigenvectors, so the discrete loop (hold, velocity filter, model error) splits into one
- * scalar loop per eigenvalue of Ks; control/safety.py computes the interval [lo, hi] of the
- * eigenvalues whose scalar loops have every pole inside the margin circle for every model error
- * in the bound. Admitted iff Ks - lo I and hi I - Ks are positive definite. Returns 0 when
- * admitted, else a penalty in (1, 3] that grows with Gershgorin's estimate of the violation, so
- * the GA's ranking leads the population back into the admitted set. */
-static double safe_admit(int nj, double lo, double hi, double *kp, double *kv, double kv0)
+ * its symmetric part Ks and kv by kv0 I, kv0 the held damping g->safe_kv or, when the damping is
+ * tuned (g->safe_nkv > 0), the grid point j nearest to the mean of the candidate's Kv diagonal.
+ * With Kv a multiple of the identity, Ks and Kv share their eigenvectors, so the discrete loop
+ * (hold, velocity filter, model error) splits into one scalar loop per pair (eigenvalue of Ks,
+ * kv0); control/safety.py computes the interval [lo, hi] of the eigenvalues whose scalar loops
+ * have every pole inside the margin circle for every model error in the bound (per grid point
+ * when tuned). Admitted iff Ks - lo I and hi I - Ks are positive definite. Returns 0 when
+ * admitted, else a penalty in (1, 3] that grows with Gershgorin's estimate of the violation (3
+ * for a damping without interval), so the GA's ranking leads the population back into the
+ * admitted set. */
+static double safe_admit(int nj, const vgt_ga_settings *g, double *kp, double *kv)
 {
     double below[nj * nj], above[nj * nj], gmin = INFINITY, gmax = -INFINITY;
+    double lo = g->safe_lo, hi = g->safe_hi, kv0 = g->safe_kv;
+    if (g->safe_nkv > 0) {
+        double mean = 0.0;
+        for (int i = 0; i < nj; ++i) mean += kv[i * nj + i];
+        long j = lround(mean / nj / g->safe_kv_step);
+        j = j < 0 ? 0 : (j >= g->safe_nkv ? g->safe_nkv - 1 : j);
+        kv0 = (double)j * g->safe_kv_step;
+        lo = g->safe_lo_tab[j];
+        hi = g->safe_hi_tab[j];
+    }
     for (int i = 0; i < nj; ++i)
         for (int l = i; l < nj; ++l) {
             double v = 0.5 * (kp[i * nj + l] + kp[l * nj + i]);
@@ -672,6 +686,7 @@ static double safe_admit(int nj, double lo, double hi, double *kp, double *kv, d
         gmin = fmin(gmin, kp[i * nj + i] - radius);
         gmax = fmax(gmax, kp[i * nj + i] + radius);
     }
+    if (!(lo < hi)) return 3.0;
     if (positive_definite(nj, below) && positive_definite(nj, above)) return 0.0;
     const double scale = hi - lo;
     return 1.0 + fmin(1.0, fmax(0.0, lo - gmin) / scale) + fmin(1.0, fmax(0.0, gmax - hi) / scale) + 1e-9;
@@ -690,7 +705,7 @@ static void safe_repair(const predictor *x, int count, vf *K, double *penalty)
             kp[gi] = (double)K[gi][c];
             kv[gi] = (double)K[nn + gi][c];
         }
-        penalty[c] = safe_admit(nj, x->safe_lo, x->safe_hi, kp, kv, x->safe_kv);
+        penalty[c] = safe_admit(nj, x->g, kp, kv);
         for (int gi = 0; gi < nn; ++gi) {
             K[gi][c] = (float)kp[gi];
             K[nn + gi][c] = (float)kv[gi];
@@ -847,6 +862,7 @@ static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *
     x->safe_kv = g->safe_kv;
     x->safe_lo = g->safe_lo;
     x->safe_hi = g->safe_hi;
+    x->g = g;
     const int nj = x->nj;
     x->r = malloc(sizeof(float) * (size_t)(g->horizon * nj + 1));
     x->s = malloc(sizeof(float) * (size_t)(g->horizon * nj + 1));
@@ -1183,7 +1199,7 @@ int vgt_ga_activation(const vgt_model *m, const vgt_settings *s, const vgt_ga_se
          * is not admitted, or not predicted to lower the error below the fixed gains' from the
          * same measured state, is dropped for the fixed gains (the first seeded row) */
         const int nn = x.nj * x.nj;
-        int admitted = safe_admit(x.nj, g->safe_lo, g->safe_hi, out->best, out->best + nn, g->safe_kv) == 0.0;
+        int admitted = safe_admit(x.nj, g, out->best, out->best + nn) == 0.0;
         if (!admitted || !(best_cost < out->seeded_cost)) {
             decode_one(g, pb->initial_bits, pb->lower, pb->upper, out->best);
             out->best_cost = out->seeded_cost;

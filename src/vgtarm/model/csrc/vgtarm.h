@@ -159,6 +159,13 @@ typedef struct {
                             /* and predicted better than them. 0: the paper's GA, unchanged       */
     double safe_kv;         /* the damping of the safe variant (1/s)                              */
     double safe_lo, safe_hi;/* the admitted interval of the eigenvalues of Kp (1/s^2)             */
+    int safe_nkv;           /* > 0: the damping is tuned too: Kv = kv_j I with kv_j = j safe_kv_step */
+                            /* (j = 0 .. safe_nkv - 1) the grid point nearest to the mean of the   */
+                            /* candidate's Kv diagonal, admitted iff the eigenvalues of Kp lie in  */
+                            /* [safe_lo_tab[j], safe_hi_tab[j]] (NaN: none); safe_kv, safe_lo and  */
+                            /* safe_hi are then unused. 0: Kv = safe_kv I held                     */
+    double safe_kv_step;    /* the grid's step (1/s)                                               */
+    const double *safe_lo_tab, *safe_hi_tab; /* (safe_nkv) the admitted intervals per grid point  */
 } vgt_ga_settings;
 
 /* One activation: the state at sample k and the reference rows k .. k+H. */
