@@ -34,7 +34,7 @@ from ..ik import CSV_COLUMNS, write_csv
 from ..model.parameters import JOINT_NAMES, JOINT_UNITS, ROBOT_FILE_LIMIT
 from ..model.robot import load_robot
 from ..paths import Path as DesiredPath
-from . import cli_mujoco, cli_stack, cli_study, cli_visual
+from . import cli_mujoco, cli_stack, cli_study, cli_visual, low_force
 
 
 def _format_vector(values: Sequence[float] | np.ndarray, digits: int = 6) -> str:
@@ -111,6 +111,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from .cases import joint_reference, run_case
     from .plotting import comparison_figure, save_figure
 
+    low_force.apply_preset(args)
     if args.out is not None:
         check_output_folder(args.out, "--out", inputs=[args.config], owned=RUN_FILES)  # before the work
     robot = load_robot(args.config)
@@ -148,6 +149,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                 velocity_noise=args.velocity_noise,
                 velocity_filter_hz=args.velocity_filter,
                 plant_engine=args.plant,
+                **low_force.simulate_options(args),
             )
         except SimulationError as exc:
             if args.out is not None and exc.result is not None:
@@ -182,6 +184,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         "seed",
         "observer",
         "observer_gain_per_s",
+        "estimator",
         "force_sensor",
         "sensing",
         "simulated_time_s",
@@ -529,6 +532,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--duration", type=_positive_float, default=None, metavar="S", help="run only the first S seconds of the path"
     )
     _add_observer_options(simulate)
+    low_force.add_simulate_options(simulate)
     simulate.add_argument(
         "--plant",
         choices=("model", "mujoco"),
