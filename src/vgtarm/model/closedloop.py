@@ -41,6 +41,9 @@ INTEGRATOR_CODES = {name.removeprefix("VGT_").lower(): code for name, code in en
 #: Observer codes by name (enum ``vgt_observer`` of the header, ``VGT_OBSERVER_MOMENTUM`` -> ``"momentum"``).
 OBSERVER_CODES = {name.removeprefix("VGT_OBSERVER_").lower(): code for name, code in enum("vgt_observer").items()}
 
+#: Estimator codes by name (enum ``vgt_estimator`` of the header, ``VGT_ESTIMATOR_KALMAN`` -> ``"kalman"``).
+ESTIMATOR_CODES = {name.removeprefix("VGT_ESTIMATOR_").lower(): code for name, code in enum("vgt_estimator").items()}
+
 #: The generated functions the loop calls, by field of ``vgt_model``.
 _MODEL_FIELDS = ("cfc", "fd", "tip_state", "tip", "id", "jac", "tip_hessian")
 
@@ -67,6 +70,8 @@ class LoopSettings:
     observer_gain: float = 0.0
     sensing: bool = False
     velocity_filter: float = 0.0
+    estimator: str = "difference"
+    kalman_gain: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def struct(self, n_joints: int, n_margins: int) -> Any:
         """The C structure of these settings for a robot of ``n_joints`` joints."""
@@ -87,6 +92,8 @@ class LoopSettings:
                 "observer_gain": self.observer_gain,
                 "sensing": int(self.sensing),
                 "velocity_filter": self.velocity_filter,
+                "estimator": ESTIMATOR_CODES[self.estimator],
+                "kalman_gain": list(self.kalman_gain),
             },
         )
 
@@ -145,6 +152,8 @@ class LoopArrays:
         self.q_meas = np.full((n, n_joints), np.nan)
         self.qd_meas = np.full((n, n_joints), np.nan)
         self.tau_hat = np.full((n, n_joints), np.nan)
+        #: the Kalman estimator's q^, v^, d^ and model acceleration (unused by the other estimator)
+        self.x_hat = np.full((n, 4, n_joints), np.nan)
         fields = {name: _ptr(a) for name, a in self.inputs.items()}
         fields.update(
             q=_ptr(self.q),
@@ -156,6 +165,7 @@ class LoopArrays:
             q_meas=_ptr(self.q_meas),
             qd_meas=_ptr(self.qd_meas),
             tau_hat=_ptr(self.tau_hat),
+            x_hat=_ptr(self.x_hat),
         )
         self.struct = ffi().new("vgt_run *", {"n": n, **fields})
 

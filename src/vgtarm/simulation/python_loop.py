@@ -97,8 +97,26 @@ class PythonLoop:
         if k == 0:
             arrays.qd_meas[k] = qd
             return
+        if s.estimator == "kalman":  # the velocity is the estimator's (_estimate)
+            return
         raw = (arrays.q_meas[k] - arrays.q_meas[k - 1]) / s.dt + arrays.inputs["velocity_noise"][k]
         arrays.qd_meas[k] = s.velocity_filter * arrays.qd_meas[k - 1] + (1.0 - s.velocity_filter) * raw
+
+    def _estimate(self, s: LoopSettings, arrays: LoopArrays, k: int) -> None:
+        """The Kalman estimator at sample ``k`` (as ``estimate`` in ``closed_loop.c``)."""
+        x, z = arrays.x_hat[k], arrays.q_meas[k]
+        if k == 0:
+            x[0], x[1], x[2], x[3] = z, arrays.qd[0], 0.0, 0.0
+        else:
+            q0, v0, d0 = arrays.x_hat[k - 1, 0], arrays.x_hat[k - 1, 1], arrays.x_hat[k - 1, 2]
+            a = self.model.forward_dynamics(q0, v0, arrays.F[k - 1], np.zeros(3))
+            acc = a + d0
+            qp = q0 + s.dt * v0 + 0.5 * s.dt * s.dt * acc
+            vp = v0 + s.dt * acc
+            innovation = z - qp
+            L = s.kalman_gain
+            x[0], x[1], x[2], x[3] = qp + L[0] * innovation, vp + L[1] * innovation, d0 + L[2] * innovation, a
+        arrays.qd_meas[k] = x[1]
 
     def _differenced(self, s: LoopSettings, arrays: LoopArrays, j: int) -> Array:
         """Velocity of sample ``j`` differenced from the encoders, unfiltered (as ``differenced``)."""
@@ -114,6 +132,12 @@ class PythonLoop:
         if s.observer == "force":
             J = self.model.tip_jacobian(arrays.q_meas[k])
             arrays.tau_hat[k] = J.T @ arrays.f_ext[k - 1]
+            return
+        if s.sensing and s.estimator == "kalman":  # the model's acceleration plus the disturbance
+            x0, x = arrays.x_hat[k - 1], arrays.x_hat[k]
+            raw = self.model.inverse_dynamics(x0[0], x0[1], x[3] + x[2]) - arrays.F[k - 1]
+            keep = math.exp(-s.observer_gain * s.dt)
+            arrays.tau_hat[k] = keep * arrays.tau_hat[k - 1] + (1.0 - keep) * raw
             return
         if s.sensing:  # differenced velocities: the change spans the two last periods
             va, vb = self._differenced(s, arrays, k - 1), self._differenced(s, arrays, k)
@@ -138,6 +162,11 @@ class PythonLoop:
                 return NOT_FINITE, k
             arrays.error[k] = np.linalg.norm(inp["tip_d"][k] - arrays.tip[k])
             self._measure(settings, arrays, k)
+            if settings.sensing and settings.estimator == "kalman":
+                try:
+                    self._estimate(settings, arrays, k)
+                except (AssemblyError, InputError):  # a diverging run's estimate beyond the model
+                    return NOT_FINITE, k
             if settings.threshold > 0 and arrays.error[k] > settings.threshold:
                 return ABOVE_THRESHOLD, k
             try:

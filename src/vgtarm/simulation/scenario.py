@@ -27,7 +27,7 @@ from ..model.parameters import RobotParameters
 from ..model.robot import Robot
 from ..model.stack import Stack
 from .external import ExternalForce
-from .sensing import DEFAULT_VELOCITY_FILTER_HZ, OBSERVERS
+from .sensing import DEFAULT_VELOCITY_FILTER_HZ, ESTIMATORS, OBSERVERS
 
 #: Integrators by name.
 INTEGRATORS: dict[str, str] = {
@@ -55,6 +55,8 @@ class Scenario:
         limit_tolerance: distance (m, rad) outside a joint limit at which the run is stopped.
         observer, observer_gain, force_sensor: how the controller cancels the tool force.
         encoder_resolution, twist_resolution, velocity_noise, velocity_filter_hz: realistic sensing.
+        estimator, estimator_bandwidth_hz: how velocities (and the observer's disturbance) are
+            estimated with encoders: ``"difference"`` (default) or ``"kalman"`` (docs/control.md).
         plant_engine: ``"model"`` or a registered engine (``"mujoco"``).
         transient_s: start transient excluded from the "after transient" figures (s).
     """
@@ -75,6 +77,8 @@ class Scenario:
     velocity_filter_hz: float = DEFAULT_VELOCITY_FILTER_HZ
     plant_engine: str = MODEL_ENGINE
     transient_s: float = 0.2
+    estimator: str = "difference"
+    estimator_bandwidth_hz: float | None = None
 
     def __post_init__(self) -> None:
         if self.external_force is None:  # the keyword form's default
@@ -100,6 +104,8 @@ class Scenario:
             raise InputError(f"seed = {self.seed!r}: expected a whole number >= 0")
         if self.observer not in OBSERVERS:
             raise InputError(f"observer = {self.observer!r}: expected one of {list(OBSERVERS)}")
+        if not isinstance(self.estimator, str) or self.estimator not in ESTIMATORS:
+            raise InputError(f"estimator = {shown(self.estimator)}: expected one of {list(ESTIMATORS)}")
         transient = self.transient_s
         if (
             isinstance(transient, bool)

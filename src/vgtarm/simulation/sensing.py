@@ -34,6 +34,31 @@ MAX_TWIST_RESOLUTION = 0.1
 MAX_VELOCITY_NOISE = 1.0
 #: Observers by name.
 OBSERVERS = ("none", "momentum")
+#: Velocity (and, with the momentum observer, disturbance) estimators by name: encoder differences
+#: through the first-order filter (the default), or the model-based Kalman filter.
+ESTIMATORS = ("difference", "kalman")
+#: Default bandwidth of the Kalman estimator (Hz; measured choice in docs/control.md).
+DEFAULT_ESTIMATOR_BANDWIDTH_HZ = 60.0
+
+
+def kalman_gains(dt: float, bandwidth_hz: float) -> tuple[float, float, float]:
+    """Steady-state gains (position, velocity, disturbance) of the estimator's Kalman filter.
+
+    Each joint's state is its position, velocity and an acceleration disturbance that drifts as a
+    random walk; the encoder reads the position with the quantisation noise of its step. Only the
+    ratio of the process noise to the measurement noise sets the gains, and it is given through the
+    bandwidth: ratio ``(2 pi f dt)^6``, whose filter has its three poles near ``2 pi f`` (a
+    third-order filter of the encoder positions), so every joint gets the same gains whatever its
+    step. From the discrete algebraic Riccati equation (SciPy)."""
+    from scipy.linalg import solve_discrete_are
+
+    # in units of the period (state q, v dt, d dt^2) and of the measurement noise
+    A = np.array([[1.0, 1.0, 0.5], [0.0, 1.0, 1.0], [0.0, 0.0, 1.0]])
+    H = np.array([[1.0, 0.0, 0.0]])
+    Q = np.diag([0.0, 0.0, (2.0 * math.pi * bandwidth_hz * dt) ** 6])
+    P = solve_discrete_are(A.T, H.T, Q, np.array([[1.0]]))
+    L = P @ H.T / (H @ P @ H.T + 1.0)
+    return float(L[0, 0]), float(L[1, 0]) / dt, float(L[2, 0]) / (dt * dt)
 
 
 @dataclass(frozen=True)
@@ -48,6 +73,9 @@ class Sensing:
     velocity_filter_hz: float
     velocity_filter: float
     units: tuple[str, ...] = JOINT_UNITS
+    estimator: str = "difference"
+    estimator_bandwidth_hz: float = 0.0
+    kalman_gain: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @property
     def active(self) -> bool:
@@ -71,7 +99,12 @@ class Sensing:
             "encoder_resolution_m": legs[0] if legs else 0.0,
             "twist_resolution_rad": twists[0] if twists else 0.0,
             "velocity_noise": self.velocity_noise,
-            "velocity_filter_hz": self.velocity_filter_hz if self.active else None,
+            "velocity_filter_hz": self.velocity_filter_hz if self.active and self.estimator == "difference" else None,
+            **(
+                {"estimator": self.estimator, "estimator_bandwidth_hz": self.estimator_bandwidth_hz}
+                if self.estimator != "difference"
+                else {}
+            ),
         }
 
 
@@ -115,6 +148,8 @@ def sensing_settings(
     twist_resolution: float | None,
     velocity_noise: float,
     velocity_filter_hz: float,
+    estimator: str = "difference",
+    estimator_bandwidth_hz: float | None = None,
 ) -> Sensing:
     """Validate the observer and sensing arguments of a run with control period ``dt``.
 
@@ -144,6 +179,7 @@ def sensing_settings(
         )
     cutoff = _number("velocity_filter_hz", velocity_filter_hz, strict=True)
     resolution = np.array([legs if unit == "m" else twist for unit in units])
+    bandwidth, gains = _estimator(estimator, estimator_bandwidth_hz, dt, resolution, noise)
     return Sensing(
         observer=observer,
         observer_gain=gain,
@@ -153,4 +189,37 @@ def sensing_settings(
         velocity_filter_hz=cutoff,
         velocity_filter=math.exp(-2.0 * math.pi * cutoff * dt),
         units=tuple(units),
+        estimator=estimator,
+        estimator_bandwidth_hz=bandwidth,
+        kalman_gain=gains,
     )
+
+
+def _estimator(
+    estimator: str, bandwidth_hz: float | None, dt: float, resolution: NDArray[np.float64], noise: float
+) -> tuple[float, tuple[float, float, float]]:
+    """The Kalman estimator's bandwidth (Hz) and gains; 0 and zeros with the differences."""
+    if estimator not in ESTIMATORS:
+        raise InputError(f"estimator = {shown(estimator)}: expected one of {list(ESTIMATORS)}")
+    if estimator == "difference":
+        if bandwidth_hz is not None:
+            raise InputError(f"estimator_bandwidth_hz = {bandwidth_hz!r}: only used with estimator = 'kalman'")
+        return 0.0, (0.0, 0.0, 0.0)
+    if not np.all(resolution > 0):
+        raise InputError(
+            "estimator = 'kalman' without encoders: expected encoder_resolution > 0 (the filter "
+            "estimates the state from encoder counts)"
+        )
+    if noise > 0:
+        raise InputError(
+            f"velocity_noise = {noise!r} with estimator = 'kalman': expected 0 (the estimator reads "
+            "positions, not differenced velocities)"
+        )
+    bandwidth = DEFAULT_ESTIMATOR_BANDWIDTH_HZ if bandwidth_hz is None else bandwidth_hz
+    bandwidth = _number("estimator_bandwidth_hz", bandwidth, strict=True)
+    if bandwidth * dt > 0.25:
+        raise InputError(
+            f"estimator_bandwidth_hz = {bandwidth_hz!r}: expected at most 0.25/dt = {0.25 / dt:g} Hz "
+            "(a quarter of the sampling rate)"
+        )
+    return bandwidth, kalman_gains(dt, bandwidth)

@@ -300,6 +300,8 @@ def prepare(
         scenario.twist_resolution,
         scenario.velocity_noise,
         scenario.velocity_filter_hz,
+        scenario.estimator,
+        scenario.estimator_bandwidth_hz,
     )
     external = scenario.external_force
     chosen = scenario.controller_model
@@ -336,6 +338,8 @@ def prepare(
         observer_gain=sensing.observer_gain,
         sensing=sensing.active,
         velocity_filter=sensing.velocity_filter,
+        estimator=sensing.estimator,
+        kalman_gain=sensing.kalman_gain,
     )
     job = Job(
         settings=settings,

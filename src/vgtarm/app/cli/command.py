@@ -35,6 +35,7 @@ from ...model.parameters import JOINT_NAMES, JOINT_UNITS, ROBOT_FILE_LIMIT
 from ...model.robot import load_robot
 from ...paths import Path as DesiredPath
 from . import mujoco as cli_mujoco
+from . import presets
 from . import stack as cli_stack
 from . import study as cli_study
 from . import visual as cli_visual
@@ -115,6 +116,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from ..cases import joint_reference, run_case
     from ..pictures.plotting import comparison_figure, save_figure
 
+    presets.apply_preset(args)
     if args.out is not None:
         check_output_folder(args.out, "--out", inputs=[args.config], owned=RUN_FILES)  # before the work
     robot = load_robot(args.config)
@@ -152,6 +154,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                 velocity_noise=args.velocity_noise,
                 velocity_filter_hz=args.velocity_filter,
                 plant_engine=args.plant,
+                **presets.simulate_options(args),
             )
         except SimulationError as exc:
             if args.out is not None and exc.result is not None:
@@ -186,6 +189,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         "seed",
         "observer",
         "observer_gain_per_s",
+        "estimator",
         "force_sensor",
         "sensing",
         "simulated_time_s",
@@ -502,6 +506,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--duration", type=positive_float, default=None, metavar="S", help="run only the first S seconds of the path"
     )
     _add_observer_options(simulate)
+    presets.add_simulate_options(simulate)
     simulate.add_argument(
         "--plant",
         choices=("model", "mujoco"),

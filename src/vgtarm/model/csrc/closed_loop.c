@@ -168,8 +168,36 @@ static void measure(const vgt_settings *s, const vgt_run *r, long k)
         memcpy(vm, qd, sizeof(double) * (size_t)nj);
         return;
     }
+    if (s->estimator == VGT_ESTIMATOR_KALMAN) return; /* the velocity is the estimator's */
     const double *qm0 = qm - nj, *vm0 = vm - nj, *noise = r->velocity_noise + nj * k;
     vgt_filtered_velocity(nj, s->velocity_filter, s->dt, qm, qm0, vm0, noise, vm);
+}
+
+/* The Kalman estimator at sample k (VGT_ESTIMATOR_KALMAN, with sensing; after measure): each joint's
+ * position, velocity and acceleration disturbance from the encoder reading q_meas_k, predicted over
+ * the last period by the controller model's forward dynamics at the estimate of sample k-1 under
+ * the effort applied, F_{k-1} (no tool force: that is in the disturbance), then corrected with the
+ * steady-state gains. The controller sees the encoder reading and the estimated velocity. The run
+ * starts from a known state (the encoder reading, the true velocity, no disturbance). */
+static int estimate(const vgt_model *m, const vgt_settings *s, const vgt_run *r, vgt_work *wk, long k)
+{
+    const int nj = s->n_joints;
+    double *x = r->x_hat + 4 * nj * k;
+    double *q = x, *v = x + nj, *d = x + 2 * nj, *a = x + 3 * nj;
+    const double *z = r->q_meas + nj * k;
+    if (k == 0) {
+        memcpy(q, z, sizeof(double) * (size_t)nj);
+        memcpy(v, r->qd, sizeof(double) * (size_t)nj);
+        for (int i = 0; i < nj; ++i) d[i] = a[i] = 0.0;
+    } else {
+        const double *x0 = x - 4 * nj, zero[3] = {0.0, 0.0, 0.0};
+        const double *in_fd[5] = {x0, x0 + nj, r->F + nj * (k - 1), zero, r->p_ctrl};
+        double *out_fd[1] = {a};
+        if (call(&m->fd, wk, 5, in_fd, 1, out_fd)) return VGT_FUNCTION_FAILED;
+        vgt_kalman_step(nj, s->dt, s->kalman_gain, x0, x0 + nj, x0 + 2 * nj, a, z, q, v, d);
+    }
+    memcpy(r->qd_meas + nj * k, v, sizeof(double) * (size_t)nj);
+    return VGT_DONE;
 }
 
 /* The velocity of sample j >= 1 differenced from the encoder readings, (q_meas_j - q_meas_{j-1})
@@ -215,6 +243,18 @@ static int observe(const vgt_model *m, const vgt_settings *s, const vgt_run *r, 
     }
     double acc[nj], raw[nj], applied[nj], va[nj], vb[nj], zero[3] = {0.0, 0.0, 0.0};
     const double *qa, *F1 = r->F + nj * (k - 1);
+    if (s->sensing && s->estimator == VGT_ESTIMATOR_KALMAN) {
+        /* the Kalman estimate of the last period: the model's acceleration plus the disturbance,
+         * at the estimate of sample k-1, under F_{k-1}; raw = M^ d^ (to round-off) */
+        const double *x0 = r->x_hat + 4 * nj * (k - 1), *x = x0 + 4 * nj;
+        for (int i = 0; i < nj; ++i) acc[i] = x[3 * nj + i] + x[2 * nj + i];
+        const double *in_k[5] = {x0, x0 + nj, acc, zero, r->p_ctrl};
+        double *out_k[1] = {raw};
+        if (call(&m->id, wk, 5, in_k, 1, out_k)) return VGT_FUNCTION_FAILED;
+        const double keep = exp(-s->observer_gain * s->dt), *tau0 = tau - nj;
+        vgt_observer_filter(nj, keep, tau0, raw, F1, tau);
+        return VGT_DONE;
+    }
     if (s->sensing) {
         const double *F2 = F1 - nj;
         differenced(s, r, k - 1, va);
@@ -280,6 +320,9 @@ int vgt_simulate_slice(const vgt_model *m, const vgt_settings *s, const vgt_run 
             double e0 = td[0] - tip[0], e1 = td[1] - tip[1], e2 = td[2] - tip[2];
             r->error[k] = sqrt(e0 * e0 + e1 * e1 + e2 * e2);
             measure(s, r, k);
+            if (s->sensing && s->estimator == VGT_ESTIMATOR_KALMAN && estimate(m, s, r, &wk, k)) {
+                status = VGT_FUNCTION_FAILED; *stop = k; break;
+            }
             if (s->threshold > 0.0 && r->error[k] > s->threshold) { status = VGT_ABOVE_THRESHOLD; *stop = k; break; }
             if (observe(m, s, r, &wk, k)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
             const double *qm = r->q_meas + nj * k, *vm = r->qd_meas + nj * k, *tau = r->tau_hat + nj * k;

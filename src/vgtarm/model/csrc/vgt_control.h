@@ -29,6 +29,25 @@ static inline void vgt_differenced_velocity(int n, double dt, const double *qm, 
     for (int i = 0; i < n; ++i) v[i] = (qm[i] - qm0[i]) / dt + noise[i];
 }
 
+/* One period of the steady-state Kalman filter of each joint (state q, v, d: position, velocity and
+ * acceleration disturbance), from the estimate q0, v0, d0 of the sample before: predicted with the
+ * model's acceleration a plus d over dt, corrected by the gains L[0..2] on the innovation z - q^-
+ * of the encoder reading z. */
+static inline void vgt_kalman_step(int n, double dt, const double *L, const double *q0, const double *v0,
+                                   const double *d0, const double *a, const double *z, double *q, double *v,
+                                   double *d)
+{
+    for (int i = 0; i < n; ++i) {
+        const double acc = a[i] + d0[i];
+        const double qp = q0[i] + dt * v0[i] + 0.5 * dt * dt * acc;
+        const double vp = v0[i] + dt * acc;
+        const double innovation = z[i] - qp;
+        q[i] = qp + L[0] * innovation;
+        v[i] = vp + L[1] * innovation;
+        d[i] = d0[i] + L[2] * innovation;
+    }
+}
+
 /* The momentum observer's window: the mean acceleration (vb - va) / dt over it. */
 static inline void vgt_window_acceleration(int n, double dt, const double *va, const double *vb, double *acc)
 {

@@ -35,6 +35,14 @@ enum vgt_observer {
     VGT_OBSERVER_FORCE = 2     /* tip force sensor, one period late, through J_P^T              */
 };
 
+/* How the controller estimates joint velocities (with sensing). */
+enum vgt_estimator {
+    VGT_ESTIMATOR_DIFFERENCE = 0, /* encoder differences through a first-order filter (the default) */
+    VGT_ESTIMATOR_KALMAN = 1      /* steady-state Kalman filter on the encoder positions, process      */
+                                  /* model the controller model's forward dynamics under the applied */
+                                  /* effort plus an estimated acceleration disturbance (a state)     */
+};
+
 /* Integrators of the plant. */
 enum vgt_integrator {
     VGT_EULER = 0,               /* explicit Euler                                 */
@@ -69,6 +77,9 @@ typedef struct {
     double observer_gain;   /* K_O (1/s) of the momentum observer                         */
     int sensing;            /* 1: the controller sees encoder-quantised, differenced state */
     double velocity_filter; /* sensing: weight of the previous velocity estimate, [0, 1)   */
+    int estimator;          /* sensing: an enum vgt_estimator                              */
+    double kalman_gain[3];  /* VGT_ESTIMATOR_KALMAN: gains of position, velocity and       */
+                            /* disturbance on the position innovation (per joint, the same) */
 } vgt_settings;
 
 /* One run: n samples of an n_joints robot (nj below). */
@@ -86,6 +97,8 @@ typedef struct {
     const double *velocity_noise;           /* (n, nj) noise on the differenced velocity    */
     double *q_meas, *qd_meas;               /* (n, nj) what the controller sees              */
     double *tau_hat;                        /* (n, nj) estimated external joint efforts      */
+    double *x_hat;                          /* (n, 4 nj) Kalman estimator: q^, v^, d^ and the */
+                                            /* model's acceleration over the period before   */
 } vgt_run;
 
 /* Evaluate one generated function over n samples (batch.c). */

@@ -1,0 +1,67 @@
+"""The state estimator's options and the named low-force preset of ``vgtarm simulate`` (issue 22).
+
+Kept apart from the command-line module: :func:`add_simulate_options` adds ``--estimator``,
+``--estimator-bandwidth`` and ``--preset`` to a parser, :func:`apply_preset` fills a preset's
+settings into the parsed arguments, and :func:`simulate_options` gives the scenario's options.
+The preset's choice and the measured front it is taken from are in ``docs/control.md``
+("The trade-off: tip error against force").
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from ...simulation.sensing import DEFAULT_ESTIMATOR_BANDWIDTH_HZ, ESTIMATORS
+
+#: Named settings of ``vgtarm simulate --preset``: the parsed arguments they set (each replaces the
+#: option of the same name). ``low-force``: the effort criterion, the Kalman estimator and the
+#: momentum observer at the point of the measured front with the least chatter under 0.06 mm.
+PRESETS: dict[str, dict[str, Any]] = {
+    "low-force": {
+        "criterion": "effort",
+        "observer": "momentum",
+        "observer_gain": 700.0,
+        "estimator": "kalman",
+        "estimator_bandwidth": 120.0,
+    },
+}
+
+
+def add_simulate_options(parser: argparse.ArgumentParser) -> None:
+    """``--estimator``, ``--estimator-bandwidth`` and ``--preset`` on ``parser``."""
+
+    parser.add_argument(
+        "--estimator",
+        choices=ESTIMATORS,
+        default="difference",
+        help="with encoders: velocities from differences through the filter (default), or a Kalman filter "
+        "with the controller model's dynamics (and, with the observer, the disturbance) as its process model",
+    )
+    parser.add_argument(
+        "--estimator-bandwidth",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help=f"--estimator kalman: its bandwidth (default {DEFAULT_ESTIMATOR_BANDWIDTH_HZ:g} Hz, at most 1/(4 dt))",
+    )
+    parser.add_argument(
+        "--preset",
+        choices=sorted(PRESETS),
+        default=None,
+        help="named settings; low-force: "
+        + ", ".join(f"{key.replace('_', '-')} {value}" for key, value in PRESETS["low-force"].items()),
+    )
+
+
+def apply_preset(args: argparse.Namespace) -> None:
+    """Set the arguments of ``args.preset`` (none: nothing changes)."""
+    for key, value in PRESETS.get(getattr(args, "preset", None) or "", {}).items():
+        setattr(args, key, value)
+
+
+def simulate_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The scenario options of the estimator arguments (none with the default: the runs of before)."""
+    if args.estimator == "difference" and args.estimator_bandwidth is None:
+        return {}
+    return {"estimator": args.estimator, "estimator_bandwidth_hz": args.estimator_bandwidth}
