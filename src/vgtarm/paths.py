@@ -289,6 +289,30 @@ def from_csv(
             names the file and the line (1-based, the header being line 1).
     """
     label = os.fspath(file)
+    times, points, where = _read_csv(file, quote, minimum=2)
+    stem = os.path.splitext(os.path.basename(label))[0]
+    try:
+        return _fit_spline(times, points, dt, name if name is not None else stem, "t", where)
+    except PathError as exc:
+        raise PathError(f"path file {shown(label, 200)}: {exc}") from None
+
+
+def csv_point(file: str | os.PathLike[str], *, quote: bool = True) -> tuple[float, FloatArray] | None:
+    """The time (s) and the point ``(3,)`` (m) of a path file with a single data row; ``None`` if it has more.
+
+    The file is read and checked as by :func:`from_csv` (same messages), which needs two rows or
+    more; ``vgtarm ik`` answers a one-row file with the configuration of that point.
+    """
+    times, points, _ = _read_csv(file, quote, minimum=1)
+    return (float(times[0]), points[0].copy()) if points.shape[0] == 1 else None
+
+
+def _read_csv(
+    file: str | os.PathLike[str], quote: bool, minimum: int
+) -> tuple[FloatArray, FloatArray, Callable[[int], str]]:
+    """The checked times ``(N,)`` and points ``(N, 3)`` of a path file with at least ``minimum`` rows,
+    and the function naming the line of a row (for messages)."""
+    label = os.fspath(file)
     shown_label = shown(label, 200)
     text = read_text_limited(file, CSV_FILE_LIMIT, "path file", error=PathError, encoding="utf-8-sig")
     try:
@@ -304,8 +328,11 @@ def from_csv(
             f"path file {shown_label}: line {header_line}: header must be the columns t,x,y,z"
             + (f", found {shown(','.join(cell.strip() for cell in header))}" if quote else "")
         )
-    if len(rows) < 3:
-        raise PathError(f"path file {shown_label}: need at least 2 data rows after the header, got {len(rows) - 1}")
+    if len(rows) < minimum + 1:
+        raise PathError(
+            f"path file {shown_label}: need at least {minimum} data row{'s' if minimum > 1 else ''} after the header,"
+            f" got {len(rows) - 1}"
+        )
     if len(rows) - 1 > MAX_SAMPLES:
         raise PathError(f"path file {shown_label}: {len(rows) - 1} data rows; at most {MAX_SAMPLES:,} are read")
     data = np.empty((len(rows) - 1, 4))
@@ -334,12 +361,13 @@ def from_csv(
     def where(i: int) -> str:
         return f"line {lines[i]}"
 
-    stem = os.path.splitext(os.path.basename(label))[0]
+    if data.shape[0] == 1:
+        return data[:, 0], data[:, 1:], where
     try:
         times, points = _check_samples(data[:, 0], data[:, 1:], "t", "x,y,z", where)
-        return _fit_spline(times, points, dt, name if name is not None else stem, "t", where)
     except PathError as exc:
         raise PathError(f"path file {shown_label}: {exc}") from None
+    return times, points, where
 
 
 def _numbered_rows(reader: Any) -> list[tuple[int, list[str]]]:

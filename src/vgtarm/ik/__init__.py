@@ -5,13 +5,15 @@ subject to the tip point (optionally the full pose), the joint limits and assemb
 margin; the joint rates and accelerations of the reference follow exactly from the optimality
 conditions. See ``docs/ik.md``.
 
-Public API: :func:`inverse_kinematics` (also ``Robot.inverse_kinematics``), the records
+Public API: :func:`inverse_kinematics` (also ``Robot.inverse_kinematics``), :func:`solve_point`
+(one tip point, a :class:`PointSolution` record), the records
 :class:`IKResult` and :class:`IKSamples`, :class:`OrientationPath`, :class:`IKOptions`, the
 solver interface and registry (:class:`Solver`, :class:`SolverResult`, :func:`register_solver`,
 :data:`SOLVERS`, :func:`solver_names`) and :func:`write_csv`.
 """
 
 from .options import IKOptions
+from .point import PointSolution, solve_point
 from .pose import OrientationPath
 from .records import CSV_COLUMNS, IKResult, IKSamples, write_csv
 from .solve import (
@@ -34,11 +36,13 @@ __all__ = [
     "IKResult",
     "IKSamples",
     "OrientationPath",
+    "PointSolution",
     "Solver",
     "SolverResult",
     "in_place",
     "inverse_kinematics",
     "register_solver",
+    "solve_point",
     "solver_names",
     "unregister_solver",
     "write_csv",

@@ -343,7 +343,7 @@ def _ik_path(args: argparse.Namespace) -> DesiredPath:
         if not (np.isfinite(dt) and dt > 0):
             raise InputError(f"--dt must be a finite period > 0 s, got {shown(args.dt)}")
     if (args.case is None) == (args.path is None):
-        raise InputError("give exactly one of --case 1|2 and --path FILE")
+        raise InputError("give exactly one of --case 1|2, --path FILE and --point X,Y,Z")
     if args.path is not None:
         return paths.from_csv(args.path, dt)
     if args.case not in ("1", "2"):
@@ -360,7 +360,7 @@ def _check_ik_memory(args: argparse.Namespace, path: DesiredPath) -> None:
     source = f"--path {shown(str(args.path), 200)}" if args.path is not None else f"--case {args.case}"
     spacing = f"--dt {path.dt:g} s" if args.dt is not None else f"dt {path.dt:g} s"
     check_memory(
-        memory_estimate(len(path), args.pose),
+        memory_estimate(len(path), args.pose is not None),
         f"{source} at {spacing}: {len(path):,} samples of inverse kinematics",
         "give a larger --dt or a shorter path",
     )
@@ -379,10 +379,46 @@ def _criterion(args: argparse.Namespace) -> dict[str, Any]:
     return {"criterion": args.criterion, "tool_force": force}
 
 
+def _numbers(text: str, field: str, count: int, meaning: str) -> np.ndarray:
+    """``count`` comma-separated finite numbers of the option ``field``, or one line naming it."""
+    cells = text.split(",")
+    try:
+        values = np.array([float(cell) for cell in cells])
+    except ValueError:
+        values = np.array([np.nan])
+    if values.shape != (count,) or not np.isfinite(values).all():
+        raise InputError(f"{field} {shown(text)}: expected {count} finite numbers separated by commas ({meaning})")
+    return values
+
+
+def _ik_rotation(args: argparse.Namespace) -> np.ndarray | str | None:
+    """``--pose``: None, ``"hold"`` or the rotation ``(3, 3)`` of its nine numbers."""
+    if args.pose is None or args.pose == "hold":
+        return args.pose
+    return _numbers(args.pose, "--pose", 9, "the rotation C03 row by row, R11,R12,...,R33").reshape(3, 3)
+
+
+def _ik_point(args: argparse.Namespace) -> tuple[float, np.ndarray] | None:
+    """The time (s) and the point (m) of ``--point`` (time 0) or of a one-row ``--path`` file; None for a path."""
+    if args.point is not None:
+        if args.case is not None or args.path is not None:
+            raise InputError("give exactly one of --case 1|2, --path FILE and --point X,Y,Z")
+        if args.dt is not None:
+            raise InputError(f"--dt {shown(args.dt)}: a single --point has no sampling period; leave --dt out")
+        return 0.0, _numbers(args.point, "--point", 3, "the tip point x,y,z in m")
+    if args.path is not None and args.case is None:
+        return paths.csv_point(args.path)
+    return None
+
+
 def cmd_ik(args: argparse.Namespace) -> int:
-    """Inverse kinematics of a desired path: write the joint reference as CSV and print a summary."""
+    """Inverse kinematics of a desired path, or of one point: write the joint reference as CSV and print a summary."""
     if args.output is not None:  # before the work; never over the path file it reads
         check_output_file(args.output, "-o", inputs=[args.path, args.config])
+    rotation = _ik_rotation(args)
+    point = _ik_point(args)
+    if point is not None:
+        return _ik_one_point(args, point, rotation)
     path = _ik_path(args)
     _check_ik_memory(args, path)
     robot = load_robot(args.config)
@@ -391,8 +427,7 @@ def cmd_ik(args: argparse.Namespace) -> int:
 
         placement = path_placement(robot)
         path = path if placement is None else placement.apply(path)
-    pose = "hold" if args.pose else None
-    result = robot.inverse_kinematics(path, solver=args.solver, rates=args.rates, pose=pose, **_criterion(args))
+    result = robot.inverse_kinematics(path, solver=args.solver, rates=args.rates, pose=rotation, **_criterion(args))
     if not result.success:
         raise UnreachableError(f"inverse kinematics did not verify every sample: {result.message}; nothing written")
     if args.output is not None:
@@ -401,7 +436,10 @@ def cmd_ik(args: argparse.Namespace) -> int:
     samples = result.samples
     worst = int(np.argmax(samples.residual))
     largest = int(np.argmax(samples.phi))
-    task = "tip position and orientation held from the first sample" if args.pose else "tip position, orientation free"
+    task = {
+        None: "tip position, orientation free",
+        "hold": "tip position and orientation held from the first sample",
+    }.get(rotation if isinstance(rotation, str | None) else "", "tip position and the orientation of --pose")
     span = f"dt = {path.dt:g} s, t = {path.t[0]:g} .. {path.t[-1]:g} s"
     print(f"path       {escape(path.name)}: {len(result)} samples, {span}")  # the name of a user's file, escaped
     print(f"task       {task}")
@@ -409,7 +447,7 @@ def cmd_ik(args: argparse.Namespace) -> int:
     fallbacks = int(np.count_nonzero(np.char.find(samples.method.astype(str), "fallback") >= 0))
     print(f"result     {result.message}; {fallbacks} samples re-solved by the reference solver")
     print(f"residual   worst {samples.residual[worst]:.3g} m at t = {result.t[worst]:.6g} s")
-    if args.pose:
+    if rotation is not None:
         print(f"           worst orientation error {np.nanmax(samples.orientation_error):.3g} rad")
     print(f"Phi        largest {samples.phi[largest]:.6g} at t = {result.t[largest]:.6g} s")
     print("limits     closest approach to each joint limit over the path")
@@ -422,6 +460,46 @@ def cmd_ik(args: argparse.Namespace) -> int:
     if args.output is not None:
         columns = f"{', '.join(CSV_COLUMNS[:4])}, joints, rates, accelerations"
         print(f"output     {escape(str(args.output))} ({len(result)} rows: {columns})")
+    return 0
+
+
+def _ik_one_point(args: argparse.Namespace, sample: tuple[float, np.ndarray], rotation: np.ndarray | str | None) -> int:
+    """``vgtarm ik --point`` (or a one-row path file): the configuration, its residual and its limit margins."""
+    from ...ik import solve_point
+    from ...ik.records import csv_columns
+
+    if args.rates != "exact":  # checked although a point has no rates: a typo is never ignored
+        from ...ik.rates import RATE_MODES
+
+        if args.rates not in RATE_MODES:
+            raise InputError(f"--rates {shown(args.rates)}: expected one of {', '.join(RATE_MODES)}")
+    robot = load_robot(args.config)
+    t, point = sample
+    held = rotation is None or isinstance(rotation, str)  # "hold": the free optimum's own orientation
+    solution = solve_point(robot, point, rotation=None if held else rotation, solver=args.solver, **_criterion(args))
+    if not solution.success:
+        raise UnreachableError(f"{solution.reason}; nothing written")
+    if args.output is not None:
+        row = np.concatenate([[t], solution.point, solution.q, np.zeros(2 * robot.n_joints)])
+        line = ",".join(f"{v:.17g}" for v in row)
+        atomic_write_text(args.output, ",".join(csv_columns(robot.joint_names)) + "\n" + line + "\n")
+    source = f"the one row of --path {escape(str(args.path))}" if args.point is None else "--point"
+    print(f"point      {_format_vector(solution.point, 10)} m, from {source}")
+    print(f"task       tip position, orientation {'free' if held else 'of --pose'}")
+    print(f"result     {solution.reason}")
+    print(f"residual   {solution.residual:.3g} m")
+    if not held:
+        print(f"           orientation error {solution.orientation_error:.3g} rad")
+    print(f"Phi        {solution.phi:.6g}")
+    print("q          name   value            to min       to max")
+    for i, name in enumerate(robot.joint_names):
+        low, high = solution.margins[i]
+        unit = robot.joint_units[i]
+        print(f"           {name:<6} {solution.q[i]:<16.10g} {low:<12.6g} {high:<12.6g} {unit}")
+    i, side, gap = solution.closest_limit
+    print(f"closest    {robot.joint_names[i]} is {gap:.6g} {robot.joint_units[i]} from its {side}")
+    if args.output is not None:
+        print(f"output     {escape(str(args.output))} (1 row: t, x, y, z, joints, zero rates and accelerations)")
     return 0
 
 
@@ -553,11 +631,23 @@ def build_parser() -> argparse.ArgumentParser:
     again.set_defaults(run=cmd_reproduce)
     ik = sub.add_parser("ik", help="joint reference of a desired tip path (inverse kinematics, paper eq. 12)")
     ik.add_argument("--case", default=None, metavar="1|2", help="the paper's case study path 1 or 2")
-    ik.add_argument("--path", type=Path, default=None, metavar="FILE", help="CSV file of t,x,y,z rows (s, m)")
+    ik.add_argument(
+        "--path", type=Path, default=None, metavar="FILE", help="CSV file of t,x,y,z rows (s, m); one row: one point"
+    )
+    ik.add_argument(
+        "--point",
+        default=None,
+        metavar="X,Y,Z",
+        help="one tip point (m): its joint configuration, residual and margins",
+    )
     ik.add_argument(
         "--pose",
-        action="store_true",
-        help="also hold the end-effector orientation: the free-orientation optimum of the first sample",
+        nargs="?",
+        const="hold",
+        default=None,
+        metavar="C03",
+        help="also the end-effector orientation: alone, that of the free-orientation optimum at the first sample "
+        "(held); or nine numbers R11,R12,...,R33, the rotation C03 row by row (as vgtarm fk prints it)",
     )
     ik.add_argument("--solver", default="fast", metavar="NAME", help="fast (default), reference, slsqp or ipopt")
     ik.add_argument("--rates", default="exact", metavar="MODE", help="exact (default) or finite_difference")
@@ -579,9 +669,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: What argparse takes for a negative number rather than an option: its own pattern (``-1``,
-#: ``-.5``) extended to exponents (``-1e-3``, ``-1E+2``, ``-2.e5``) and ``-inf``/``-nan``, so a
+#: ``-.5``) extended to exponents (``-1e-3``, ``-1E+2``, ``-2.e5``), ``-inf``/``-nan`` and lists
+#: of numbers separated by commas that start with a negative one (``--point -0.02,0,0.64``), so a
 #: negative value in any form can be given as a positional value or an option's value.
-NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$", re.IGNORECASE)
+_NUMBER = r"(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|(inf|infinity|nan)"
+NEGATIVE_NUMBER = re.compile(rf"^-({_NUMBER})(,\s*[-+]?({_NUMBER}))*$", re.IGNORECASE)
 
 
 def _accept_negative_numbers(parser: argparse.ArgumentParser) -> None:

@@ -1,0 +1,166 @@
+"""Inverse kinematics of one tip point (optionally one orientation): a toolbox's single-pose IK.
+
+:func:`solve_point` returns a :class:`PointSolution` record: the joint configuration that puts the
+tip at the point while minimising the joint-limit cost ``Phi`` of eq. 12 (the same problem as one
+sample of a path, solved and verified by the same solvers), its residual, its margins to the joint
+limits, ``success`` and ``reason``. An unreachable point is not raised for: the record then holds
+the feasible configuration that comes closest, ``success`` False and a one-line ``reason``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import InputError, UnreachableError, shown
+from ..model.robot import Robot
+from ..paths import MAX_COORDINATE, Path
+from . import reference
+from .options import IKOptions
+from .pose import angle_error, orientation_target
+from .problem import IKProblem
+from .solve import REACH_TOLERANCE, _task, inverse_kinematics
+
+Array = NDArray[np.float64]
+#: The time step of the two-sample resting path a point is solved as (s); it does not enter the answer.
+_REST_DT = 1.0
+
+
+@dataclass(frozen=True, eq=False)
+class PointSolution:
+    """The joint configuration of one tip point.
+
+    Attributes:
+        point: ``(3,)`` the target tip point in the base frame (m).
+        rotation: ``(3, 3)`` the target orientation ``C03``, or ``None`` (free orientation).
+        q: ``(n,)`` joint values (m, rad): the eq. 12 optimum when ``success``, else the feasible
+            configuration whose tip comes closest to the point.
+        residual: distance of the tip at ``q`` from the point (m).
+        orientation_error: angle between the end-effector at ``q`` and ``rotation`` (rad); NaN
+            when the orientation is free.
+        margins: ``(n, 2)`` distance of each joint to its lower limit (column 0) and to its upper
+            limit (column 1), in the joint's unit; both >= 0 within the limits.
+        phi: the joint-limit cost ``Phi(q)`` of eq. 12.
+        success: the point was reached and the optimality conditions verified.
+        reason: one line: what was solved, or why not.
+        joint_names: the robot's joint names, in the order of ``q``.
+    """
+
+    point: Array
+    rotation: Array | None
+    q: Array
+    residual: float
+    orientation_error: float
+    margins: Array
+    phi: float
+    success: bool
+    reason: str
+    joint_names: tuple[str, ...]
+
+    @property
+    def closest_limit(self) -> tuple[int, str, float]:
+        """``(joint index, "min" or "max", distance)`` of the joint nearest to one of its limits."""
+        i, side = np.unravel_index(int(np.argmin(self.margins)), self.margins.shape)
+        return int(i), ("min", "max")[int(side)], float(self.margins[i, side])
+
+
+def _as_point(point: object) -> Array:
+    try:
+        p = np.array(point, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"point {shown(point)}: expected three numbers x, y, z (m)") from None
+    if p.shape != (3,) or not np.isfinite(p).all():
+        raise InputError(f"point {shown(point)}: expected three finite numbers x, y, z (m)")
+    if np.abs(p).max() > MAX_COORDINATE:
+        raise InputError(f"point {shown(p.tolist())}: expected coordinates within +-{MAX_COORDINATE:g} m")
+    return p
+
+
+def _format(p: Array) -> str:
+    return "(" + ", ".join(f"{v:.6g}" for v in p) + ")"
+
+
+def solve_point(
+    robot: Robot, point: object, *, rotation: object = None, solver: str = "fast", **options: Any
+) -> PointSolution:
+    """Joint configuration that puts the tip of ``robot`` at ``point``, by eq. 12's joint-limit criterion.
+
+    Args:
+        robot: The robot.
+        point: ``(3,)`` the tip point in the base frame (m).
+        rotation: ``None`` (free orientation) or the end-effector orientation ``C03`` ``(3, 3)``
+            (as ``vgtarm fk`` prints it).
+        solver: an inverse-kinematics solver name (:func:`vgtarm.ik.solver_names`).
+        **options: See :class:`~vgtarm.ik.options.IKOptions` (``margin``, ``initial_guess``, ...).
+
+    Returns:
+        A :class:`PointSolution`; an unreachable point gives ``success`` False, the closest
+        feasible configuration and a ``reason`` naming the point and the smallest residual.
+
+    Raises:
+        InputError: a point that is not three finite numbers within 1 km, a rotation that is not
+            a rotation matrix, or a bad solver or option (as :func:`inverse_kinematics`).
+    """
+    p = _as_point(point)
+    target = None if rotation is None else orientation_target(rotation, 2, True)
+    path = Path(
+        "point", np.array([0.0, _REST_DT]), np.stack([p, p]), np.zeros((2, 3)), np.zeros((2, 3)), np.zeros((2, 3))
+    )
+    pose = None if target is None else target.rotation[0]
+    try:
+        result = inverse_kinematics(robot, path, solver=solver, rates="finite_difference", pose=pose, **options)
+    except UnreachableError:
+        return _closest(robot, path, p, target, options)
+    q = np.array(result.q[0])
+    tip, tip_rotation = robot.tip_position(q), robot.forward_kinematics(q).rotation
+    error = float("nan") if pose is None else float(angle_error(tip_rotation[None], pose[None])[0])
+    success = bool(result.samples.success[0])
+    reason = (
+        f"point {_format(p)} m reached and the optimality conditions of eq. 12 verified"
+        if success
+        else f"point {_format(p)} m: {result.message}"
+    )
+    return _solution(robot, p, pose, q, float(np.linalg.norm(tip - p)), error, success, reason)
+
+
+def _closest(robot: Robot, path: Path, p: Array, target: Any, options: dict[str, Any]) -> PointSolution:
+    """The record of an unreachable point: the feasible configuration closest to it."""
+    settings = IKOptions.from_keywords(options, robot.n_joints)
+    problem = IKProblem.from_parameters(robot.parameters, settings.margin, 1.0)
+    start = robot.parameters.home if settings.initial_guess is None else settings.initial_guess
+    task = _task(robot, path, target)
+    q, r = reference.closest(problem, task, 0, [np.asarray(start, dtype=float)], settings)
+    residual = float(np.linalg.norm(r[:3]))
+    error = float(np.arcsin(min(1.0, float(np.linalg.norm(r[3:]))))) if task.m == 6 else float("nan")
+    extra = f" and orientation error {error:.3g} rad" if task.m == 6 else ""
+    reason = (
+        f"point {_format(p)} m cannot be reached: the closest tip within the joint limits and the assembly margin "
+        f"({problem.margin:g} m) is {residual:.3g} m away{extra} (tolerance {REACH_TOLERANCE:g} m)"
+    )
+    pose = None if target is None else target.rotation[0]
+    return _solution(robot, p, pose, np.array(q, dtype=float), residual, error, False, reason)
+
+
+def _solution(
+    robot: Robot, p: Array, pose: Array | None, q: Array, residual: float, error: float, success: bool, reason: str
+) -> PointSolution:
+    low, high = robot.parameters.lower, robot.parameters.upper
+    margins = np.stack([q - low, high - q], axis=1)
+    phi = float(IKProblem.from_parameters(robot.parameters).phi(q))
+    for array in (p, q, margins):
+        array.flags.writeable = False
+    return PointSolution(
+        point=p,
+        rotation=pose,
+        q=q,
+        residual=residual,
+        orientation_error=error,
+        margins=margins,
+        phi=phi,
+        success=success,
+        reason=reason,
+        joint_names=robot.joint_names,
+    )
