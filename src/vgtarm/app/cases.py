@@ -19,7 +19,7 @@ The case gains are scalars: each case's ``Kp`` and ``Kv`` apply to every joint o
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -43,8 +43,8 @@ class CaseStudy:
     number: int
     title: str
     path_factory: Callable[[float], paths.Path] = field(repr=False)
-    kp: float
-    kv: float
+    kp: float | tuple[float, ...]
+    kv: float | tuple[float, ...]
     kp_bounds: tuple[float, float]
     kv_bounds: tuple[float, float]
     threshold: float = 2e-4
@@ -53,6 +53,19 @@ class CaseStudy:
     def path(self, dt: float = 1e-3) -> paths.Path:
         """The desired tip path sampled at ``dt`` (s)."""
         return self.path_factory(dt)
+
+    def with_gains(self, kp: float | tuple[float, ...] | None, kv: float | tuple[float, ...] | None) -> CaseStudy:
+        """The case with a user's gains (one value for every joint, or one per joint; None keeps the
+        case's); the GA's upper bounds grow to the largest gain when it exceeds them."""
+        kp = self.kp if kp is None else kp
+        kv = self.kv if kv is None else kv
+        return replace(
+            self,
+            kp=kp,
+            kv=kv,
+            kp_bounds=(self.kp_bounds[0], max(self.kp_bounds[1], float(np.max(kp)))),
+            kv_bounds=(self.kv_bounds[0], max(self.kv_bounds[1], float(np.max(kv)))),
+        )
 
     def controller(
         self,
@@ -237,9 +250,14 @@ def run_case(
     reference: JointReference | None = None,
     progress: Callable[[int, int], None] | None = None,
     scm_variant: str = "paper",
+    kp: float | tuple[float, ...] | None = None,
+    kv: float | tuple[float, ...] | None = None,
     **options: Any,
 ) -> SimulationResult:
     """Run one case study; the robot starts at rest at ``q_d(0)`` (the paper's start).
+
+    ``kp``, ``kv``: gains other than the case's (one value for every joint, or one per joint),
+    recorded in the summary.
 
     ``scm_variant``: the switching method's variant (``"paper"``: the paper's, as the
     reproduction runs it; ``"safe"``: gains admitted on the discrete loop first).
@@ -247,22 +265,85 @@ def run_case(
     ``reference`` reuses a joint reference computed before (it must match ``dt`` and ``rates``);
     ``options`` go to :func:`vgtarm.simulation.simulate` (observer, force sensor, sensing, ...).
     """
-    case = case_study(number)
+    case = case_study(number).with_gains(kp, kv)
     ref = reference if reference is not None else joint_reference(robot, number, dt=dt, rates=rates)
     metadata: dict[str, Any] = {"case": number, "case_title": case.title}
     placement = path_placement(robot)
     if placement is not None:
         metadata.update(placement.metadata())
+    if kp is not None or kv is not None:  # recorded only when given: the paper's runs stay as they were
+        metadata.update(_gain_metadata(case, robot.n_joints))
+    options = {"integrator": integrator, "substeps": substeps, "seed": seed, "progress": progress, **options}
+    return _run(
+        robot, case, ref, metadata, controller, external_force, horizon, ga, scm_variant, controller_model, options
+    )
+
+
+#: The gains of a run on a user's path unless given: case 1's (as a study's path file).
+PATH_GAINS_CASE = 1
+
+
+def run_path(
+    robot: Robot,
+    path: paths.Path,
+    *,
+    controller: str = "cfc",
+    external_force: bool = False,
+    kp: float | tuple[float, ...] | None = None,
+    kv: float | tuple[float, ...] | None = None,
+    rates: str = "exact",
+    horizon: int = 20,
+    ga: GAOptions | None = None,
+    controller_model: RobotParameters | Stack | None = None,
+    reference: JointReference | None = None,
+    scm_variant: str = "paper",
+    metadata: dict[str, Any] | None = None,
+    **options: Any,
+) -> SimulationResult:
+    """Run a user's desired tip ``path`` (its own sampling period) as a case is run: from rest at
+    ``q_d(0)``, with ``kp``, ``kv`` (one value for every joint or one per joint; default case
+    :data:`PATH_GAINS_CASE`'s, whose GA bounds and tool force apply too).
+
+    ``reference`` reuses a joint reference of the path computed before; ``metadata`` is added to
+    the summary (the path file's name, ...); ``options`` go to :func:`vgtarm.simulation.simulate`.
+    """
+    case = replace(case_study(PATH_GAINS_CASE), number=0, title=path.name).with_gains(kp, kv)
+    ref = (
+        reference
+        if reference is not None
+        else JointReference.of(robot.inverse_kinematics(path, rates=rates), path.name)
+    )
+    info: dict[str, Any] = {"path": path.name, **_gain_metadata(case, robot.n_joints), **(metadata or {})}
+    return _run(robot, case, ref, info, controller, external_force, horizon, ga, scm_variant, controller_model, options)
+
+
+def _gain_metadata(case: CaseStudy, n_joints: int) -> dict[str, Any]:
+    """The summary's ``kp`` and ``kv``: one value per joint, so the run can be repeated."""
+    return {
+        "kp": np.broadcast_to(np.asarray(case.kp, dtype=float), (n_joints,)).tolist(),
+        "kv": np.broadcast_to(np.asarray(case.kv, dtype=float), (n_joints,)).tolist(),
+    }
+
+
+def _run(
+    robot: Robot,
+    case: CaseStudy,
+    reference: JointReference,
+    metadata: dict[str, Any],
+    controller: str,
+    external_force: bool,
+    horizon: int,
+    ga: GAOptions | None,
+    scm_variant: str,
+    controller_model: RobotParameters | Stack | None,
+    options: dict[str, Any],
+) -> SimulationResult:
     return simulate(
         robot,
-        ref,
+        reference,
         case.controller(controller, horizon=horizon, ga=ga, n_joints=robot.n_joints, variant=scm_variant),
         controller_model=controller_model,
         external_force=case.external_force if external_force else None,
-        integrator=integrator,
-        substeps=substeps,
-        seed=seed,
         metadata=metadata,
-        progress=progress,
         **options,
     )

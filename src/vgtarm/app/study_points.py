@@ -99,7 +99,7 @@ def _controller(inputs: Inputs, n_joints: int) -> ComputedForceControl | Switchi
     raise InputError(f"controller = {inputs['controller']!r}: expected one of ['cfc', 'scm']")
 
 
-def _number(value: Value, default: float) -> float:
+def _number(value: Value, default: float | tuple[float, ...]) -> float | tuple[float, ...]:
     return default if value is None else float(value)
 
 

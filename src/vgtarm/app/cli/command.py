@@ -39,7 +39,7 @@ from . import presets
 from . import stack as cli_stack
 from . import study as cli_study
 from . import visual as cli_visual
-from .options import add_config, non_negative_int, positive_float, positive_int
+from .options import add_config, joint_gains, non_negative_int, positive_float, positive_int
 
 
 def _format_vector(values: Sequence[float] | np.ndarray, digits: int = 6) -> str:
@@ -112,58 +112,80 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from ...errors import SimulationError
+    from ...simulation import JointReference
     from ...simulation.result import ROBOT_COPY, RUN_FILES
-    from ..cases import joint_reference, run_case
+    from ..cases import joint_reference, run_case, run_path, truncate_reference
     from ..pictures.plotting import comparison_figure, save_figure
 
     presets.apply_preset(args)
+    if (args.case is None) == (args.path is None):
+        raise InputError("give exactly one of --case 1|2 and --path FILE")
+    inputs = [args.config, args.path]
     if args.out is not None:
-        check_output_folder(args.out, "--out", inputs=[args.config], owned=RUN_FILES)  # before the work
+        check_output_folder(args.out, "--out", inputs=inputs, owned=RUN_FILES)  # before the work
+    desired = None if args.path is None else paths.from_csv(args.path)  # a bad file: one line, before the model
     robot = load_robot(args.config)
     robot_text = _robot_text(args.config)
+    kp = None if args.kp is None else joint_gains(args.kp, "--kp", robot.joint_names)
+    kv = None if args.kv is None else joint_gains(args.kv, "--kv", robot.joint_names)
     if args.plant == "mujoco":
         from ... import mujoco_bridge  # noqa: F401  (registers the MuJoCo plant)
     model = robot.parameters.scaled(mass=args.model_mass, inertia=args.model_inertia, friction=args.model_friction)
     exact_model = (args.model_mass, args.model_inertia, args.model_friction) == (1.0, 1.0, 1.0)
-    with tqdm(total=100, desc=f"case {args.case} {args.controller}", unit="%", disable=args.quiet, leave=False) as bar:
+    label = f"case {args.case}" if desired is None else escape(desired.name)
+    with tqdm(total=100, desc=f"{label} {args.controller}", unit="%", disable=args.quiet, leave=False) as bar:
 
         def progress(done: int, total: int) -> None:
             bar.update(round(100 * done / total) - bar.n)
 
+        options: dict[str, Any] = dict(
+            controller=args.controller,
+            external_force=args.external_force,
+            integrator=args.integrator,
+            substeps=args.substeps,
+            seed=args.seed,
+            rates=args.rates,
+            horizon=args.horizon,
+            scm_variant=args.scm_variant,
+            controller_model=None if exact_model else model,
+            progress=progress,
+            observer=args.observer,
+            observer_gain=args.observer_gain,
+            force_sensor=args.force_sensor,
+            encoder_resolution=args.encoder_resolution,
+            velocity_noise=args.velocity_noise,
+            velocity_filter_hz=args.velocity_filter,
+            plant_engine=args.plant,
+            kp=kp,
+            kv=kv,
+            **presets.simulate_options(args),
+        )
         try:
-            result = run_case(
-                robot,
-                args.case,
-                controller=args.controller,
-                external_force=args.external_force,
-                integrator=args.integrator,
-                substeps=args.substeps,
-                seed=args.seed,
-                rates=args.rates,
-                horizon=args.horizon,
-                scm_variant=args.scm_variant,
-                reference=None
-                if args.duration is None and args.criterion == "joint_limits"
-                else joint_reference(robot, args.case, rates=args.rates, duration=args.duration, **_criterion(args)),
-                controller_model=None if exact_model else model,
-                progress=progress,
-                observer=args.observer,
-                observer_gain=args.observer_gain,
-                force_sensor=args.force_sensor,
-                encoder_resolution=args.encoder_resolution,
-                velocity_noise=args.velocity_noise,
-                velocity_filter_hz=args.velocity_filter,
-                plant_engine=args.plant,
-                **presets.simulate_options(args),
-            )
+            if desired is not None:
+                ik = robot.inverse_kinematics(desired, rates=args.rates, **_criterion(args))
+                reference = JointReference.of(ik, name=desired.name)
+                if args.duration is not None:
+                    reference = truncate_reference(reference, args.duration)
+                result = run_path(
+                    robot, desired, reference=reference, metadata={"path_file": str(args.path)}, **options
+                )
+            else:
+                result = run_case(
+                    robot,
+                    args.case,
+                    reference=None
+                    if args.duration is None and args.criterion == "joint_limits"
+                    else joint_reference(
+                        robot, args.case, rates=args.rates, duration=args.duration, **_criterion(args)
+                    ),
+                    **options,
+                )
         except SimulationError as exc:
             if args.out is not None and exc.result is not None:
                 try:  # the folder is replaced whole: no figure of an earlier run stays beside it
                     with (
                         placements() as moved,
-                        atomic_folder(
-                            args.out, "--out", inputs=[args.config], owned=RUN_FILES, checked=True
-                        ) as partial,
+                        atomic_folder(args.out, "--out", inputs=inputs, owned=RUN_FILES, checked=True) as partial,
                     ):
                         exc.result.save(partial)  # type: ignore[attr-defined]
                         if robot_text is not None:
@@ -181,6 +203,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     summary = result.summary()
     for key in (
         "case",
+        "path",
+        "path_file",
+        "kp",
+        "kv",
         "ik_criterion",
         "controller",
         "external_force",
@@ -210,12 +236,14 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         if key not in summary:  # the path placement: only on a robot other than the paper's
             continue
         value = summary[key]
-        text = f"{value:.6g}" if isinstance(value, float) else str(value)
+        if isinstance(value, list) and len(set(value)) == 1:
+            value = value[0]  # one gain for every joint
+        text = f"{value:.6g}" if isinstance(value, float) else escape(str(value))
         print(f"{key:<34} {text}")
     if args.out is not None:
         with (
             placements() as moved,
-            atomic_folder(args.out, "--out", inputs=[args.config], owned=RUN_FILES, checked=True) as written,
+            atomic_folder(args.out, "--out", inputs=inputs, owned=RUN_FILES, checked=True) as written,
         ):
             result.save(written)
             save_figure(comparison_figure([result]), written / "figure.png")
@@ -540,8 +568,23 @@ def build_parser() -> argparse.ArgumentParser:
     add_config(fk)
     fk.set_defaults(run=cmd_fk)
 
-    simulate = sub.add_parser("simulate", help="run one of the paper's case studies")
-    simulate.add_argument("--case", type=int, choices=(1, 2), required=True)
+    simulate = sub.add_parser("simulate", help="run one of the paper's case studies or your own path")
+    simulate.add_argument("--case", type=int, choices=(1, 2), default=None, help="the paper's case study 1 or 2")
+    simulate.add_argument(
+        "--path",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="your own path instead: a CSV file of t,x,y,z rows (s, m), as for vgtarm ik, run at its own spacing",
+    )
+    for name, what in (("kp", "stiffness Kp (N/m, N m/rad)"), ("kv", "damping Kv (N s/m, N m s/rad)")):
+        simulate.add_argument(
+            f"--{name}",
+            default=None,
+            metavar="K[,K...]",
+            help=f"the {what}: one number for every joint or one per joint, comma-separated (default: the case's; "
+            "a path: case 1's)",
+        )
     simulate.add_argument(
         "--controller", choices=("cfc", "scm"), default="cfc", help="computed force control or the GA switching method"
     )

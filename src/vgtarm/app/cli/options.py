@@ -38,3 +38,23 @@ def add_config(parser: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="robot TOML file (default: the shipped reference robot)",
     )
+
+
+def joint_gains(text: str, option: str, joint_names: tuple[str, ...]) -> float | tuple[float, ...]:
+    """The gain of ``option`` (``--kp``, ``--kv``): one number for every joint, or one per joint of
+    ``joint_names`` separated by commas, each finite and > 0; else one line naming the option, the
+    value and what was expected (:class:`~vgtarm.errors.InputError`)."""
+    from ...errors import InputError, shown
+
+    n = len(joint_names)
+    expected = (
+        f"expected one number for every joint or {n} numbers separated by commas (one per joint: "
+        f"{' '.join(joint_names)}), each finite and > 0"
+    )
+    try:
+        values = [float(cell) for cell in text.split(",")]
+    except ValueError:
+        raise InputError(f"{option} {shown(text)}: {expected}") from None
+    if len(values) not in (1, n) or not all(np.isfinite(v) and v > 0 for v in values):
+        raise InputError(f"{option} {shown(text)}: {expected}")
+    return values[0] if len(values) == 1 else tuple(values)
