@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -97,6 +98,36 @@ def test_local_study_writes_every_run(local_run: Any, tiny: Path) -> None:
     assert _comparable(table) == _comparable(rows)
 
 
+def test_runs_land_where_the_readme_says_and_a_study_of_before_resumes(local_run: Any, tiny: Path) -> None:
+    """``DIR/<id>.json`` (the README); a study begun before, with ``DIR/runs/<id>.json``, resumes
+    there: nothing is run again and no file moves."""
+    ids = {p.id for p in load_study(tiny).points()}
+    assert {p.stem for p in local_run.folder.glob("*.json")} == ids
+    assert not (local_run.folder / "runs").exists()
+    old = tiny.parent / "before"
+    (old / "runs").mkdir(parents=True)
+    for point_id in ids:
+        shutil.copyfile(local_run.folder / f"{point_id}.json", old / "runs" / f"{point_id}.json")
+    resumed = run_study(load_study(tiny), old, execute_point, progress=False)
+    assert resumed.skipped == len(ids) and resumed.executed == 0
+    assert _comparable(resumed.rows) == _comparable(local_run.rows)
+    assert not list(old.glob("*.json")) and {p.stem for p in (old / "runs").glob("*.json")} == ids
+
+
+def test_the_dashboard_line(monkeypatch: pytest.MonkeyPatch) -> None:
+    from vgtarm.study import runner
+
+    class Cluster:
+        dashboard_link = "http://127.0.0.1:40123/status"
+
+    monkeypatch.setattr(runner.importlib.util, "find_spec", lambda name: object())
+    assert runner.dashboard_address() == "127.0.0.1:0"  # loopback only, a free port
+    assert runner.dashboard_line(Cluster()) == "Dask dashboard of the local cluster: http://127.0.0.1:40123/status"
+    monkeypatch.setattr(runner.importlib.util, "find_spec", lambda name: None)
+    assert runner.dashboard_address() is None
+    assert "needs Bokeh" in runner.dashboard_line(Cluster())
+
+
 def test_remote_scheduler_gives_the_same_table(local_run: Any, tiny: Path) -> None:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -176,7 +207,7 @@ def test_killed_study_resumes_without_running_anything_twice(tmp_path: Path) -> 
     study_file = tmp_path / "killable.toml"
     study_file.write_text(KILLABLE)
     out = tmp_path / "out"
-    runs = out / "runs"
+    runs = out  # DIR/<id>.json, as the README says
     total = len(load_study(study_file).points())
     command = [str(Path(sys.executable).parent / "vgtarm"), "study", "run", str(study_file), "--out", str(out)]
     process = subprocess.Popen(

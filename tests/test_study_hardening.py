@@ -138,14 +138,14 @@ def test_each_stored_id_has_its_own_row_and_a_copied_run_file_is_refused(
     out = tmp_path / "out"
     shutil.copytree(hostile_run.folder, out)
     first, second = ids
-    shutil.copyfile(out / "runs" / f"{first}.json", out / "runs" / f"{second}.json")  # same content, other id
+    shutil.copyfile(out / f"{first}.json", out / f"{second}.json")  # same content, other id
     before = (out / "results.csv").read_bytes()
     assert main(["study", "run", str(study), "--out", str(out), "-q"]) == 1
     line = _one_line(capsys.readouterr().err)
     assert f"{second}.json" in line and repr(first) in line and "copy" in line
     assert (out / "results.csv").read_bytes() == before  # refused before any run or table
     with pytest.raises(InputError, match="not a run record"):
-        (out / "runs" / f"{second}.json").write_text("[1, 2]\n")
+        (out / f"{second}.json").write_text("[1, 2]\n")
         Store(out).read(second)
 
 

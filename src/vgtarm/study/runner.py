@@ -19,12 +19,14 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import importlib.util
 import ipaddress
 import logging
 import multiprocessing
 import os
 import re
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable, Mapping
@@ -113,7 +115,7 @@ def run_study(
         from tqdm import tqdm
 
         with (
-            _client(address, workers) as client,  # connected or started before the folder is made
+            _client(address, workers, announce=progress) as client,  # connected or started before the folder is made
             tqdm(
                 total=len(points), initial=len(points) - len(todo), unit="run", disable=not progress, desc=study.name
             ) as bar,
@@ -245,8 +247,8 @@ class _client:
     """A Dask client on ``scheduler`` (an address checked by :func:`scheduler_address`), or on a
     local cluster it starts and stops."""
 
-    def __init__(self, scheduler: str | None, workers: int | None) -> None:
-        self.scheduler, self.workers = scheduler, workers
+    def __init__(self, scheduler: str | None, workers: int | None, announce: bool = False) -> None:
+        self.scheduler, self.workers, self.announce = scheduler, workers, announce
         self.cluster: Any = None
         self.client: Any = None
         self.level: int | None = None
@@ -264,6 +266,8 @@ class _client:
         logger.setLevel(max(logging.ERROR, logger.getEffectiveLevel()))
         try:
             self.cluster = _start_local_cluster(self.workers or usable_cpus())
+            if self.announce:
+                print(dashboard_line(self.cluster), file=sys.stderr)
             try:
                 self.client = Client(self.cluster)
             except BaseException:
@@ -288,6 +292,24 @@ class _client:
                 logging.getLogger("distributed").setLevel(self.level)
 
 
+#: Where a local cluster serves its dashboard: this machine only, on a port the system chooses free.
+DASHBOARD_ADDRESS = "127.0.0.1:0"
+
+
+def dashboard_address() -> str | None:
+    """:data:`DASHBOARD_ADDRESS` when Dask can serve a dashboard (it needs Bokeh), else None (none is
+    started: Dask would otherwise only log that Bokeh is missing)."""
+    return DASHBOARD_ADDRESS if importlib.util.find_spec("bokeh") is not None else None
+
+
+def dashboard_line(cluster: Any) -> str:
+    """The line printed when a local cluster starts: its dashboard's address, or why there is none."""
+    link = getattr(cluster, "dashboard_link", None) if dashboard_address() is not None else None
+    if link:
+        return f"Dask dashboard of the local cluster: {link}"
+    return "Dask dashboard: none (it needs Bokeh: pip install 'bokeh>=3.1'); the progress bar shows the runs"
+
+
 def _start_local_cluster(workers: int) -> Any:
     """A local cluster of ``workers`` processes, one thread each, started from a thread that blocks
     SIGINT (see the module's docstring); a Ctrl-C while it starts is raised here at once, and the
@@ -305,7 +327,7 @@ def _start_local_cluster(workers: int) -> Any:
                 n_workers=workers,
                 threads_per_worker=1,
                 processes=True,
-                dashboard_address=None,
+                dashboard_address=dashboard_address(),
                 silence_logs=logging.ERROR,
                 env={"VGTARM_THREADS": "1"},  # the workers fill the CPUs; no GA threads on top
             )

@@ -2,7 +2,9 @@
 
 Layout of ``DIR``::
 
-    runs/<id>.json        one per finished run (inputs, summary, error), written atomically
+    <id>.json             one per finished run (inputs, summary, error), written atomically
+                          (studies begun before issue 27 keep theirs in runs/<id>.json: read,
+                          resumed and completed where they are)
     executions.log        "submit <id>" when a run is sent to the cluster, "write <id>" once stored
     results.csv           one row per run of the study: id, every input, every summary figure
     results.parquet       the same table (pyarrow)
@@ -25,6 +27,7 @@ import io
 import json
 import math
 import os
+import re
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -48,27 +51,40 @@ TIMING_COLUMNS = (
 )
 
 
+#: The sub-folder that held the run files of a study begun before issue 27 (``DIR/runs/<id>.json``);
+#: such a study resumes there, new studies write ``DIR/<id>.json`` as the README says.
+LEGACY_RUNS = "runs"
+#: The name of a run file: a point's id (16 hexadecimal digits, :func:`vgtarm.study.spec.point_id_of`).
+RUN_FILE = re.compile(r"[0-9a-f]{16}\.json")
+
+
 class Store:
     """The results folder of a study."""
 
     def __init__(self, folder: str | Path) -> None:
         self.folder = Path(folder)
-        self.runs = self.folder / "runs"
+        legacy = self.folder / LEGACY_RUNS
+        #: Where run files go: the study folder itself, or ``runs/`` of a study begun there before.
+        self.runs = legacy if legacy.is_dir() else self.folder
         self.log = self.folder / "executions.log"
 
     def prepare(self) -> None:
-        """Create the folder and ``runs/``."""
+        """Create the folder."""
         self.runs.mkdir(parents=True, exist_ok=True)
 
     def done(self) -> set[str]:
         """Ids of the runs stored (temporary files of interrupted writes are ignored)."""
         if not self.runs.is_dir():
             return set()
-        return {p.stem for p in self.runs.glob("*.json") if not p.name.startswith(".")}
+        return {p.stem for p in self.runs.glob("*.json") if RUN_FILE.fullmatch(p.name)}
+
+    def run_file(self, point_id: str) -> Path:
+        """The file of run ``point_id`` (which may not exist yet)."""
+        return self.runs / f"{point_id}.json"
 
     def write(self, record: Mapping[str, Any]) -> Path:
         """Store one finished run ``{"id", "inputs", "summary", "error"}`` atomically, then log it."""
-        path = self.runs / f"{record['id']}.json"
+        path = self.run_file(str(record["id"]))
         atomic_write_text(path, json.dumps(_jsonable(dict(record))) + "\n")
         self.note("write", [str(record["id"])])
         return path
@@ -87,7 +103,7 @@ class Store:
         """One stored run: a record ``{"id", "inputs", "summary", "error"}`` whose id is ``point_id``
         (InputError, one line, for anything else: a run file copied under another id, a damaged or
         foreign file)."""
-        path = self.runs / f"{point_id}.json"
+        path = self.run_file(point_id)
         shown_path = cut(str(path), 200)
         redo = "remove it and run the study again to redo that run"
         try:
