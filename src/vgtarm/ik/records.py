@@ -97,6 +97,7 @@ class IKResult:
         robot_fingerprint: :attr:`vgtarm.Robot.fingerprint` of that robot's parameters, so a
             simulation of another robot can say so ("" if unknown).
         joint_names: the robot's joint names, in the order of the columns of ``q``.
+        path: the name of the desired path (:attr:`vgtarm.paths.Path.name`; "" if unknown).
     """
 
     t: Array
@@ -122,6 +123,7 @@ class IKResult:
     robot_fingerprint: str = ""
 
     joint_names: tuple[str, ...] = JOINT_NAMES
+    path: str = ""
 
     def __len__(self) -> int:
         return int(self.t.shape[0])

@@ -244,6 +244,7 @@ def inverse_kinematics(
         robot=robot.parameters.name,
         robot_fingerprint=robot.fingerprint,
         joint_names=robot.joint_names,
+        path=path.name,
     )
 
 

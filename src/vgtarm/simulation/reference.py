@@ -87,8 +87,10 @@ class JointReference:
         return float((self.t[-1] - self.t[0]) / (len(self.t) - 1))
 
     @classmethod
-    def of(cls, source: HasJointReference, name: str = "reference") -> JointReference:
+    def of(cls, source: HasJointReference, name: str | None = None) -> JointReference:
         """Wrap an IK result (or any object with ``t``, ``q``, ``qd``, ``qdd``).
+
+        ``name`` defaults to the IK result's desired path's name (``path``), else ``"reference"``.
 
         An IK result also gives its desired tip path (``position``) and the robot it was solved
         for, which the simulator checks against the plant.
@@ -109,7 +111,7 @@ class JointReference:
             _array(source.qd, "qd"),
             _array(source.qdd, "qdd"),
             rates=str(rates),
-            name=name,
+            name=name if name is not None else str(getattr(source, "path", "") or "reference"),
             tip=None if position is None else _array(position, "tip"),
             robot=str(getattr(source, "robot", "")),
             robot_fingerprint=str(getattr(source, "robot_fingerprint", "")),

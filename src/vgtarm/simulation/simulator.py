@@ -247,6 +247,7 @@ class Run:
             "integrator": scenario.integrator,
             "substeps": scenario.substeps,
             "reference_rates": self.reference.rates,
+            "reference": self.reference.name,
             "transient_s": scenario.transient_s,
             "controller_model": self.job.model.parameters.name,
             "plant": plant.parameters.name,

@@ -74,8 +74,9 @@ class ReportRun:
 
 
 def spec_of(result: SimulationResult) -> RunSpec:
-    """The :class:`RunSpec` of a run from its metadata (case 0 when the run is not a case study);
-    a case that is not a whole number is refused (:class:`~vgtarm.errors.InputError`)."""
+    """The :class:`RunSpec` of a run from its metadata (case 0 when the run is not a case study, named
+    by its path: ``path``, else the reference's name); a case that is not a whole number is refused
+    (:class:`~vgtarm.errors.InputError`)."""
     meta = result.metadata
     case = meta.get("case", 0) or 0
     try:
@@ -87,6 +88,7 @@ def spec_of(result: SimulationResult) -> RunSpec:
         controller=str(meta.get("controller", "run")),
         external_force=bool(meta.get("external_force", False)),
         rates=str(meta.get("reference_rates", "exact")),
+        name="" if number else str(meta.get("path") or meta.get("reference") or ""),
     )
 
 
@@ -237,13 +239,13 @@ def _effort_figure(runs: Sequence[ReportRun], max_points: int) -> dict[str, Any]
 
 def _path_figure(runs: Sequence[ReportRun], max_points: int) -> dict[str, Any]:
     data: list[dict[str, Any]] = []
-    shown_desired: set[int] = set()
+    shown_desired: set[tuple[int, str]] = set()
     for i, run in enumerate(runs):
         r = run.result
         n = r.completed
         index = decimate_min_max(r.t[:n], r.tip_error[:n], max_points)
-        if run.spec.case not in shown_desired:
-            shown_desired.add(run.spec.case)
+        if (run.spec.case, run.spec.name) not in shown_desired:
+            shown_desired.add((run.spec.case, run.spec.name))
             d = (r.tip_desired[index] * MM).astype(np.float32)
             name = f"case {run.spec.case}: desired" if run.spec.case else f"{plotly_text(run.label)}: desired"
             data.append(
@@ -618,7 +620,8 @@ def load_runs(folders: Sequence[str | Path]) -> list[ReportRun]:
             spec = spec_of(result)
         except InputError as exc:
             raise InputError(f"run folder {errors.cut(str(path), 200)}: {exc}") from None
-        label = f"{path.name}: {spec.label}" if spec.case == 0 else f"case {spec.case} {spec.label} ({path.name})"
+        what = f"case {spec.case}" if spec.case else spec.name
+        label = f"{what} {spec.label} ({path.name})" if what else f"{path.name}: {spec.label}"
         runs.append(ReportRun(spec=spec, label=label, folder=path.name, result=result))
     return runs
 

@@ -22,6 +22,13 @@ class RunSpec:
     controller: str
     external_force: bool
     rates: str
+    #: The desired path's name of a run that is not a case study (case 0), as its summary records it.
+    name: str = ""
+
+    @property
+    def case_text(self) -> str:
+        """The table's case cell: the case's number, else the path's name (a dash if unknown)."""
+        return str(self.case) if self.case else (self.name or "—")
 
     @property
     def folder(self) -> str:
@@ -77,7 +84,7 @@ def table_row(spec: RunSpec, summary: dict[str, Any], folder: str | None = None)
     s = summary
     paper = PAPER_RESULTS.get((spec.case, spec.controller, spec.external_force))
     return [
-        str(spec.case),
+        spec.case_text,
         spec.controller.upper(),
         "yes" if spec.external_force else "no",
         "exact" if spec.rates == "exact" else "finite diff.",
