@@ -28,3 +28,11 @@ def test_a_case_run_still_shows_its_number(robot):
     run = run_case(robot, 1, reference=truncate_reference(joint_reference(robot, 1), 0.01))
     spec = spec_of(run)
     assert spec.case == 1 and spec.name == "" and table_row(spec, run.summary())[0] == "1"
+
+
+def test_the_animation_title_names_the_path_of_a_run_that_is_not_a_case(robot):
+    from vgtarm.app.pictures.animation import _title
+
+    path = paths.waypoints([0.0, 0.02], [[0.0, 0.0, 0.66], [0.001, 0.0, 0.66]], dt=1e-3, name="my_cut")
+    run = simulate(robot, robot.inverse_kinematics(path), ComputedForceControl.with_gains(5000, 300))
+    assert _title(robot, run, 1.0).startswith(f"{robot.parameters.name}: my_cut, CFC")

@@ -330,7 +330,13 @@ class _GifWriter:
 def _title(robot: Robot, result: SimulationResult, speed: float) -> str:
     meta = result.metadata
     return (
-        f"{mpl_text(robot.parameters.name)}: case {mpl_text(meta.get('case', '?'))},"
+        f"{mpl_text(robot.parameters.name)}: "
+        + (
+            f"case {mpl_text(meta['case'])}"
+            if meta.get("case")
+            else mpl_text(meta.get("path", meta.get("reference", "?")))
+        )
+        + ","
         f" {mpl_text(str(meta.get('controller', 'run')).upper())}"
         + (" + tool force" if meta.get("external_force") else "")
         + (f", {speed:g}x speed" if speed != 1 else "")
