@@ -70,6 +70,14 @@ def test_cli_negative_coordinates_are_values_not_options(capsys):
     assert "verified" in capsys.readouterr().out
 
 
+def test_a_one_row_path_file_with_dt_is_refused(tmp_path, capsys):
+    source = tmp_path / "one.csv"
+    source.write_text("t,x,y,z\n0.25,0.01,0,0.65\n")
+    assert main(["ik", "--path", str(source), "--dt", "0.01"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--dt '0.01'" in err and "one row" in err
+
+
 def test_a_one_row_path_file_is_one_point(tmp_path, capsys, robot):
     source, out = tmp_path / "one.csv", tmp_path / "q.csv"
     source.write_text("t,x,y,z\n0.25,0.01,0,0.65\n")

@@ -435,7 +435,13 @@ def _ik_point(args: argparse.Namespace) -> tuple[float, np.ndarray] | None:
             raise InputError(f"--dt {shown(args.dt)}: a single --point has no sampling period; leave --dt out")
         return 0.0, _numbers(args.point, "--point", 3, "the tip point x,y,z in m")
     if args.path is not None and args.case is None:
-        return paths.csv_point(args.path)
+        sample = paths.csv_point(args.path)
+        if sample is not None and args.dt is not None:
+            raise InputError(
+                f"--dt {shown(args.dt)}: --path {shown(str(args.path), 200)} has one row, a single point with no "
+                "sampling period; leave --dt out"
+            )
+        return sample
     return None
 
 
