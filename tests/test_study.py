@@ -22,7 +22,7 @@ pytest.importorskip("pyarrow")
 
 from vgtarm.app.cli.command import main  # noqa: E402
 from vgtarm.app.study_points import check_point, execute_point, simulate_command  # noqa: E402
-from vgtarm.errors import ConfigError  # noqa: E402
+from vgtarm.errors import ConfigError, InputError  # noqa: E402
 from vgtarm.study import TIMING_COLUMNS, Store, load_study, parse_study  # noqa: E402
 from vgtarm.study.report import group_statistics, write_report  # noqa: E402
 from vgtarm.study.runner import run_study  # noqa: E402
@@ -188,6 +188,36 @@ def test_row_reproduced_by_vgtarm_simulate(local_run: Any, tmp_path: Path) -> No
     stored = {k: v for k, v in record["summary"].items() if k not in TIMING_COLUMNS}
     assert {k: v for k, v in again.items() if k not in TIMING_COLUMNS} == stored
     assert stored["ga_activations"] > 0  # the GA (seeded) and the disturbance (seeded) both acted
+
+
+@pytest.mark.parametrize(
+    ("controller", "key", "value", "flag"),
+    [("cfc", "kp", 4000.0, True), ("scm", "kv", 100.0, True), ("scm", "kv", 600.0, False)],
+)
+def test_a_row_with_its_own_gains_is_reproduced_by_simulate_kp_kv(
+    tmp_path: Path, controller: str, key: str, value: float, flag: bool
+) -> None:
+    """``--kp``/``--kv`` re-run a row with its gains (same summary, timings aside); a gain the
+    switching method's GA bounds do not hold keeps its refusal (simulate would widen the bounds).
+    The switching method's gains are values its genes represent exactly (kv 100 = 300 * 85/255)."""
+    text = f'[study]\ncase = 1\nduration = 0.02\nseeds = [0]\n[grid]\ncontroller = "{controller}"\n{key} = {value}\n'
+    (tmp_path / "gains.toml").write_text(text)
+    (point,) = load_study(tmp_path / "gains.toml").points()
+    if not flag:
+        with pytest.raises(InputError, match=f"{key} = {value}"):
+            simulate_command(point.inputs)
+        return
+    command = simulate_command(point.inputs)
+    other = "kv" if key == "kp" else "kp"
+    assert command[command.index(f"--{key}") + 1] == repr(value) and f"--{other}" not in command
+    stored, error = execute_point(point.inputs, {})
+    assert error == "" and stored[key] == [value] * 7 and stored[other] == [5000.0 if other == "kp" else 300.0] * 7
+    out = tmp_path / "again"
+    assert main([*command, "--out", str(out), "-q"]) == 0
+    again = json.loads((out / "summary.json").read_text())
+    assert {k: v for k, v in again.items() if k not in TIMING_COLUMNS} == {
+        k: v for k, v in stored.items() if k not in TIMING_COLUMNS
+    }
 
 
 KILLABLE = """

@@ -125,14 +125,25 @@ def _options(inputs: Inputs) -> dict[str, Any]:
 
 
 def _metadata(robot: Robot, inputs: Inputs) -> dict[str, Any]:
+    gains = _gains_metadata(inputs, robot.n_joints)
     if inputs["case"] is None:
-        return {"path": inputs["path"]}
+        return {"path": inputs["path"], **gains}
     placement = path_placement(robot)  # a case path on another robot than the paper's: where and how large
     return {
         "case": inputs["case"],
         "case_title": case_study(int(inputs["case"])).title,
         **(placement.metadata() if placement is not None else {}),
+        **gains,
     }
+
+
+def _gains_metadata(inputs: Inputs, n_joints: int) -> dict[str, Any]:
+    """``kp`` and ``kv`` per joint when the point gives either, as ``vgtarm simulate --kp/--kv`` records them."""
+    if inputs.get("kp") is None and inputs.get("kv") is None:
+        return {}
+    case = case_study(int(inputs["case"] or 1))
+    kp, kv = _number(inputs["kp"], case.kp), _number(inputs["kv"], case.kv)
+    return {"kp": [float(kp)] * n_joints, "kv": [float(kv)] * n_joints}  # type: ignore[arg-type]
 
 
 def execute_point(inputs: Inputs, files: Mapping[str, str]) -> tuple[dict[str, Any], str]:
@@ -236,11 +247,23 @@ _SWITCHES = {"external_force": "--external-force", "force_sensor": "--force-sens
 _STUDY_ONLY = {"kp": None, "kv": None, "threshold": None, "kp_max": None, "kv_max": None, "path": None, "dt": 1e-3}
 
 
+def _gain_flag_repeats(inputs: Inputs, key: str) -> bool:
+    """Whether ``vgtarm simulate --kp``/``--kv`` gives the point's run: always under CFC; under the
+    switching method when the gain lies within the case's GA bounds and the study sets no ``kp_max``
+    or ``kv_max`` (``simulate`` widens the bounds to a larger gain, a study keeps them)."""
+    if inputs["controller"] == "cfc":
+        return True
+    case = case_study(int(inputs["case"] or 1))
+    bound = case.kp_bounds[1] if key == "kp" else case.kv_bounds[1]
+    return inputs.get(f"{key}_max") is None and float(inputs[key]) <= bound  # type: ignore[arg-type]
+
+
 def simulate_command(inputs: Inputs, *, study_folder: str | Path | None = None) -> list[str]:
     """The ``vgtarm simulate`` arguments that re-run a point (its summary is the row's, timings aside).
 
     Raises InputError naming an input that ``vgtarm simulate`` has no flag for, when it is not at
-    its default (gains, GA sizes, tool-force magnitudes, a path file, another ``dt``).
+    its default (gains beyond the GA's bounds, GA sizes, tool-force magnitudes, a path file, another
+    ``dt``).
     """
     from ..study.spec import PARAMETERS
 
@@ -250,7 +273,9 @@ def simulate_command(inputs: Inputs, *, study_folder: str | Path | None = None) 
     for key, value in inputs.items():
         if key in ("case", "robot"):
             continue
-        if key in _FLAGS:
+        if key in ("kp", "kv") and value is not None and _gain_flag_repeats(inputs, key):
+            args += [f"--{key}", repr(float(value))]
+        elif key in _FLAGS:
             if value is not None:
                 args += [_FLAGS[key], str(value) if not isinstance(value, float) else repr(value)]
         elif key in _SWITCHES:
