@@ -77,6 +77,7 @@ def test_gains_on_a_case_are_recorded_and_change_the_run(tmp_path):
         ([], ["exactly one of --case 1|2 and --path FILE"]),
         (["--path", "{missing}"], ["path file", "missing.csv"]),
         (["--path", "{one_row}"], ["need at least 2 data rows"]),
+        (["--case", "1", "--controller", "scm", "--kp", "4000"], ["--kp '4000'", "--controller scm", "genes"]),
     ],
 )
 def test_bad_values_are_refused_in_one_line_before_any_output(tmp_path, case1_file, capsys, args, words):

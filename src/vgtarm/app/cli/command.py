@@ -128,6 +128,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     robot_text = _robot_text(args.config)
     kp = None if args.kp is None else joint_gains(args.kp, "--kp", robot.joint_names)
     kv = None if args.kv is None else joint_gains(args.kv, "--kv", robot.joint_names)
+    if args.controller == "scm" and (kp is not None or kv is not None):  # the GA's genes must hit them
+        _check_scm_gains(args, robot.n_joints, kp, kv)
     if args.plant == "mujoco":
         from ... import mujoco_bridge  # noqa: F401  (registers the MuJoCo plant)
     model = robot.parameters.scaled(mass=args.model_mass, inertia=args.model_inertia, friction=args.model_friction)
@@ -251,6 +253,22 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                 atomic_write_text(written / ROBOT_COPY, robot_text)
         print(f"results written to {escape(str(moved.get(args.out, args.out)))}")  # escaped: never drives the terminal
     return 0
+
+
+def _check_scm_gains(
+    args: argparse.Namespace, n_joints: int, kp: float | tuple[float, ...] | None, kv: float | tuple[float, ...] | None
+) -> None:
+    """Refuse, naming ``--kp``/``--kv``, gains the switching method cannot start from."""
+    from ..cases import PATH_GAINS_CASE, case_study
+
+    case = case_study(args.case or PATH_GAINS_CASE).with_gains(kp, kv)
+    try:
+        case.controller("scm", horizon=args.horizon, n_joints=n_joints, variant=args.scm_variant)
+    except InputError as exc:
+        given = ", ".join(f"--{k} {shown(getattr(args, k))}" for k in ("kp", "kv") if getattr(args, k) is not None)
+        raise InputError(
+            f"{given} with --controller scm --scm-variant {args.scm_variant}: {exc} (the case's own gains are)"
+        ) from None
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
