@@ -92,3 +92,11 @@ def md_code(value: object) -> str:
 def mpl_text(value: object) -> str:
     """``value`` as Matplotlib text: a ``$`` shows as ``$`` and starts no math."""
     return _text(value).replace("$", "\\$")
+
+
+def html_table(header: list[str] | tuple[str, ...], rows: list[list[object]], *, caption: str = "") -> str:
+    """An HTML table (for a notebook's ``_repr_html_``): every cell and the caption escaped as text."""
+    head = "".join(f"<th>{html_text(h)}</th>" for h in header)
+    body = "".join("<tr>" + "".join(f"<td>{html_text(c)}</td>" for c in row) + "</tr>" for row in rows)
+    title = f"<caption>{html_text(caption)}</caption>" if caption else ""
+    return f"<table>{title}<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"

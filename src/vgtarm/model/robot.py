@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..errors import ConfigError, InputError, cut, shown
 from ..fileio import parse_toml, read_text_limited
+from ..markup import html_table
 from ..memory import check_batch
 from .assembly import check_margins
 from .compiled import CompiledBackend, InterpretedBackend, get_backend
@@ -151,6 +152,23 @@ class Robot:
 
     def __repr__(self) -> str:
         return f"Robot({self.parameters.name!r}, backend={self.backend.kind!r})"
+
+    def _repr_html_(self) -> str:
+        """The robot in a notebook: its name, size and backend, and a table of its joints with their
+        units, limits and home values (every name escaped)."""
+        p = self.parameters
+        rows: list[list[object]] = [
+            [name, unit, f"{lo:.6g}", f"{hi:.6g}", f"{home:.6g}"]
+            for name, unit, lo, hi, home in zip(
+                self.joint_names, self.joint_units, p.lower, p.upper, p.home, strict=True
+            )
+        ]
+        caption = (
+            f"{p.name}: {self.n_joints} joints, {self.n_modules} module(s), "
+            f"{'stack' if self.is_stack else 'the paper' + chr(39) + 's model'}, {self.backend.kind} backend, "
+            f"fingerprint {self.fingerprint}"
+        )
+        return html_table(("joint", "unit", "lower", "upper", "home"), rows, caption=caption)
 
     @property
     def fingerprint(self) -> str:

@@ -13,6 +13,7 @@ from numpy.typing import NDArray
 
 from ..errors import InputError
 from ..fileio import atomic_folder, atomic_write_text
+from ..markup import html_table
 from ..model.parameters import JOINT_NAMES
 
 Array = NDArray[np.float64]
@@ -126,6 +127,46 @@ class SimulationResult:
             time_in_ga_mode_s=float(np.count_nonzero(self.mode == MODE_GA) * self.dt),
         )
         return summary
+
+    def _repr_html_(self) -> str:
+        """The run in a notebook: its main figures as a table and a small plot of the tip error
+        (an inline PNG), every value escaped."""
+        s = self.summary()
+        keys = (
+            "controller",
+            "reference",
+            "case",
+            "success",
+            "message",
+            "simulated_time_s",
+            "real_time_factor",
+            "max_tip_error_m",
+            "rms_tip_error_m",
+            "max_tip_error_after_transient_m",
+            "peak_force_n",
+            "rms_force_n",
+            "ga_activations",
+        )
+        rows: list[list[object]] = [[k, f"{s[k]:.6g}" if isinstance(s[k], float) else s[k]] for k in keys if k in s]
+        return html_table(("figure", "value"), rows, caption="simulation run") + self._error_png()
+
+    def _error_png(self) -> str:
+        """A small inline plot of the tip error (mm) over time, as an ``<img>`` with a data URL."""
+        import base64
+        import io
+
+        from matplotlib.figure import Figure
+
+        figure = Figure(figsize=(5.0, 2.0), dpi=80)
+        ax = figure.add_subplot()
+        ax.plot(self.t, self.tip_error * 1e3, linewidth=0.8)
+        ax.set_xlabel("t (s)")
+        ax.set_ylabel("tip error (mm)")
+        figure.tight_layout()
+        buffer = io.BytesIO()
+        figure.savefig(buffer, format="png")
+        data = base64.b64encode(buffer.getvalue()).decode("ascii")
+        return f'<img alt="tip error over time" src="data:image/png;base64,{data}"/>'
 
     def save(self, folder: str | Path) -> Path:
         """Write ``timeseries.csv``, ``ga_activations.csv`` and ``summary.json`` into ``folder``.

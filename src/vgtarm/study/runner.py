@@ -37,6 +37,7 @@ from typing import Any
 
 from ..errors import InputError, cut, shown
 from ..machine import usable_cpus
+from ..markup import html_table
 from .spec import Point, Study, Value
 from .store import Store
 
@@ -53,6 +54,10 @@ _LABEL = r"[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,61}[A-Za-z0-9_])?"
 _HOST_NAME = re.compile(rf"(?=.{{1,253}}$){_LABEL}(?:\.{_LABEL})*\.?")
 
 
+#: Rows of a study shown in a notebook.
+SHOWN_ROWS = 50
+
+
 @dataclass(frozen=True)
 class StudyRun:
     """What :func:`run_study` did: the table's rows, counts and the wall time (s)."""
@@ -65,6 +70,24 @@ class StudyRun:
     lost: tuple[str, ...]
     wall_time_s: float
     folder: Path
+
+    def _repr_html_(self) -> str:
+        """The study in a notebook: its counts, and its table (the first :data:`SHOWN_ROWS` rows;
+        the columns that vary between runs, then the figures), every cell escaped."""
+        figures = ["max_tip_error_m", "rms_tip_error_m", "peak_force_n", "ga_activations", "success", "error"]
+        inputs = sorted({key for row in self.rows for key in row} - set(figures))
+        varied = [k for k in inputs if len({repr(row.get(k)) for row in self.rows}) > 1]
+        columns = ["id", *[k for k in varied if k != "id"], *[f for f in figures if any(f in r for r in self.rows)]]
+        rows: list[list[object]] = [
+            [f"{row.get(c):.6g}" if isinstance(row.get(c), float) else row.get(c, "") for c in columns]
+            for row in self.rows[:SHOWN_ROWS]
+        ]
+        more = f", the first {SHOWN_ROWS} shown" if len(self.rows) > SHOWN_ROWS else ""
+        caption = (
+            f"study in {self.folder}: {self.points} points, {self.executed} run, {self.skipped} done before, "
+            f"{self.failed} failed, {len(self.lost)} lost, {self.wall_time_s:.1f} s{more}"
+        )
+        return html_table(columns, rows, caption=caption)
 
 
 def check_study(study: Study, check: Check) -> list[Point]:
