@@ -340,6 +340,7 @@ def prepare(
         velocity_filter=sensing.velocity_filter,
         estimator=sensing.estimator,
         kalman_gain=sensing.kalman_gain,
+        threshold_measured=isinstance(controller, SwitchingControl) and controller.measured_switching,
     )
     job = Job(
         settings=settings,
@@ -384,6 +385,7 @@ def drive(run: Run, progress: Progress | None = None) -> Outcome:
         mode[k:stop] = MODE_FIXED
         for activation in step.activations:
             mode[activation.sample] = MODE_GA
+        mode[list(step.held)] = MODE_GA  # a held set's samples: its gains, no GA run
         found.extend(step.activations)
         if status != DONE:
             break
