@@ -255,7 +255,8 @@ def _held_pattern(run, hold):
         dropped = a.best_fitness == a.fixed_gains_fitness
         span = 1 if dropped else min(hold, n - a.sample)
         admitted += not dropped
-        assert (run.mode[a.sample : a.sample + span] == 1).all(), f"activation at {a.sample}: expected {span} GA samples"
+        held = run.mode[a.sample : a.sample + span]
+        assert (held == 1).all(), f"activation at {a.sample}: expected {span} GA samples"
         if i + 1 < len(samples):
             assert samples[i + 1] >= a.sample + span, f"activation at {samples[i + 1]} inside the hold from {a.sample}"
         end = a.sample + span
@@ -283,7 +284,8 @@ def test_an_admitted_gain_set_is_held_for_exactly_its_hold(robot, monkeypatch, h
     runs = []
     for in_loop in (True, False, True):
         monkeypatch.setattr(engines, "GA_IN_LOOP", in_loop)
-        runs.append(simulate(robot, ref, scm, external_force=case_study(2).external_force, seed=2, encoder_resolution=1e-6))
+        force = case_study(2).external_force
+        runs.append(simulate(robot, ref, scm, external_force=force, seed=2, encoder_resolution=1e-6))
     inside = runs[0]
     assert inside.success and len(inside.activations) > 2
     admitted = _held_pattern(inside, hold)
