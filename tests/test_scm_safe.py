@@ -306,7 +306,7 @@ def test_the_hold_survives_pauses_and_chunks(robot):
     options = dict(external_force=case_study(2).external_force, seed=5, encoder_resolution=1e-6)
     whole = simulate(robot, ref, scm, **options)
     chunked = simulate(robot, ref, scm, progress=lambda k, n: None, **options)
-    _held_pattern(whole, scm.horizon)
+    _held_pattern(whole, scm.hold_periods)
     for name in ("q", "effort", "mode"):
         np.testing.assert_array_equal(getattr(chunked, name), getattr(whole, name), err_msg=name)
 
@@ -334,7 +334,8 @@ def test_the_safe_variant_switches_on_the_measured_tip_error(robot):
 def test_hold_and_switch_on_are_checked_at_the_boundary():
     scm = case_study(2).controller("scm")
     safe = replace(scm, variant="safe")
-    assert safe.hold_periods == safe.horizon == 20
+    assert (safe.hold_periods, safe.horizon) == (10, 20)
+    assert replace(safe, horizon=1).hold_periods == 1
     for bad in (0, 21, 2.5, True):
         with pytest.raises(InputError, match="hold = "):
             replace(safe, hold=bad)
