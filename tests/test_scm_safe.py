@@ -346,3 +346,23 @@ def test_hold_and_switch_on_are_checked_at_the_boundary():
     with pytest.raises(InputError, match="the paper's variant holds"):
         replace(scm, switch_on="measured")
     assert replace(scm, hold=1, switch_on="true").hold_periods == 1
+
+
+def test_the_damping_table_is_kept_in_the_cache_folder(tmp_path, monkeypatch):
+    """A new process reads the table from the cache folder: the same numbers as computed; a
+    damaged file is recomputed and replaced."""
+    from vgtarm.control import safety
+
+    monkeypatch.setenv("VGTARM_CACHE_DIR", str(tmp_path))
+    args = (60.0, 3, DT, FILTER, MODEL_ERROR, RADIUS)
+    computed = safety._damping_table(*args)
+    first = safety.damping_table.__wrapped__(*args)
+    (stored,) = tmp_path.glob("safety-table-*.json")
+    np.testing.assert_array_equal(np.array(first), np.array(computed))
+    monkeypatch.setattr(safety, "_damping_table", lambda *a: pytest.fail("recomputed a stored table"))
+    np.testing.assert_array_equal(np.array(safety.damping_table.__wrapped__(*args)), np.array(computed))
+    stored.write_text("{not json", encoding="utf-8")
+    monkeypatch.undo()
+    monkeypatch.setenv("VGTARM_CACHE_DIR", str(tmp_path))
+    np.testing.assert_array_equal(np.array(safety.damping_table.__wrapped__(*args)), np.array(computed))
+    assert np.array_equal(np.array(safety.damping_table.__wrapped__(*args)), np.array(computed), equal_nan=True)

@@ -28,12 +28,18 @@ the grid point nearest to the mean of its ``Kv`` diagonal and looks its interval
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
+import json
+import os
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError, shown
+from ..model.compiled import cache_dir
 
 Array = NDArray[np.float64]
 
@@ -108,7 +114,7 @@ def admitted_interval(
         if not (np.isfinite(value) and ok):
             raise InputError(f"{label} = {shown(value)}: out of range for the admission test")
 
-    def inside(lams: Array) -> Array:  # the scalar loops of all of them at once (batched eigenvalues)
+    def inside(lams: Array) -> NDArray[np.bool_]:  # the scalar loops of all of them at once (batched eigenvalues)
         return _scalar_radii(lams, kv, dt, velocity_filter, model_error) < radius
 
     grid = np.geomspace(*SCAN[:2], int(SCAN[2]))
@@ -126,8 +132,8 @@ def admitted_interval(
     bad = np.array([grid[max(where[0] - 1, 0)], grid[min(where[-1] + 1, len(grid) - 1)]])
     for _ in range(60):
         mid = np.sqrt(good * bad)
-        ok = inside(mid)
-        good, bad = np.where(ok, mid, good), np.where(ok, bad, mid)
+        inner = inside(mid)
+        good, bad = np.where(inner, mid, good), np.where(inner, bad, mid)
     return float(good[0]), float(good[1])
 
 
@@ -179,7 +185,46 @@ def damping_table(
     """Admitted intervals of the eigenvalues of ``Kp`` for the dampings ``kv_j = j step``,
     ``j = 0 .. count - 1``: ``(lo, hi)`` tuples, NaN where no eigenvalue (or no single interval of
     them) has every pole of the scalar loop inside ``radius`` for every model error in the bound.
-    The edges are bisected to 2^-40 relative and then moved inwards by 1e-9 relative."""
+    The edges are bisected to 2^-40 relative and then moved inwards by 1e-9 relative.
+
+    About 420,000 eigenvalue problems (1-5 s, the safe variant's set-up before its first run in a
+    process): the table is kept in the cache folder of the compiled libraries
+    (``safety-table-<key>.json``, the key hashing the arguments and this module's source), so a new
+    process reads it instead; an unreadable or unwritable file is recomputed or left alone.
+    """
+    args = (step, count, dt, velocity_filter, model_error, radius)
+    path = _table_file(args)
+    if path is not None:
+        try:
+            stored = json.loads(path.read_text(encoding="utf-8"))
+            los, his = (tuple(float(x) for x in stored[name]) for name in ("lo", "hi"))
+            if len(los) == len(his) == count:
+                return los, his
+        except (OSError, ValueError, KeyError, TypeError):
+            pass
+    table = _damping_table(*args)
+    if path is not None:
+        with contextlib.suppress(OSError):
+            path.parent.mkdir(parents=True, exist_ok=True)
+            temporary = path.with_name(f".{path.name}.{os.getpid()}")
+            temporary.write_text(json.dumps({"lo": table[0], "hi": table[1]}), encoding="utf-8")
+            os.replace(temporary, path)  # atomic: a reader sees the whole table or none
+    return table
+
+
+def _table_file(args: tuple[object, ...]) -> Path | None:
+    """The cache file of :func:`damping_table` for ``args`` (``None``: no usable cache folder)."""
+    try:
+        folder = cache_dir()
+    except RuntimeError:  # Path.home() without a home folder
+        return None
+    digest = hashlib.sha256(Path(__file__).read_bytes() + repr(args).encode()).hexdigest()[:24]
+    return folder / f"safety-table-{digest}.json"
+
+
+def _damping_table(
+    step: float, count: int, dt: float, velocity_filter: float | None, model_error: float, radius: float
+) -> tuple[tuple[float, ...], tuple[float, ...]]:
     for label, value, ok in (
         ("step", step, step > 0),
         ("count", count, 1 <= count <= 10_000),

@@ -260,7 +260,12 @@ class Run:
                 threshold_m=controller.threshold,
                 scm_variant=controller.variant,
                 **(
-                    {"scm_model_error": controller.model_error, "scm_stability_radius": controller.stability_radius}
+                    {
+                        "scm_model_error": controller.model_error,
+                        "scm_stability_radius": controller.stability_radius,
+                        "scm_hold": controller.hold_periods,
+                        "scm_switch_on": "measured" if controller.measured_switching else "true",
+                    }
                     if controller.variant == "safe"
                     else {}
                 ),
