@@ -410,6 +410,11 @@ def test_ctrl_c_ends_a_study_on_a_local_dask_cluster_and_its_workers(warm, tmp_p
     pytest.importorskip("distributed")
     study = tmp_path / "study.toml"
     assert _cli("study", "init", str(study)).returncode == 0
+    # the example's 16 short runs can end within the 2 s before the interrupt (the safe variant no
+    # longer computes its damping table per worker): the whole path and 64 seeds outlast it
+    text = study.read_text().replace("duration = 1.0 ", "# duration ").replace("seeds = 4 ", "seeds = 64 ")
+    assert "seeds = 64" in text and "duration = 1.0" not in text
+    study.write_text(text)
     out = tmp_path / "out"
     command = _Command(["study", "run", str(study), "--out", str(out), "--workers", "2"], warm)
     took = command.interrupt_when(lambda: b"cfc-vs-scm" in command.err, then=2.0)

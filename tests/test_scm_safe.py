@@ -21,6 +21,7 @@ from vgtarm.control.safety import admitted_interval, damping_table, loop_matrix,
 from vgtarm.errors import InputError, SimulationError
 from vgtarm.model.closedloop import ClosedLoopDriver, LoopSettings
 from vgtarm.model.compiled import CompiledBackend
+from vgtarm.simulation import simulate
 from vgtarm.simulation.engines import compiled_ga
 from vgtarm.simulation.simulator import loop_arrays
 
@@ -241,3 +242,127 @@ def test_realistic_sensing_paper_diverges_safe_holds(robot):
     safe = _case2(robot, "safe", 0, 2.3, **options)
     assert safe.success
     assert safe.summary()["max_tip_error_m"] < 0.82e-3
+
+
+def _held_pattern(run, hold):
+    """Check the hold in a run's modes: an admitted set (not dropped for the fixed gains) controls
+    exactly ``hold`` samples from its activation, with no activation in between; a dropped one its
+    sample only. Returns the count of admitted activations."""
+    n = len(run.mode)
+    samples = [a.sample for a in run.activations]
+    admitted = 0
+    for i, a in enumerate(run.activations):
+        dropped = a.best_fitness == a.fixed_gains_fitness
+        span = 1 if dropped else min(hold, n - a.sample)
+        admitted += not dropped
+        held = run.mode[a.sample : a.sample + span]
+        assert (held == 1).all(), f"activation at {a.sample}: expected {span} GA samples"
+        if i + 1 < len(samples):
+            assert samples[i + 1] >= a.sample + span, f"activation at {samples[i + 1]} inside the hold from {a.sample}"
+        end = a.sample + span
+        if end < n and (i + 1 == len(samples) or samples[i + 1] != end):
+            assert run.mode[end] == 0, f"sample {end} after the hold from {a.sample}: expected the fixed gains"
+    assert np.count_nonzero(run.mode == 1) == sum(
+        1 if a.best_fitness == a.fixed_gains_fitness else min(hold, n - a.sample) for a in run.activations
+    )
+    return admitted
+
+
+@pytest.mark.parametrize("hold", [1, 7, 20])
+def test_an_admitted_gain_set_is_held_for_exactly_its_hold(robot, monkeypatch, hold):
+    """Case 2 with the tool force and 1 um encoders, 0.3 s: every admitted set controls exactly
+    `hold` samples (no GA in between), a dropped one its sample only; the GA inside the compiled
+    loop (the hold in csrc/ga.c) and called per activation from Python (the hold in engines.py)
+    give the same run to the last bit; the same seed gives the same run."""
+    if not isinstance(robot.backend, CompiledBackend):
+        pytest.skip("no C compiler")
+    from vgtarm.simulation import engines
+
+    ref = joint_reference(robot, 2, duration=0.3)
+    scm = replace(case_study(2).controller("scm", variant="safe"), hold=hold)
+    assert scm.hold_periods == hold and scm.measured_switching
+    runs = []
+    for in_loop in (True, False, True):
+        monkeypatch.setattr(engines, "GA_IN_LOOP", in_loop)
+        force = case_study(2).external_force
+        runs.append(simulate(robot, ref, scm, external_force=force, seed=2, encoder_resolution=1e-6))
+    inside = runs[0]
+    assert inside.success and len(inside.activations) > 2
+    admitted = _held_pattern(inside, hold)
+    assert admitted > 0, "expected admitted gain sets"
+    for other in runs[1:]:
+        for name in ("q", "qd", "effort", "tip_error", "mode"):
+            np.testing.assert_array_equal(getattr(other, name), getattr(inside, name), err_msg=name)
+        assert [a.sample for a in other.activations] == [a.sample for a in inside.activations]
+
+
+def test_the_hold_survives_pauses_and_chunks(robot):
+    """A run in chunks with progress (and the loop's pauses) holds across the chunk boundaries: the
+    same run as in one call."""
+    if not isinstance(robot.backend, CompiledBackend):
+        pytest.skip("no C compiler")
+    ref = joint_reference(robot, 2, duration=0.3)
+    scm = case_study(2).controller("scm", variant="safe")
+    options = dict(external_force=case_study(2).external_force, seed=5, encoder_resolution=1e-6)
+    whole = simulate(robot, ref, scm, **options)
+    chunked = simulate(robot, ref, scm, progress=lambda k, n: None, **options)
+    _held_pattern(whole, scm.hold_periods)
+    for name in ("q", "effort", "mode"):
+        np.testing.assert_array_equal(getattr(chunked, name), getattr(whole, name), err_msg=name)
+
+
+def test_the_safe_variant_switches_on_the_measured_tip_error(robot):
+    """With 1 um encoders the GA runs exactly where the tip error the controller saw exceeds the
+    threshold (every fixed-gain sample at or below it, every activation above); with
+    ``switch_on="true"`` the same holds for the true error; the paper's variant keeps the true
+    error and no hold."""
+    if not isinstance(robot.backend, CompiledBackend):
+        pytest.skip("no C compiler")
+    ref = joint_reference(robot, 2, duration=0.5)
+    safe = case_study(2).controller("scm", variant="safe")
+    options = dict(external_force=case_study(2).external_force, seed=1, encoder_resolution=1e-6)
+    for switch_on in ("measured", "true"):
+        run = simulate(robot, ref, replace(safe, switch_on=switch_on), **options)
+        seen = run.tip_error_measured if switch_on == "measured" else run.tip_error
+        assert seen is not None and len(run.activations) > 3
+        activations = [a.sample for a in run.activations]
+        assert seen[run.mode == 0].max() <= safe.threshold < seen[activations].min(), switch_on
+    paper = case_study(2).controller("scm")
+    assert (paper.hold_periods, paper.measured_switching) == (1, False)
+
+
+def test_hold_and_switch_on_are_checked_at_the_boundary():
+    scm = case_study(2).controller("scm")
+    safe = replace(scm, variant="safe")
+    assert (safe.hold_periods, safe.horizon) == (10, 20)
+    assert replace(safe, horizon=1).hold_periods == 1
+    for bad in (0, 21, 2.5, True):
+        with pytest.raises(InputError, match="hold = "):
+            replace(safe, hold=bad)
+    with pytest.raises(InputError, match="switch_on = 'estimated'"):
+        replace(safe, switch_on="estimated")
+    with pytest.raises(InputError, match="the paper's variant holds"):
+        replace(scm, hold=5)
+    with pytest.raises(InputError, match="the paper's variant holds"):
+        replace(scm, switch_on="measured")
+    assert replace(scm, hold=1, switch_on="true").hold_periods == 1
+
+
+def test_the_damping_table_is_kept_in_the_cache_folder(tmp_path, monkeypatch):
+    """A new process reads the table from the cache folder: the same numbers as computed; a
+    damaged file is recomputed and replaced."""
+    from vgtarm.control import safety
+
+    monkeypatch.setenv("VGTARM_CACHE_DIR", str(tmp_path))
+    args = (60.0, 3, DT, FILTER, MODEL_ERROR, RADIUS)
+    computed = safety._damping_table(*args)
+    first = safety.damping_table.__wrapped__(*args)
+    (stored,) = tmp_path.glob("safety-table-*.json")
+    np.testing.assert_array_equal(np.array(first), np.array(computed))
+    monkeypatch.setattr(safety, "_damping_table", lambda *a: pytest.fail("recomputed a stored table"))
+    np.testing.assert_array_equal(np.array(safety.damping_table.__wrapped__(*args)), np.array(computed))
+    stored.write_text("{not json", encoding="utf-8")
+    monkeypatch.undo()
+    monkeypatch.setenv("VGTARM_CACHE_DIR", str(tmp_path))
+    np.testing.assert_array_equal(np.array(safety.damping_table.__wrapped__(*args)), np.array(computed))
+    assert np.array_equal(np.array(safety.damping_table.__wrapped__(*args)), np.array(computed), equal_nan=True)

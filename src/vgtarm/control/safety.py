@@ -28,12 +28,18 @@ the grid point nearest to the mean of its ``Kv`` diagonal and looks its interval
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
+import json
+import os
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError, shown
+from ..model.compiled import cache_dir
 
 Array = NDArray[np.float64]
 
@@ -108,12 +114,11 @@ def admitted_interval(
         if not (np.isfinite(value) and ok):
             raise InputError(f"{label} = {shown(value)}: out of range for the admission test")
 
-    def inside(lam: float) -> bool:
-        return spectral_radius([[lam]], [[kv]], dt, velocity_filter, model_error) < radius
+    def inside(lams: Array) -> NDArray[np.bool_]:  # the scalar loops of all of them at once (batched eigenvalues)
+        return _scalar_radii(lams, kv, dt, velocity_filter, model_error) < radius
 
     grid = np.geomspace(*SCAN[:2], int(SCAN[2]))
-    flags = np.array([inside(float(lam)) for lam in grid])
-    where = np.flatnonzero(flags)
+    where = np.flatnonzero(inside(grid))
     if where.size == 0:
         raise InputError(
             f"kv = {kv:g}: no Kp eigenvalue gives poles inside radius {radius:g} with dt = {dt:g} s and a model"
@@ -122,21 +127,24 @@ def admitted_interval(
     if np.any(np.diff(where) != 1):
         raise InputError(f"kv = {kv:g}: the admitted Kp eigenvalues are not one interval; refusing the safe variant")
 
-    def edge(good: float, bad: float) -> float:
-        for _ in range(60):
-            mid = float(np.sqrt(good * bad))
-            good, bad = (mid, bad) if inside(mid) else (good, mid)
-        return good
+    # both edges bisected together (60 halvings of the log-interval); an edge at the scan's end stays
+    good = np.array([grid[where[0]], grid[where[-1]]])
+    bad = np.array([grid[max(where[0] - 1, 0)], grid[min(where[-1] + 1, len(grid) - 1)]])
+    for _ in range(60):
+        mid = np.sqrt(good * bad)
+        inner = inside(mid)
+        good, bad = np.where(inner, mid, good), np.where(inner, bad, mid)
+    return float(good[0]), float(good[1])
 
-    lo = edge(float(grid[where[0]]), float(grid[where[0] - 1])) if where[0] > 0 else float(grid[0])
-    hi = edge(float(grid[where[-1]]), float(grid[where[-1] + 1])) if where[-1] < len(grid) - 1 else float(grid[-1])
-    return lo, hi
 
-
-def _scalar_radii(lams: Array, kv: float, dt: float, velocity_filter: float | None, model_error: float) -> Array:
+def _scalar_radii(
+    lams: Array, kv: float | Array, dt: float, velocity_filter: float | None, model_error: float
+) -> Array:
     """:func:`spectral_radius` of the scalar loops ``(lambda, kv)`` for every ``lambda`` of ``lams`` at
-    once (the same grid of ``gamma`` and both holds; batched eigenvalues of the 4x4 or 2x2 loops)."""
+    once (the same grid of ``gamma`` and both holds; batched eigenvalues of the 4x4 or 2x2 loops);
+    ``kv`` one damping or one per ``lambda``."""
     lam = np.asarray(lams, dtype=float)
+    kv = np.asarray(kv, dtype=float)
     gammas = np.linspace(1.0 - model_error, 1.0 + model_error, GAMMA_POINTS if model_error > 0 else 1)
     g = gammas[:, None, None]
     h = np.array([dt * dt / 2.0, 0.0])[None, :, None]
@@ -177,7 +185,46 @@ def damping_table(
     """Admitted intervals of the eigenvalues of ``Kp`` for the dampings ``kv_j = j step``,
     ``j = 0 .. count - 1``: ``(lo, hi)`` tuples, NaN where no eigenvalue (or no single interval of
     them) has every pole of the scalar loop inside ``radius`` for every model error in the bound.
-    The edges are bisected to 2^-40 relative and then moved inwards by 1e-9 relative."""
+    The edges are bisected to 2^-40 relative and then moved inwards by 1e-9 relative.
+
+    About 420,000 eigenvalue problems (1-5 s, the safe variant's set-up before its first run in a
+    process): the table is kept in the cache folder of the compiled libraries
+    (``safety-table-<key>.json``, the key hashing the arguments and this module's source), so a new
+    process reads it instead; an unreadable or unwritable file is recomputed or left alone.
+    """
+    args = (step, count, dt, velocity_filter, model_error, radius)
+    path = _table_file(args)
+    if path is not None:
+        try:
+            stored = json.loads(path.read_text(encoding="utf-8"))
+            los, his = (tuple(float(x) for x in stored[name]) for name in ("lo", "hi"))
+            if len(los) == len(his) == count:
+                return los, his
+        except (OSError, ValueError, KeyError, TypeError):
+            pass
+    table = _damping_table(*args)
+    if path is not None:
+        with contextlib.suppress(OSError):
+            path.parent.mkdir(parents=True, exist_ok=True)
+            temporary = path.with_name(f".{path.name}.{os.getpid()}")
+            temporary.write_text(json.dumps({"lo": table[0], "hi": table[1]}), encoding="utf-8")
+            os.replace(temporary, path)  # atomic: a reader sees the whole table or none
+    return table
+
+
+def _table_file(args: tuple[object, ...]) -> Path | None:
+    """The cache file of :func:`damping_table` for ``args`` (``None``: no usable cache folder)."""
+    try:
+        folder = cache_dir()
+    except RuntimeError:  # Path.home() without a home folder
+        return None
+    digest = hashlib.sha256(Path(__file__).read_bytes() + repr(args).encode()).hexdigest()[:24]
+    return folder / f"safety-table-{digest}.json"
+
+
+def _damping_table(
+    step: float, count: int, dt: float, velocity_filter: float | None, model_error: float, radius: float
+) -> tuple[tuple[float, ...], tuple[float, ...]]:
     for label, value, ok in (
         ("step", step, step > 0),
         ("count", count, 1 <= count <= 10_000),
@@ -187,21 +234,28 @@ def damping_table(
         if not (np.isfinite(value) and ok):
             raise InputError(f"{label} = {shown(value)}: out of range for the damping table")
     grid = np.geomspace(TABLE_SCAN[0], TABLE_SCAN[1], int(TABLE_SCAN[2]))
-    los, his = [], []
+    kvs = np.arange(count) * step
+    # every grid point of every damping in one batch, then all the edges bisected together: each
+    # scalar loop's eigenvalues are those of its own matrix, so the table is that of one damping at
+    # a time, in a fraction of the time (the safe variant's set-up before a run)
+    flags = _scalar_radii(np.tile(grid, count), np.repeat(kvs, len(grid)), dt, velocity_filter, model_error) < radius
+    flags = flags.reshape(count, len(grid))
+    rows, goods, bads = [], [], []
     for j in range(count):
-        kv = j * step
-        flags = _scalar_radii(grid, kv, dt, velocity_filter, model_error) < radius
-        where = np.flatnonzero(flags)
+        where = np.flatnonzero(flags[j])
         if where.size == 0 or np.any(np.diff(where) != 1) or where[0] == 0 or where[-1] == len(grid) - 1:
-            los.append(float("nan"))
-            his.append(float("nan"))
             continue
-        good = np.array([grid[where[0]], grid[where[-1]]])
-        bad = np.array([grid[where[0] - 1], grid[where[-1] + 1]])
+        rows.append(j)
+        goods += [grid[where[0]], grid[where[-1]]]
+        bads += [grid[where[0] - 1], grid[where[-1] + 1]]
+    los, his = [float("nan")] * count, [float("nan")] * count
+    if rows:
+        good, bad, kv = np.array(goods), np.array(bads), np.repeat(kvs[rows], 2)
         for _ in range(int(TABLE_SCAN[3])):
             mid = np.sqrt(good * bad)
             inside = _scalar_radii(mid, kv, dt, velocity_filter, model_error) < radius
             good, bad = np.where(inside, mid, good), np.where(inside, bad, mid)
-        los.append(float(good[0] * (1 + 1e-9)))
-        his.append(float(good[1] * (1 - 1e-9)))
+        for i, j in enumerate(rows):
+            los[j] = float(good[2 * i] * (1 + 1e-9))
+            his[j] = float(good[2 * i + 1] * (1 - 1e-9))
     return tuple(los), tuple(his)

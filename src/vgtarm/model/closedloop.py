@@ -72,6 +72,7 @@ class LoopSettings:
     velocity_filter: float = 0.0
     estimator: str = "difference"
     kalman_gain: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    threshold_measured: bool = False
 
     def struct(self, n_joints: int, n_margins: int) -> Any:
         """The C structure of these settings for a robot of ``n_joints`` joints."""
@@ -94,6 +95,7 @@ class LoopSettings:
                 "velocity_filter": self.velocity_filter,
                 "estimator": ESTIMATOR_CODES[self.estimator],
                 "kalman_gain": list(self.kalman_gain),
+                "threshold_measured": int(self.threshold_measured),
             },
         )
 
@@ -538,11 +540,13 @@ class CompiledGA:
             dropped=bool(self._result.dropped),
         )
 
-    def bind_switching(self, seeds: NDArray[np.int64]) -> None:
+    def bind_switching(self, seeds: NDArray[np.int64], hold: int = 1) -> None:
         """Prepare switching control in the loop (:meth:`ClosedLoopDriver.simulate_switching`):
         ``seeds`` are the generator seeds of the GA activations in order, one each, and bound the
-        activations recorded (the loop returns when the records are full)."""
+        activations recorded (the loop returns when the records are full); an admitted gain set
+        controls ``hold`` periods from its activation (1: that sample only, the paper's)."""
         capacity = len(seeds)
+        self.held = np.zeros(self.n, dtype=np.uint8)  # 1 at the samples a held set controlled
         self._seeds = np.ascontiguousarray(np.asarray(seeds, dtype=np.int64).view(np.uint64))
         self._records: dict[str, NDArray[Any]] = {
             **{n: np.zeros(capacity, dtype=np.int64) for n in ("sample", "generations", "evaluations", "threads")},
@@ -566,6 +570,8 @@ class CompiledGA:
                 "qd0": ffi().cast("double *", work[self.n_joints :].ctypes.data),
                 "best": ffi().cast("double *", work[2 * self.n_joints :].ctypes.data),
                 "backoff": 1,
+                "hold": hold,
+                "held": ffi().cast("unsigned char *", self.held.ctypes.data),
             },
         )
         self._switch_base = base  # the struct points into it: keep it alive

@@ -19,6 +19,7 @@ All of them give the same run bit for bit where their arithmetic is the same (te
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -82,6 +83,7 @@ class Advance:
     status: int
     stop: int
     activations: tuple[RawActivation, ...] = ()
+    held: tuple[int, ...] = ()  # samples controlled by a held gain set (safe variant), no GA run
 
 
 @dataclass(frozen=True)
@@ -115,23 +117,41 @@ class _SteppedLoop:
         self.loop = loop
         self.job = job
         self._compiled_ga: CompiledGA | None = None
+        self._admitted = False  # the last activation's set was admitted (the safe variant, compiled)
+        self._hold_left = 0  # samples the last admitted set still controls (as csrc/ga.c holds it)
+        self._held: Gains | None = None
 
     def advance(self, k: int, k_end: int) -> Advance:
         job = self.job
         found: list[RawActivation] = []
+        held: list[int] = []
         while True:
+            if self._hold_left > 0 and self._held is not None:
+                end = min(k + self._hold_left, k_end)
+                status, after = self.loop.simulate(job.unswitched, job.arrays, self._held.Kp, self._held.Kv, k, end)
+                held.extend(range(k, end if status == DONE else min(after, end)))
+                self._hold_left -= end - k
+                if status != DONE:
+                    return Advance(status, after, tuple(found), tuple(held))
+                k = end
+                if k >= k_end:
+                    return Advance(DONE, k_end, tuple(found), tuple(held))
+                continue
             status, stop = self.loop.simulate(job.settings, job.arrays, job.gains.Kp, job.gains.Kv, k, k_end)
             if status != ABOVE_THRESHOLD:
-                return Advance(status, k_end if status == DONE else stop, tuple(found))
+                return Advance(status, k_end if status == DONE else stop, tuple(found), tuple(held))
             started = time.perf_counter()
+            self._admitted = False
             gains, activation = self._tune(stop)
             status, after = self.loop.simulate(job.unswitched, job.arrays, gains.Kp, gains.Kv, stop, stop + 1)
             found.append(RawActivation(stop, *activation, time.perf_counter() - started))
+            if self._admitted and job.controller.hold_periods > 1:
+                self._hold_left, self._held = job.controller.hold_periods - 1, gains
             if status != DONE:
-                return Advance(status, after, tuple(found))
+                return Advance(status, after, tuple(found), tuple(held))
             k = stop + 1
             if k >= k_end:
-                return Advance(DONE, k_end, tuple(found))
+                return Advance(DONE, k_end, tuple(found), tuple(held))
 
     def _tune(self, k: int) -> tuple[Gains, tuple[int, int, float, float]]:
         """Run the GA at sample ``k``; returns the gains and (generations, evaluations, best, fixed).
@@ -151,6 +171,7 @@ class _SteppedLoop:
                 self._compiled_ga = compiled_ga(controller, self.loop, job.model, arrays, job.dt, job.settings)
             seed = int(job.ga_rng.integers(0, 2**63, dtype=np.int64))
             out = self._compiled_ga.activate(k, arrays.q_meas[k], arrays.qd_meas[k], seed)
+            self._admitted = controller.variant == "safe" and not out.dropped
             Kp, Kv = controller.split(out.genes)
             return Gains.of(Kp, Kv), (out.generations, out.evaluations, out.best_cost, out.seeded_cost)
         if controller.variant == "safe":
@@ -203,7 +224,8 @@ class CompiledSwitchingLoop:
         self.loop = ClosedLoopDriver(plant.backend)
         self.ga = compiled_ga(job.controller, self.loop, job.model, job.arrays, job.dt, job.settings)
         # one seed per sample, drawn as the stepped loop draws them one by one (the same numbers)
-        self.ga.bind_switching(np.asarray(job.ga_rng.integers(0, 2**63, size=int(job.arrays.n), dtype=np.int64)))
+        seeds = np.asarray(job.ga_rng.integers(0, 2**63, size=int(job.arrays.n), dtype=np.int64))
+        self.ga.bind_switching(seeds, hold=job.controller.hold_periods)
 
     def advance(self, k: int, k_end: int) -> Advance:
         job = self.job
@@ -213,6 +235,8 @@ class CompiledSwitchingLoop:
         )
         assert status != ABOVE_THRESHOLD  # the records hold one activation per sample
         records = self.ga.records(first, int(self.ga.switching.count))
+        end = k_end if status == DONE else stop
+        held = tuple((np.flatnonzero(self.ga.held[k:end]) + k).tolist())
         found = tuple(
             RawActivation(
                 sample=int(sample),
@@ -224,7 +248,7 @@ class CompiledSwitchingLoop:
             )
             for i, sample in enumerate(records["sample"].tolist())
         )
-        return Advance(status, k_end if status == DONE else stop, found)
+        return Advance(status, k_end if status == DONE else stop, found, held)
 
 
 def engine_for(plant: Robot, plant_engine: str, job: Job) -> Engine:
@@ -290,4 +314,8 @@ def compiled_ga(
         quadratic=controller.prediction == "quadratic",
         safe=safe,
         damping=damping,
+        # the safe variant's GA runs at about 6 % of the samples (its sets are held): a second thread
+        # would save under 0.1 s a run, one stall of it on a busy machine costs 0.1-0.6 s; so one
+        # thread unless $VGTARM_THREADS asks (the run is the same bit for bit with any count)
+        threads=1 if controller.variant == "safe" and not os.environ.get("VGTARM_THREADS", "").strip() else None,
     )

@@ -167,8 +167,15 @@ class PythonLoop:
                     self._estimate(settings, arrays, k)
                 except (AssemblyError, InputError):  # a diverging run's estimate beyond the model
                     return NOT_FINITE, k
-            if settings.threshold > 0 and arrays.error[k] > settings.threshold:
-                return ABOVE_THRESHOLD, k
+            if settings.threshold > 0:
+                seen = arrays.error[k]
+                if settings.threshold_measured:  # what the controller sees: its model's tip at q_meas
+                    try:
+                        seen = np.linalg.norm(inp["tip_d"][k] - self.model.tip_position(arrays.q_meas[k]))
+                    except (AssemblyError, InputError):
+                        return NOT_FINITE, k
+                if seen > settings.threshold:
+                    return ABOVE_THRESHOLD, k
             try:
                 self._observe(settings, arrays, k)
                 qm, vm = arrays.q_meas[k], arrays.qd_meas[k]

@@ -261,7 +261,12 @@ class Run:
                 threshold_m=controller.threshold,
                 scm_variant=controller.variant,
                 **(
-                    {"scm_model_error": controller.model_error, "scm_stability_radius": controller.stability_radius}
+                    {
+                        "scm_model_error": controller.model_error,
+                        "scm_stability_radius": controller.stability_radius,
+                        "scm_hold": controller.hold_periods,
+                        "scm_switch_on": "measured" if controller.measured_switching else "true",
+                    }
                     if controller.variant == "safe"
                     else {}
                 ),
@@ -341,6 +346,7 @@ def prepare(
         velocity_filter=sensing.velocity_filter,
         estimator=sensing.estimator,
         kalman_gain=sensing.kalman_gain,
+        threshold_measured=isinstance(controller, SwitchingControl) and controller.measured_switching,
     )
     job = Job(
         settings=settings,
@@ -385,6 +391,7 @@ def drive(run: Run, progress: Progress | None = None) -> Outcome:
         mode[k:stop] = MODE_FIXED
         for activation in step.activations:
             mode[activation.sample] = MODE_GA
+        mode[list(step.held)] = MODE_GA  # a held set's samples: its gains, no GA run
         found.extend(step.activations)
         if status != DONE:
             break

@@ -323,7 +323,18 @@ int vgt_simulate_slice(const vgt_model *m, const vgt_settings *s, const vgt_run 
             if (s->sensing && s->estimator == VGT_ESTIMATOR_KALMAN && estimate(m, s, r, &wk, k)) {
                 status = VGT_FUNCTION_FAILED; *stop = k; break;
             }
-            if (s->threshold > 0.0 && r->error[k] > s->threshold) { status = VGT_ABOVE_THRESHOLD; *stop = k; break; }
+            if (s->threshold > 0.0) {
+                double seen = r->error[k];
+                if (s->threshold_measured) { /* what the controller sees: its model's tip at q_meas */
+                    double tip_m[3];
+                    const double *in_m[2] = {r->q_meas + nj * k, r->p_ctrl};
+                    double *out_m[1] = {tip_m};
+                    if (call(&m->tip, &wk, 2, in_m, 1, out_m)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
+                    double m0 = td[0] - tip_m[0], m1 = td[1] - tip_m[1], m2 = td[2] - tip_m[2];
+                    seen = sqrt(m0 * m0 + m1 * m1 + m2 * m2);
+                }
+                if (seen > s->threshold) { status = VGT_ABOVE_THRESHOLD; *stop = k; break; }
+            }
             if (observe(m, s, r, &wk, k)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
             const double *qm = r->q_meas + nj * k, *vm = r->qd_meas + nj * k, *tau = r->tau_hat + nj * k;
             const double *in_c[8] = {qm, vm, r->q_d + nj * k, r->qd_d + nj * k, r->qdd_d + nj * k, Kp, Kv, r->p_ctrl};

@@ -1255,6 +1255,17 @@ int vgt_simulate_switching(const vgt_model *m, const vgt_settings *s, const vgt_
         k += 1;
     }
     while (k < k1) {
+        if (sw->hold_left > 0) { /* an admitted set held over the periods it was certified frozen for */
+            const long end = k + sw->hold_left < k1 ? k + sw->hold_left : k1;
+            status = vgt_simulate_slice(m, unswitched, r, sw->best, sw->best + nn, k, end, stop, slice);
+            const long done = status == VGT_DONE ? end : *stop; /* paused: *stop is not finished yet */
+            if (sw->held)
+                for (long i = k; i < done && i < end; ++i) sw->held[i] = 1;
+            sw->hold_left -= (done < end ? done : end) - k;
+            if (status != VGT_DONE) return status; /* failed or paused (the next call resumes it) */
+            k = end;
+            continue;
+        }
         status = vgt_simulate_slice(m, s, r, Kp, Kv, k, k1, stop, slice);
         if (status != VGT_ABOVE_THRESHOLD) return status; /* done, failed or paused */
         k = *stop;
@@ -1307,6 +1318,7 @@ int vgt_simulate_switching(const vgt_model *m, const vgt_settings *s, const vgt_
             sw->threads[record] = out.threads;
             kp = sw->best;
             kv = sw->best + nn;
+            if (sw->hold > 1 && !out.dropped) sw->hold_left = sw->hold - 1;
         }
         status = vgt_simulate_slice(m, unswitched, r, kp, kv, k, k + 1, stop, slice);
         sw->wall_time[record] = seconds() - start;

@@ -80,6 +80,8 @@ typedef struct {
     int estimator;          /* sensing: an enum vgt_estimator                              */
     double kalman_gain[3];  /* VGT_ESTIMATOR_KALMAN: gains of position, velocity and       */
                             /* disturbance on the position innovation (per joint, the same) */
+    int threshold_measured; /* 1: the threshold is on the tip error the controller sees: the  */
+                            /* model's tip at q_meas against tip_d; 0: the true tip error     */
 } vgt_settings;
 
 /* One run: n samples of an n_joints robot (nj below). */
@@ -237,11 +239,16 @@ typedef struct {
                                   /* back to 1 after an activation on threads without one; init 1) */
     int pending;                  /* a call paused inside an activation's sample: 1 under the GA's */
                                   /* gains (best), 2 under the fixed ones (the last sample); 0 none */
+    long hold;                    /* periods an admitted (not dropped) gain set controls, counting  */
+                                  /* its activation's sample (0 or 1: that sample only, the paper)  */
+    long hold_left;               /* samples the current set still controls after its activation's */
+    unsigned char *held;          /* (n) 1 at each sample controlled by a held set (NULL: hold <= 1) */
 } vgt_switching;
 
 /* Samples k0 .. k1-1 under the switching control method: the fixed gains Kp, Kv while the tip
  * error stays within s->threshold; at a sample above it, one GA activation from the measured
- * state, whose gains control that sample (with `unswitched`, s without the threshold). Returns
+ * state, whose gains control that sample (with `unswitched`, s without the threshold) and, when
+ * sw->hold > 1 and the set was not dropped, the next sw->hold - 1 samples too (held). Returns
  * VGT_DONE, a failure status (with *stop), VGT_ABOVE_THRESHOLD with *stop = the sample when
  * the records are full, or VGT_PAUSED with *stop = the sample to continue from when sw->slice's
  * budget ran out (call again with k0 = *stop; the results are the same bit for bit). */
