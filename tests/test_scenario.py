@@ -133,3 +133,11 @@ def test_drive_reports_progress_and_marks_every_sample(robot):
     assert [done for done, _ in calls] == sorted({done for done, _ in calls})
     assert (outcome.mode == MODE_FIXED).all() and not outcome.activations
     _same_run(simulate(robot, ref, CFC), simulate(robot, ref, CFC, progress=lambda *_: None))
+
+
+def test_simulate_documents_every_field_of_the_scenario():
+    """A new scenario field is one field, one check, one use, and one line of simulate's docstring."""
+    import inspect
+
+    doc = inspect.getdoc(simulate) or ""
+    assert [f for f in Scenario.option_names() if f"``{f}``" not in doc] == []

@@ -150,6 +150,9 @@ def simulate(
               observer takes the unfiltered differences) with Gaussian noise of ``velocity_noise``
               (m/s, rad/s) on each difference, seeded from ``seed``. ``twist_resolution`` (rad)
               defaults to a 20-bit encoder (2 pi / 2^20) when encoders are on;
+            - ``estimator``: ``"difference"`` (differenced, filtered encoder counts) or ``"kalman"``
+              (a Kalman filter on the encoder positions with the controller model as its process
+              model, tuned by ``estimator_bandwidth_hz``, default 60 Hz; needs encoders);
             - ``transient_s``: length of the start transient excluded from the "after transient" figures.
         metadata: extra entries for the summary (case name, ...).
         progress: called as ``progress(samples_done, samples_total)`` now and then.
