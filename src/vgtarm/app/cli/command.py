@@ -39,7 +39,7 @@ from . import presets
 from . import stack as cli_stack
 from . import study as cli_study
 from . import visual as cli_visual
-from .options import add_config, joint_gains, non_negative_int, positive_float, positive_int
+from .options import add_config, joint_gains, non_negative_int, positive_float, positive_int, positive_int_at_most
 
 
 def _format_vector(values: Sequence[float] | np.ndarray, digits: int = 6) -> str:
@@ -315,12 +315,7 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
     from ...simulation import INTEGRATORS
     from ...simulation.simulator import MAX_SUBSTEPS
 
-    def substeps(text: str) -> int:
-        value = positive_int(text)
-        if value > MAX_SUBSTEPS:
-            raise argparse.ArgumentTypeError(f"expected at most {MAX_SUBSTEPS:,} steps per control period, got {text}")
-        return value
-
+    substeps = positive_int_at_most(MAX_SUBSTEPS, "steps per control period")
     parser.add_argument(
         "--integrator",
         choices=sorted(INTEGRATORS),
@@ -671,14 +666,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", type=Path, default=Path("results"), metavar="DIR", help="output folder (default: results)"
     )
 
-    def seed_count(text: str) -> int:
-        from ..reports.seeds import MAX_SEEDS
+    from ..reports.seeds import MAX_SEEDS
 
-        value = positive_int(text)
-        if value > MAX_SEEDS:
-            raise argparse.ArgumentTypeError(f"expected at most {MAX_SEEDS:,} seeds, got {text}")
-        return value
-
+    seed_count = positive_int_at_most(MAX_SEEDS, "seeds")
     again.add_argument(
         "--seeds",
         type=seed_count,

@@ -4,6 +4,7 @@ refuse a bad value with argparse's own one-line message)."""
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -58,3 +59,16 @@ def joint_gains(text: str, option: str, joint_names: tuple[str, ...]) -> float |
     if len(values) not in (1, n) or not all(np.isfinite(v) and v > 0 for v in values):
         raise InputError(f"{option} {shown(text)}: {expected}")
     return values[0] if len(values) == 1 else tuple(values)
+
+
+def positive_int_at_most(largest: int, what: str) -> Callable[[str], int]:
+    """An option type: a whole number from 1 to ``largest``, refused as "expected at most
+    {largest} {what}" above it."""
+
+    def parse(text: str) -> int:
+        value = positive_int(text)
+        if value > largest:
+            raise argparse.ArgumentTypeError(f"expected at most {largest:,} {what}, got {text}")
+        return value
+
+    return parse
