@@ -12,6 +12,18 @@ accelerations scale by ``s`` too (same timing). A robot whose home tip lies with
 ``c0`` (the paper's robot, or a copy of it as a stack) gets the paths unchanged. The summary of a
 run records the centre and the scale (``path_centre_m``, ``path_scale``).
 
+**A robot whose tip moves in a plane** (a single planar module; :mod:`vgtarm.ik.taskspace`) tracks
+the tip's two coordinates in that plane, so a case path is also turned into it: the moved and
+scaled displacement ``s (x - c0)`` is turned by the smallest rotation that takes the normal of the
+path's own best-fitting plane (the least principal direction of its points; for case 2 the plane
+of its three corners, for case 1 the horizontal plane of its circle) onto the robot's plane
+normal, then projected on the robot's plane (what is left out of the path's plane, case 1's
++-15 mm wave in height before scaling, is dropped). Velocities and accelerations follow by the
+same linear map: the same timing, the same shape where the path is planar. On a robot whose tip
+moves on a line the displacement is projected on the line. The summary records the task
+(``ik_task``, e.g. ``"tip (u2, u3) in its plane"``) and the robot plane's normal
+(``path_plane_normal``).
+
 The case gains are scalars: each case's ``Kp`` and ``Kv`` apply to every joint of the robot
 (``Kp I``, ``Kv I`` of its size), as the paper's 7x7 diagonal gains do: legs and twists alike.
 """
@@ -23,11 +35,13 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from .. import paths
 from ..control import ComputedForceControl, SwitchingControl
 from ..errors import InputError, shown
 from ..ga import GAOptions
+from ..ik.taskspace import TaskSpace, task_space
 from ..model.parameters import N_JOINTS, RobotParameters
 from ..model.robot import Robot
 from ..model.stack import Stack
@@ -156,41 +170,105 @@ class PathPlacement:
     """Where the case paths go on a robot: ``x -> centre + scale (x - PAPER_HOME_TIP)``.
 
     ``centre`` (m) is the robot's home tip; ``scale`` its reach over the paper robot's (module
-    docstring); ``reach`` (m) the distance from the base origin to its home tip.
+    docstring); ``reach`` (m) the distance from the base origin to its home tip. ``space`` is the
+    plane or line the tip of a robot moves in when it does not move in all of space (the path is
+    then turned into it, module docstring), else None.
     """
 
     centre: tuple[float, float, float]
     scale: float
     reach: float
+    space: TaskSpace | None = None
 
     def apply(self, path: paths.Path) -> paths.Path:
-        """The path moved and scaled (timing unchanged)."""
+        """The path moved and scaled (timing unchanged); turned into the robot's plane or line if it has one."""
         c0, c = np.array(PAPER_HOME_TIP), np.array(self.centre)
+        if self.space is None:
+            return paths.Path(
+                path.name,
+                path.t,
+                c + self.scale * (path.position - c0),
+                self.scale * path.velocity,
+                self.scale * path.acceleration,
+                None if path.jerk is None else self.scale * path.jerk,
+            )
+        M = self.scale * self.turn(path)
         return paths.Path(
             path.name,
             path.t,
-            c + self.scale * (path.position - c0),
-            self.scale * path.velocity,
-            self.scale * path.acceleration,
-            None if path.jerk is None else self.scale * path.jerk,
+            c + (path.position - c0) @ M.T,
+            path.velocity @ M.T,
+            path.acceleration @ M.T,
+            None if path.jerk is None else path.jerk @ M.T,
         )
+
+    def turn(self, path: paths.Path) -> NDArray[np.float64]:
+        """The linear map ``(3, 3)`` that takes ``path``'s displacements into the robot's plane or line
+        (before scaling): the smallest rotation of the path's plane normal onto the robot's, then the
+        projection on the robot's plane (module docstring); the projection alone for a line, or for a
+        path that is itself a line or a point."""
+        assert self.space is not None
+        E = self.space.directions
+        projection = E.T @ E
+        if self.space.rank != 2:
+            return np.asarray(projection)
+        spread = path.position - path.position.mean(axis=0)
+        _, s, vt = np.linalg.svd(spread, full_matrices=False)
+        if s.shape[0] < 3 or not s[1] > 1e-9 * s[0]:
+            return np.asarray(projection)
+        target = self.space.normal()
+        normal = np.where(np.abs(vt[2]) < 1e-12, 0.0, vt[2])
+        normal /= np.linalg.norm(normal)
+        if normal @ target < 0:
+            normal = -normal
+        cosine = float(normal @ target)
+        k = np.cross(normal, target)
+        cross = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+        rotation = cosine * np.eye(3) + cross + np.outer(k, k) / (1.0 + cosine)
+        return np.asarray(projection @ rotation)
 
     def metadata(self) -> dict[str, Any]:
         """The summary entries of the placement."""
-        return {"path_centre_m": list(self.centre), "path_scale": self.scale, "path_reach_m": self.reach}
+        entries: dict[str, Any] = {
+            "path_centre_m": list(self.centre),
+            "path_scale": self.scale,
+            "path_reach_m": self.reach,
+        }
+        if self.space is not None:
+            entries["ik_task"] = self.space.label
+            if self.space.rank == 2:
+                entries["path_plane_normal"] = self.space.normal().tolist()
+        return entries
+
+
+def reduced_space(robot: Robot) -> TaskSpace | None:
+    """The plane or line the tip of ``robot`` moves in from home (:func:`vgtarm.ik.taskspace.task_space`),
+    or None when it moves in all of space (the paper's robot is never asked)."""
+    home = robot.parameters.home
+    if not robot.is_stack or np.linalg.matrix_rank(robot.tip_jacobian(home), tol=1e-9) == 3:
+        return None
+    return task_space(robot, home)
+
+
+def task_metadata(robot: Robot) -> dict[str, Any]:
+    """``{"ik_task": ...}`` for a robot whose tip moves in a plane or a line, else nothing (the
+    paper's runs stay as they were)."""
+    space = reduced_space(robot)
+    return {} if space is None else {"ik_task": space.label}
 
 
 def path_placement(robot: Robot) -> PathPlacement | None:
     """How the case paths are placed on ``robot``; ``None`` for the paper's robot (home tip within
     :data:`SAME_TIP_TOLERANCE` of :data:`PAPER_HOME_TIP`: the paths are used as they are)."""
     tip = robot.tip_position(robot.parameters.home)
-    if float(np.linalg.norm(tip - np.array(PAPER_HOME_TIP))) <= SAME_TIP_TOLERANCE:
+    space = reduced_space(robot)
+    if space is None and float(np.linalg.norm(tip - np.array(PAPER_HOME_TIP))) <= SAME_TIP_TOLERANCE:
         return None
     reach = float(np.linalg.norm(tip))
     if not reach > 0.0:
         raise InputError(f"robot {shown(robot.parameters.name)}: its tip at home is at the base origin (no reach)")
     scale = reach / float(np.linalg.norm(PAPER_HOME_TIP))
-    return PathPlacement((float(tip[0]), float(tip[1]), float(tip[2])), scale, reach)
+    return PathPlacement((float(tip[0]), float(tip[1]), float(tip[2])), scale, reach, space)
 
 
 def case_path(robot: Robot, number: int, dt: float = 1e-3) -> paths.Path:
@@ -313,7 +391,12 @@ def run_path(
         if reference is not None
         else JointReference.of(robot.inverse_kinematics(path, rates=rates), path.name)
     )
-    info: dict[str, Any] = {"path": path.name, **_gain_metadata(case, robot.n_joints), **(metadata or {})}
+    info: dict[str, Any] = {
+        "path": path.name,
+        **_gain_metadata(case, robot.n_joints),
+        **task_metadata(robot),
+        **(metadata or {}),
+    }
     return _run(robot, case, ref, info, controller, external_force, horizon, ga, scm_variant, controller_model, options)
 
 

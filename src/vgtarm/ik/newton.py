@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import kkt
+from . import rates as rate_modes
 from .options import NewtonSettings
 from .problem import BatchState, IKProblem, Task, rows_times
 
@@ -102,8 +103,11 @@ def iterate(
     Updates ``state`` rows ``idx`` in place, including the model values at the last iterate. With
     ``with_rates`` every evaluation also computes the exact rates in the same compiled call
     (:meth:`Task.evaluate_with_rates`); they are kept for samples that converge with no active
-    inequality (``rates_ready``), whose KKT matrix is the one the compiled call assumes.
+    inequality (``rates_ready``), whose KKT matrix is the one the compiled call assumes. A reduced
+    task (a planar robot's, :attr:`Task.compiled_rates` False) gets the same rates from
+    :func:`vgtarm.ik.rates.exact` on the same samples instead.
     """
+    compiled_rates = with_rates and task.compiled_rates
     nj = problem.n
     working = np.asarray(idx, dtype=np.intp)
     state.converged[working] = False
@@ -112,7 +116,7 @@ def iterate(
         if working.size == 0:
             break
         q, lam, mu, active = state.q[working], state.lam[working], state.mu[working], state.active[working]
-        if with_rates:
+        if compiled_rates:
             residual, J, H, g, rates = task.evaluate_with_rates(working, q, lam, problem.weight)
         else:
             residual, J, H, g = task.evaluate_cost(working, q, lam)
@@ -121,8 +125,10 @@ def iterate(
             state.g[working] = g
         done, predicted, finite = stopping_test(problem, q, lam, mu, active, (residual, J, H), settings, g)
         state.converged[working[done]] = True
-        if with_rates:
+        if compiled_rates:
             _store_rates(state, working, done & ~active.any(axis=1), rates)
+        elif with_rates:
+            rate_modes.exact(problem, task, state, working[done & ~active.any(axis=1)])
         keep = finite & ~done
         if step == settings.max_iterations:
             break

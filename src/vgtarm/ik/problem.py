@@ -207,6 +207,10 @@ class Task:
             shared by the task and every task derived from it (a solver's work counter).
         effort: the effort criterion's terms (:mod:`vgtarm.ik.effort`), or None for eq. 12 alone.
             With them the cost is ``Phi_e + Phi`` and the Hessians ``H`` include ``Phi_e``'s.
+        directions: ``(r, 3)`` orthonormal rows for a robot whose tip moves in a plane (``r = 2``)
+            or a line (``r = 1``) (:mod:`vgtarm.ik.taskspace`): the position task is then the
+            ``r`` rows ``E (P(q) - P_d)``, evaluated through the same compiled functions (the
+            multipliers enter them as ``E^T lam``); None for the tip's three coordinates.
     """
 
     kind: str
@@ -220,6 +224,7 @@ class Task:
     model: Robot
     evaluations: list[int] = field(default_factory=lambda: [0])
     effort: EffortTerms | None = None
+    directions: Array | None = None
 
     def _evaluate(self, name: str, inputs: dict[str, Array], n: int) -> dict[str, Array]:
         self.evaluations[0] += n
@@ -228,7 +233,25 @@ class Task:
     @property
     def m(self) -> int:
         """Number of equality rows."""
+        if self.directions is not None:
+            return int(self.directions.shape[0])
         return 3 if self.kind == "position" else 6
+
+    @property
+    def compiled_rates(self) -> bool:
+        """Whether :meth:`evaluate_with_rates` can give the rates in its compiled call (not for a
+        reduced task, whose rates :func:`vgtarm.ik.rates.exact` computes from the same conditions)."""
+        return self.directions is None
+
+    def _lift(self, lam: Array) -> Array:
+        """Multipliers of the tip's three rows, ``E^T lam`` ``(n, 3)``, for a reduced task's ``lam`` ``(n, r)``."""
+        assert self.directions is not None
+        return np.asarray(lam @ self.directions)
+
+    def _reduce(self, rows: Array, nj: int) -> Array:
+        """A KKT-residual vector ``(n, nj + 3)`` of the tip's three rows with its task rows projected, ``(n, nj + r)``."""
+        assert self.directions is not None
+        return np.concatenate([rows[:, :nj], rows[:, nj : nj + 3] @ self.directions.T], axis=1)
 
     def __len__(self) -> int:
         return int(self.position.shape[0])
@@ -251,6 +274,7 @@ class Task:
             self.model,
             self.evaluations,
             None if self.effort is None else self.effort.subset(idx),
+            self.directions,
         )
 
     def with_targets(self, position: Array, rotation: Array | None, like: int = 0) -> Task:
@@ -271,6 +295,7 @@ class Task:
             self.model,
             self.evaluations,
             None if self.effort is None else self.effort.at_rest(like, n),
+            self.directions,
         )
 
     def forward(self, q: Array) -> tuple[Array, Array]:
@@ -299,6 +324,8 @@ class Task:
         """As :meth:`evaluate`, plus the gradient ``(n, nj)`` of the model part of the cost, ``Phi_e``
         (None for eq. 12 alone, whose cost the problem evaluates)."""
         n, nj = idx.shape[0], q.shape[1]
+        if self.directions is not None:
+            return self._evaluate_reduced(idx, q, lam)
         g = None
         if self.effort is not None:
             out = self._evaluate("ik_effort", {"q": q, "lam": lam, **self._effort_inputs(idx)}, n)
@@ -313,6 +340,21 @@ class Task:
             c, J, H = out["c"], out["J"], out["H"]
             c[:, :3] -= self.position[idx]
         return c, J.reshape(n, self.m, nj), H.reshape(n, nj, nj), g
+
+    def _evaluate_reduced(self, idx: Index, q: Array, lam: Array) -> tuple[Array, Array, Array, Array | None]:
+        """:meth:`evaluate_cost` of a reduced position task: the three-row functions at ``E^T lam``, projected."""
+        assert self.directions is not None
+        n, nj = idx.shape[0], q.shape[1]
+        lifted = self._lift(lam)
+        g = None
+        if self.effort is not None:
+            out = self._evaluate("ik_effort", {"q": q, "lam": lifted, **self._effort_inputs(idx)}, n)
+            g = out["g"]
+        else:
+            out = self._evaluate("ik_position", {"q": q, "lam": lifted}, n)
+        c = (out["c"] - self.position[idx]) @ self.directions.T
+        J = np.einsum("rk,nkj->nrj", self.directions, out["J"].reshape(n, 3, nj))
+        return c, J, out["H"].reshape(n, nj, nj), g
 
     def effort_cost(self, idx: Index, q: Array) -> Array:
         """``Phi_e`` ``(n,)`` of ``q`` ``(n, nj)`` at samples ``idx`` (zeros without the effort criterion)."""
@@ -342,6 +384,8 @@ class Task:
         ``weight`` ``(nj,)`` is the diagonal of the Hessian of ``Phi``. The rates are valid only where
         ``(q, lam)`` is a solution with no active limit or triangle row.
         """
+        if not self.compiled_rates:
+            raise InputError("a reduced task's rates are not compiled; use evaluate_cost and vgtarm.ik.rates.exact")
         n, nj = idx.shape[0], q.shape[1]
         inputs = {"q": q, "lam": lam, "w": weight, "xd": self.velocity[idx], "xdd": self.acceleration[idx]}
         if self.effort is not None:
@@ -361,6 +405,13 @@ class Task:
     def first_order_rhs(self, idx: Index, q: Array, lam: Array) -> Array:
         """``-dF/dt`` at fixed ``(q, lam)`` of the KKT residual ``F = [grad L; c - c_d]``, ``(n, nj + m)``."""
         n, nj = idx.shape[0], q.shape[1]
+        if self.directions is not None:
+            rhs = np.zeros((n, nj + 3))
+            rhs[:, nj:] = self.velocity[idx]
+            if self.effort is not None:
+                inputs = {"q": q, "lam": self._lift(lam), **self._effort_inputs(idx), "fd": self.effort.force_rate[idx]}
+                rhs -= self._evaluate("ik_effort_dt", inputs, n)["dt"]
+            return self._reduce(rhs, nj)
         rhs = np.zeros((n, nj + self.m))
         rhs[:, nj : nj + 3] = self.velocity[idx]
         if self.effort is not None:
@@ -378,6 +429,8 @@ class Task:
         derivatives of the optimum along the path.
         """
         n = idx.shape[0]
+        if self.directions is not None:
+            lam, lam_d = self._lift(lam), self._lift(lam_d)
         inputs = {"q": q, "lam": lam, "qd": qd, "lam_d": lam_d}
         if self.effort is not None:
             d2 = self._evaluate("ik_effort_d2", {**inputs, **self._effort_inputs(idx, rates=True)}, n)["d2"]
@@ -389,7 +442,7 @@ class Task:
         rhs = -d2
         nj = q.shape[1]
         rhs[:, nj : nj + 3] += self.acceleration[idx]
-        return rhs
+        return rhs if self.directions is None else self._reduce(rhs, nj)
 
 
 @dataclass

@@ -32,7 +32,8 @@ class IKSamples:
         active: ``(N, 2 n + k)`` active inequalities, labelled by ``constraint_labels``: lower
             limits, upper limits, then the assembly rows ``G q + h >= margin``.
         constraint_labels: ``(2 n + k,)`` names of the inequalities.
-        multipliers: ``(N, m)`` Lagrange multipliers of the task equations (3 or 6).
+        multipliers: ``(N, m)`` Lagrange multipliers of the task equations (3 or 6; 2 or 1 for a
+            robot whose tip moves in a plane or a line).
         inequality_multipliers: ``(N, 2 n + k)`` multipliers of the inequalities (>= 0 at an optimum).
         stationarity: ``(N,)`` largest entry of the Lagrangian gradient.
         curvature: ``(N,)`` certificate of the second-order condition, positive when the Hessian of
@@ -98,6 +99,9 @@ class IKResult:
             simulation of another robot can say so ("" if unknown).
         joint_names: the robot's joint names, in the order of the columns of ``q``.
         path: the name of the desired path (:attr:`vgtarm.paths.Path.name`; "" if unknown).
+        task_space: the tip coordinates the task constrained: ``"tip (u1, u2, u3)"`` (with
+            ``" and orientation"`` for the pose task), or for a robot whose tip moves in a plane or a
+            line the reduced task (:mod:`vgtarm.ik.taskspace`), e.g. ``"tip (u2, u3) in its plane"``.
     """
 
     t: Array
@@ -124,6 +128,7 @@ class IKResult:
 
     joint_names: tuple[str, ...] = JOINT_NAMES
     path: str = ""
+    task_space: str = ""
 
     def __len__(self) -> int:
         return int(self.t.shape[0])

@@ -210,11 +210,18 @@ METHOD_IPOPT = "ipopt"
 
 
 def build_ipopt(
-    problem: IKProblem, kind: str, options: IKOptions, definition: Definition = PAPER, effort: bool = False
+    problem: IKProblem,
+    kind: str,
+    options: IKOptions,
+    definition: Definition = PAPER,
+    effort: bool = False,
+    directions: Array | None = None,
 ) -> ca.Function:
     """The IPOPT solver of one sample of the robot ``definition`` (default the paper's); its parameter
     is ``[target point (3), R_d row-major (9, pose only), p]``, and with ``effort`` (the effort
-    criterion, position task) ``[target point (3), tool force (3), inverse scales (n), p]``."""
+    criterion, position task) ``[target point (3), tool force (3), inverse scales (n), p]``. With
+    ``directions`` ``(r, 3)`` (a robot whose tip moves in a plane or a line) the position rows are
+    ``E (P(q) - point)``, written symbolically here, independently of the compiled projection."""
     q = ca.SX.sym("q", definition.n_joints)
     point = ca.SX.sym("point", 3)
     p = ca.SX.sym("p", definition.n_parameters)
@@ -231,6 +238,8 @@ def build_ipopt(
         rd = ca.SX.sym("R_d", 9)
         parameters = ca.vertcat(point, rd, p)
         c = pose_constraints(q, rotation_from_row_major(rd), p, definition) - ca.vertcat(point, ca.SX.zeros(3))
+    if directions is not None:
+        c = ca.DM(directions) @ c
     cost = 0.5 * ca.sum1(ca.DM(problem.weight) * (q - ca.DM(problem.centre)) ** 2)
     if extra is not None:
         cost = cost + extra
@@ -249,7 +258,7 @@ def build_ipopt(
 
 def solve_ipopt(problem: IKProblem, task: Task, state: BatchState, q_start: Array, options: IKOptions) -> None:
     """The IPOPT reference solver (solver contract: :class:`vgtarm.ik.Solver`)."""
-    solver = build_ipopt(problem, task.kind, options, task.model.definition, task.effort is not None)
+    solver = build_ipopt(problem, task.kind, options, task.model.definition, task.effort is not None, task.directions)
     m, k = task.m, problem.n_triangle
     lbg = np.concatenate([np.zeros(m), np.full(k, problem.margin)])
     ubg = np.concatenate([np.zeros(m), np.full(k, np.inf)])

@@ -31,6 +31,7 @@ from .options import IKOptions
 from .pose import HOLD, OrientationTarget, angle_error, orientation_target
 from .problem import BatchState, IKProblem, Task
 from .records import IKResult, IKSamples
+from .taskspace import TaskSpace, task_space
 
 Array = NDArray[np.float64]
 FALLBACK = "slsqp (fallback)"
@@ -61,10 +62,17 @@ def _check_start(robot: Robot, problem: IKProblem, q: Array) -> Array:
     return q
 
 
-def _task(robot: Robot, path: Path, target: OrientationTarget | None, effort: EffortTerms | None = None) -> Task:
+def _task(
+    robot: Robot,
+    path: Path,
+    target: OrientationTarget | None,
+    effort: EffortTerms | None = None,
+    space: TaskSpace | None = None,
+) -> Task:
     common = (path.t, path.position, path.velocity, path.acceleration)
     if target is None:
-        return Task("position", *common, None, None, None, robot, effort=effort)
+        directions = None if space is None else space.directions
+        return Task("position", *common, None, None, None, robot, effort=effort, directions=directions)
     rotation = target.rotation.reshape(-1, 9)
     return Task(
         "pose",
@@ -206,12 +214,9 @@ def inverse_kinematics(
     q_start = _check_start(
         robot, problem, robot.parameters.home if settings.initial_guess is None else settings.initial_guess
     )
+    space = None
     if robot.is_stack and np.linalg.matrix_rank(robot.tip_jacobian(q_start), tol=1e-9) < 3:
-        raise InputError(
-            f"robot {shown(robot.parameters.name)}: its tip moves in a plane or a line (the tip Jacobian at the start "
-            "pose has rank < 3), so the tip-position task has a dependent row; inverse kinematics of such a robot "
-            "is not supported yet"
-        )
+        space = reduced_task(robot, path, q_start, pose)
     n = len(path)
     check_memory(
         memory_estimate(n, pose is not None),
@@ -226,7 +231,7 @@ def inverse_kinematics(
             raise InputError(f"pose must be None, {HOLD!r}, rotation matrices or an OrientationPath, got {pose!r}")
         target = orientation_target(pose, n, rates == "exact")
     terms = effort_terms(robot, path, settings.tool_force, settings.tool_force_speed) if effort else None
-    task = _task(robot, path, target, terms)
+    task = _task(robot, path, target, terms, space)
     solved = _checked(solve(problem, task, q_start, settings), task)
     state = solved.state
     _recover(problem, task, state, q_start, settings)
@@ -240,12 +245,43 @@ def inverse_kinematics(
     result = _result(path, state, qd, qdd, samples, target, problem, name, rates, task.kind, started)
     return replace(
         result,
+        task_space=TASK_FULL[task.kind] if space is None else space.label,
         work=solved.counters,
         robot=robot.parameters.name,
         robot_fingerprint=robot.fingerprint,
         joint_names=robot.joint_names,
         path=path.name,
     )
+
+
+#: :attr:`IKResult.task_space` of the full tasks.
+TASK_FULL = MappingProxyType({"position": "tip (u1, u2, u3)", "pose": "tip (u1, u2, u3) and orientation"})
+
+
+def reduced_task(robot: Robot, path: Path, q_start: Array, pose: object = None) -> TaskSpace:
+    """The plane or line of a robot whose tip Jacobian at ``q_start`` has rank < 3 (:mod:`.taskspace`),
+    checked against the path: a point off it (by more than :data:`REACH_TOLERANCE`) cannot be reached
+    (:class:`UnreachableError`; :func:`vgtarm.ik.solve_point` then gives the closest configuration)."""
+    space = task_space(robot, q_start)
+    name = shown(robot.parameters.name)
+    if space is None:  # rank 3 elsewhere: task_space raised for the singular start; defensive
+        raise InputError(f"robot {name}: the start pose is singular; start from another pose (initial_guess)")
+    if pose is not None:
+        raise InputError(
+            f"robot {name}: its tip moves in a {'plane' if space.rank == 2 else 'line'} (task: {space.label}); a pose "
+            "target needs a tip that moves in three directions: leave pose out"
+        )
+    off = space.distance(path.position)
+    worst = int(np.argmax(off)) if off.size else 0
+    if off.size and off[worst] > REACH_TOLERANCE:
+        where = "plane" if space.rank == 2 else "line"
+        raise UnreachableError(
+            f"path {shown(path.name)}: sample {worst} (t = {path.t[worst]:.6g} s) at "
+            f"{shown(np.round(path.position[worst], 12).tolist())} m is {off[worst]:.3g} m off the {where} the tip of "
+            f"robot {name} moves in (task: {space.label}, through {shown(np.round(space.origin, 12).tolist())} m); "
+            f"expected every point in that {where} (the case paths are placed there)"
+        )
+    return space
 
 
 def _checked(result: object, task: Task) -> SolverResult:

@@ -234,6 +234,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         "ga_time_s",
         "path_centre_m",
         "path_scale",
+        "ik_task",
     ):
         if key not in summary:  # the path placement: only on a robot other than the paper's
             continue
@@ -487,6 +488,8 @@ def cmd_ik(args: argparse.Namespace) -> int:
         None: "tip position, orientation free",
         "hold": "tip position and orientation held from the first sample",
     }.get(rotation if isinstance(rotation, str | None) else "", "tip position and the orientation of --pose")
+    if result.task_space.endswith(("plane", "line")):  # a robot whose tip moves in a plane or a line
+        task = f"{result.task_space} (its tip cannot leave it), orientation free"
     span = f"dt = {path.dt:g} s, t = {path.t[0]:g} .. {path.t[-1]:g} s"
     print(f"path       {escape(path.name)}: {len(result)} samples, {span}")  # the name of a user's file, escaped
     print(f"task       {task}")
@@ -532,7 +535,11 @@ def _ik_one_point(args: argparse.Namespace, sample: tuple[float, np.ndarray], ro
         atomic_write_text(args.output, ",".join(csv_columns(robot.joint_names)) + "\n" + line + "\n")
     source = f"the one row of --path {escape(str(args.path))}" if args.point is None else "--point"
     print(f"point      {_format_vector(solution.point, 10)} m, from {source}")
-    print(f"task       tip position, orientation {'free' if held else 'of --pose'}")
+    from ..cases import reduced_space
+
+    space = reduced_space(robot)  # a robot whose tip moves in a plane or a line: that reduced task
+    tip_task = "tip position" if space is None else f"{space.label} (its tip cannot leave it)"
+    print(f"task       {tip_task}, orientation {'free' if held else 'of --pose'}")
     print(f"result     {solution.reason}")
     print(f"residual   {solution.residual:.3g} m")
     if not held:
