@@ -249,7 +249,7 @@ class Task:
         return np.asarray(lam @ self.directions)
 
     def _reduce(self, rows: Array, nj: int) -> Array:
-        """A KKT-residual vector ``(n, nj + 3)`` of the tip's three rows with its task rows projected, ``(n, nj + r)``."""
+        """A KKT-residual vector ``(n, nj + 3)`` with its three tip rows projected on the task, ``(n, nj + r)``."""
         assert self.directions is not None
         return np.concatenate([rows[:, :nj], rows[:, nj : nj + 3] @ self.directions.T], axis=1)
 
