@@ -139,7 +139,7 @@ def test_describe_and_fk_commands_take_a_stack(capsys, six):
     assert "expected 21 joint values" in err and err.count("\n") == 1
 
 
-def test_the_planar_module_loads_runs_fk_and_refuses_ik_in_one_line():
+def test_the_planar_module_loads_runs_fk_and_ik_in_its_plane():
     robot = vgtarm.load_robot(EXAMPLES / "planar_module.toml")
     assert robot.n_joints == 3 and robot.joint_names == ("s1", "v1", "p1")
     model = StackModel(robot.parameters)
@@ -158,12 +158,12 @@ def test_the_planar_module_loads_runs_fk_and_refuses_ik_in_one_line():
             axis=1,
         )
         np.testing.assert_allclose(jp[i], fd, rtol=0, atol=1e-8)
-    # its tip stays in the u2-u3 plane: the position task has a zero row, refused in one line
+    # its tip stays in the u2-u3 plane: the task is the tip's two coordinates there (tests/test_ik_planar.py)
     tip = robot.tip_position(robot.parameters.home)
     path = paths.waypoints([0.0, 0.2], [tip, tip + [0.0, 0.01, -0.005]], 0.01, blend="cubic", name="line")
-    with pytest.raises(vgtarm.errors.InputError, match="moves in a plane") as caught:
-        robot.inverse_kinematics(path)
-    assert "\n" not in str(caught.value)
+    result = robot.inverse_kinematics(path)
+    assert result.success and result.task_space == "tip (u2, u3) in its plane"
+    np.testing.assert_allclose(robot.tip_position(result.q), path.position, rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize(

@@ -15,8 +15,9 @@ run records the centre and the scale (``path_centre_m``, ``path_scale``).
 **A robot whose tip moves in a plane** (a single planar module; :mod:`vgtarm.ik.taskspace`) tracks
 the tip's two coordinates in that plane, so a case path is also turned into it: the moved and
 scaled displacement ``s (x - c0)`` is turned by the smallest rotation that takes the normal of the
-path's own best-fitting plane (the least principal direction of its points; for case 2 the plane
-of its three corners, for case 1 the horizontal plane of its circle) onto the robot's plane
+path's own best-fitting plane (the least principal direction of its points, entries below 1e-6 set
+to zero; for case 2 the plane of its three corners, for case 1 the horizontal plane of its circle)
+onto the robot's plane
 normal, then projected on the robot's plane (what is left out of the path's plane, case 1's
 +-15 mm wave in height before scaling, is dropped). Velocities and accelerations follow by the
 same linear map: the same timing, the same shape where the path is planar. On a robot whose tip
@@ -165,6 +166,11 @@ PAPER_HOME_TIP = (0.0, 0.0, 0.66)
 SAME_TIP_TOLERANCE = 1e-9
 
 
+#: Entries of a path's fitted plane normal below this are set to zero: the sampling of a path that is
+#: not a whole number of periods (case 1) tilts the fitted normal of its horizontal circle by ~1e-8 rad.
+NORMAL_SNAP = 1e-6
+
+
 @dataclass(frozen=True)
 class PathPlacement:
     """Where the case paths go on a robot: ``x -> centre + scale (x - PAPER_HOME_TIP)``.
@@ -217,7 +223,7 @@ class PathPlacement:
         if s.shape[0] < 3 or not s[1] > 1e-9 * s[0]:
             return np.asarray(projection)
         target = self.space.normal()
-        normal = np.where(np.abs(vt[2]) < 1e-12, 0.0, vt[2])
+        normal = np.where(np.abs(vt[2]) < NORMAL_SNAP, 0.0, vt[2])
         normal /= np.linalg.norm(normal)
         if normal @ target < 0:
             normal = -normal
