@@ -298,12 +298,15 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
             seeds=args.seeds,
             config=args.config,
             workers=args.workers or default_workers(),
+            duration=args.duration,
         )
     print(f"{'run':<26} {'max (mm)':>10} {'after 0.2 s (mm)':>17} {'GA':>5} {'wall (s)':>9}")
     for spec, result in made.results.items():
         s = result.summary()
+        after = s["max_tip_error_after_transient_m"]  # None: a run shorter than the transient (--duration)
+        after_text = "-" if after is None else f"{after * 1e3:.4f}"
         print(
-            f"{spec.folder:<26} {s['max_tip_error_m'] * 1e3:>10.4f} {s['max_tip_error_after_transient_m'] * 1e3:>17.4f}"
+            f"{spec.folder:<26} {s['max_tip_error_m'] * 1e3:>10.4f} {after_text:>17}"
             f" {s['ga_activations']:>5} {s['wall_time_s']:>9.3f}"
         )
     report = moved.get(args.out, args.out) / made.report.name  # beside it if the folder gained a user's file
@@ -689,6 +692,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         metavar="N",
         help="worker processes for the runs and figures (default: the CPUs, at most 4; 1: all in this process)",
+    )
+    again.add_argument(
+        "--duration",
+        type=positive_float,
+        default=None,
+        metavar="S",
+        help="run only the first S seconds of each case path (a quick look; default: the whole path)",
     )
     _add_run_options(again)
     add_config(again)

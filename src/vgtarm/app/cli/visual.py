@@ -107,12 +107,15 @@ def cmd_animate(args: argparse.Namespace) -> int:
 def cmd_report(args: argparse.Namespace) -> int:
     """Write report.html for saved runs."""
     from ..reports.html import PLOTLY_JS, load_runs, write_html_report
+    from ..reports.runs import task_note
 
     inputs, owned = [*args.runs, args.config], ("*.html", PLOTLY_JS)
     check_output_folder(args.out, "--out", inputs=inputs, owned=owned)  # before the work; never over a run
     robot = load_robot(robot_file_of_runs(args.config, list(args.runs)))
     runs = load_runs(args.runs)
     intro = "Runs: " + ", ".join(p.name for p in args.runs)
+    note = task_note(r.result.metadata for r in runs)  # a robot whose tip moves in a plane: its task
+    intro = f"{intro}. {note}" if note else intro
     with placements() as moved, atomic_folder(args.out, "--out", inputs=inputs, owned=owned, checked=True) as folder:
         page = write_html_report(robot, runs, folder, title=args.title, intro=intro)
     where = moved.get(args.out, args.out)  # beside it if the folder gained a user's file during the run

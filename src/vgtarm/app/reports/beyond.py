@@ -178,7 +178,9 @@ def _split(result: SimulationResult, slow: np.ndarray) -> tuple[float, float, fl
     error = result.tip_error
     fast = error[~slow]
     largest = float(np.max(error[slow])) if slow.any() else float("nan")
-    return largest, float(np.max(fast)) if fast.size else float("nan"), float(np.sqrt(np.mean(fast**2)))
+    if not fast.size:  # a run all in slow phases (reproduce --duration shorter than the start)
+        return largest, float("nan"), float("nan")
+    return largest, float(np.max(fast)), float(np.sqrt(np.mean(fast**2)))
 
 
 def beyond_figure(results: dict[BeyondRun, SimulationResult], folder: Path, name: str = "beyond_tip_error.png") -> str:
@@ -260,8 +262,7 @@ def beyond_section(results: dict[BeyondRun, SimulationResult], figure: str) -> l
             f"- The random disturbance alone (5 N per axis, a new value each period, faster than any observer"
             f" can follow) leaves max {mm(noise['max_tip_error_m'])} mm, RMS {mm(noise['rms_tip_error_m'])} mm,"
             " everywhere on the path: it sets the floor.",
-            f"- Together: max {mm(both[0])} mm in the slow phases, {mm(both[1])} mm elsewhere (RMS"
-            f" {mm(both[2])} mm).",
+            f"- Together: max {mm(both[0])} mm in the slow phases, {mm(both[1])} mm elsewhere (RMS {mm(both[2])} mm).",
             f"- The force sensor knows the tool force one period late, with no filter lag: max"
             f" {mm(sensor['max_tip_error_m'])} mm, RMS {mm(sensor['rms_tip_error_m'])} mm ({mm(late[0])} mm in"
             f" the slow phases, {mm(late[1])} mm elsewhere). What is left is the one-period delay, of the"

@@ -32,7 +32,7 @@ from ..pictures.plotting import plot_efforts, plot_path_3d, plot_tip_error, save
 from ..pool import Inline, Workers
 from .beyond import BeyondRun, beyond_figure, beyond_runs, beyond_section, run_beyond_one
 from .html import runs_from_reproduction, write_html_report
-from .runs import TABLE_COLUMNS, RunSpec, mm, paper_runs, table_row
+from .runs import TABLE_COLUMNS, RunSpec, mm, paper_runs, table_row, task_note
 from .seeds import seed_section
 
 
@@ -65,6 +65,7 @@ def reproduce(
     seeds: int | None = None,
     config: str | Path | None = None,
     workers: int = 1,
+    duration: float | None = None,
 ) -> Reproduction:
     """Run the paper's combinations, save every run, the figures, ``report.md`` and the interactive
     ``report.html`` (with ``plotly.min.js`` beside it) into ``out``; with ``beyond_paper`` also the
@@ -78,6 +79,9 @@ def reproduce(
     here (:mod:`.pool`; only the runs' wall times differ). The workers are fresh interpreters
     (``spawn``) that import the calling program's main module: a script must start its work under
     ``if __name__ == "__main__":``. With 1 (the default) everything is made here, in turn.
+
+    ``duration`` (s) runs only the first ``duration`` seconds of each case path (a quick look at a
+    robot; every run and figure is made, on that part of the path); None (the default) the whole path.
 
     ``out`` is written as one unit (:func:`vgtarm.fileio.atomic_folder`): into a temporary sibling
     that replaces an earlier reproduction whole when everything is written; an error or Ctrl-C
@@ -102,6 +106,7 @@ def reproduce(
             config=config,
             start=start,
             workers=workers,
+            duration=duration,
         )
     return Reproduction(results, Path(out) / "report.md", time.perf_counter() - start)
 
@@ -128,6 +133,7 @@ def _reproduce_into(
     config: str | Path | None,
     start: float,
     workers: int,
+    duration: float | None = None,
 ) -> dict[RunSpec, SimulationResult]:
     """The work of :func:`reproduce`, written into the (temporary) folder ``folder``."""
     options = {"seed": seed, "integrator": integrator, "substeps": substeps}
@@ -158,7 +164,7 @@ def _reproduce_into(
         # the references once, here; then the runs, the longest first (switching control), and
         # each figure as soon as its runs are made
         keys = sorted({(s.case, s.rates) for s in specs} | ({(2, "exact")} if beyond_paper else set()))
-        references = {key: joint_reference(robot, key[0], rates=key[1]) for key in keys}
+        references = {key: joint_reference(robot, key[0], rates=key[1], duration=duration) for key in keys}
         for spec in specs:
             args = (spec, references[(spec.case, spec.rates)], folder, options)
             tasks.add(_cost(spec.controller, spec.external_force), _paper_run, args, partial(paper_done, spec))
@@ -176,7 +182,15 @@ def _reproduce_into(
                     runs_from_reproduction({spec: results[spec] for spec in specs}),
                     folder,
                     title="vgtarm: the paper's case studies reproduced",
-                    intro=f"The interactive companion of report.md (seed {seed}, integrator {integrator}).",
+                    intro=" ".join(
+                        filter(
+                            None,
+                            [
+                                f"The interactive companion of report.md (seed {seed}, integrator {integrator}).",
+                                task_note(results[spec].metadata for spec in specs),
+                            ],
+                        )
+                    ),
                 )
             )
 
@@ -190,7 +204,13 @@ def _reproduce_into(
     figures = {p.caption: figures[p.caption] for p in plan}
     beyond = beyond_section({b: beyond_results[b] for b in extra}, beyond_figure_name[0]) if extra else []
     text = render_report(
-        results, figures, seed=seed, integrator=integrator, substeps=substeps, wall_time_s=time.perf_counter() - start
+        results,
+        figures,
+        seed=seed,
+        integrator=integrator,
+        substeps=substeps,
+        wall_time_s=time.perf_counter() - start,
+        duration=duration,
     )
     if beyond:
         text += "\n" + "\n".join(beyond) + "\n"
@@ -351,6 +371,7 @@ def render_report(
     integrator: str,
     substeps: int,
     wall_time_s: float,
+    duration: float | None = None,
 ) -> str:
     """The Markdown report: table of ours beside the paper's, the figures, and a reading. What users
     name (the robot, the integrator, the runs' cells) goes through :mod:`vgtarm.markup`."""
@@ -371,6 +392,19 @@ def render_report(
             f"This robot is not the paper's: each case path is centred at its home tip ({centre}) m and scaled by"
             f" its reach, {first['path_scale']:.4g} times the paper's, with the same timing and the same gains on"
             " every joint. The paper's figures, for its own robot, are beside ours for orientation only.",
+            "",
+        ]
+    if "ik_task" in first:  # a robot whose tip moves in a plane or a line: the task it can follow
+        lines += [
+            f"Its tip moves in a plane or a line, so the inverse kinematics tracks the task {md_code(first['ik_task'])}"
+            " (the tip's coordinates there; the remaining freedom on eq. 12), and each case path is turned into it"
+            " by the smallest rotation of the path's own plane onto it, with the same timing (docs/ik.md).",
+            "",
+        ]
+    if duration is not None:
+        lines += [
+            f"Every run covers only the first {duration:g} s of its path (`--duration`): a quick look, not the"
+            " paper's runs.",
             "",
         ]
     lines += [
@@ -458,7 +492,7 @@ def _reading(results: dict[RunSpec, SimulationResult], summaries: dict[RunSpec, 
             period = float(scm["dt_s"])
             verdict = "inside" if median <= period else "not yet inside"
             out.append(
-                f"  The paper says its GA \"restricts online use\". Here one activation (50 generations of 50"
+                f'  The paper says its GA "restricts online use". Here one activation (50 generations of 50'
                 f" candidates, compiled) took {median * 1e3:.2f} ms at the median and {p99 * 1e3:.2f} ms at the 99th"
                 f" percentile: {verdict} the {period * 1e3:g} ms control period it serves; the run went"
                 f" {scm['simulated_time_s'] / scm['wall_time_s']:.1f} times real time."

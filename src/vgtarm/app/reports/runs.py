@@ -7,7 +7,7 @@ used by ``report.md`` (:mod:`.reproduce`) and ``report.html`` (:mod:`.html`) ali
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -98,3 +98,15 @@ def table_row(spec: RunSpec, summary: dict[str, Any], folder: str | None = None)
         f"{s['wall_time_s']:.2f}",
         folder if folder is not None else spec.folder,
     ]
+
+
+def task_note(summaries: Iterable[Mapping[str, Any]]) -> str:
+    """A sentence naming the inverse-kinematics task of runs on a robot whose tip moves in a plane or a
+    line (their summaries' ``ik_task``), or "" when every run tracked the tip's three coordinates."""
+    tasks = sorted({str(s["ik_task"]) for s in summaries if s.get("ik_task")})
+    if not tasks:
+        return ""
+    return (
+        f"Task: {'; '.join(tasks)} (the robot's tip cannot leave it; the inverse kinematics tracks the path's"
+        " coordinates there and spends the remaining freedom on eq. 12)."
+    )
