@@ -248,9 +248,11 @@ class SimulationResult:
             ga_time_s=float(summary["ga_time_s"]),
             effort_estimate=block([f"tau_hat_{n}" for n in joints]) if "tau_hat_" + joints[0] in index else None,
             tip_error_measured=block(["tip_error_measured"])[:, 0] if "tip_error_measured" in index else None,
+            # a stack's joints, for the figures computed below (a planar module has fewer than the paper's 7)
+            metadata={"joint_names": joints} if "joint_names" in summary else {},
         )
         # the summary is the metadata updated with figures computed from the arrays: keep the rest
-        computed = set(loaded.summary())
+        computed = set(loaded.summary()) - set(loaded.metadata)
         return replace(loaded, metadata={k: v for k, v in summary.items() if k not in computed})
 
     @property
