@@ -9,6 +9,7 @@ answer, the time derivatives of the answer, and the geometry of the placed case 
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -214,3 +215,21 @@ def test_case_paths_are_turned_into_the_plane_with_the_same_timing(planar):
         PAPER_HOME_TIP[1] + 0.06,
         PAPER_HOME_TIP[2],
     )
+
+
+def test_simulate_on_a_path_file_in_the_plane_records_the_task_and_refuses_one_off_it(planar, tmp_path, capsys):
+    from vgtarm.app.cli import main
+
+    config = str(EXAMPLES / "planar_module.toml")
+    rows = ["t,x,y,z"] + [f"{0.001 * k:g},0,{0.0001 * k:g},{0.33 + 0.00005 * k:g}" for k in range(51)]
+    (tmp_path / "in.csv").write_text("\n".join(rows) + "\n")
+    out = tmp_path / "run"
+    assert main(["simulate", "--path", str(tmp_path / "in.csv"), "--config", config, "--out", str(out), "-q"]) == 0
+    assert "tip (u2, u3) in its plane" in capsys.readouterr().out
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["ik_task"] == "tip (u2, u3) in its plane" and summary["success"]
+    rows[2] = "0.001,0.01,0.0001,0.33005"  # one point 1 cm off the plane x = 0
+    (tmp_path / "off.csv").write_text("\n".join(rows) + "\n")
+    assert main(["simulate", "--path", str(tmp_path / "off.csv"), "--config", config, "-q"]) == 1
+    err = capsys.readouterr().err
+    assert "0.01 m off the plane" in err and err.count("\n") == 1

@@ -34,7 +34,7 @@ from ..model.robot import Robot, load_robot, robot_from_dict
 from ..simulation import JointReference, simulate
 from ..simulation.external import ExternalForce
 from ..study.spec import Value, simulate_options
-from .cases import case_path, case_study, path_placement, truncate_reference
+from .cases import case_path, case_study, path_placement, task_metadata, truncate_reference
 
 Inputs = Mapping[str, Value]
 
@@ -127,7 +127,7 @@ def _options(inputs: Inputs) -> dict[str, Any]:
 def _metadata(robot: Robot, inputs: Inputs) -> dict[str, Any]:
     gains = _gains_metadata(inputs, robot.n_joints)
     if inputs["case"] is None:
-        return {"path": inputs["path"], **gains}
+        return {"path": inputs["path"], **gains, **task_metadata(robot)}  # as run_path records it
     placement = path_placement(robot)  # a case path on another robot than the paper's: where and how large
     return {
         "case": inputs["case"],
