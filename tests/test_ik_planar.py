@@ -18,7 +18,7 @@ from scipy.optimize import minimize
 
 import vgtarm
 from vgtarm import paths
-from vgtarm.app.cases import PAPER_HOME_TIP, case_path, case_study, path_placement
+from vgtarm.app.cases import PAPER_HOME_TIP, PathPlacement, case_path, case_study, path_placement
 from vgtarm.ik import SOLVERS
 from vgtarm.ik.options import IKOptions
 from vgtarm.ik.problem import IKProblem
@@ -233,3 +233,15 @@ def test_simulate_on_a_path_file_in_the_plane_records_the_task_and_refuses_one_o
     assert main(["simulate", "--path", str(tmp_path / "off.csv"), "--config", config, "-q"]) == 1
     err = capsys.readouterr().err
     assert "0.01 m off the plane" in err and err.count("\n") == 1
+
+
+def test_on_a_line_a_case_path_is_projected_on_it():
+    line = TaskSpace(np.array([[0.0, 0.0, 1.0]]), np.array([0.1, 0.2, 0.5]), "tip u3 along its line")
+    placement = PathPlacement((0.1, 0.2, 0.5), 0.5, 0.55, line)
+    original = case_study(2).path(1e-3)
+    placed = placement.apply(original)
+    np.testing.assert_array_equal(placed.position[:, :2], np.broadcast_to([0.1, 0.2], (len(placed), 2)))
+    np.testing.assert_allclose(placed.position[:, 2], 0.5 + 0.5 * (original.position[:, 2] - 0.66), atol=1e-15)
+    np.testing.assert_allclose(placed.acceleration[:, 2], 0.5 * original.acceleration[:, 2], atol=1e-15)
+    metadata = placement.metadata()
+    assert metadata["ik_task"] == "tip u3 along its line" and "path_plane_normal" not in metadata
