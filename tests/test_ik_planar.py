@@ -245,3 +245,31 @@ def test_on_a_line_a_case_path_is_projected_on_it():
     np.testing.assert_allclose(placed.acceleration[:, 2], 0.5 * original.acceleration[:, 2], atol=1e-15)
     metadata = placement.metadata()
     assert metadata["ik_task"] == "tip u3 along its line" and "path_plane_normal" not in metadata
+
+
+@pytest.mark.parametrize("angle", [30.0, 90.0])
+def test_a_module_in_a_turned_plane_gets_its_plane_from_the_jacobian(angle, tmp_path):
+    """The plane found from the Jacobians is the one the module's description gives (its h axis
+    ``(-sin a, cos a, 0)`` and the vertical), and the IK and the case paths follow it. The model is
+    interpreted here: a new plane angle is a new structure, whose compilation would take a while."""
+    from vgtarm.model.compiled import get_backend
+    from vgtarm.model.robot import Robot, definition_of
+    from vgtarm.model.stack import load_stack
+
+    text = (EXAMPLES / "planar_module.toml").read_text().replace("plane = 0.0 ", f"plane = {angle} ")
+    (tmp_path / "turned.toml").write_text(text)
+    stack = load_stack(tmp_path / "turned.toml")
+    robot = Robot(stack, get_backend("interpreted", definition_of(stack)))
+    space = task_space(robot, stack.home)
+    a = np.radians(angle)
+    described = np.array([[-np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    assert space is not None
+    np.testing.assert_allclose(space.directions.T @ space.directions, described.T @ described, atol=1e-14)
+    assert space.label == (
+        "tip (u1, u3) in its plane" if angle == 90.0 else "tip along (-0.5, 0.866, 0) and u3 in its plane"
+    )
+    path = _every(case_path(robot, 2), 400)  # 11 samples of case 2, turned into the plane
+    assert space.distance(path.position).max() <= 1e-15
+    result = robot.inverse_kinematics(path)
+    assert result.success and result.task_space == space.label
+    np.testing.assert_allclose(robot.tip_position(result.q), path.position, rtol=0, atol=1e-12)
