@@ -1,4 +1,8 @@
-"""MJCF export of a robot (MuJoCo's XML model format): the paper's robot or any stack of modules.
+"""MJCF export of a robot (MuJoCo's XML model format): the paper's robot or any stack of modules,
+built with MuJoCo's model-editing API (``mujoco.MjSpec``, :func:`to_spec`) and written by it
+(:func:`to_mjcf`), as a scene MuJoCo's viewer shows (base, platforms, floor, light, sky, a camera
+on the tool: drawing only, no contact and no mass), every number with :data:`DIGITS` significant
+digits.
 
 The mechanism as a MuJoCo tree closed by equality constraints. Each module ``k``: three base
 hinges on the module's plane normal (at ``A`` for the leg ``s`` and the diagonal ``p``, at ``B``
