@@ -104,15 +104,16 @@ def test_simulate_with_a_wrong_controller_model(capsys):
     "argv",
     [
         ["simulate", "--case", "1", "--controller", "cfc", "--plant", "mujoco", "--duration", "0.01", "-q"],
+        ["export", "mjcf", "--out", "robot.xml"],
         ["export", "mjcf", "--out", "robot.xml", "--validate"],
         ["check", "mujoco", "--states", "2"],
     ],
-    ids=["simulate", "export --validate", "check"],
+    ids=["simulate", "export", "export --validate", "check"],
 )
 def test_mujoco_commands_without_mujoco_say_what_to_install_in_one_line(argv, tmp_path):
     """MuJoCo is an optional extra: without it (its import blocked in a fresh interpreter) each
     command that needs it ends with one line naming the extra, exit status 1, and writes nothing
-    (the export alone needs no MuJoCo; only its --validate loads the model in it)."""
+    (the export too: MuJoCo's own model-editing API builds and writes the MJCF)."""
     script = (
         "import sys; sys.modules['mujoco'] = None\n"
         "from vgtarm.app.cli.command import main\n"

@@ -8,7 +8,7 @@ and stepped by MuJoCo as the plant of our closed loop (:mod:`.plant`,
 
 from ..model.robot import Robot
 from ..simulation.engines import register_plant_engine
-from .export import to_mjcf
+from .export import to_mjcf, to_spec
 from .plant import MujocoLoop
 
 
@@ -18,4 +18,4 @@ def _mujoco_plant(plant: Robot, model: Robot) -> MujocoLoop:
 
 register_plant_engine("mujoco", _mujoco_plant)
 
-__all__ = ["MujocoLoop", "to_mjcf"]
+__all__ = ["MujocoLoop", "to_mjcf", "to_spec"]

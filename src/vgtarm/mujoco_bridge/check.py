@@ -8,6 +8,7 @@ import numpy as np
 
 from ..errors import InputError, shown
 from ..model.robot import Robot
+from .export import DIGITS
 from .model import MujocoRobot
 
 
@@ -35,14 +36,17 @@ def random_states(robot: Robot, n: int, seed: int, margin: float = 0.02) -> np.n
     return np.concatenate(chosen)[:n]
 
 
-def cross_validate(robot: Robot, n: int = 1000, seed: int = 0, bridge: MujocoRobot | None = None) -> list[CheckRow]:
-    """Worst differences between MuJoCo (on the exported model) and our model (the paper's robot
-    or any stack) over ``n`` random assemblable states with random velocities (joint speeds up to
-    0.05 m/s and 0.5 rad/s), efforts (about 20 N) and tip forces (about 10 N). ``n`` is at most
-    :data:`MAX_STATES`."""
+def cross_validate(
+    robot: Robot, n: int = 1000, seed: int = 0, bridge: MujocoRobot | None = None, digits: int = DIGITS
+) -> list[CheckRow]:
+    """Worst differences between MuJoCo (on the exported model: ``bridge``, or the MJCF as
+    :func:`~.export.to_mjcf` writes it with ``digits`` significant digits) and our model (the
+    paper's robot or any stack) over ``n`` random assemblable states with random velocities
+    (joint speeds up to 0.05 m/s and 0.5 rad/s), efforts (about 20 N) and tip forces (about
+    10 N). ``n`` is at most :data:`MAX_STATES`."""
     if isinstance(n, bool) or not isinstance(n, int | np.integer) or not 1 <= n <= MAX_STATES:
         raise InputError(f"n = {shown(n)}: expected a number of states in [1, {MAX_STATES:,}]")
-    mj = bridge or MujocoRobot(robot)
+    mj = bridge or MujocoRobot(robot, digits=digits)
     rng = np.random.default_rng(seed)
     worst: dict[str, float] = {}
 

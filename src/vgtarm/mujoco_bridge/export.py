@@ -1,4 +1,8 @@
-"""MJCF export of a robot (MuJoCo's XML model format): the paper's robot or any stack of modules.
+"""MJCF export of a robot (MuJoCo's XML model format): the paper's robot or any stack of modules,
+built with MuJoCo's model-editing API (``mujoco.MjSpec``, :func:`to_spec`) and written by it
+(:func:`to_mjcf`), as a scene MuJoCo's viewer shows (base, platforms, floor, light, sky, a camera
+on the tool: drawing only, no contact and no mass), every number with :data:`DIGITS` significant
+digits.
 
 The mechanism as a MuJoCo tree closed by equality constraints. Each module ``k``: three base
 hinges on the module's plane normal (at ``A`` for the leg ``s`` and the diagonal ``p``, at ``B``
@@ -31,9 +35,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError, shown
 from ..model.parameters import Body, RobotParameters
@@ -55,6 +60,12 @@ LEG_INERTIA = 1e-14
 MJ_MINVAL = 1e-15
 #: Longest time step the export accepts (s): a bound on a mistyped value, not a tuned one.
 MAX_TIMESTEP = 1.0
+#: Significant digits of every number the export writes: the fewest at which ``vgtarm check
+#: mujoco`` on the written model still agrees with our dynamics to 1e-9 on every example
+#: (measured for 6 to 17 digits in docs/mujoco.md). ``MAX_DIGITS`` writes every number as it is.
+DIGITS = 11
+MIN_DIGITS = 6
+MAX_DIGITS = 17
 
 
 @dataclass(frozen=True)
@@ -192,29 +203,36 @@ def home_geometry(robot: Robot) -> HomeGeometry:
     )
 
 
-def _v(x: Array) -> str:
-    return " ".join(f"{float(c):.17g}" for c in np.ravel(x))
+def require_mujoco() -> Any:
+    """The ``mujoco`` module, or one line saying how to install it."""
+    try:
+        import mujoco
+    except ImportError:
+        raise InputError("MuJoCo is not installed: pip install 'vgtarm[mujoco]'") from None
+    return mujoco
 
 
-def _inertial(mass: float, com: Array, inertia: Array) -> str:
-    sym = 0.5 * (inertia + inertia.T)
-    full = [sym[0, 0], sym[1, 1], sym[2, 2], sym[0, 1], sym[0, 2], sym[1, 2]]
-    return f'<inertial pos="{_v(com)}" mass="{mass:.17g}" fullinertia="{_v(np.array(full))}"/>'
-
-
-def _body_inertial(body: Body, origin: Array, rotation: Array, body_origin: Array) -> str:
-    """``body`` (given in the frame ``rotation`` at ``origin``) as the inertial of a MuJoCo body
-    whose frame is at ``body_origin`` (F0 axes)."""
-    com = origin + rotation @ np.array(body.com) - body_origin
-    return _inertial(body.mass, com, rotation @ body.inertia_matrix @ rotation.T)
-
-
-def _leg_inertial(mass: float, inertia: float) -> str:
-    return f'<inertial pos="0 0 0" mass="{mass:.17g}" diaginertia="{inertia:.17g} {inertia:.17g} {inertia:.17g}"/>'
+def rounded(x: ArrayLike, digits: int) -> list[float]:
+    """``x`` rounded to ``digits`` significant digits of its largest element (an axis ``(1, 6e-17,
+    0)`` becomes ``(1, 0, 0)``; a value alone keeps ``digits`` of its own); at
+    :data:`MAX_DIGITS` the values are kept as they are. Python's ``round`` gives the double
+    nearest the decimal, which MuJoCo's writer (shortest round trip) prints with at most
+    ``digits`` digits."""
+    values = [float(v) for v in np.ravel(np.asarray(x, dtype=float))]
+    largest = max((abs(v) for v in values), default=0.0)
+    if digits >= MAX_DIGITS or largest == 0.0:
+        return [v + 0.0 for v in values]  # "+ 0.0": no signed zeros in the file
+    decimals = digits - 1 - math.floor(math.log10(largest))
+    return [round(v, decimals) + 0.0 for v in values]
 
 
 def _check_export(
-    robot: object, timestep: object, solver_tolerance: object, leg_mass: object, leg_inertia: object
+    robot: object,
+    timestep: object,
+    solver_tolerance: object,
+    leg_mass: object,
+    leg_inertia: object,
+    digits: object,
 ) -> None:
     if not isinstance(robot, Robot):
         raise InputError(f"robot = {shown(robot)}: expected a vgtarm.Robot (see vgtarm.load_robot)")
@@ -228,30 +246,40 @@ def _check_export(
         if not (real and math.isfinite(float(value)) and low < float(value) <= high):  # type: ignore[arg-type]
             bound = f"<= {high:g}" if math.isfinite(high) else "finite"
             raise InputError(f"{name} = {shown(value)}: expected a number > {low:g} and {bound}")
+    whole = isinstance(digits, int | np.integer) and not isinstance(digits, bool)
+    if not (whole and MIN_DIGITS <= digits <= MAX_DIGITS):  # type: ignore[operator]
+        raise InputError(
+            f"digits = {shown(digits)}: expected a whole number of significant digits "
+            f"from {MIN_DIGITS} to {MAX_DIGITS} ({MAX_DIGITS}: every number as it is)"
+        )
 
 
-def to_mjcf(
+#: Colours of the scene (RGBA): the legs ``s`` and ``v``, the diagonals ``p``, the platforms,
+#: the base and what the stack carries (twists, tool).
+COLOURS = {
+    "leg": (0.25, 0.62, 0.35, 1.0),
+    "diagonal": (0.9, 0.55, 0.2, 1.0),
+    "platform": (0.35, 0.5, 0.75, 1.0),
+    "base": (0.3, 0.3, 0.33, 1.0),
+    "tool": (0.78, 0.78, 0.82, 1.0),
+    "tip": (0.9, 0.15, 0.15, 1.0),
+}
+
+
+def to_spec(
     robot: Robot,
     *,
     timestep: float = 1e-3,
     solver_tolerance: float = 1e-12,
     leg_mass: float = LEG_MASS,
     leg_inertia: float = LEG_INERTIA,
-) -> str:
-    """The robot (the paper's or any stack of modules) as an MJCF document (text).
-
-    Joints and force actuators are named after the paper, module by module (``s1, v1, p1, s2, v2,
-    p2, psi3`` for the paper's robot; :attr:`Robot.joint_names`; motors, gear 1, control = effort
-    in N or N m, no control limits); the motors of the closed legs ``v``, ``p`` drive the tendons
-    ``<leg>_leg``, the others their joints; passive hinges ``<leg>_base`` and ``platform<k>``;
-    a twist ``psi<j>`` turns the body ``twist<j>`` (or ``end_effector``, when it is the last
-    frame and has no part of its own); the tool tip is the site ``tip``; the keyframe ``home`` is
-    the robot's home pose at rest. Viscous friction is joint damping (``s``, twists) or tendon
-    damping (``v``, ``p``); gravity is the robot's. ``leg_mass`` (kg) and ``leg_inertia``
-    (kg m^2) are given to every leg body (the paper's legs are massless; MuJoCo refuses below
-    1e-15) and to a twist without a part of its own.
-    """
-    _check_export(robot, timestep, solver_tolerance, leg_mass, leg_inertia)
+    digits: int = DIGITS,
+    scene: bool = True,
+) -> Any:
+    """The robot (the paper's or any stack of modules) as a ``mujoco.MjSpec``, MuJoCo's own model
+    (see :func:`to_mjcf`, which writes it). Needs MuJoCo (``vgtarm[mujoco]``)."""
+    _check_export(robot, timestep, solver_tolerance, leg_mass, leg_inertia, digits)
+    mujoco = require_mujoco()
     g = home_geometry(robot)
     stack = g.stack
     q = stack.home
@@ -263,139 +291,314 @@ def to_mjcf(
     end_effector = stack.end_effector
     tool = np.array(stack.tool, dtype=float)
 
-    def leg(name: str, base: Array, direction: Array, normal: Array, length: float, parent_pos: Array) -> list[str]:
-        """A base hinge body at ``base`` and a rod body sliding along ``direction`` in it; the
+    def r(x: ArrayLike) -> list[float]:
+        return rounded(x, digits)
+
+    def r1(x: float) -> float:
+        return rounded(x, digits)[0]
+
+    spec = mujoco.MjSpec()
+    spec.modelname = stack.name
+    spec.compiler.degree = False
+    spec.compiler.autolimits = True
+    # every body has its inertial: geoms (the scene's drawing) never add mass or inertia
+    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    # written as built (fullinertia, fromto, motor, ...) and each number exactly as given
+    spec.compiler.savecompiled = False
+    spec.compiler.savecanonical = False
+    option = spec.option
+    option.timestep = r1(timestep)
+    option.gravity = r(stack.gravity)
+    option.solver = mujoco.mjtSolver.mjSOL_NEWTON
+    option.iterations = 200
+    option.tolerance = r1(solver_tolerance)
+    option.integrator = mujoco.mjtIntegrator.mjINT_EULER
+    option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
+    if scene:
+        _materials(spec, mujoco)
+
+    def visual(body: Any, kind: Any, size: list[float], material: str, **placement: Any) -> Any:
+        """A geom that is only drawn: no contact, no mass (the compiler takes no inertia from
+        geoms), in group 0 (shown)."""
+        geom = body.add_geom(type=kind, size=size, contype=0, conaffinity=0, **placement)
+        if scene:
+            geom.material = material
+        else:
+            geom.rgba = COLOURS[material]
+        return geom
+
+    def inertial(body: Any, mass: float, com: ArrayLike, inertia: Array) -> None:
+        sym = 0.5 * (inertia + inertia.T)
+        body.explicitinertial = True
+        body.mass = r1(mass)
+        body.ipos = r(com)
+        body.fullinertia = r([sym[0, 0], sym[1, 1], sym[2, 2], sym[0, 1], sym[0, 2], sym[1, 2]])
+
+    def part(body: Any, part: Body, origin: Array, rotation: Array, body_origin: Array) -> None:
+        """``part`` (given in the frame ``rotation`` at ``origin``) as the inertial of ``body``,
+        whose frame is at ``body_origin`` (F0 axes)."""
+        com = origin + rotation @ np.array(part.com) - body_origin
+        inertial(body, part.mass, com, rotation @ part.inertia_matrix @ rotation.T)
+
+    def light(body: Any) -> None:
+        """A leg's mass and inertia (or a twist's without a part of its own)."""
+        body.explicitinertial = True
+        body.mass = r1(leg_mass)
+        body.ipos = [0.0, 0.0, 0.0]
+        body.inertia = r([leg_inertia] * 3)
+
+    def leg(parent: Any, name: str, base: Array, direction: Array, normal: Array, length: float, at: Array) -> Any:
+        """A base hinge body at ``base`` and in it a rod body sliding along ``direction``; the
         slide of a leg on the tree path (``s``) carries its friction, the closed legs' friction
-        is on their tendons."""
-        friction = "" if name in closed else f' damping="{damping[name]:.17g}"'
-        return [
-            f'<body name="{name}_base" pos="{_v(base - parent_pos)}">',
-            _leg_inertial(leg_mass, leg_inertia),
-            f'<joint name="{name}_base" type="hinge" axis="{_v(normal)}"/>',
-            f'<body name="{name}_rod" pos="0 0 0">',
-            _leg_inertial(leg_mass, leg_inertia),
-            f'<joint name="{name}" type="slide" axis="{_v(direction)}" ref="{length:.17g}"{friction}/>',
-            f'<geom type="capsule" fromto="0 0 0 {_v(direction * length)}" size="0.006" rgba="0.2 0.6 0.2 1"/>',
-        ]
+        is on their tendons. Returns the rod body."""
+        hinge = parent.add_body(name=f"{name}_base", pos=r(base - at))
+        light(hinge)
+        hinge.add_joint(name=f"{name}_base", type=mujoco.mjtJoint.mjJNT_HINGE, axis=r(normal))
+        rod = hinge.add_body(name=f"{name}_rod")
+        light(rod)
+        slide = rod.add_joint(name=name, type=mujoco.mjtJoint.mjJNT_SLIDE, axis=r(direction), ref=r1(length))
+        if name not in closed:
+            slide.damping = [r1(damping[name]), 0.0, 0.0]
+        material = "diagonal" if name.startswith("p") else "leg"
+        visual(rod, mujoco.mjtGeom.mjGEOM_CAPSULE, [0.006], material, fromto=[0.0] * 3 + r(direction * length))
+        return rod
 
-    def effector(origin: Array, rotation: Array, mount: Array) -> tuple[str, list[str]]:
+    def effector(body: Any, origin: Array, rotation: Array, mount: Array) -> None:
         """The end-effector's inertial, and the tip site (with a rod from the mount point to it
-        when the tool stands off), in a body at ``origin`` (the last platform's centre) whose tool
-        is mounted at ``mount`` from it."""
-        inertial = _body_inertial(end_effector, origin, rotation, origin)
-        if not tool.any():  # the tip is the mount point (no "+ 0": signed zeros kept)
-            return inertial, [f'<site name="tip" pos="{_v(mount)}" size="0.005"/>']
+        when the tool stands off), in ``body`` at ``origin`` (the last platform's centre) whose
+        tool is mounted at ``mount`` from it."""
+        part(body, end_effector, origin, rotation, origin)
         tip = mount + rotation @ tool
-        return inertial, [
-            f'<site name="tip" pos="{_v(tip)}" size="0.005"/>',
-            f'<geom type="capsule" fromto="{_v(mount)} {_v(tip)}" size="0.005" rgba="0.7 0.7 0.8 1"/>',
-        ]
+        site = body.add_site(name="tip", pos=r(tip), size=[0.005])
+        if scene:
+            site.material = "tip"
+        if tool.any():
+            visual(body, mujoco.mjtGeom.mjGEOM_CAPSULE, [0.005], "tool", fromto=r(mount) + r(tip))
 
-    def stage(k: int) -> list[str]:
+    def stage(platform: Any, k: int) -> None:
         """Everything inside platform ``k``'s body (origin ``A'``): its inertial, then the twist
         with what rides on it, or directly what stands on the platform."""
         mod = g.modules[k]
-        out = [_body_inertial(stack.modules[k].platform, mod.centre, mod.rotation, mod.A_top)]
+        part(platform, stack.modules[k].platform, mod.centre, mod.rotation, mod.A_top)
         twist = mod.twist
         if twist is None and k < last:
-            return out + module(k + 1, mod.A_top)
+            module(platform, k + 1, mod.A_top)
+            return
         if twist is None:  # the end-effector fixed on the last platform
-            inertial, tip = effector(mod.centre, g.rotation, np.zeros(3))
-            return [*out, f'<body name="end_effector" pos="{_v(mod.centre - mod.A_top)}">', inertial, *tip, "</body>"]
+            body = platform.add_body(name="end_effector", pos=r(mod.centre - mod.A_top))
+            effector(body, mod.centre, g.rotation, np.zeros(3))
+            return
         lumped = k == last and twist.body is None  # the twist's body is the end-effector
-        inertial, tip = effector(mod.centre, twist.rotation, twist.mount)
+        name = "end_effector" if lumped else f"twist{twist.joint[3:]}"
+        body = platform.add_body(name=name, pos=r(mod.centre - mod.A_top))
         if lumped:
-            out += [f'<body name="end_effector" pos="{_v(mod.centre - mod.A_top)}">', inertial]
+            effector(body, mod.centre, twist.rotation, twist.mount)
+        elif twist.body is None:
+            light(body)
         else:
-            out += [f'<body name="twist{twist.joint[3:]}" pos="{_v(mod.centre - mod.A_top)}">']
-            out += [
-                _leg_inertial(leg_mass, leg_inertia)
-                if twist.body is None
-                else _body_inertial(twist.body, mod.centre, twist.rotation, mod.centre)
-            ]
-        out += [
-            f'<joint name="{twist.joint}" type="hinge" axis="{_v(mod.rotation[:, 2])}" ref="{twist.home:.17g}" '
-            f'damping="{twist.viscous:.17g}"/>',
-            f'<geom type="cylinder" fromto="0 0 0 {_v(twist.mount)}" size="0.03" rgba="0.7 0.7 0.8 1"/>',
-        ]
+            part(body, twist.body, mod.centre, twist.rotation, mod.centre)
+        body.add_joint(
+            name=twist.joint,
+            type=mujoco.mjtJoint.mjJNT_HINGE,
+            axis=r(mod.rotation[:, 2]),
+            ref=r1(twist.home),
+            damping=[r1(twist.viscous), 0.0, 0.0],
+        )
+        visual(body, mujoco.mjtGeom.mjGEOM_CYLINDER, [0.03], "tool", fromto=[0.0] * 3 + r(twist.mount))
         if lumped:
-            out += tip
-        elif k == last:  # the end-effector fixed on the twist's part
-            out += ['<body name="end_effector" pos="0 0 0">', inertial, *tip, "</body>"]
+            return
+        if k == last:  # the end-effector fixed on the twist's part
+            effector(body.add_body(name="end_effector"), mod.centre, twist.rotation, twist.mount)
         else:
-            out += module(k + 1, mod.centre)
-        return [*out, "</body>"]
+            module(body, k + 1, mod.centre)
 
-    def module(k: int, parent_pos: Array) -> list[str]:
-        """Module ``k`` (0-based) in the coordinates of its parent body at ``parent_pos``."""
+    def module(parent: Any, k: int, at: Array) -> None:
+        """Module ``k`` (0-based) in ``parent``, a body whose origin is at ``at`` (F0)."""
         mod = g.modules[k]
         i = stack.leg_indices[k][0]
         s, v, p = q[i : i + 3]
         ln = [f"s{k + 1}", f"v{k + 1}", f"p{k + 1}"]
+        if scene:  # the module's base: a bar from A to B on what it stands on
+            visual(parent, mujoco.mjtGeom.mjGEOM_CAPSULE, [0.01], "base", fromto=r(mod.A - at) + r(mod.B - at))
         # the closed legs' tendons run between these sites: their feet on the module's base
         # body, their heads at the platform's corner B'
-        out: list[str] = [
-            f'<site name="{ln[1]}_foot" pos="{_v(mod.B - parent_pos)}" size="0.004"/>',
-            f'<site name="{ln[2]}_foot" pos="{_v(mod.A - parent_pos)}" size="0.004"/>',
-        ]
+        parent.add_site(name=f"{ln[1]}_foot", pos=r(mod.B - at), size=[0.004])
+        parent.add_site(name=f"{ln[2]}_foot", pos=r(mod.A - at), size=[0.004])
         # leg s carries the platform, hinged at A'
-        out += leg(ln[0], mod.A, mod.dir_s, mod.normal, s, parent_pos)
-        out += [f'<body name="platform{k + 1}" pos="{_v(mod.A_top - mod.A)}">']
-        out += [f'<joint name="platform{k + 1}" type="hinge" axis="{_v(mod.normal)}"/>']
-        out += [f'<site name="{n}_head" pos="{_v(mod.B_top - mod.A_top)}" size="0.004"/>' for n in ln[1:]]
-        out += stage(k)
-        out += ["</body>", "</body>", "</body>"]
-        out += leg(ln[1], mod.B, mod.dir_v, mod.normal, v, parent_pos) + ["</body>", "</body>"]
-        out += leg(ln[2], mod.A, mod.dir_p, mod.normal, p, parent_pos) + ["</body>", "</body>"]
-        return out
+        rod = leg(parent, ln[0], mod.A, mod.dir_s, mod.normal, s, at)
+        platform = rod.add_body(name=f"platform{k + 1}", pos=r(mod.A_top - mod.A))
+        platform.add_joint(name=f"platform{k + 1}", type=mujoco.mjtJoint.mjJNT_HINGE, axis=r(mod.normal))
+        for n in ln[1:]:
+            platform.add_site(name=f"{n}_head", pos=r(mod.B_top - mod.A_top), size=[0.004])
+        if scene:
+            _platform(platform, mod, stack, k, visual, r, mujoco)
+        stage(platform, k)
+        leg(parent, ln[1], mod.B, mod.dir_v, mod.normal, v, at)
+        leg(parent, ln[2], mod.A, mod.dir_p, mod.normal, p, at)
 
-    tree = module(0, np.zeros(3))
-    equality = []
+    world = spec.worldbody
+    if scene:
+        _surroundings(spec, g, visual, r, mujoco)
+    module(world, 0, np.zeros(3))
     for k, m in enumerate(g.modules):
-        for leg_name, top in ((f"v{k + 1}", m.B_top), (f"p{k + 1}", m.B_top)):
-            base = m.B if leg_name.startswith("v") else m.A
-            equality.append(
-                f'<connect name="close_{leg_name}" body1="{leg_name}_rod" body2="platform{k + 1}" '
-                f'anchor="{_v(top - base)}" solref="{timestep / 50:.6g} 1" solimp="0.99999 0.99999 0.001 0.5 2"/>'
+        for leg_name, base in ((f"v{k + 1}", m.B), (f"p{k + 1}", m.A)):
+            closure = spec.add_equality(
+                name=f"close_{leg_name}",
+                type=mujoco.mjtEq.mjEQ_CONNECT,
+                objtype=mujoco.mjtObj.mjOBJ_BODY,
+                name1=f"{leg_name}_rod",
+                name2=f"platform{k + 1}",
+                solref=[float(f"{timestep / 50:.6g}"), 1.0],
+                solimp=[0.99999, 0.99999, 0.001, 0.5, 2.0],
             )
-    tendons = [
-        f'<spatial name="{n}_leg" damping="{damping[n]:.17g}" width="0.004">'
-        f'<site site="{n}_foot"/><site site="{n}_head"/></spatial>'
-        for n in closed
-    ]
-    actuators = [
-        f'<motor name="{n}" tendon="{n}_leg" gear="1"/>' if n in closed else f'<motor name="{n}" joint="{n}" gear="1"/>'
-        for n in names
-    ]
-    gravity = _v(np.array(stack.gravity))
-    return "\n".join(
-        [
-            f'<mujoco model="{_attribute(stack.name)}">',
-            '<compiler angle="radian" autolimits="true"/>',
-            f'<option timestep="{timestep:.17g}" gravity="{gravity}" solver="Newton" iterations="200" '
-            f'tolerance="{solver_tolerance:g}" integrator="Euler">',
-            '<flag contact="disable"/>',
-            "</option>",
-            "<worldbody>",
-            *tree,
-            "</worldbody>",
-            "<equality>",
-            *equality,
-            "</equality>",
-            "<tendon>",
-            *tendons,
-            "</tendon>",
-            "<actuator>",
-            *actuators,
-            "</actuator>",
-            "<keyframe>",
-            '<key name="home"/>',  # the reference configuration: the home pose, at rest
-            "</keyframe>",
-            "</mujoco>",
-        ]
+            closure.data[0:3] = r(m.B_top - base)
+    for n in closed:
+        tendon = spec.add_tendon(name=f"{n}_leg", damping=[r1(damping[n]), 0.0, 0.0], width=0.004)
+        tendon.wrap_site(f"{n}_foot")
+        tendon.wrap_site(f"{n}_head")
+    for n in names:
+        kind = mujoco.mjtTrn.mjTRN_TENDON if n in closed else mujoco.mjtTrn.mjTRN_JOINT
+        motor = spec.add_actuator(name=n, trntype=kind, target=f"{n}_leg" if n in closed else n)
+        motor.set_to_motor()
+    spec.add_key(name="home")  # the reference configuration: the home pose, at rest
+    return spec
+
+
+def to_mjcf(
+    robot: Robot,
+    *,
+    timestep: float = 1e-3,
+    solver_tolerance: float = 1e-12,
+    leg_mass: float = LEG_MASS,
+    leg_inertia: float = LEG_INERTIA,
+    digits: int = DIGITS,
+    scene: bool = True,
+) -> str:
+    """The robot (the paper's or any stack of modules) as an MJCF document (text), built with
+    MuJoCo's model-editing API (:func:`to_spec`, ``mujoco.MjSpec``) and written by it, indented.
+
+    Joints and force actuators are named after the paper, module by module (``s1, v1, p1, s2, v2,
+    p2, psi3`` for the paper's robot; :attr:`Robot.joint_names`; motors, gear 1, control = effort
+    in N or N m, no control limits); the motors of the closed legs ``v``, ``p`` drive the tendons
+    ``<leg>_leg``, the others their joints; passive hinges ``<leg>_base`` and ``platform<k>``;
+    a twist ``psi<j>`` turns the body ``twist<j>`` (or ``end_effector``, when it is the last
+    frame and has no part of its own); the tool tip is the site ``tip``; the keyframe ``home`` is
+    the robot's home pose at rest. Viscous friction is joint damping (``s``, twists) or tendon
+    damping (``v``, ``p``); gravity is the robot's. ``leg_mass`` (kg) and ``leg_inertia``
+    (kg m^2) are given to every leg body (the paper's legs are massless; MuJoCo refuses below
+    1e-15) and to a twist without a part of its own.
+
+    Every number is written with at most ``digits`` significant digits (:data:`DIGITS`, the
+    fewest at which MuJoCo's dynamics still agree with ours to 1e-9, measured in
+    ``docs/mujoco.md``; :data:`MAX_DIGITS` writes every number as it is). With ``scene`` (the
+    default) the model opens as a scene in MuJoCo's viewer: the base, the platforms, a floor, a
+    light, a sky and the camera ``tool`` that follows the end-effector, all drawing only (no
+    contact, no mass: the dynamics are those of ``scene=False``). Needs MuJoCo
+    (``vgtarm[mujoco]``).
+    """
+    return str(
+        to_spec(
+            robot,
+            timestep=timestep,
+            solver_tolerance=solver_tolerance,
+            leg_mass=leg_mass,
+            leg_inertia=leg_inertia,
+            digits=digits,
+            scene=scene,
+        ).to_xml()
     )
 
 
-def _attribute(text: str) -> str:
-    """``text`` as an XML attribute value (quotes, ampersands and angle brackets escaped)."""
-    return text.replace("&", "&amp;").replace('"', "&quot;").replace("<", "&lt;").replace(">", "&gt;")
+def _materials(spec: Any, mujoco: Any) -> None:
+    """The scene's materials (one per colour of :data:`COLOURS`, the floor's checker) and sky,
+    all built-in textures: the file needs no other file."""
+    for name, rgba in COLOURS.items():
+        spec.add_material(name=name, rgba=rgba, specular=0.3, shininess=0.4)
+    spec.add_texture(
+        name="sky",
+        type=mujoco.mjtTexture.mjTEXTURE_SKYBOX,
+        builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT,
+        rgb1=[0.62, 0.74, 0.88],
+        rgb2=[0.12, 0.14, 0.18],
+        width=512,
+        height=3072,
+    )
+    spec.add_texture(
+        name="checker",
+        type=mujoco.mjtTexture.mjTEXTURE_2D,
+        builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER,
+        rgb1=[0.34, 0.36, 0.4],
+        rgb2=[0.27, 0.29, 0.32],
+        mark=mujoco.mjtMark.mjMARK_EDGE,
+        markrgb=[0.55, 0.57, 0.6],
+        width=300,
+        height=300,
+    )
+    floor = spec.add_material(name="floor", texrepeat=[5.0, 5.0], texuniform=True, reflectance=0.1)
+    floor.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "checker"
+
+
+def _unit(x: Array) -> Array:
+    return x / np.linalg.norm(x)
+
+
+def _platform(platform: Any, mod: ModuleHome, stack: Stack, k: int, visual: Any, r: Any, mujoco: Any) -> None:
+    """Platform ``k`` drawn in its body (origin ``A'``): a bar from ``A'`` to ``B'`` and a plate
+    under its centre, wide enough for the module standing on it."""
+    visual(platform, mujoco.mjtGeom.mjGEOM_CAPSULE, [0.01], "platform", fromto=[0.0] * 3 + r(mod.B_top - mod.A_top))
+    above = stack.modules[k + 1].b if k + 1 < len(stack.modules) else 0.0
+    radius = max(stack.modules[k].d, above) + 0.02
+    centre = mod.centre - mod.A_top
+    under = centre - 0.008 * mod.rotation[:, 2]
+    visual(platform, mujoco.mjtGeom.mjGEOM_CYLINDER, r([radius]), "platform", fromto=r(under) + r(centre))
+
+
+def _surroundings(spec: Any, g: HomeGeometry, visual: Any, r: Any, mujoco: Any) -> None:
+    """What the scene has around the robot: a floor across gravity (no contact: contacts are off
+    and the floor has none), the base slab under module 1, a sun light, the camera ``tool``
+    that keeps the end-effector in view from beside and above the tool, and the free camera's
+    first view."""
+    gravity = np.array(g.stack.gravity, dtype=float)
+    up = -_unit(gravity) if np.linalg.norm(gravity) > 0 else np.array([0.0, 0.0, 1.0])
+    axis = np.eye(3)[0] if abs(up[0]) < 0.9 else np.eye(3)[1]
+    ahead = _unit(axis - (axis @ up) * up)
+    side = np.cross(up, ahead)
+    points = [g.tip] + [m.centre for m in g.modules]
+    size = max(0.3, *(float(np.linalg.norm(p)) for p in points))
+    world = spec.worldbody
+    floor = visual(world, mujoco.mjtGeom.mjGEOM_PLANE, r([2 * size, 2 * size, 0.05]), "floor", pos=r(-0.02 * up))
+    floor.alt.type = mujoco.mjtOrientation.mjORIENTATION_ZAXIS
+    floor.alt.zaxis = r(up)
+    first = g.modules[0]
+    slab = visual(
+        world,
+        mujoco.mjtGeom.mjGEOM_BOX,
+        r([0.06, g.stack.modules[0].b + 0.05, 0.01]),
+        "base",
+        pos=[0.0, 0.0, -0.01],
+    )
+    slab.alt.type = mujoco.mjtOrientation.mjORIENTATION_XYAXES
+    slab.alt.xyaxes = r(first.normal) + r(_unit(first.B - first.A))
+    sun = world.add_light(
+        name="sun",
+        type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL,
+        pos=r(3 * size * up),
+        dir=r(_unit(-up - 0.4 * ahead + 0.3 * side)),
+        castshadow=False,  # shadow maps speckle the plates in software rendering
+        diffuse=[0.7, 0.7, 0.7],
+        specular=[0.2, 0.2, 0.2],
+    )
+    sun.ambient = [0.1, 0.1, 0.1]
+    world.add_camera(
+        name="tool",
+        mode=mujoco.mjtCamLight.mjCAMLIGHT_TARGETBODY,
+        targetbody="end_effector",
+        pos=r(g.tip + 1.2 * size * _unit(ahead - side + 0.5 * up)),
+        fovy=45.0,
+    )
+    spec.visual.headlight.ambient = [0.25, 0.25, 0.25]
+    spec.visual.headlight.diffuse = [0.5, 0.5, 0.5]
+    spec.visual.global_.offwidth = 1280
+    spec.visual.global_.offheight = 960
+    spec.visual.global_.azimuth = 135.0
+    spec.visual.global_.elevation = -20.0

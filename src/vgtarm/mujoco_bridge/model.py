@@ -9,18 +9,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError, shown
 from ..model.robot import Robot
-from .export import home_geometry, to_mjcf
+from .export import MAX_DIGITS, home_geometry, require_mujoco, to_mjcf
 
 Array = NDArray[np.float64]
-
-
-def require_mujoco() -> Any:
-    """The ``mujoco`` module, or one line saying how to install it."""
-    try:
-        import mujoco
-    except ImportError:
-        raise InputError("MuJoCo is not installed: pip install 'vgtarm[mujoco]'") from None
-    return mujoco
 
 
 class MujocoRobot:
@@ -28,15 +19,17 @@ class MujocoRobot:
     our ``q, qd`` (``n`` joints, :attr:`Robot.joint_names`) mapped onto MuJoCo's full state
     (passive hinges from our closed-form passive angles, their rates from the loop closures'
     constraint Jacobian) and MuJoCo's state read back as our joints (the tree's slides and twists,
-    the closed legs' tendons). ``export`` options go to :func:`to_mjcf`."""
+    the closed legs' tendons). ``export`` options go to :func:`to_mjcf`; ``digits`` is the
+    precision of the model's numbers, by default every number as it is (``vgtarm check mujoco``
+    checks the file ``vgtarm export mjcf`` writes, at :data:`~.export.DIGITS`)."""
 
-    def __init__(self, robot: Robot, *, timestep: float = 1e-3, **export: float) -> None:
+    def __init__(self, robot: Robot, *, timestep: float = 1e-3, digits: int = MAX_DIGITS, **export: Any) -> None:
         if not isinstance(robot, Robot):
             raise InputError(f"robot = {shown(robot)}: expected a vgtarm.Robot (see vgtarm.load_robot)")
         mujoco = require_mujoco()
         self.mujoco = mujoco
         self.robot = robot
-        self.xml = to_mjcf(robot, timestep=timestep, **export)
+        self.xml = to_mjcf(robot, timestep=timestep, digits=digits, **export)
         self.model = mujoco.MjModel.from_xml_string(self.xml)
         self.model.opt.jacobian = mujoco.mjtJacobian.mjJAC_DENSE
         self.data = mujoco.MjData(self.model)

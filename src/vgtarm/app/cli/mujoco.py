@@ -14,13 +14,35 @@ from ...model.robot import load_robot
 from .options import add_config, non_negative_int, positive_float, positive_int
 
 
+def digits(text: str) -> int:
+    """``--digits``: a whole number of significant digits the export may write."""
+    from ...mujoco_bridge.export import MAX_DIGITS, MIN_DIGITS
+
+    value = int(text)
+    if not MIN_DIGITS <= value <= MAX_DIGITS:
+        raise argparse.ArgumentTypeError(f"expected a whole number from {MIN_DIGITS} to {MAX_DIGITS}, got {text}")
+    return value
+
+
+def add_digits(parser: argparse.ArgumentParser) -> None:
+    from ...mujoco_bridge.export import DIGITS, MAX_DIGITS
+
+    parser.add_argument(
+        "--digits",
+        type=digits,
+        default=DIGITS,
+        metavar="N",
+        help=f"significant digits of the numbers in the MJCF (default {DIGITS}; {MAX_DIGITS}: every number as it is)",
+    )
+
+
 def cmd_export(args: argparse.Namespace) -> int:
     """Write the robot as MJCF."""
     from ...mujoco_bridge.export import to_mjcf
 
     check_output_file(args.out, "--out", inputs=[args.config])
     robot = load_robot(args.config)
-    text = to_mjcf(robot, timestep=args.timestep)
+    text = to_mjcf(robot, timestep=args.timestep, digits=args.digits)
     if args.validate:
         from ...mujoco_bridge.model import require_mujoco
 
@@ -38,7 +60,7 @@ def cmd_check(args: argparse.Namespace) -> int:
 
     require_mujoco()
     robot = load_robot(args.config)
-    print(table(cross_validate(robot, n=args.states, seed=args.seed)))
+    print(table(cross_validate(robot, n=args.states, seed=args.seed, digits=args.digits)))
     return 0
 
 
@@ -46,12 +68,11 @@ def add_parsers(sub: Any) -> None:
     """Register ``export`` and ``check`` on the ``vgtarm`` command's subparsers."""
     export = sub.add_parser("export", help="export the robot or its controller for another engine or a target")
     formats = export.add_subparsers(dest="format", required=True, metavar="FORMAT")
-    mjcf = formats.add_parser("mjcf", help="the robot in MuJoCo's XML model format")
+    mjcf = formats.add_parser("mjcf", help="the robot in MuJoCo's XML model format, as a scene (needs vgtarm[mujoco])")
     mjcf.add_argument("--out", type=Path, required=True, metavar="FILE", help="the file to write (robot.xml)")
     mjcf.add_argument("--timestep", type=positive_float, default=1e-3, metavar="DT", help="MuJoCo's time step (s)")
-    mjcf.add_argument(
-        "--validate", action="store_true", help="load the result in MuJoCo before writing (needs vgtarm[mujoco])"
-    )
+    mjcf.add_argument("--validate", action="store_true", help="load the result in MuJoCo before writing")
+    add_digits(mjcf)
     add_config(mjcf)
     mjcf.set_defaults(run=cmd_export)
     controller = formats.add_parser(
@@ -64,5 +85,6 @@ def add_parsers(sub: Any) -> None:
     check.add_argument("engine", choices=("mujoco",), help="mujoco: the exported model stepped by MuJoCo")
     check.add_argument("--states", type=positive_int, default=1000, help="random states (default 1000)")
     check.add_argument("--seed", type=non_negative_int, default=0, help="seed of the states (default 0)")
+    add_digits(check)
     add_config(check)
     check.set_defaults(run=cmd_check)
