@@ -1,0 +1,79 @@
+"""Griffe extension of the documentation site: Sphinx roles in vgtarm's docstrings become links.
+
+vgtarm's docstrings are Google style with Sphinx cross-reference roles (``:func:`solve_point```,
+``:class:`~vgtarm.errors.PathError```, ``:mod:`.spec```), which Markdown would show as they are.
+Before mkdocstrings renders a docstring, each role is rewritten to an optional autorefs
+cross-reference: the name is resolved as Python would from the docstring's scope (relative
+module paths included), ``~`` keeps only the last component as the text, and the reference
+becomes a link wherever the API reference documents its target (plain code text elsewhere, for
+a private module, without a warning). ``:pep:`N``` becomes the text "PEP N".
+
+Used only by ``mkdocs.yml`` (``plugins.mkdocstrings...extensions``); not part of the package.
+"""
+
+from __future__ import annotations
+
+import html
+import re
+from typing import Any
+
+import griffe
+
+ROLE = re.compile(r":(?P<role>[a-z]+):`(?P<body>[^`]+)`")
+"""A Sphinx role: ``:role:`text```."""
+EXPLICIT = re.compile(r"^(?P<title>.*?)\s*<(?P<target>[^<>]+)>$")
+"""The explicit form of a role's text: ``title <target>``."""
+PYTHON_ROLES = frozenset({"func", "class", "meth", "attr", "data", "mod", "obj", "exc", "const"})
+
+
+def _scope_module(obj: griffe.Object) -> griffe.Module:
+    return obj if isinstance(obj, griffe.Module) else obj.module
+
+
+def _resolve(obj: griffe.Object, target: str) -> str:
+    """The full dotted path that ``target`` names in the scope of ``obj`` (best effort)."""
+    if target.startswith("."):
+        module = _scope_module(obj)
+        base = module.path if module.is_package or module.is_init_module else module.parent.path  # type: ignore[union-attr]
+        rest = target[1:]
+        while rest.startswith("."):
+            base, rest = base.rpartition(".")[0], rest[1:]
+        return f"{base}.{rest}" if rest else base
+    head, _, tail = target.partition(".")
+    try:
+        resolved = obj.resolve(head)
+    except (griffe.NameResolutionError, AttributeError, KeyError):
+        return target
+    return f"{resolved}.{tail}" if tail else resolved
+
+
+def _rewrite(obj: griffe.Object, text: str) -> str:
+    def replace(match: re.Match[str]) -> str:
+        role, body = match["role"], match["body"].strip()
+        if role == "pep":
+            return f"PEP {body}"
+        if role not in PYTHON_ROLES:
+            return f"`{body}`"
+        explicit = EXPLICIT.match(body)
+        if explicit:
+            title, target = explicit["title"], explicit["target"]
+        else:
+            target = body.lstrip("~")
+            title = target.rsplit(".", 1)[-1] if body.startswith("~") else target.lstrip(".")
+        target = target.rstrip("()")
+        path = _resolve(obj, target)
+        return f'<autoref identifier="{html.escape(path)}" optional><code>{html.escape(title)}</code></autoref>'
+
+    return ROLE.sub(replace, text)
+
+
+class SphinxRoles(griffe.Extension):
+    """Rewrite the Sphinx roles of every docstring of a loaded package."""
+
+    def on_package(self, *, pkg: griffe.Module, **kwargs: Any) -> None:
+        stack: list[griffe.Object] = [pkg]
+        while stack:
+            obj = stack.pop()
+            if obj.docstring is not None:
+                obj.docstring.value = _rewrite(obj, obj.docstring.value)
+            stack.extend(member for member in obj.members.values() if not member.is_alias)  # type: ignore[misc]
