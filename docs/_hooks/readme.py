@@ -1,20 +1,21 @@
 """MkDocs hook of the documentation site: the README's guides, placed on the site's pages.
 
 README.md stays the front door and the one copy of the user guides; the site shows the same text
-split over pages, never a second copy that could drift. A page asks for README sections with a
-marker line:
+split over pages, never a second copy that could drift. A page asks for README text with a
+marker, a line holding only a link to the README (so that on GitHub the page links to the text):
 
-- ``<!-- readme: intro -->``: the text between the README's title and its first ``##`` section;
-- ``<!-- readme: Two commands -->``: the ``##`` section of that title, with its subsections;
-- ``<!-- readme: * -->``: every ``##`` section that no other page asks for, in README order (so a
-  section added to the README later is never missing from the site).
+- ``[README: intro](../README.md)``: the text between the README's title and its first ``##``;
+- ``[README: Two commands](../README.md#two-commands)``: the ``##`` section of that title, with
+  its subsections (raised one level when the page's own title is the section's);
+- ``[README: the other sections](../README.md)``: every ``##`` section that no page asks for, in
+  README order, so that a section added to the README later is never missing from the site.
 
 The README's links are written from the repository root; on the site they are rewritten: a file
 under ``docs/`` becomes a link relative to the page, ``#anchor`` points to the page that now
 holds that heading, and a link to a file outside ``docs/`` (which the site does not publish)
-keeps its text only. A marker naming no README section, a second page asking for the same
-section, or two ``*`` markers is logged as a warning, which ``mkdocs build --strict`` makes an
-error.
+keeps its text only. A docs page's own links to ``../README.md#anchor`` go to the page that
+holds that heading. A marker naming no README section, two pages asking for the same section, or
+a section on no page is logged as a warning, which ``mkdocs build --strict`` makes an error.
 
 Used only by ``mkdocs.yml`` (``hooks``); not part of the package.
 """
@@ -30,13 +31,14 @@ from typing import Any
 
 log = logging.getLogger("mkdocs.hooks.readme")
 
-MARKER = re.compile(r"^<!--\s*readme:\s*(?P<name>.+?)\s*-->\s*$", re.MULTILINE)
+MARKER = re.compile(r"^\[README: (?P<name>[^\]]+)\]\(\.\./README\.md(?:#[\w-]*)?\)\s*$", re.MULTILINE)
 """A page's request for README text, alone on its line."""
 LINK = re.compile(r"(?P<bang>!?)\[(?P<text>[^\]]*)\]\((?P<target>[^)\s]+)(?P<title>\s+\"[^\"]*\")?\)")
 """An inline Markdown link or image: ``[text](target "title")``."""
 FENCE = re.compile(r"^(```|~~~)")
 INTRO = "intro"
-REST = "*"
+REST = "the other sections"
+REST_MARKER = f"[README: {REST}](../README.md)"
 
 
 def slug(heading: str) -> str:
@@ -62,7 +64,8 @@ _STATE: dict[str, Any] = {}
 def split_readme(text: str) -> Readme:
     """Cut the README at its level-2 headings outside code blocks; drop its level-1 title."""
     readme = Readme()
-    part, lines, in_fence = INTRO, [], False
+    part, in_fence = INTRO, False
+    lines: list[str] = []
     for line in text.splitlines():
         if FENCE.match(line):
             in_fence = not in_fence
@@ -131,35 +134,42 @@ def on_files(files: Any, config: Any, **kwargs: Any) -> Any:
             readme.placed[name] = file.src_uri
     rest = [name for name in readme.sections if name not in readme.placed]
     if rest and rest_page is None:
-        log.warning("README sections %s are on no page of the site (add a '<!-- readme: * -->' page)", rest)
+        log.warning("README sections %s are on no page of the site (give a page the line %r)", rest, REST_MARKER)
     for name in rest:
         readme.placed[name] = rest_page or ""
     _STATE["rest"] = rest
     return files
 
 
-def _rewrite_links(text: str, page: str) -> str:
-    """The README's links (written from the repository root) as links from the page ``page``."""
+def _rewrite_links(text: str, page: str, base: Path) -> str:
+    """``text``'s links, written from the folder ``base``, as links from the site page ``page``."""
     readme: Readme = _STATE["readme"]
     root: Path = _STATE["root"]
     docs: Path = _STATE["docs"]
-    page_dir = posixpath.dirname(page)
+    page_dir = posixpath.dirname(page) or "."
+    from_readme = base == root
+
+    def to_page(owner: str, fragment: str) -> str:
+        target = "" if owner == page else posixpath.relpath(owner, page_dir)
+        return target + (f"#{fragment}" if fragment else "") or "#"
 
     def replace(match: re.Match[str]) -> str:
         target = match["target"]
         if re.match(r"^[a-z][a-z0-9+.-]*:", target, re.IGNORECASE):  # http:, mailto: ...
             return match[0]
         path, _, fragment = target.partition("#")
-        if not path:
-            owner = readme.placed.get(readme.anchors.get(fragment, ""), page)
-            new = f"#{fragment}" if owner == page else f"{posixpath.relpath(owner, page_dir or '.')}#{fragment}"
+        if not path and not from_readme:
+            return match[0]
+        resolved = (base / path).resolve() if path else root / "README.md"
+        if resolved == root / "README.md":
+            owner = readme.placed.get(readme.anchors.get(fragment, ""), "index.md") if fragment else "index.md"
+            new = to_page(owner, fragment)
+        elif resolved.is_relative_to(docs):
+            new = posixpath.relpath(resolved.relative_to(docs).as_posix(), page_dir)
+            new += f"#{fragment}" if fragment else ""
         else:
-            resolved = (root / path).resolve()
-            if not resolved.is_relative_to(docs):
-                log.info("README link %r is outside docs/: shown as text on %s", target, page)
-                return match["text"] if not match["bang"] else ""
-            rel = posixpath.relpath(resolved.relative_to(docs).as_posix(), page_dir or ".")
-            new = rel + (f"#{fragment}" if fragment else "")
+            log.info("link %r leaves docs/: shown as text on %s", target, page)
+            return match["text"] if not match["bang"] else ""
         return f"{match['bang']}[{match['text']}]({new}{match['title'] or ''})"
 
     out, in_fence = [], False
@@ -172,19 +182,26 @@ def _rewrite_links(text: str, page: str) -> str:
 
 def on_page_markdown(markdown: str, page: Any, **kwargs: Any) -> str:
     readme: Readme = _STATE["readme"]
+    root: Path = _STATE["root"]
     src = page.file.src_uri
+    page_base = Path(page.file.abs_src_path).resolve().parent
 
-    def replace(match: re.Match[str]) -> str:
-        name = match["name"]
+    def section(name: str) -> str:
         if name == INTRO:
-            return _rewrite_links(readme.intro, src)
+            return _rewrite_links(readme.intro, src, root)
         if name == REST:
-            return "\n".join(_rewrite_links(readme.sections[s], src) for s in _STATE["rest"])
+            return "\n".join(_rewrite_links(readme.sections[s], src, root) for s in _STATE["rest"])
         if name not in readme.sections:
             return ""
         text = readme.sections[name]
         if re.search(rf"^# {re.escape(name)}\s*$", markdown, re.MULTILINE):
             text = raise_headings(text)
-        return _rewrite_links(text, src)
+        return _rewrite_links(text, src, root)
 
-    return MARKER.sub(replace, markdown)
+    parts, last = [], 0
+    for match in MARKER.finditer(markdown):
+        parts.append(_rewrite_links(markdown[last : match.start()], src, page_base))
+        parts.append(section(match["name"]))
+        last = match.end()
+    parts.append(_rewrite_links(markdown[last:], src, page_base))
+    return "\n".join(parts)

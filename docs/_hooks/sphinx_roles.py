@@ -8,6 +8,10 @@ module paths included), ``~`` keeps only the last component as the text, and the
 becomes a link wherever the API reference documents its target (plain code text elsewhere, for
 a private module, without a warning). ``:pep:`N``` becomes the text "PEP N".
 
+vgtarm documents many module constants with Sphinx's ``#:`` comments on the lines just above
+them (``#: Joint names, in the order of the joint vector q.``); griffe reads only string
+docstrings, so an attribute without one gets those comment lines as its docstring.
+
 Used only by ``mkdocs.yml`` (``plugins.mkdocstrings...extensions``); not part of the package.
 """
 
@@ -67,13 +71,26 @@ def _rewrite(obj: griffe.Object, text: str) -> str:
     return ROLE.sub(replace, text)
 
 
+def _comment_docstring(attr: griffe.Attribute) -> griffe.Docstring | None:
+    """The ``#:`` comment lines right above an attribute's assignment, as its docstring."""
+    lines, number = attr.module.lines, (attr.lineno or 0) - 2  # the line above, 0-based
+    found: list[str] = []
+    while 0 <= number < len(lines) and lines[number].lstrip().startswith("#:"):
+        found.insert(0, lines[number].lstrip()[2:].strip())
+        number -= 1
+    return griffe.Docstring("\n".join(found), lineno=number + 2, parent=attr) if found else None
+
+
 class SphinxRoles(griffe.Extension):
-    """Rewrite the Sphinx roles of every docstring of a loaded package."""
+    """Rewrite the Sphinx roles of every docstring of a loaded package; give attributes their
+    ``#:`` comments as docstrings."""
 
     def on_package(self, *, pkg: griffe.Module, **kwargs: Any) -> None:
         stack: list[griffe.Object] = [pkg]
         while stack:
             obj = stack.pop()
+            if obj.docstring is None and isinstance(obj, griffe.Attribute):
+                obj.docstring = _comment_docstring(obj)
             if obj.docstring is not None:
                 obj.docstring.value = _rewrite(obj, obj.docstring.value)
             stack.extend(member for member in obj.members.values() if not member.is_alias)  # type: ignore[misc]
