@@ -336,3 +336,30 @@ def test_site_loads_nothing_from_the_network(site: Path) -> None:
         remote = re.findall(r"<(?:script|link|img|iframe)\b[^>]*(?:src|href)=\"(?:https?:)?//[^\"]+\"", source)
         assert remote == [], (page.name, remote)
         assert "fonts.googleapis" not in source and "fonts.gstatic" not in source
+
+
+def test_shared_attribute_entries_are_split_per_name() -> None:
+    """The site's griffe extension gives ``a, b: text`` of an Attributes section one entry per name
+    (Google style has one name per entry); other sections and prose are left as they are."""
+    spec = importlib.util.spec_from_file_location("sphinx_roles", DOCS / "_hooks" / "sphinx_roles.py")
+    if spec is None or spec.loader is None or importlib.util.find_spec("griffe") is None:
+        pytest.skip("griffe (the docs extra) is not installed")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    text = (
+        "Lead, with a, b: prose.\n\nAttributes:\n    t: times.\n    q, qd: values\n        and rates.\n\n"
+        "Args:\n    a, b: kept.\n"
+    )
+    assert module.split_shared_entries(text).splitlines() == [
+        "Lead, with a, b: prose.",
+        "",
+        "Attributes:",
+        "    t: times.",
+        "    q: values",
+        "        and rates.",
+        "    qd: values",
+        "        and rates.",
+        "",
+        "Args:",
+        "    a, b: kept.",
+    ]

@@ -10,7 +10,10 @@ a private module, without a warning). ``:pep:`N``` becomes the text "PEP N".
 
 vgtarm documents many module constants with Sphinx's ``#:`` comments on the lines just above
 them (``#: Joint names, in the order of the joint vector q.``); griffe reads only string
-docstrings, so an attribute without one gets those comment lines as its docstring.
+docstrings, so an attribute without one gets those comment lines as its docstring. An entry of
+an ``Attributes:`` section that names several attributes (``q, qd, qdd: joint values, rates and
+accelerations``), which Google style does not allow, becomes one entry per name with the same
+description.
 
 Used only by ``mkdocs.yml`` (``plugins.mkdocstrings...extensions``); not part of the package.
 """
@@ -51,6 +54,38 @@ def _resolve(obj: griffe.Object, target: str) -> str:
     return f"{resolved}.{tail}" if tail else resolved
 
 
+SECTION = re.compile(r"^(?P<indent> *)Attributes:\s*$")
+SHARED_ENTRY = re.compile(r"^(?P<indent> +)(?P<names>\w+(?:, \w+)+)(?P<rest>(?: \([^)]*\))?:(?: .*)?)$")
+
+
+def split_shared_entries(text: str) -> str:
+    """``a, b: description`` in an ``Attributes:`` section as ``a: description`` and
+    ``b: description``, each with the entry's continuation lines."""
+    lines = text.splitlines()
+    out: list[str] = []
+    section_indent: int | None = None
+    index = 0
+    while index < len(lines):
+        line = lines[index]
+        header = SECTION.match(line)
+        if header:
+            section_indent = len(header["indent"])
+        elif line.strip() and section_indent is not None and len(line) - len(line.lstrip()) <= section_indent:
+            section_indent = None
+        entry = SHARED_ENTRY.match(line) if section_indent is not None else None
+        if entry is None or len(entry["indent"]) <= section_indent:  # type: ignore[operator]
+            out.append(line)
+            index += 1
+            continue
+        depth, end = len(entry["indent"]), index + 1
+        while end < len(lines) and lines[end].strip() and len(lines[end]) - len(lines[end].lstrip()) > depth:
+            end += 1
+        for name in entry["names"].split(", "):
+            out.extend([f"{entry['indent']}{name}{entry['rest']}", *lines[index + 1 : end]])
+        index = end
+    return "\n".join(out)
+
+
 def _rewrite(obj: griffe.Object, text: str) -> str:
     def replace(match: re.Match[str]) -> str:
         role, body = match["role"], match["body"].strip()
@@ -68,7 +103,7 @@ def _rewrite(obj: griffe.Object, text: str) -> str:
         path = _resolve(obj, target)
         return f'<autoref identifier="{html.escape(path)}" optional><code>{html.escape(title)}</code></autoref>'
 
-    return ROLE.sub(replace, text)
+    return ROLE.sub(replace, split_shared_entries(text))
 
 
 def _comment_docstring(attr: griffe.Attribute) -> griffe.Docstring | None:
