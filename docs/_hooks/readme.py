@@ -35,7 +35,7 @@ MARKER = re.compile(r"^\[README: (?P<name>[^\]]+)\]\(\.\./README\.md(?:#[\w-]*)?
 """A page's request for README text, alone on its line."""
 LINK = re.compile(r"(?P<bang>!?)\[(?P<text>[^\]]*)\]\((?P<target>[^)\s]+)(?P<title>\s+\"[^\"]*\")?\)")
 """An inline Markdown link or image: ``[text](target "title")``."""
-FENCE = re.compile(r"^(```|~~~)")
+FENCE = re.compile(r"^\s*(```|~~~)")
 INTRO = "intro"
 REST = "the other sections"
 REST_MARKER = f"[README: {REST}](../README.md)"
