@@ -134,8 +134,12 @@ def case1(
 
     Args:
         dt: Sampling period, s, > 0.
-        x0, y0, z0: Centre of the curve, m.
-        ax, ay, az: Amplitudes, m.
+        x0: Centre of the curve along x, m.
+        y0: Centre of the curve along y, m.
+        z0: Centre of the curve along z, m.
+        ax: Amplitude along x, m.
+        ay: Amplitude along y, m.
+        az: Amplitude along z, m.
         duration: Length of the path, s, >= dt.
 
     Returns:

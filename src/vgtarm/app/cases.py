@@ -1,6 +1,6 @@
 """The paper's two case studies (Section VI) with the spec's numbers, and what the paper reports.
 
-All values come from ``shared/spec/mechanism.md``: the paper gives the shapes of the paths and
+All values come from ``docs/conventions.md``: the paper gives the shapes of the paths and
 the gains, the spec fixes the path parameters (assumptions) and the GA bounds.
 
 **On a robot other than the paper's** (a stack of modules, issue 13) the case paths are moved and

@@ -114,14 +114,19 @@ def export_controller(
         robot: the robot the controller drives (the paper's or a stack; its joint limits and home
             pose are exported).
         out_dir: the folder to write; an existing folder is replaced whole only if vgtarm wrote it.
-        kp, kv: gains of computed force control: a number (the same on every joint), n diagonal
-            entries or an n x n matrix (default: case 2's, 15000 1/s^2 and 600 1/s).
+        kp: proportional gain of computed force control: a number (the same on every joint), n
+            diagonal entries or an n x n matrix (default: case 2's, 15000 1/s^2).
+        kv: derivative gain, in the same forms as ``kp`` (default: case 2's, 600 1/s).
         dt: control period (s).
         controller_model: the controller's parameters (default: the robot's own, an exact model).
-        observer, observer_gain, force_sensor: how the external efforts are estimated, as in
-            :func:`vgtarm.simulation.simulate` (``"momentum"``: K_O default 0.5/dt).
-        encoder_resolution, twist_resolution, velocity_filter_hz: the sensing, as in simulate: with
-            encoders the controller rounds the readings and differences them for velocities.
+        observer: how the external efforts are estimated, as in :func:`vgtarm.simulation.simulate`
+            (``"none"`` or ``"momentum"``).
+        observer_gain: the momentum observer's gain K_O (default 0.5/dt).
+        force_sensor: measure the tip force instead of estimating it, as in simulate.
+        encoder_resolution: the encoders' resolution of the legs, as in simulate: with encoders
+            the controller rounds the readings and differences them for velocities.
+        twist_resolution: the twist encoder's resolution, as in simulate.
+        velocity_filter_hz: the cut-off of the velocity filter, as in simulate.
         limit_tolerance: how far (m, rad) a reading may lie beyond a joint limit before the
             controller refuses the step.
         effort_max: a clip of each effort (a number or n values; default none).
@@ -133,8 +138,9 @@ def export_controller(
         The record of the folder (:class:`ExportedController`).
 
     Raises:
-        InputError: a bad option (the message names it); ExportError: no compiler or a compile that
-        fails. Either way nothing is left at ``out_dir`` (an existing folder stays as it was).
+        InputError: a bad option (the message names it); nothing is left at ``out_dir``.
+        ExportError: no compiler or a compile that fails; nothing is left at ``out_dir`` (an
+            existing folder stays as it was).
     """
     if not isinstance(robot, Robot):
         raise InputError(f"robot = {shown(robot)}: expected a vgtarm.Robot (vgtarm.load_robot)")

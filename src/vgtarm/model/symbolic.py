@@ -4,7 +4,7 @@ Everything else (Jacobians, their rates, the mass matrix, the velocity-product, 
 friction terms, forward and inverse dynamics) is derived from :func:`kinematics` here by
 automatic differentiation; nothing is re-derived by hand elsewhere.
 
-Conventions follow ``shared/spec/mechanism.md``: joint vector ``q = (s1, v1, p1, s2, v2, p2,
+Conventions follow ``docs/conventions.md``: joint vector ``q = (s1, v1, p1, s2, v2, p2,
 psi3)``; module 1 in the ``u2-u3`` plane of F0, module 2 mirrored in the ``u1-u3`` plane of F1;
 ``C01 = Rx(theta1)``, ``C02 = C01 Ry(theta2)``, ``C03 = C02 Rz(psi3)``; tip
 ``P = r1 + C01 r2 + h1 C02 u3`` (paper eq. 6).

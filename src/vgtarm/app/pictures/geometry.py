@@ -4,7 +4,7 @@ One plain record, :class:`MechanismGeometry`, is built from the model's forward 
 the robot's dimensions, and everything that shows the robot reads it: the Matplotlib drawing
 (:mod:`vgtarm.app.pictures.drawing`), the animation (:mod:`vgtarm.app.pictures.animation`) and the interactive page
 (:mod:`vgtarm.app.reports.html`). Nothing here is a sketch: the joints follow the spec's module
-(``shared/spec/mechanism.md``) from the passive angles the model returns.
+(``docs/conventions.md``) from the passive angles the model returns.
 
 Any robot is drawn the same way, as a stack of modules (the paper's robot is the stack of
 :func:`~vgtarm.model.stack.description.stack_from_parameters`: modules at 0 and 90 degrees, a
