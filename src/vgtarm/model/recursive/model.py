@@ -110,7 +110,13 @@ class RecursiveModel:
             kind = "int *" if array.dtype == np.intc else "double *"
             setattr(arm, name, self._ffi.cast(kind, self._ffi.from_buffer(array)))
         self._arm = arm
-        self._G, self._h = stack.margin_form()
+        G, h = stack.margin_form()
+        legs = np.array(stack.leg_indices)
+        rows = np.stack([G[6 * k : 6 * k + 6, legs[k]] for k in range(stack.n_modules)])
+        if not (rows == rows[0]).all():  # the rows of the triangle inequalities hold for any b, d
+            raise AssertionError("the assembly rows differ between modules")
+        self._rows = np.ascontiguousarray(rows[0])
+        self._h = np.ascontiguousarray(h)
 
     def __repr__(self) -> str:
         return f"RecursiveModel({self.stack.name!r}, {self.stack.n_modules} modules, {self.n} joints)"
@@ -133,17 +139,18 @@ class RecursiveModel:
 
     def _q(self, q: ArrayLike) -> Array:
         qa = self._batch(q, "q", self.n)
-        margins = qa @ self._G.T + self._h
-        if not (margins > 0.0).all():
-            sample, row = np.unravel_index(int(np.argmin(margins)), margins.shape)
-            k, inequality = divmod(int(row), 6)
-            legs = ", ".join(
-                f"{leg}{k + 1} = {qa[sample, i]:.6g}"
-                for leg, i in zip(LEG_NAMES, self.stack.leg_indices[k], strict=True)
-            )
+        where = self._ffi.new("int[2]")
+        sample = self._lib.vgt_rec_unassembled(
+            self._arm, len(qa), self._ptr(qa), self._ptr(self._rows), self._ptr(self._h), where
+        )
+        if sample >= 0:
+            k, inequality = where[0], where[1]
+            idx = self.stack.leg_indices[k]
+            margin = float(self._rows[inequality] @ qa[sample, list(idx)] + self._h[6 * k + inequality])
+            legs = ", ".join(f"{leg}{k + 1} = {qa[sample, i]:.6g}" for leg, i in zip(LEG_NAMES, idx, strict=True))
             raise AssemblyError(
                 f"q[{sample}]: module {k + 1} cannot be assembled: '{TRIANGLE_INEQUALITIES[inequality]}' fails "
-                f"(margin {margins[sample, row]:.6g} m; {legs})"
+                f"(margin {margin:.6g} m; {legs})"
             )
         return qa
 

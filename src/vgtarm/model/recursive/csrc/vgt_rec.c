@@ -128,17 +128,52 @@ static void mul6(const double *I, const double *x, double *out) {
     }
 }
 
-/* P += X^T I X: an inertia of the body (body coordinates) added to its parent's */
+/* P += X^T I X: an inertia of the body (body coordinates) added to its parent's. With I =
+ * [A B; B^T C] turned into parent axes (A' = R A R^T, ...) and shifted by r (rx its cross-product
+ * matrix): [A' - B' rx + rx B'^T - rx C' rx, B' + rx C'; B'^T - C' rx, C']. */
+static void rotate_block(const double *R, const double *I, int row, int col, double *out) {
+    double t[9];
+    for (int i = 0; i < 3; ++i) /* t = R X, X the 3x3 block */
+        for (int j = 0; j < 3; ++j)
+            t[3 * i + j] = R[3 * i] * I[6 * row + col + j] + R[3 * i + 1] * I[6 * (row + 1) + col + j] +
+                           R[3 * i + 2] * I[6 * (row + 2) + col + j];
+    for (int i = 0; i < 3; ++i) /* out = t R^T */
+        for (int j = 0; j < 3; ++j) out[3 * i + j] = t[3 * i] * R[3 * j] + t[3 * i + 1] * R[3 * j + 1] + t[3 * i + 2] * R[3 * j + 2];
+}
+
 static void inertia_out(const body_t *b, const double *I, double *P) {
-    double col[6], m[6], f[6], g[6];
-    for (int k = 0; k < 6; ++k) {
-        memset(col, 0, sizeof col);
-        col[k] = 1.0;
-        motion_in(b, col, m);
-        mul6(I, m, f);
-        force_out(b, f, g);
-        for (int i = 0; i < 6; ++i) P[6 * i + k] += g[i];
+    double A[9], B[9], C[9], BX[9], XC[9], XCX[9];
+    const double *r = b->r;
+    rotate_block(b->R, I, 0, 0, A);
+    rotate_block(b->R, I, 0, 3, B);
+    rotate_block(b->R, I, 3, 3, C);
+    /* BX = B rx, XC = rx C (rx = [0 -z y; z 0 -x; -y x 0]) */
+    for (int i = 0; i < 3; ++i) {
+        const double *Bi = B + 3 * i;
+        BX[3 * i + 0] = Bi[1] * r[2] - Bi[2] * r[1];
+        BX[3 * i + 1] = Bi[2] * r[0] - Bi[0] * r[2];
+        BX[3 * i + 2] = Bi[0] * r[1] - Bi[1] * r[0];
     }
+    for (int j = 0; j < 3; ++j) {
+        XC[0 + j] = -r[2] * C[3 + j] + r[1] * C[6 + j];
+        XC[3 + j] = r[2] * C[0 + j] - r[0] * C[6 + j];
+        XC[6 + j] = -r[1] * C[0 + j] + r[0] * C[3 + j];
+    }
+    for (int i = 0; i < 3; ++i) { /* XCX = XC rx */
+        const double *Xi = XC + 3 * i;
+        XCX[3 * i + 0] = Xi[1] * r[2] - Xi[2] * r[1];
+        XCX[3 * i + 1] = Xi[2] * r[0] - Xi[0] * r[2];
+        XCX[3 * i + 2] = Xi[0] * r[1] - Xi[1] * r[0];
+    }
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) {
+            /* rx B^T = -(B rx)^T: its (i, j) entry is -BX[j][i] */
+            P[6 * i + j] += A[3 * i + j] - BX[3 * i + j] - BX[3 * j + i] - XCX[3 * i + j];
+            double off = B[3 * i + j] + XC[3 * i + j];
+            P[6 * i + 3 + j] += off;
+            P[6 * (3 + j) + i] += off;
+            P[6 * (3 + i) + 3 + j] += C[3 * i + j];
+        }
 }
 
 /* ---- the joints ------------------------------------------------------------------------------ */
@@ -233,6 +268,27 @@ static void velocities(const vgt_rec_arm *arm, work_t *k, const double *qd) {
 }
 
 /* ---- the exported functions ------------------------------------------------------------------ */
+
+long vgt_rec_unassembled(const vgt_rec_arm *arm, long n, const double *q, const double *rows, const double *h,
+                         int *where) {
+    for (long s = 0; s < n; ++s) {
+        const double *x = q + s * arm->nq;
+        int module = 0;
+        for (int i = 0; i < arm->nb; ++i) {
+            if (arm->type[i] != 3) continue;
+            const double *legs = x + arm->qi[i];
+            for (int r = 0; r < 6; ++r) {
+                double margin = rows[3 * r] * legs[0] + rows[3 * r + 1] * legs[1] + rows[3 * r + 2] * legs[2] + h[6 * module + r];
+                if (!(margin > 0.0)) {
+                    where[0] = module, where[1] = r;
+                    return s;
+                }
+            }
+            ++module;
+        }
+    }
+    return -1;
+}
 
 int vgt_rec_fk(const vgt_rec_arm *arm, long n, const double *q, double *tip, double *rot, double *body_pos,
                double *body_rot, double *passive) {

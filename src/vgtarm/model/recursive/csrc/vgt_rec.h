@@ -23,6 +23,10 @@ typedef struct {
 /* Every function evaluates n samples (row-major arrays, one row per sample) and returns 0, or -1
  * when its scratch memory could not be allocated. A tip wrench fext is (f, m) in base
  * components: f acts at the tip point, m on the last body; NULL means none. */
+/* The first sample (or -1) with a module that cannot be assembled: some margin rows[6x3] legs + h
+ * <= 0 (h: 6 per module, legs the module's s, v, p), or not a number; where gets (module, row). */
+long vgt_rec_unassembled(const vgt_rec_arm *arm, long n, const double *q, const double *rows, const double *h,
+                         int *where);
 int vgt_rec_fk(const vgt_rec_arm *arm, long n, const double *q, double *tip, double *rot, double *body_pos,
                double *body_rot, double *passive);
 int vgt_rec_jacobian(const vgt_rec_arm *arm, long n, const double *q, double *jp, double *jw);
