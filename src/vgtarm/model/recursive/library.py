@@ -34,7 +34,7 @@ from .joint import module_functions
 _HERE = Path(__file__).resolve().parent
 _CSRC = _HERE / "csrc"
 _HEADER = _CSRC / "vgt_rec.h"
-_CFLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off")
+_CFLAGS = ("-O3", "-fPIC", "-shared", "-ffp-contract=off")
 _GENERATED = "vgt_rec_generated"
 _LOCK = threading.Lock()
 
