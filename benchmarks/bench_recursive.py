@@ -165,32 +165,35 @@ def _growth(x: list[float], y: list[float]) -> float:
     return float(np.polyfit(np.log(x), np.log(y), 1)[0])
 
 
-def run() -> list[dict[str, float]]:
+def _row(k: int) -> dict[str, float]:
+    """The figures of ``k`` modules."""
     import vgtarm
 
-    rows: list[dict[str, float]] = []
-    for k in MODULE_COUNTS:
-        stack = family(k)
-        model = RecursiveModel(stack)
-        q, qd, F = _inputs(stack, SAMPLES)
-        row: dict[str, float] = {"k": k, "n": stack.n_joints, "bodies": model.n_bodies}
-        row["fd"] = _per_sample(lambda: model.forward_dynamics(q, qd, F), SAMPLES)
-        row["fd_wall"] = _per_sample(lambda: model.forward_dynamics(q, qd, F), SAMPLES, time.perf_counter)
-        row["id"] = _per_sample(lambda: model.inverse_dynamics(q, qd, F), SAMPLES)
-        m = max(SAMPLES // k, 200)
-        row["mass"] = _per_sample(lambda: model.mass_matrix(q[:m]), m)
-        row["symbolic"] = math.nan
-        if library_cached(StackDefinition.of(stack)):
-            robot = vgtarm.Robot(stack)
-            row["symbolic"] = _per_sample(lambda: robot.forward_dynamics(q, qd, F), SAMPLES)
-        row["pinocchio"], row["pinocchio_loop"] = _pinocchio_per_sample(stack, SAMPLES)
-        rows.append(row)
-        print(
-            f"  {k} modules ({stack.n_joints} joints): FD {_fmt(row['fd'])}, ID {_fmt(row['id'])}, "
-            f"M {_fmt(row['mass'])}, symbolic FD {_fmt(row['symbolic']) if math.isfinite(row['symbolic']) else '-'}, "
-            f"Pinocchio ABA {_fmt(row['pinocchio'])}",
-            flush=True,
-        )
+    stack = family(k)
+    model = RecursiveModel(stack)
+    q, qd, F = _inputs(stack, SAMPLES)
+    row: dict[str, float] = {"k": k, "n": stack.n_joints, "bodies": model.n_bodies}
+    row["fd"] = _per_sample(lambda: model.forward_dynamics(q, qd, F), SAMPLES)
+    row["fd_wall"] = _per_sample(lambda: model.forward_dynamics(q, qd, F), SAMPLES, time.perf_counter)
+    row["id"] = _per_sample(lambda: model.inverse_dynamics(q, qd, F), SAMPLES)
+    m = max(SAMPLES // k, 200)
+    row["mass"] = _per_sample(lambda: model.mass_matrix(q[:m]), m)
+    row["symbolic"] = math.nan
+    if library_cached(StackDefinition.of(stack)):
+        robot = vgtarm.Robot(stack)
+        row["symbolic"] = _per_sample(lambda: robot.forward_dynamics(q, qd, F), SAMPLES)
+    row["pinocchio"], row["pinocchio_loop"] = _pinocchio_per_sample(stack, SAMPLES)
+    symbolic = _fmt(row["symbolic"]) if math.isfinite(row["symbolic"]) else "-"
+    print(
+        f"  {k} modules ({stack.n_joints} joints): FD {_fmt(row['fd'])}, ID {_fmt(row['id'])}, "
+        f"M {_fmt(row['mass'])}, symbolic FD {symbolic}, Pinocchio ABA {_fmt(row['pinocchio'])}",
+        flush=True,
+    )
+    return row
+
+
+def run() -> list[dict[str, float]]:
+    rows = [_row(k) for k in MODULE_COUNTS]
     build = _build_figures()
     _print(rows, build)
     return rows
@@ -220,9 +223,7 @@ def _print(rows: list[dict[str, float]], build: dict[str, float]) -> None:
     print("| --- | --- | --- |")
     print(f"| forward dynamics, 10 modules (35 joints) | {_fmt(by_k[10]['fd'])} | <= 5 us |")
     print(f"| forward dynamics, 50 modules (175 joints) | {_fmt(by_k[50]['fd'])} | <= 30 us |")
-    print(
-        f"| growth exponent of forward dynamics, 10 to 50 modules | {growth:.2f} (Pinocchio {pin_growth:.2f}) | <= 1.3 |"
-    )
+    print(f"| growth exponent of FD, 10 to 50 modules | {growth:.2f} (Pinocchio {pin_growth:.2f}) | <= 1.3 |")
     print(f"| recursive / Pinocchio ABA at 50 modules | {by_k[50]['fd'] / by_k[50]['pinocchio']:.2f}x | <= 3x |")
     print(
         f"| cold build of the one library + 50-module arm, own process (wall, peak memory) | "
