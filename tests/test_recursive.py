@@ -16,6 +16,8 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -151,9 +153,9 @@ def recursive_batch(model: RecursiveModel, s: dict[str, np.ndarray]) -> dict[str
     return out
 
 
-STACKS = {f"varied{k}": (lambda k=k: varied_stack(k)) for k in range(1, 7)}
-STACKS["six_modules.toml"] = lambda: load_stack(EXAMPLES / "six_modules.toml")
-STACKS["paper_robot.toml"] = lambda: load_stack(EXAMPLES / "paper_robot.toml")
+STACKS: dict[str, Callable[[], Stack]] = {f"varied{k}": partial(varied_stack, k) for k in range(1, 7)}
+STACKS["six_modules.toml"] = partial(load_stack, EXAMPLES / "six_modules.toml")
+STACKS["paper_robot.toml"] = partial(load_stack, EXAMPLES / "paper_robot.toml")
 
 
 @pytest.mark.parametrize("name", sorted(STACKS))
@@ -334,4 +336,4 @@ def test_bad_input_is_refused_with_one_line():
     with pytest.raises(InputError, match="f_tip"):
         model.forward_dynamics(q, np.zeros(n), np.zeros(n), f_tip=[1.0, 2.0])
     with pytest.raises(InputError, match="expected a Stack"):
-        RecursiveModel("six_modules.toml")  # type: ignore[arg-type]
+        RecursiveModel("six_modules.toml")
