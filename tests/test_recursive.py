@@ -27,7 +27,7 @@ from vgtarm.errors import AssemblyError, InputError
 from vgtarm.model import compiled
 from vgtarm.model.definition import StackDefinition
 from vgtarm.model.parameters import Body
-from vgtarm.model.recursive import RecursiveModel, library
+from vgtarm.model.recursive import RecursiveModel, library, recursive_robot, stack_from_vector
 from vgtarm.model.stack import Stack, StackModel, StackModule, Twist, load_stack, stack_margins
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -337,3 +337,64 @@ def test_bad_input_is_refused_with_one_line():
         model.forward_dynamics(q, np.zeros(n), np.zeros(n), f_tip=[1.0, 2.0])
     with pytest.raises(InputError, match="expected a Stack"):
         RecursiveModel("six_modules.toml")
+
+
+# -- the Robot on the recursive model ---------------------------------------------------------
+
+
+@pytest.mark.parametrize("k", [1, 4, 6])
+def test_the_parameter_vector_reads_back_into_the_same_stack(k):
+    stack = varied_stack(k)
+    back = stack_from_vector(stack, stack.vector())
+    assert back.vector().tobytes() == stack.vector().tobytes()
+    assert StackDefinition.of(back) == StackDefinition.of(stack)
+    scaled = stack.scaled(mass=1.3, inertia=0.7, friction=2.0)
+    assert stack_from_vector(stack, scaled.vector()).vector().tobytes() == scaled.vector().tobytes()
+
+
+def test_a_robot_on_the_recursive_model_is_the_symbolic_robot():
+    """Robot(stack, RecursiveBackend(stack)) against the Robot of the symbolic model (its compiled
+    library when cached, else CasADi's interpreter), with the Robot's own checks, and with other
+    parameters through with_parameters."""
+    import vgtarm
+    from vgtarm.model.compiled import InterpretedBackend, functions_of
+
+    stack = varied_stack(3)
+    definition = StackDefinition.of(stack)
+    names = ["fk", "tip", "jac", "mass", "bias_forces", "fd", "id"]
+    symbolic = vgtarm.Robot(stack, InterpretedBackend(functions_of(definition, names).functions))
+    robot = recursive_robot(stack)
+    assert robot.backend.kind == "recursive"
+    s = states(stack, 40, seed=11)
+    q, qd = s["q"], s["qd"]
+    for other in (stack, stack.scaled(mass=1.4, friction=0.5)):
+        a, b = robot.with_parameters(other), symbolic.with_parameters(other)
+        assert (
+            relative(a.forward_kinematics(q).platform_rotation, b.forward_kinematics(q).platform_rotation) <= TOLERANCE
+        )
+        assert relative(a.tip_position(q), b.tip_position(q)) <= TOLERANCE
+        assert relative(a.tip_jacobian(q), b.tip_jacobian(q)) <= TOLERANCE
+        assert relative(a.angular_jacobian(q), b.angular_jacobian(q)) <= TOLERANCE
+        assert relative(a.mass_matrix(q), b.mass_matrix(q)) <= TOLERANCE
+        assert relative(a.bias_forces(q, qd), b.bias_forces(q, qd)) <= TOLERANCE
+        assert (
+            relative(a.inverse_dynamics(q, qd, s["qdd"], s["f"]), b.inverse_dynamics(q, qd, s["qdd"], s["f"]))
+            <= TOLERANCE
+        )
+        assert relative(a.forward_dynamics(q, qd, s["F"], s["f"]), b.forward_dynamics(q, qd, s["F"], s["f"])) <= 1e-9
+    with pytest.raises(InputError, match="no compiled function named 'ik_pose'"):
+        robot.evaluate("ik_pose", {}, 1)
+    with pytest.raises(AssemblyError):
+        robot.mass_matrix(np.full(stack.n_joints, 0.01))
+
+
+def test_a_fifty_module_robot_needs_no_compile():
+    stack = long_stack(50)
+    robot = recursive_robot(stack)
+    q = configurations(stack, 3, seed=2)
+    qdd = robot.forward_dynamics(q, np.zeros_like(q), np.zeros_like(q))
+    assert np.isfinite(qdd).all()
+    assert (
+        np.abs(robot.inverse_dynamics(q, np.zeros_like(q), qdd)).max()
+        <= 1e-8 * np.abs(robot.bias_forces(q, np.zeros_like(q))).max()
+    )

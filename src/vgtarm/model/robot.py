@@ -29,7 +29,7 @@ from ..fileio import parse_toml, read_text_limited
 from ..markup import html_table
 from ..memory import check_batch
 from .assembly import check_margins
-from .compiled import CompiledBackend, InterpretedBackend, get_backend
+from .compiled import Backend, CompiledBackend, InterpretedBackend, get_backend
 from .definition import PAPER, Definition, StackDefinition
 from .parameters import ROBOT_FILE_LIMIT, RobotParameters, load_parameters, parameters_from_dict
 from .sanity import (
@@ -132,7 +132,7 @@ class Robot:
     def __init__(
         self,
         parameters: RobotParameters | Stack,
-        backend: CompiledBackend | InterpretedBackend | None = None,
+        backend: CompiledBackend | InterpretedBackend | Backend | None = None,
     ) -> None:
         definition = definition_of(parameters)
         # RobotParameters or Stack (typed Any: the layers above read the fields both share)
