@@ -58,8 +58,12 @@ from vgtarm.model.recursive import RecursiveModel
 stack = family(50)
 model = RecursiveModel(stack)
 model.forward_dynamics(stack.home, np.zeros(stack.n_joints), np.zeros(stack.n_joints))
-import resource
-peak = max(resource.getrusage(who).ru_maxrss for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
+import re, resource
+# VmHWM: this process's own peak (ru_maxrss of a process started by a large one reports the
+# parent's size at the fork); the compiler's, started by this small process, from ru_maxrss
+status = open("/proc/self/status").read()
+own = int(re.search(r"VmHWM:\\s+(\\d+)", status).group(1))
+peak = max(own, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)
 print(time.perf_counter() - start, peak * 1024)
 """
 
@@ -141,7 +145,10 @@ def pinocchio_chain(stack: Stack) -> tuple[object, object]:
 
 def _pinocchio_per_sample(stack: Stack, n: int) -> tuple[float, float]:
     """Pinocchio's ABA per sample: batched (``abaInParallel``, one thread) and one Python call per sample."""
-    pin, model = pinocchio_chain(stack)
+    try:
+        pin, model = pinocchio_chain(stack)
+    except ImportError:  # the extra `bench` (PyPI `pin`) is not installed
+        return math.nan, math.nan
     assert model.nv == stack.n_joints  # type: ignore[attr-defined]
     rng = np.random.default_rng(1)
     q = np.column_stack([pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq)) for _ in range(n)])  # type: ignore[attr-defined]
