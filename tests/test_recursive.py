@@ -16,6 +16,7 @@
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable
 from functools import partial
 from pathlib import Path
@@ -413,3 +414,34 @@ def test_a_ten_module_arm_on_the_recursive_model_equals_mujoco():
     assert worst["mass matrix M (relative)"] <= 1e-10
     assert worst["bias forces C, moving (relative)"] <= 1e-10
     assert worst["forward dynamics moving, efforts and tip force (relative)"] <= 1e-9
+
+
+def test_a_damaged_library_is_never_opened_and_is_rebuilt(tmp_path, monkeypatch):
+    """The library is checked against its metadata (size, SHA-256) before it is opened: an altered
+    file is removed and built again, and a library without metadata is not trusted."""
+    if compiled.find_compiler() is None:
+        pytest.skip("no C compiler")
+    folder = tmp_path / "cache"
+    monkeypatch.setenv("VGTARM_CACHE_DIR", str(folder))
+    library.load_library.cache_clear()
+    try:
+        library.load_library()
+        (so,) = folder.glob("vgtarm_rec_*.so")
+        (meta,) = folder.glob("vgtarm_rec_*.json")
+        good = so.read_bytes()
+        altered = good[:-1] + bytes([good[-1] ^ 1])  # one bit changed
+        (tmp_path / "altered.so").write_bytes(altered)  # a new file: the loaded one stays mapped intact
+        os.replace(tmp_path / "altered.so", so)
+        library.load_library.cache_clear()
+        built: list[int] = []
+        real = library._compile
+        monkeypatch.setattr(library, "_compile", lambda *a: built.append(1) or real(*a))
+        library.load_library()
+        assert built == [1]
+        assert so.read_bytes() != altered
+        meta.unlink()  # no metadata: built again, never opened as it is
+        library.load_library.cache_clear()
+        library.load_library()
+        assert built == [1, 1] and meta.is_file()
+    finally:
+        library.load_library.cache_clear()
