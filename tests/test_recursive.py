@@ -28,7 +28,8 @@ from vgtarm.errors import AssemblyError, InputError
 from vgtarm.model import compiled
 from vgtarm.model.definition import StackDefinition
 from vgtarm.model.parameters import Body
-from vgtarm.model.recursive import RecursiveModel, library, recursive_robot, stack_from_vector
+from vgtarm.model.recursive import RecursiveModel, library, stack_from_vector
+from vgtarm.model.robot import recursive_robot
 from vgtarm.model.stack import Stack, StackModel, StackModule, Twist, load_stack, stack_margins
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -445,3 +446,25 @@ def test_a_damaged_library_is_never_opened_and_is_rebuilt(tmp_path, monkeypatch)
         assert built == [1, 1] and meta.is_file()
     finally:
         library.load_library.cache_clear()
+
+
+def test_load_robot_chooses_the_model(monkeypatch):
+    import vgtarm
+    from vgtarm.errors import ConfigError
+
+    path = EXAMPLES / "planar_module.toml"
+    assert vgtarm.load_robot(path, model="recursive").backend.kind == "recursive"
+    monkeypatch.setenv("VGTARM_MODEL", "recursive")
+    assert vgtarm.load_robot(path).backend.kind == "recursive"
+    monkeypatch.setenv("VGTARM_MODEL", "fastest")
+    with pytest.raises(ConfigError, match=r"\$VGTARM_MODEL = 'fastest': expected one of symbolic, recursive"):
+        vgtarm.load_robot(path)
+    monkeypatch.delenv("VGTARM_MODEL")
+    with pytest.raises(ConfigError, match="model = 'x'"):
+        vgtarm.load_robot(path, model="x")
+    with pytest.raises(ConfigError, match="the paper's robot keeps its symbolic model"):
+        vgtarm.load_robot(None, model="recursive")
+    fifty = long_stack(50)
+    with pytest.raises(InputError, match="expected a Stack"):
+        recursive_robot(load_stack(EXAMPLES / "paper_robot.toml").modules)
+    assert recursive_robot(fifty).n_joints == fifty.n_joints

@@ -6,10 +6,11 @@ twist stage a revolute joint; the C loops of ``csrc/vgt_rec.c`` run Featherstone
 over the chain (forward kinematics and Jacobians, composite rigid bodies for ``M``, recursive
 Newton-Euler for inverse dynamics and ``C``, articulated bodies for forward dynamics), the arm
 being data (:class:`RecursiveModel`). One library (:mod:`.library`) serves every arm.
-:func:`recursive_robot` gives a :class:`~vgtarm.model.robot.Robot` on it (:mod:`.backend`).
+:func:`vgtarm.model.robot.recursive_robot` (or ``load_robot(path, model="recursive")``) gives a
+:class:`~vgtarm.model.robot.Robot` on it (:mod:`.backend`).
 """
 
-from .backend import RecursiveBackend, recursive_robot, stack_from_vector
+from .backend import RecursiveBackend, stack_from_vector
 from .model import RecursiveModel, spatial_inertia
 
-__all__ = ["RecursiveBackend", "RecursiveModel", "recursive_robot", "spatial_inertia", "stack_from_vector"]
+__all__ = ["RecursiveBackend", "RecursiveModel", "spatial_inertia", "stack_from_vector"]

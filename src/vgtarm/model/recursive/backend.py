@@ -1,6 +1,7 @@
 """The recursive model behind :class:`~vgtarm.model.robot.Robot`: a backend of the model's functions.
 
-``Robot(stack, RecursiveBackend(stack))`` (or :func:`recursive_robot`) is a robot whose forward
+``Robot(stack, RecursiveBackend(stack))`` (:func:`vgtarm.model.robot.recursive_robot`,
+``load_robot(path, model="recursive")``) is a robot whose forward
 kinematics, tip and angular Jacobians, ``M``, ``C``, forward and inverse dynamics come from the
 recursive model (:class:`~.model.RecursiveModel`), with the Robot's own checks of every input and
 result. Nothing is compiled for the arm, so any stack up to the 50 modules of
@@ -18,7 +19,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,9 +29,6 @@ from ..outline import shapes
 from ..parameters import Body
 from ..stack.description import BODY_VALUES, Stack
 from .model import RecursiveModel
-
-if TYPE_CHECKING:
-    from ..robot import Robot
 
 Array = NDArray[np.float64]
 
@@ -159,10 +156,3 @@ class RecursiveBackend:
         if name == "fd":
             return [model.forward_dynamics(q, rows[1], rows[2], rows[3])]
         return [model.inverse_dynamics(q, rows[1], rows[2], rows[3])]  # "id"
-
-
-def recursive_robot(stack: Stack) -> Robot:
-    """A :class:`~vgtarm.model.robot.Robot` of ``stack`` on the recursive model (nothing compiled for it)."""
-    from ..robot import Robot
-
-    return Robot(stack, RecursiveBackend(stack))
