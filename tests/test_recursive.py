@@ -168,6 +168,16 @@ def test_equal_to_the_symbolic_stack_model_on_random_states(name):
     got = recursive_batch(RecursiveModel(stack), s)
     errors = {key: relative(got[key], want[key]) for key in want}
     assert max(errors.values()) <= TOLERANCE, errors
+    # the twist parts' frames: the platform's position, turned by the twist about its normal
+    model = RecursiveModel(stack)
+    twists = [i for i, unit in enumerate(stack.joint_units) if unit == "rad"]
+    twist_bodies = [b for b in range(model.n_bodies) if b not in model.module_bodies]
+    for joint, b in zip(twists, twist_bodies, strict=True):
+        c, s_ = np.cos(s["q"][:, joint]), np.sin(s["q"][:, joint])
+        rz = np.zeros((len(c), 3, 3))
+        rz[:, 0, 0], rz[:, 0, 1], rz[:, 1, 0], rz[:, 1, 1], rz[:, 2, 2] = c, -s_, s_, c, 1.0
+        assert np.allclose(got["body_rotation"][:, b], got["body_rotation"][:, b - 1] @ rz, atol=1e-14)
+        assert np.array_equal(got["body_position"][:, b], got["body_position"][:, b - 1])
 
 
 CACHED = ["planar_module.toml", "paper_robot.toml", "six_modules.toml"]

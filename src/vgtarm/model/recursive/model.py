@@ -180,7 +180,9 @@ class RecursiveModel:
     def forward_kinematics(self, q: ArrayLike) -> dict[str, Array]:
         """``tip`` ``(..., 3)``, ``rotation`` ``(..., 3, 3)`` of the end-effector, the platform frames
         ``platform_position`` ``(..., m, 3)`` and ``platform_rotation`` ``(..., m, 3, 3)``, and the
-        ``passive`` angles ``(..., m, 4)`` (alpha, beta, gamma, theta of each module)."""
+        ``passive`` angles ``(..., m, 4)`` (alpha, beta, gamma, theta of each module), and the frames of
+        every body of the chain (platforms and twist parts, base first; origin at the platform
+        centre), ``body_position`` ``(..., b, 3)`` and ``body_rotation`` ``(..., b, 3, 3)``."""
         qa = self._q(q)
         count, nb, m = len(qa), self.n_bodies, self.stack.n_modules
         tip, rot = np.empty((count, 3)), np.empty((count, 3, 3))
@@ -192,6 +194,8 @@ class RecursiveModel:
             "platform_position": pos[:, self.module_bodies],
             "platform_rotation": brot[:, self.module_bodies],
             "passive": passive,
+            "body_position": pos,
+            "body_rotation": brot,
         }
         return {key: self._shaped(q, value) for key, value in out.items()}
 
