@@ -320,9 +320,19 @@ def test_a_second_arm_compiles_nothing(monkeypatch):
     library.load_library.cache_clear()
 
 
-def test_the_cache_key_follows_the_sources_and_the_compiler():
+def test_the_cache_key_follows_the_sources_and_the_compiler(monkeypatch, tmp_path):
     assert library.cache_key("cc") == library.cache_key("cc")
     assert library.cache_key("cc") != library.cache_key("clang")
+    sources = library._sources()
+    names = {p.relative_to(library._HERE.parent).as_posix() for p in sources}
+    # the generated module functions come from joint.py and the model's symbolic.py (solve_module)
+    assert {"recursive/joint.py", "symbolic.py", "recursive/library.py", "recursive/csrc/vgt_rec.c"} <= names
+    assert "recursive/csrc/vgt_rec.h" in names and "recursive/model.py" not in names
+    changed = tmp_path / "symbolic.py"
+    changed.write_text((library._HERE.parent / "symbolic.py").read_text() + "\n# changed\n")
+    key = library.cache_key("cc")
+    monkeypatch.setattr(library, "_sources", lambda: [changed if p.name == "symbolic.py" else p for p in sources])
+    assert library.cache_key("cc") != key
 
 
 # -- bad input --------------------------------------------------------------------------------

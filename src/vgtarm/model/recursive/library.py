@@ -8,8 +8,9 @@ seconds) and every later arm, of any size and any module types, loads it at once
 The cache is the model's (:func:`vgtarm.model.compiled.cache_dir`, with its trust rules): beside
 ``vgtarm_rec_<key>.so`` lies ``vgtarm_rec_<key>.json`` with the key and the library's size and
 SHA-256, compared before the library is opened by its absolute path; anything that fails a check
-is rebuilt once. The key hashes this package's sources (the module recipe and the C loops), the
-compile flags, the CasADi and cffi versions and the compiler command.
+is rebuilt once. The key hashes what shapes the library (the module recipe, the symbolic definition it is
+generated from, this build recipe, the C loops), the compile flags, the CasADi and cffi versions
+and the compiler command.
 """
 
 from __future__ import annotations
@@ -40,15 +41,18 @@ _LOCK = threading.Lock()
 
 
 def _sources() -> list[Path]:
-    return sorted(p for p in _HERE.rglob("*") if p.is_file() and p.suffix in (".py", ".c", ".h"))
+    """What shapes the library: the module recipe, the model's symbolic definition it is generated
+    from (``solve_module``...), this build recipe and the C loops (not the Python around them)."""
+    recipe = [_HERE / "joint.py", _HERE.parent / "symbolic.py", _HERE / "library.py"]
+    return recipe + sorted(p for p in _CSRC.iterdir() if p.suffix in (".c", ".h"))
 
 
 def cache_key(compiler: str) -> str:
-    """The key of the library for ``compiler``: every source of this package, the flags, the
-    CasADi and cffi versions and the compiler command."""
+    """The key of the library for ``compiler``: the sources that shape it (:func:`_sources`), the
+    flags, the CasADi and cffi versions and the compiler command."""
     digest = hashlib.sha256()
     for path in _sources():
-        digest.update(path.relative_to(_HERE).as_posix().encode())
+        digest.update(path.name.encode())  # the names are distinct
         digest.update(path.read_bytes())
     digest.update(repr(_CFLAGS).encode())
     digest.update(str(getattr(ca, "__version__", "unknown")).encode())
