@@ -18,6 +18,7 @@ from . import (  # noqa: E402
     bench_ik,
     bench_model,
     bench_mujoco,
+    bench_recursive,
     bench_reproduce,
     bench_sim,
     bench_stacks,
@@ -34,6 +35,7 @@ MODULES = {
     "mujoco": bench_mujoco,
     "reproduce": bench_reproduce,
     "stacks": bench_stacks,
+    "recursive": bench_recursive,
     "export": bench_export,
 }
 #: Groups run when none is named (``stacks`` is long: it compiles ten libraries from cold).

@@ -348,6 +348,9 @@ def run() -> list[Figures]:
         f"Compiled library against CasADi's interpreter ({k} modules, same run)",
         _interpreter_rows(stacks[k], rows[k - 1]),
     )
+    from . import bench_recursive  # the recursive model, 1 to 50 modules, beside the symbolic one
+
+    bench_recursive.run()
     return rows
 
 

@@ -101,6 +101,10 @@ RUNTIME_ONLY = frozenset(
         "outline.py",
     }
 )
+#: Sub-packages of the model package that build and cache a library of their own, with a key of
+#: their own (the recursive model, :mod:`vgtarm.model.recursive`): the key of this module's
+#: libraries skips them, as no code generation here imports them (tested).
+SEPARATE_LIBRARIES = frozenset({"recursive"})
 _CSRC = _PACKAGE_DIR / "csrc"
 _CFLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off")
 #: Flags of a stack's generated functions, compiled apart before the link with the drivers (built
@@ -435,7 +439,7 @@ def find_compiler() -> str | None:
 
 def model_sources() -> list[Path]:
     """Every source file of the ``vgtarm.model`` package that can shape a compiled library (all
-    but :data:`RUNTIME_ONLY`), in a fixed order."""
+    but :data:`RUNTIME_ONLY` and :data:`SEPARATE_LIBRARIES`), in a fixed order."""
     return sorted(
         path
         for path in _PACKAGE_DIR.rglob("*")
@@ -443,6 +447,7 @@ def model_sources() -> list[Path]:
         and path.suffix in _SOURCE_SUFFIXES
         and "__pycache__" not in path.parts
         and path.relative_to(_PACKAGE_DIR).as_posix() not in RUNTIME_ONLY
+        and path.relative_to(_PACKAGE_DIR).parts[0] not in SEPARATE_LIBRARIES
     )
 
 

@@ -29,9 +29,10 @@ from ..fileio import parse_toml, read_text_limited
 from ..markup import html_table
 from ..memory import check_batch
 from .assembly import check_margins
-from .compiled import CompiledBackend, InterpretedBackend, get_backend
+from .compiled import Backend, CompiledBackend, InterpretedBackend, get_backend
 from .definition import PAPER, Definition, StackDefinition
 from .parameters import ROBOT_FILE_LIMIT, RobotParameters, load_parameters, parameters_from_dict
+from .recursive.backend import RecursiveBackend
 from .sanity import (
     FORCE_NAMES,
     RANGE_REASONS,
@@ -132,7 +133,7 @@ class Robot:
     def __init__(
         self,
         parameters: RobotParameters | Stack,
-        backend: CompiledBackend | InterpretedBackend | None = None,
+        backend: CompiledBackend | InterpretedBackend | Backend | None = None,
     ) -> None:
         definition = definition_of(parameters)
         # RobotParameters or Stack (typed Any: the layers above read the fields both share)
@@ -541,22 +542,57 @@ class Robot:
         return t.reshape(shape), v.reshape(shape)
 
 
-def load_robot(config: str | Path | None = None) -> Robot:
+#: The models a stack's Robot can run on (``load_robot(model=...)``, ``$VGTARM_MODEL``). The
+#: symbolic one stays the default until the inverse kinematics and the control run on the recursive
+#: one (issue 24); a stack too large to build is still refused up front (:mod:`.budget`).
+MODEL_CHOICES = ("symbolic", "recursive")
+
+
+def recursive_robot(stack: Stack) -> Robot:
+    """A robot of ``stack`` on the recursive model (:mod:`vgtarm.model.recursive`): forward kinematics,
+    Jacobians, ``M``, ``C``, forward and inverse dynamics in ``O(n)``, nothing compiled for the arm;
+    the inverse kinematics and the control functions are not on it yet (refused by name)."""
+    if not isinstance(stack, Stack):
+        raise InputError(f"stack = {shown(stack)}: expected a Stack (the recursive model is for stacks of modules)")
+    return Robot(stack, RecursiveBackend(stack))
+
+
+def _robot_of(parameters: RobotParameters | Stack, model: str | None) -> Robot:
+    """The robot of ``parameters`` on the chosen model (the paper's robot: always its symbolic one)."""
+    choice = (os.environ.get("VGTARM_MODEL", "") or "symbolic") if model is None else model
+    if choice not in MODEL_CHOICES:
+        where = "model" if model is not None else "$VGTARM_MODEL"
+        raise ConfigError(f"{where} = {shown(choice)}: expected one of {', '.join(MODEL_CHOICES)}")
+    if choice == "recursive":
+        if isinstance(parameters, RobotParameters):
+            raise ConfigError(
+                "model = 'recursive' is for stacks of modules; the paper's robot keeps its symbolic model "
+                "(convert it: vgtarm convert-robot --out stack.toml)"
+            )
+        return recursive_robot(parameters)
+    return Robot(parameters)
+
+
+def load_robot(config: str | Path | None = None, *, model: str | None = None) -> Robot:
     """Load a robot: the shipped reference robot, or the TOML file ``config``.
 
     A file with ``[[modules]]`` tables (or an ``[end_effector]`` table) describes a stack of modules
     (:mod:`vgtarm.model.stack.description`); any other, the paper's 7-joint robot
     (:func:`load_parameters`). Either way a bad file raises one
     :class:`~vgtarm.errors.ConfigError` line naming the field.
+
+    ``model`` (default ``$VGTARM_MODEL``, else ``symbolic``) chooses a stack's model: ``symbolic``
+    (the compiled symbolic library) or ``recursive`` (:func:`recursive_robot`: any size at once, but
+    no inverse kinematics or control on it yet). The paper's robot always runs on its symbolic model.
     """
     if config is None:
-        return Robot(load_parameters(None))
+        return _robot_of(load_parameters(None), model)
     if isinstance(config, str | os.PathLike):
         text = read_text_limited(config, ROBOT_FILE_LIMIT, "configuration file", error=ConfigError)
         data = parse_toml(text, cut(str(config), 200), error=ConfigError)
         if is_stack_format(data):
-            return Robot(stack_from_dict(data, source=str(config)))
-    return Robot(load_parameters(config))
+            return _robot_of(stack_from_dict(data, source=str(config)), model)
+    return _robot_of(load_parameters(config), model)
 
 
 def is_stack_format(data: Mapping[str, Any]) -> bool:

@@ -1,0 +1,247 @@
+"""The recursive model of a stack (issue 24) from 1 to 50 modules, against the symbolic model and Pinocchio.
+
+Run with ``python -m benchmarks recursive`` (a minute), and at the end of ``python -m benchmarks
+stacks``. The robots are :func:`benchmarks.bench_stacks.family` (``k`` paper modules, planes
+alternating 0 and 90 degrees, a twist stage after every second module and the paper's twist on
+the last). Figures, all in this process and run:
+
+- **build**: the recursive model's one library compiled cold into a fresh temporary cache folder,
+  in a process of its own (wall time and that process's peak memory, compiler included), which then
+  makes the 50-module arm and evaluates it; then **a second arm** (another process on the same
+  folder: import, load, the 50-module arm's model made and evaluated once), and the making of one
+  arm's model in this process (its data arrays: nothing is compiled per arm);
+- **forward dynamics per sample**, batches of configurations within a tenth of each joint's span
+  around home: the recursive model (articulated bodies, C), the symbolic model's compiled library
+  where the cache already holds it (the structures of 2 and 6 modules; building the others takes
+  minutes to hours and is what ``python -m benchmarks stacks`` measures), and **Pinocchio**'s
+  articulated-body algorithm (``abaInParallel`` on one thread: its batched C++ entry point) on a
+  serial chain with the same number of degrees of freedom and bodies: one planar joint (two
+  translations, one rotation, as a module's platform moves) per module, one revolute joint per
+  twist, bodies of the same masses and inertias;
+- the growth exponent ``a`` of ``y ~ n^a`` between 10 and 50 modules.
+
+Times are CPU time of this process (``time.process_time``): on a machine shared with other work,
+wall time counts the waits for a busy core; both are printed for the recursive model.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from vgtarm.model.compiled import library_cached
+from vgtarm.model.definition import StackDefinition
+from vgtarm.model.recursive import RecursiveModel
+from vgtarm.model.stack import Stack
+
+from .bench_stacks import family
+from .common import _fmt
+
+MODULE_COUNTS = (1, 2, 4, 6, 8, 10, 15, 20, 30, 40, 50)
+SAMPLES = 20_000
+TARGETS = {"fd10": 5e-6, "fd50": 30e-6, "growth": 1.3, "build": 15.0, "memory": 500e6, "second": 1.0}
+_SCRIPT = """
+import sys, time
+start = time.perf_counter()
+sys.path.insert(0, {root!r})
+import numpy as np
+from benchmarks.bench_stacks import family
+from vgtarm.model.recursive import RecursiveModel
+stack = family(50)
+model = RecursiveModel(stack)
+model.forward_dynamics(stack.home, np.zeros(stack.n_joints), np.zeros(stack.n_joints))
+import re, resource
+# VmHWM: this process's own peak (ru_maxrss of a process started by a large one reports the
+# parent's size at the fork); the compiler's, started by this small process, from ru_maxrss
+status = open("/proc/self/status").read()
+own = int(re.search(r"VmHWM:\\s+(\\d+)", status).group(1))
+peak = max(own, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)
+print(time.perf_counter() - start, peak * 1024)
+"""
+
+
+def _inputs(stack: Stack, n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    span = stack.upper - stack.lower
+    q = stack.home + 0.1 * span * rng.uniform(-1.0, 1.0, size=(n, stack.n_joints))
+    return q, rng.normal(scale=0.1, size=q.shape), rng.normal(scale=50.0, size=q.shape)
+
+
+def _per_sample(call: Callable[[], object], n: int, clock: Callable[[], float] = time.process_time) -> float:
+    """Best of five timings of ``call`` (a batch of ``n``), per sample."""
+    call()
+    best = math.inf
+    for _ in range(5):
+        start = clock()
+        call()
+        best = min(best, clock() - start)
+    return best / n
+
+
+def _in_process(env: dict[str, str]) -> tuple[float, float, float]:
+    """Wall time, the child's own figure (s) and the peak memory (bytes: the largest of the process
+    and of its compiler) of one run of :data:`_SCRIPT`."""
+    root = str(Path(__file__).resolve().parents[1])
+    start = time.perf_counter()
+    done = subprocess.run(
+        [sys.executable, "-c", _SCRIPT.format(root=root)], env=env, capture_output=True, text=True, check=True
+    )
+    wall = time.perf_counter() - start
+    inside, peak = (float(x) for x in done.stdout.strip().splitlines()[-1].split())
+    return wall, inside, peak
+
+
+def _build_figures() -> dict[str, float]:
+    with tempfile.TemporaryDirectory(prefix="vgtarm-bench-recursive-") as folder:
+        os.chmod(folder, 0o700)
+        env = {**os.environ, "VGTARM_CACHE_DIR": folder}
+        cold_wall, _, cold_peak = _in_process(env)
+        second_wall, second_inside, _ = _in_process(env)
+    stack = family(50)
+    start = time.perf_counter()
+    RecursiveModel(stack)
+    made = time.perf_counter() - start
+    return {
+        "cold": cold_wall,
+        "cold_peak": cold_peak,
+        "second": second_wall,
+        "second_inside": second_inside,
+        "made": made,
+    }
+
+
+def pinocchio_chain(stack: Stack) -> tuple[object, object]:
+    """A Pinocchio model of the same chain shape: a planar joint per module, a revolute joint per twist."""
+    import pinocchio as pin
+
+    model = pin.Model()
+    parent = 0
+    for k, module in enumerate(stack.modules):
+        placement = pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.28]))
+        parent = model.addJoint(parent, pin.JointModelPlanar(), placement, f"module{k + 1}")
+        body = module.platform
+        model.appendBodyToJoint(
+            parent, pin.Inertia(body.mass, np.array(body.com), np.array(body.inertia)), pin.SE3.Identity()
+        )
+        if module.twist is not None:
+            parent = model.addJoint(parent, pin.JointModelRZ(), pin.SE3.Identity(), f"twist{k + 2}")
+            twist = module.twist.body
+            if twist is not None:
+                model.appendBodyToJoint(
+                    parent, pin.Inertia(twist.mass, np.array(twist.com), np.array(twist.inertia)), pin.SE3.Identity()
+                )
+    ee = stack.end_effector
+    model.appendBodyToJoint(parent, pin.Inertia(ee.mass, np.array(ee.com), np.array(ee.inertia)), pin.SE3.Identity())
+    return pin, model
+
+
+def _pinocchio_per_sample(stack: Stack, n: int) -> tuple[float, float]:
+    """Pinocchio's ABA per sample: batched (``abaInParallel``, one thread) and one Python call per sample."""
+    try:
+        pin, model = pinocchio_chain(stack)
+    except ImportError:  # the extra `bench` (PyPI `pin`) is not installed
+        return math.nan, math.nan
+    assert model.nv == stack.n_joints  # type: ignore[attr-defined]
+    rng = np.random.default_rng(1)
+    q = np.column_stack([pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq)) for _ in range(n)])  # type: ignore[attr-defined]
+    v = rng.normal(scale=0.1, size=(model.nv, n))  # type: ignore[attr-defined]
+    tau = rng.normal(scale=5.0, size=(model.nv, n))  # type: ignore[attr-defined]
+    pool = pin.ModelPool(model, 1)  # type: ignore[attr-defined]
+    out = np.zeros((model.nv, n))  # type: ignore[attr-defined]
+    batched = _per_sample(lambda: pin.abaInParallel(1, pool, q, v, tau, out), n)  # type: ignore[attr-defined]
+    data = model.createData()  # type: ignore[attr-defined]
+    m = min(n, 2000)
+    columns = [(q[:, i].copy(), v[:, i].copy(), tau[:, i].copy()) for i in range(m)]
+
+    def loop() -> None:
+        for a, b, c in columns:
+            pin.aba(model, data, a, b, c)  # type: ignore[attr-defined]
+
+    return batched, _per_sample(loop, m)
+
+
+def _growth(x: list[float], y: list[float]) -> float:
+    return float(np.polyfit(np.log(x), np.log(y), 1)[0])
+
+
+def _row(k: int) -> dict[str, float]:
+    """The figures of ``k`` modules."""
+    import vgtarm
+
+    stack = family(k)
+    model = RecursiveModel(stack)
+    q, qd, F = _inputs(stack, SAMPLES)
+    row: dict[str, float] = {"k": k, "n": stack.n_joints, "bodies": model.n_bodies}
+    row["fd"] = _per_sample(lambda: model.forward_dynamics(q, qd, F), SAMPLES)
+    row["fd_wall"] = _per_sample(lambda: model.forward_dynamics(q, qd, F), SAMPLES, time.perf_counter)
+    row["id"] = _per_sample(lambda: model.inverse_dynamics(q, qd, F), SAMPLES)
+    m = max(SAMPLES // k, 200)
+    row["mass"] = _per_sample(lambda: model.mass_matrix(q[:m]), m)
+    row["symbolic"] = math.nan
+    if library_cached(StackDefinition.of(stack)):
+        robot = vgtarm.Robot(stack)
+        row["symbolic"] = _per_sample(lambda: robot.forward_dynamics(q, qd, F), SAMPLES)
+    row["pinocchio"], row["pinocchio_loop"] = _pinocchio_per_sample(stack, SAMPLES)
+    symbolic = _fmt(row["symbolic"]) if math.isfinite(row["symbolic"]) else "-"
+    print(
+        f"  {k} modules ({stack.n_joints} joints): FD {_fmt(row['fd'])}, ID {_fmt(row['id'])}, "
+        f"M {_fmt(row['mass'])}, symbolic FD {symbolic}, Pinocchio ABA {_fmt(row['pinocchio'])}",
+        flush=True,
+    )
+    return row
+
+
+def run() -> list[dict[str, float]]:
+    rows = [_row(k) for k in MODULE_COUNTS]
+    build = _build_figures()
+    _print(rows, build)
+    return rows
+
+
+def _print(rows: list[dict[str, float]], build: dict[str, float]) -> None:
+    print("\n### The recursive model, 1 to 50 modules (per sample, CPU time; ratios in the same run)\n")
+    print(
+        "| modules | joints | bodies | forward dynamics (ABA) | wall | inverse dynamics (RNEA) | M (CRBA) "
+        "| symbolic library FD | symbolic / recursive | Pinocchio ABA, batched | recursive / Pinocchio "
+        "| Pinocchio ABA, one Python call each |"
+    )
+    print("|" + " --- |" * 12)
+    for r in rows:
+        sym = r["symbolic"]
+        sym_cells = f"{_fmt(sym)} | {sym / r['fd']:.1f}x" if math.isfinite(sym) else "- | -"
+        print(
+            f"| {r['k']:.0f} | {r['n']:.0f} | {r['bodies']:.0f} | {_fmt(r['fd'])} | {_fmt(r['fd_wall'])} | "
+            f"{_fmt(r['id'])} | {_fmt(r['mass'])} | {sym_cells} | {_fmt(r['pinocchio'])} | "
+            f"{r['fd'] / r['pinocchio']:.2f}x | {_fmt(r['pinocchio_loop'])} |"
+        )
+    big = [r for r in rows if r["k"] >= 10]
+    growth = _growth([r["n"] for r in big], [r["fd"] for r in big])
+    pin_growth = _growth([r["n"] for r in big], [r["pinocchio"] for r in big])
+    by_k = {int(r["k"]): r for r in rows}
+    print("\n| figure | measured | target |")
+    print("| --- | --- | --- |")
+    print(f"| forward dynamics, 10 modules (35 joints) | {_fmt(by_k[10]['fd'])} | <= 5 us |")
+    print(f"| forward dynamics, 50 modules (175 joints) | {_fmt(by_k[50]['fd'])} | <= 30 us |")
+    print(f"| growth exponent of FD, 10 to 50 modules | {growth:.2f} (Pinocchio {pin_growth:.2f}) | <= 1.3 |")
+    print(f"| recursive / Pinocchio ABA at 50 modules | {by_k[50]['fd'] / by_k[50]['pinocchio']:.2f}x | <= 3x |")
+    print(
+        f"| cold build of the one library + 50-module arm, own process (wall, peak memory) | "
+        f"{build['cold']:.1f} s, {build['cold_peak'] / 1e6:.0f} MB | <= 15 s, <= 500 MB |"
+    )
+    print(
+        f"| a second arm, own process: start, import, load, make, evaluate (wall; inside the process) | "
+        f"{build['second']:.2f} s; {build['second_inside']:.2f} s | <= 1 s |"
+    )
+    print(f"| making one 50-module arm's model in a running process | {build['made'] * 1e3:.2f} ms | |")
+
+
+if __name__ == "__main__":
+    run()

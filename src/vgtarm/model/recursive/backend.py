@@ -1,0 +1,158 @@
+"""The recursive model behind :class:`~vgtarm.model.robot.Robot`: a backend of the model's functions.
+
+``Robot(stack, RecursiveBackend(stack))`` (:func:`vgtarm.model.robot.recursive_robot`,
+``load_robot(path, model="recursive")``) is a robot whose forward
+kinematics, tip and angular Jacobians, ``M``, ``C``, forward and inverse dynamics come from the
+recursive model (:class:`~.model.RecursiveModel`), with the Robot's own checks of every input and
+result. Nothing is compiled for the arm, so any stack up to the 50 modules of
+:data:`~vgtarm.model.stack.description.MAX_MODULES` gets them at once. The functions keep the
+names, inputs and outputs of the symbolic library's (``fk``, ``tip``, ``jac``, ``mass``,
+``bias_forces``, ``fd``, ``id``; sizes from :func:`vgtarm.model.outline.shapes`); the others (the
+inverse kinematics', the control law's, the closed loops) are not on it yet and are refused by name.
+
+The parameter vector ``p`` every function takes is read back into a stack of the backend's
+structure (:func:`stack_from_vector`), so :meth:`Robot.with_parameters` works as with the
+compiled library: a robot with other masses or dimensions shares the backend.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..compiled import Signature
+from ..definition import StackDefinition
+from ..outline import shapes
+from ..parameters import Body
+from ..stack.description import BODY_VALUES, Stack
+from .model import RecursiveModel
+
+Array = NDArray[np.float64]
+
+#: The functions of the symbolic library that the recursive model provides.
+FUNCTIONS = ("fk", "tip", "jac", "mass", "bias_forces", "fd", "id")
+
+
+def _body(values: Array, name: str) -> Body:
+    m, cx, cy, cz, ixx, iyy, izz, ixy, ixz, iyz = (float(x) for x in values)
+    inertia = ((ixx, ixy, ixz), (ixy, iyy, iyz), (ixz, iyz, izz))
+    return Body(name=name, mass=m, com=(cx, cy, cz), inertia=inertia)
+
+
+def stack_from_vector(stack: Stack, p: Array) -> Stack:
+    """The stack of ``stack``'s structure whose :meth:`~Stack.vector` is ``p`` (checked as any stack)."""
+    p = np.asarray(p, dtype=float).ravel()
+    if p.shape != (stack.n_parameters,):
+        raise ValueError(f"p must have {stack.n_parameters} values for this stack, got {p.shape}")
+    o = 0
+    modules = []
+    for k, module in enumerate(stack.modules, start=1):
+        b, d = float(p[o]), float(p[o + 1])
+        platform = _body(p[o + 2 : o + 2 + BODY_VALUES], f"platform{k}")
+        o += 2 + BODY_VALUES
+        twist = module.twist
+        if twist is not None:
+            height = float(p[o])
+            o += 1
+            body = None
+            if twist.body is not None:
+                body = _body(p[o : o + BODY_VALUES], f"twist{k + 1}")
+                o += BODY_VALUES
+            twist = replace(twist, height=height, body=body)
+        modules.append((b, d, platform, twist))
+    end_effector = _body(p[o : o + BODY_VALUES], "end_effector")
+    o += BODY_VALUES
+    tool = p[o : o + 3]
+    viscous = p[o + 3 : o + 3 + stack.n_joints]
+    gravity = p[o + 3 + stack.n_joints :]
+    built = []
+    i = 0
+    for module, (b, d, platform, twist) in zip(stack.modules, modules, strict=True):
+        legs = (float(viscous[i]), float(viscous[i + 1]), float(viscous[i + 2]))
+        i += 3
+        if twist is not None:
+            twist = replace(twist, viscous=float(viscous[i]))
+            i += 1
+        built.append(replace(module, b=b, d=d, platform=platform, viscous=legs, twist=twist))
+    return replace(
+        stack,
+        modules=tuple(built),
+        end_effector=end_effector,
+        tool=(float(tool[0]), float(tool[1]), float(tool[2])),
+        gravity=(float(gravity[0]), float(gravity[1]), float(gravity[2])),
+    )
+
+
+class RecursiveBackend:
+    """The functions :data:`FUNCTIONS` of a stack's model, evaluated by the recursive model."""
+
+    kind = "recursive"
+
+    def __init__(self, stack: Stack) -> None:
+        self.stack = stack
+        self.n = stack.n_joints
+        found = shapes(StackDefinition.of(stack))
+        self._signatures = {
+            key: Signature(
+                name=found[key].name,
+                nnz_in=found[key].nnz_in,
+                nnz_out=found[key].nnz_out,
+                sz_arg=0,
+                sz_res=0,
+                sz_iw=0,
+                sz_w=0,
+                in_names=found[key].in_names,
+                out_names=found[key].out_names,
+            )
+            for key in FUNCTIONS
+        }
+        self._models: dict[bytes, RecursiveModel] = {stack.vector().tobytes(): RecursiveModel(stack)}
+
+    def signature(self, name: str) -> Signature:
+        if name not in self._signatures:
+            raise KeyError(f"{name!r} is not on the recursive model (it has {', '.join(FUNCTIONS)})")
+        return self._signatures[name]
+
+    def _model(self, p: Array) -> RecursiveModel:
+        key = np.ascontiguousarray(p, dtype=float).ravel().tobytes()
+        model = self._models.get(key)
+        if model is None:
+            if len(self._models) > 16:
+                self._models.clear()
+            model = self._models[key] = RecursiveModel(stack_from_vector(self.stack, np.frombuffer(key)))
+        return model
+
+    def evaluate(self, name: str, inputs: Sequence[Array], n: int) -> list[Array]:
+        sig = self.signature(name)
+        if len(inputs) != len(sig.nnz_in):
+            raise ValueError(f"{name}: {len(sig.nnz_in)} inputs expected, got {len(inputs)}")
+        *arrays, p = (np.asarray(x, dtype=float) for x in inputs)
+        model = self._model(p)
+        rows = [np.ascontiguousarray(np.broadcast_to(a, (n, a.shape[-1]))) for a in arrays]
+        if n == 0:
+            return [np.empty((0, size)) for size in sig.nnz_out]
+        q = rows[0]
+        if name in ("fk", "tip"):
+            fk = model.forward_kinematics(q)
+            if name == "tip":
+                return [fk["tip"]]
+            return [
+                fk["passive"].reshape(n, -1),
+                fk["platform_position"].reshape(n, -1),
+                fk["platform_rotation"].reshape(n, -1),
+                fk["tip"],
+                fk["rotation"].reshape(n, -1),
+            ]
+        if name == "jac":
+            jp, jw = model.jacobians(q)
+            return [jp.reshape(n, -1), jw.reshape(n, -1)]
+        if name == "mass":
+            return [model.mass_matrix(q).reshape(n, -1)]
+        if name == "bias_forces":
+            return [model.bias_forces(q, rows[1])]
+        if name == "fd":
+            return [model.forward_dynamics(q, rows[1], rows[2], rows[3])]
+        return [model.inverse_dynamics(q, rows[1], rows[2], rows[3])]  # "id"

@@ -1,0 +1,541 @@
+/* Recursive kinematics and dynamics of a stack of VGT modules (Featherstone's algorithms over a
+ * serial chain whose joints have one or three degrees of freedom).
+ *
+ * Conventions: body i hangs on joint i below it (its parent is body i - 1, or the base). The
+ * joint gives R (the body's axes in parent components, row-major) and r (the body origin in the
+ * parent frame): x_parent = R x_body + r. Spatial vectors are (angular, linear) in body
+ * coordinates, about the body origin. S (6 x nd, row-major, nd <= 3) is the motion subspace and
+ * c_J = Sdot qd its bias, both in body coordinates. */
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "vgt_rec.h"
+#include "vgt_rec_generated.h"
+
+typedef struct {
+    double R[9], r[3];    /* pose in the parent frame */
+    double R0[9], p0[3];  /* pose in the base frame */
+    double S[18], cj[6];  /* motion subspace (6 x 3, row-major) and its bias */
+    double v[6], a[6], f[6], c[6];
+    double IA[36], pA[6], U[18], Dinv[9], u[3];
+} body_t;
+
+typedef struct {
+    body_t *body;
+    const casadi_real **arg;
+    casadi_real **res;
+    casadi_int *iw;
+    casadi_real *w;
+} work_t;
+
+static int work_open(work_t *k, const vgt_rec_arm *arm) {
+    casadi_int sz_arg = 0, sz_res = 0, sz_iw = 0, sz_w = 0, a, r, i, w;
+    vgt_rec_module_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+    vgt_rec_module_kin_work(&a, &r, &i, &w);
+    if (a > sz_arg) sz_arg = a;
+    if (r > sz_res) sz_res = r;
+    if (i > sz_iw) sz_iw = i;
+    if (w > sz_w) sz_w = w;
+    k->body = (body_t *)calloc((size_t)(arm->nb > 0 ? arm->nb : 1), sizeof(body_t));
+    k->arg = (const casadi_real **)calloc((size_t)sz_arg + 1, sizeof(casadi_real *));
+    k->res = (casadi_real **)calloc((size_t)sz_res + 1, sizeof(casadi_real *));
+    k->iw = (casadi_int *)calloc((size_t)sz_iw + 1, sizeof(casadi_int));
+    k->w = (casadi_real *)calloc((size_t)sz_w + 1, sizeof(casadi_real));
+    if (!k->body || !k->arg || !k->res || !k->iw || !k->w) {
+        free(k->body), free((void *)k->arg), free(k->res), free(k->iw), free(k->w);
+        return -1;
+    }
+    return 0;
+}
+
+static void work_close(work_t *k) {
+    free(k->body), free((void *)k->arg), free(k->res), free(k->iw), free(k->w);
+}
+
+/* ---- small 3-vector and spatial helpers ------------------------------------------------------ */
+
+static void cross3(const double *a, const double *b, double *out) {
+    double x = a[1] * b[2] - a[2] * b[1], y = a[2] * b[0] - a[0] * b[2], z = a[0] * b[1] - a[1] * b[0];
+    out[0] = x, out[1] = y, out[2] = z;
+}
+
+static void mul3(const double *R, const double *x, double *out) { /* R x */
+    double a = R[0] * x[0] + R[1] * x[1] + R[2] * x[2];
+    double b = R[3] * x[0] + R[4] * x[1] + R[5] * x[2];
+    double c = R[6] * x[0] + R[7] * x[1] + R[8] * x[2];
+    out[0] = a, out[1] = b, out[2] = c;
+}
+
+static void mul3t(const double *R, const double *x, double *out) { /* R^T x */
+    double a = R[0] * x[0] + R[3] * x[1] + R[6] * x[2];
+    double b = R[1] * x[0] + R[4] * x[1] + R[7] * x[2];
+    double c = R[2] * x[0] + R[5] * x[1] + R[8] * x[2];
+    out[0] = a, out[1] = b, out[2] = c;
+}
+
+static void matmul3(const double *A, const double *B, double *out) { /* A B */
+    double t[9];
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) t[3 * i + j] = A[3 * i] * B[j] + A[3 * i + 1] * B[3 + j] + A[3 * i + 2] * B[6 + j];
+    memcpy(out, t, sizeof t);
+}
+
+/* motion vector from the parent to the body: w' = R^T w, v' = R^T (v - r x w) */
+static void motion_in(const body_t *b, const double *m, double *out) {
+    double t[3], w[3];
+    cross3(b->r, m, t);
+    t[0] = m[3] - t[0], t[1] = m[4] - t[1], t[2] = m[5] - t[2];
+    mul3t(b->R, m, w);
+    mul3t(b->R, t, out + 3);
+    out[0] = w[0], out[1] = w[1], out[2] = w[2];
+}
+
+/* force from the body to the parent: f' = R f, n' = R n + r x f' */
+static void force_out(const body_t *b, const double *f, double *out) {
+    double n[3], t[3];
+    mul3(b->R, f + 3, out + 3);
+    mul3(b->R, f, n);
+    cross3(b->r, out + 3, t);
+    out[0] = n[0] + t[0], out[1] = n[1] + t[1], out[2] = n[2] + t[2];
+}
+
+/* v x m (motion) */
+static void cross_motion(const double *v, const double *m, double *out) {
+    double a[3], b[3], c[3];
+    cross3(v, m, a);
+    cross3(v, m + 3, b);
+    cross3(v + 3, m, c);
+    out[0] = a[0], out[1] = a[1], out[2] = a[2];
+    out[3] = b[0] + c[0], out[4] = b[1] + c[1], out[5] = b[2] + c[2];
+}
+
+/* v x* f (force) */
+static void cross_force(const double *v, const double *f, double *out) {
+    double a[3], b[3], c[3];
+    cross3(v, f, a);
+    cross3(v + 3, f + 3, b);
+    cross3(v, f + 3, c);
+    out[0] = a[0] + b[0], out[1] = a[1] + b[1], out[2] = a[2] + b[2];
+    out[3] = c[0], out[4] = c[1], out[5] = c[2];
+}
+
+static void mul6(const double *I, const double *x, double *out) {
+    for (int i = 0; i < 6; ++i) {
+        const double *row = I + 6 * i;
+        out[i] = row[0] * x[0] + row[1] * x[1] + row[2] * x[2] + row[3] * x[3] + row[4] * x[4] + row[5] * x[5];
+    }
+}
+
+/* P += X^T I X: an inertia of the body (body coordinates) added to its parent's. With I =
+ * [A B; B^T C] turned into parent axes (A' = R A R^T, ...) and shifted by r (rx its cross-product
+ * matrix): [A' - B' rx + rx B'^T - rx C' rx, B' + rx C'; B'^T - C' rx, C']. */
+static void rotate_block(const double *R, const double *I, int row, int col, double *out) {
+    double t[9];
+    for (int i = 0; i < 3; ++i) /* t = R X, X the 3x3 block */
+        for (int j = 0; j < 3; ++j)
+            t[3 * i + j] = R[3 * i] * I[6 * row + col + j] + R[3 * i + 1] * I[6 * (row + 1) + col + j] +
+                           R[3 * i + 2] * I[6 * (row + 2) + col + j];
+    for (int i = 0; i < 3; ++i) /* out = t R^T */
+        for (int j = 0; j < 3; ++j) out[3 * i + j] = t[3 * i] * R[3 * j] + t[3 * i + 1] * R[3 * j + 1] + t[3 * i + 2] * R[3 * j + 2];
+}
+
+static void inertia_out(const body_t *b, const double *I, double *P) {
+    double A[9], B[9], C[9], BX[9], XC[9], XCX[9];
+    const double *r = b->r;
+    rotate_block(b->R, I, 0, 0, A);
+    rotate_block(b->R, I, 0, 3, B);
+    rotate_block(b->R, I, 3, 3, C);
+    /* BX = B rx, XC = rx C (rx = [0 -z y; z 0 -x; -y x 0]) */
+    for (int i = 0; i < 3; ++i) {
+        const double *Bi = B + 3 * i;
+        BX[3 * i + 0] = Bi[1] * r[2] - Bi[2] * r[1];
+        BX[3 * i + 1] = Bi[2] * r[0] - Bi[0] * r[2];
+        BX[3 * i + 2] = Bi[0] * r[1] - Bi[1] * r[0];
+    }
+    for (int j = 0; j < 3; ++j) {
+        XC[0 + j] = -r[2] * C[3 + j] + r[1] * C[6 + j];
+        XC[3 + j] = r[2] * C[0 + j] - r[0] * C[6 + j];
+        XC[6 + j] = -r[1] * C[0 + j] + r[0] * C[3 + j];
+    }
+    for (int i = 0; i < 3; ++i) { /* XCX = XC rx */
+        const double *Xi = XC + 3 * i;
+        XCX[3 * i + 0] = Xi[1] * r[2] - Xi[2] * r[1];
+        XCX[3 * i + 1] = Xi[2] * r[0] - Xi[0] * r[2];
+        XCX[3 * i + 2] = Xi[0] * r[1] - Xi[1] * r[0];
+    }
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) {
+            /* rx B^T = -(B rx)^T: its (i, j) entry is -BX[j][i] */
+            P[6 * i + j] += A[3 * i + j] - BX[3 * i + j] - BX[3 * j + i] - XCX[3 * i + j];
+            double off = B[3 * i + j] + XC[3 * i + j];
+            P[6 * i + 3 + j] += off;
+            P[6 * (3 + j) + i] += off;
+            P[6 * (3 + i) + 3 + j] += C[3 * i + j];
+        }
+}
+
+/* ---- the joints ------------------------------------------------------------------------------ */
+
+static int dofs(const vgt_rec_arm *arm, int i) { return arm->type[i] == 3 ? 3 : 1; }
+
+/* Pose, motion subspace and (when qd is given) bias of every joint, and the poses in the base
+ * frame. passive (4 per module) is written when given (and qd is NULL). */
+static void joints(const vgt_rec_arm *arm, work_t *k, const double *q, const double *qd, double *passive) {
+    int module = 0;
+    for (int i = 0; i < arm->nb; ++i) {
+        body_t *b = k->body + i;
+        const double *qi = q + arm->qi[i];
+        if (arm->type[i] == 3) {
+            double pose[12];
+            const double *g = arm->geom + 4 * i;
+            if (qd) {
+                k->arg[0] = qi, k->arg[1] = qd + arm->qi[i], k->arg[2] = g;
+                k->res[0] = pose, k->res[1] = b->S, k->res[2] = b->cj;
+                vgt_rec_module(k->arg, k->res, k->iw, k->w, 0);
+            } else {
+                double scratch[4];
+                k->arg[0] = qi, k->arg[1] = g;
+                k->res[0] = pose, k->res[1] = b->S, k->res[2] = passive ? passive + 4 * module : scratch;
+                vgt_rec_module_kin(k->arg, k->res, k->iw, k->w, 0);
+                memset(b->cj, 0, sizeof b->cj);
+            }
+            memcpy(b->R, pose, 9 * sizeof(double));
+            b->r[0] = pose[9], b->r[1] = pose[10], b->r[2] = pose[11] + arm->tz[i];
+            ++module;
+        } else {
+            double c = cos(qi[0]), s = sin(qi[0]);
+            double R[9] = {c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0};
+            memcpy(b->R, R, sizeof R);
+            b->r[0] = 0.0, b->r[1] = 0.0, b->r[2] = arm->tz[i];
+            memset(b->S, 0, sizeof b->S);
+            b->S[2 * 3] = 1.0; /* row 2 (omega_z), column 0 */
+            memset(b->cj, 0, sizeof b->cj);
+        }
+        if (i == 0) {
+            memcpy(b->R0, b->R, sizeof b->R);
+            memcpy(b->p0, b->r, sizeof b->r);
+        } else {
+            const body_t *p = b - 1;
+            double t[3];
+            matmul3(p->R0, b->R, b->R0);
+            mul3(p->R0, b->r, t);
+            b->p0[0] = p->p0[0] + t[0], b->p0[1] = p->p0[1] + t[1], b->p0[2] = p->p0[2] + t[2];
+        }
+    }
+}
+
+/* S column j as a spatial vector */
+static void column(const body_t *b, int j, double *out) {
+    for (int i = 0; i < 6; ++i) out[i] = b->S[3 * i + j];
+}
+
+/* S qd of the body's joint */
+static void joint_velocity(const vgt_rec_arm *arm, const body_t *b, int i, const double *qd, double *out) {
+    int nd = dofs(arm, i);
+    const double *x = qd + arm->qi[i];
+    for (int r = 0; r < 6; ++r) {
+        double s = 0.0;
+        for (int j = 0; j < nd; ++j) s += b->S[3 * r + j] * x[j];
+        out[r] = s;
+    }
+}
+
+/* The tip wrench as a force on the last body, in its coordinates. */
+static void tip_force(const vgt_rec_arm *arm, const body_t *last, const double *fext, double *out) {
+    double t[3];
+    mul3t(last->R0, fext, out + 3);
+    mul3t(last->R0, fext + 3, out);
+    cross3(arm->tip, out + 3, t);
+    out[0] += t[0], out[1] += t[1], out[2] += t[2];
+}
+
+/* Velocities of every body; the velocity-product accelerations c = c_J + v x v_J. */
+static void velocities(const vgt_rec_arm *arm, work_t *k, const double *qd) {
+    for (int i = 0; i < arm->nb; ++i) {
+        body_t *b = k->body + i;
+        double vj[6], x[6];
+        joint_velocity(arm, b, i, qd, vj);
+        if (i == 0)
+            memset(x, 0, sizeof x);
+        else
+            motion_in(b, k->body[i - 1].v, x);
+        for (int r = 0; r < 6; ++r) b->v[r] = x[r] + vj[r];
+        cross_motion(b->v, vj, x);
+        for (int r = 0; r < 6; ++r) b->c[r] = b->cj[r] + x[r];
+    }
+}
+
+/* ---- the exported functions ------------------------------------------------------------------ */
+
+long vgt_rec_unassembled(const vgt_rec_arm *arm, long n, const double *q, const double *rows, const double *h,
+                         int *where) {
+    for (long s = 0; s < n; ++s) {
+        const double *x = q + s * arm->nq;
+        int module = 0;
+        for (int i = 0; i < arm->nb; ++i) {
+            if (arm->type[i] != 3) continue;
+            const double *legs = x + arm->qi[i];
+            for (int r = 0; r < 6; ++r) {
+                double margin = rows[3 * r] * legs[0] + rows[3 * r + 1] * legs[1] + rows[3 * r + 2] * legs[2] + h[6 * module + r];
+                if (!(margin > 0.0)) {
+                    where[0] = module, where[1] = r;
+                    return s;
+                }
+            }
+            ++module;
+        }
+    }
+    return -1;
+}
+
+int vgt_rec_fk(const vgt_rec_arm *arm, long n, const double *q, double *tip, double *rot, double *body_pos,
+               double *body_rot, double *passive) {
+    work_t k;
+    if (work_open(&k, arm)) return -1;
+    int nb = arm->nb;
+    for (long s = 0; s < n; ++s) {
+        joints(arm, &k, q + s * arm->nq, NULL, passive + s * 4 * arm->nm);
+        const body_t *last = k.body + nb - 1;
+        double t[3];
+        mul3(last->R0, arm->tip, t);
+        for (int r = 0; r < 3; ++r) tip[3 * s + r] = last->p0[r] + t[r];
+        memcpy(rot + 9 * s, last->R0, 9 * sizeof(double));
+        for (int i = 0; i < nb; ++i) {
+            memcpy(body_pos + 3 * (s * nb + i), k.body[i].p0, 3 * sizeof(double));
+            memcpy(body_rot + 9 * (s * nb + i), k.body[i].R0, 9 * sizeof(double));
+        }
+    }
+    work_close(&k);
+    return 0;
+}
+
+int vgt_rec_jacobian(const vgt_rec_arm *arm, long n, const double *q, double *jp, double *jw) {
+    work_t k;
+    if (work_open(&k, arm)) return -1;
+    int nb = arm->nb, nq = arm->nq;
+    for (long s = 0; s < n; ++s) {
+        joints(arm, &k, q + s * nq, NULL, NULL);
+        const body_t *last = k.body + nb - 1;
+        double p[3], t[3];
+        mul3(last->R0, arm->tip, t);
+        for (int r = 0; r < 3; ++r) p[r] = last->p0[r] + t[r];
+        double *JP = jp + 3 * nq * s, *JW = jw + 3 * nq * s;
+        for (int i = 0; i < nb; ++i) {
+            const body_t *b = k.body + i;
+            double arm_[3] = {p[0] - b->p0[0], p[1] - b->p0[1], p[2] - b->p0[2]};
+            for (int j = 0; j < dofs(arm, i); ++j) {
+                double col[6], w[3], v[3], x[3];
+                column(b, j, col);
+                mul3(b->R0, col, w);
+                mul3(b->R0, col + 3, v);
+                cross3(w, arm_, x);
+                int c = arm->qi[i] + j;
+                for (int r = 0; r < 3; ++r) {
+                    JW[r * nq + c] = w[r];
+                    JP[r * nq + c] = v[r] + x[r];
+                }
+            }
+        }
+    }
+    work_close(&k);
+    return 0;
+}
+
+int vgt_rec_mass(const vgt_rec_arm *arm, long n, const double *q, double *m) {
+    work_t k;
+    if (work_open(&k, arm)) return -1;
+    int nb = arm->nb, nq = arm->nq;
+    for (long s = 0; s < n; ++s) {
+        joints(arm, &k, q + s * nq, NULL, NULL);
+        double *M = m + (long)nq * nq * s;
+        for (int i = 0; i < nb; ++i) memcpy(k.body[i].IA, arm->inertia + 36 * i, 36 * sizeof(double));
+        for (int i = nb - 1; i > 0; --i) inertia_out(k.body + i, k.body[i].IA, k.body[i - 1].IA);
+        for (int i = 0; i < nb; ++i) {
+            const body_t *b = k.body + i;
+            int nd = dofs(arm, i);
+            double F[3][6];
+            for (int j = 0; j < nd; ++j) {
+                double col[6];
+                column(b, j, col);
+                mul6(b->IA, col, F[j]);
+            }
+            for (int jb = i; jb >= 0; --jb) {
+                const body_t *o = k.body + jb;
+                if (jb < i)
+                    for (int j = 0; j < nd; ++j) force_out(k.body + jb + 1, F[j], F[j]);
+                for (int r = 0; r < dofs(arm, jb); ++r)
+                    for (int j = 0; j < nd; ++j) {
+                        double sum = 0.0;
+                        for (int e = 0; e < 6; ++e) sum += o->S[3 * e + r] * F[j][e];
+                        int row = arm->qi[jb] + r, col = arm->qi[i] + j;
+                        M[row * nq + col] = sum;
+                        M[col * nq + row] = sum;
+                    }
+            }
+        }
+    }
+    work_close(&k);
+    return 0;
+}
+
+int vgt_rec_inverse(const vgt_rec_arm *arm, long n, const double *q, const double *qd, const double *qdd,
+                    const double *fext, double *tau) {
+    work_t k;
+    if (work_open(&k, arm)) return -1;
+    int nb = arm->nb, nq = arm->nq;
+    for (long s = 0; s < n; ++s) {
+        const double *x = q + s * nq, *xd = qd + s * nq, *xdd = qdd + s * nq;
+        joints(arm, &k, x, xd, NULL);
+        velocities(arm, &k, xd);
+        double a0[6] = {0.0, 0.0, 0.0, -arm->gravity[0], -arm->gravity[1], -arm->gravity[2]};
+        for (int i = 0; i < nb; ++i) {
+            body_t *b = k.body + i;
+            double t[6], Iv[6], vf[6];
+            motion_in(b, i == 0 ? a0 : k.body[i - 1].a, t);
+            joint_velocity(arm, b, i, xdd, b->a);
+            for (int r = 0; r < 6; ++r) b->a[r] += t[r] + b->c[r];
+            const double *I = arm->inertia + 36 * i;
+            mul6(I, b->a, b->f);
+            mul6(I, b->v, Iv);
+            cross_force(b->v, Iv, vf);
+            for (int r = 0; r < 6; ++r) b->f[r] += vf[r];
+        }
+        if (fext) {
+            double fb[6];
+            tip_force(arm, k.body + nb - 1, fext + 6 * s, fb);
+            for (int r = 0; r < 6; ++r) k.body[nb - 1].f[r] -= fb[r];
+        }
+        double *T = tau + s * nq;
+        for (int i = nb - 1; i >= 0; --i) {
+            body_t *b = k.body + i;
+            for (int j = 0; j < dofs(arm, i); ++j) {
+                double sum = 0.0;
+                for (int e = 0; e < 6; ++e) sum += b->S[3 * e + j] * b->f[e];
+                int c = arm->qi[i] + j;
+                T[c] = sum + arm->viscous[c] * xd[c];
+            }
+            if (i > 0) {
+                double g[6];
+                force_out(b, b->f, g);
+                for (int r = 0; r < 6; ++r) k.body[i - 1].f[r] += g[r];
+            }
+        }
+    }
+    work_close(&k);
+    return 0;
+}
+
+/* inverse of a symmetric positive definite nd x nd matrix (nd = 1 or 3), row-major 3x3 storage */
+static void inverse_spd(const double *D, int nd, double *out) {
+    if (nd == 1) {
+        out[0] = 1.0 / D[0];
+        return;
+    }
+    double a = D[0], b = D[1], c = D[2], d = D[4], e = D[5], f = D[8];
+    double A = d * f - e * e, B = c * e - b * f, C = b * e - c * d;
+    double det = a * A + b * B + c * C, inv = 1.0 / det;
+    out[0] = A * inv, out[1] = B * inv, out[2] = C * inv;
+    out[3] = B * inv, out[4] = (a * f - c * c) * inv, out[5] = (b * c - a * e) * inv;
+    out[6] = C * inv, out[7] = (b * c - a * e) * inv, out[8] = (a * d - b * b) * inv;
+}
+
+int vgt_rec_forward(const vgt_rec_arm *arm, long n, const double *q, const double *qd, const double *tau,
+                    const double *fext, double *qdd) {
+    work_t k;
+    if (work_open(&k, arm)) return -1;
+    int nb = arm->nb, nq = arm->nq;
+    for (long s = 0; s < n; ++s) {
+        const double *x = q + s * nq, *xd = qd + s * nq, *F = tau + s * nq;
+        double *A = qdd + s * nq;
+        joints(arm, &k, x, xd, NULL);
+        velocities(arm, &k, xd);
+        for (int i = 0; i < nb; ++i) {
+            body_t *b = k.body + i;
+            double Iv[6];
+            memcpy(b->IA, arm->inertia + 36 * i, 36 * sizeof(double));
+            mul6(b->IA, b->v, Iv);
+            cross_force(b->v, Iv, b->pA);
+        }
+        if (fext) {
+            double fb[6];
+            tip_force(arm, k.body + nb - 1, fext + 6 * s, fb);
+            for (int r = 0; r < 6; ++r) k.body[nb - 1].pA[r] -= fb[r];
+        }
+        for (int i = nb - 1; i >= 0; --i) {
+            body_t *b = k.body + i;
+            int nd = dofs(arm, i);
+            double D[9];
+            for (int j = 0; j < nd; ++j) { /* U = IA S */
+                double col[6], u[6];
+                column(b, j, col);
+                mul6(b->IA, col, u);
+                for (int r = 0; r < 6; ++r) b->U[3 * r + j] = u[r];
+            }
+            for (int r = 0; r < nd; ++r) {
+                int c = arm->qi[i] + r;
+                double sum = 0.0;
+                for (int e = 0; e < 6; ++e) sum += b->S[3 * e + r] * b->pA[e];
+                b->u[r] = F[c] - arm->viscous[c] * xd[c] - sum;
+                for (int j = 0; j < nd; ++j) {
+                    double d = 0.0;
+                    for (int e = 0; e < 6; ++e) d += b->S[3 * e + r] * b->U[3 * e + j];
+                    D[3 * r + j] = d;
+                }
+            }
+            inverse_spd(D, nd, b->Dinv);
+            if (i == 0) continue;
+            double Ia[36], pa[6], UD[18], du[3];
+            for (int r = 0; r < 6; ++r) /* UD = U Dinv */
+                for (int j = 0; j < nd; ++j) {
+                    double sum = 0.0;
+                    for (int e = 0; e < nd; ++e) sum += b->U[3 * r + e] * b->Dinv[3 * e + j];
+                    UD[3 * r + j] = sum;
+                }
+            for (int r = 0; r < 6; ++r)
+                for (int c = 0; c < 6; ++c) {
+                    double sum = 0.0;
+                    for (int e = 0; e < nd; ++e) sum += UD[3 * r + e] * b->U[3 * c + e];
+                    Ia[6 * r + c] = b->IA[6 * r + c] - sum;
+                }
+            for (int e = 0; e < nd; ++e) du[e] = b->u[e];
+            mul6(Ia, b->c, pa);
+            for (int r = 0; r < 6; ++r) {
+                double sum = 0.0;
+                for (int e = 0; e < nd; ++e) sum += UD[3 * r + e] * du[e];
+                pa[r] += b->pA[r] + sum;
+            }
+            body_t *p = b - 1;
+            inertia_out(b, Ia, p->IA);
+            double g[6];
+            force_out(b, pa, g);
+            for (int r = 0; r < 6; ++r) p->pA[r] += g[r];
+        }
+        double a0[6] = {0.0, 0.0, 0.0, -arm->gravity[0], -arm->gravity[1], -arm->gravity[2]};
+        for (int i = 0; i < nb; ++i) {
+            body_t *b = k.body + i;
+            int nd = dofs(arm, i);
+            double ap[6], t[3];
+            motion_in(b, i == 0 ? a0 : k.body[i - 1].a, ap);
+            for (int r = 0; r < 6; ++r) ap[r] += b->c[r];
+            for (int r = 0; r < nd; ++r) {
+                double sum = 0.0;
+                for (int e = 0; e < 6; ++e) sum += b->U[3 * e + r] * ap[e];
+                t[r] = b->u[r] - sum;
+            }
+            for (int r = 0; r < nd; ++r) {
+                double sum = 0.0;
+                for (int e = 0; e < nd; ++e) sum += b->Dinv[3 * r + e] * t[e];
+                A[arm->qi[i] + r] = sum;
+            }
+            for (int r = 0; r < 6; ++r) {
+                double sum = ap[r];
+                for (int e = 0; e < nd; ++e) sum += b->S[3 * r + e] * A[arm->qi[i] + e];
+                b->a[r] = sum;
+            }
+        }
+    }
+    work_close(&k);
+    return 0;
+}

@@ -1,0 +1,37 @@
+/* The recursive model of a stack of VGT modules: the one C interface (read by cffi too).
+ *
+ * An arm is a serial chain of bodies, base first. Each body hangs on a joint: a module (three
+ * legs; its platform pose, motion subspace and bias come from the generated module functions)
+ * or a twist (a revolute joint about the z axis of the frame before it). Everything about the arm
+ * is data in vgt_rec_arm, so one compiled library serves every arm. Spatial vectors are
+ * (angular, linear) in body coordinates; matrices are row-major. */
+
+typedef struct {
+    int nb;                 /* bodies (one per joint), base first */
+    int nq;                 /* degrees of freedom */
+    int nm;                 /* modules (bodies of type 3) */
+    const int *type;        /* per body: 3 = module, 1 = twist */
+    const int *qi;          /* per body: index in q of its first coordinate */
+    const double *tz;       /* per body: offset along the parent frame's z axis before the joint (m) */
+    const double *geom;     /* per body: b, d, cos(phi), sin(phi) (used by modules) */
+    const double *inertia;  /* per body: 6x6 spatial inertia about the body origin, body coordinates */
+    const double *viscous;  /* per degree of freedom: viscous friction */
+    const double *gravity;  /* 3: gravity in the base frame (m/s^2) */
+    const double *tip;      /* 3: the tip point in the last body's frame (m) */
+} vgt_rec_arm;
+
+/* Every function evaluates n samples (row-major arrays, one row per sample) and returns 0, or -1
+ * when its scratch memory could not be allocated. A tip wrench fext is (f, m) in base
+ * components: f acts at the tip point, m on the last body; NULL means none. */
+/* The first sample (or -1) with a module that cannot be assembled: some margin rows[6x3] legs + h
+ * <= 0 (h: 6 per module, legs the module's s, v, p), or not a number; where gets (module, row). */
+long vgt_rec_unassembled(const vgt_rec_arm *arm, long n, const double *q, const double *rows, const double *h,
+                         int *where);
+int vgt_rec_fk(const vgt_rec_arm *arm, long n, const double *q, double *tip, double *rot, double *body_pos,
+               double *body_rot, double *passive);
+int vgt_rec_jacobian(const vgt_rec_arm *arm, long n, const double *q, double *jp, double *jw);
+int vgt_rec_mass(const vgt_rec_arm *arm, long n, const double *q, double *m);
+int vgt_rec_inverse(const vgt_rec_arm *arm, long n, const double *q, const double *qd, const double *qdd,
+                    const double *fext, double *tau);
+int vgt_rec_forward(const vgt_rec_arm *arm, long n, const double *q, const double *qd, const double *tau,
+                    const double *fext, double *qdd);

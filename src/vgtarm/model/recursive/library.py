@@ -1,0 +1,134 @@
+"""The recursive model's one compiled library: generated once per module recipe, cached, loaded.
+
+The library holds the generated module functions (:mod:`.joint`) and the hand-written loops over
+the bodies (``csrc/vgt_rec.c``). Nothing in it depends on an arm: the arm is data
+(:class:`~.model.RecursiveModel` passes it as arrays), so the first arm ever builds it (about two
+seconds) and every later arm, of any size and any module types, loads it at once.
+
+The cache is the model's (:func:`vgtarm.model.compiled.cache_dir`, with its trust rules): beside
+``vgtarm_rec_<key>.so`` lies ``vgtarm_rec_<key>.json`` with the key and the library's size and
+SHA-256, compared before the library is opened by its absolute path; anything that fails a check
+is rebuilt once. The key hashes what shapes the library (the module recipe, the symbolic definition it is
+generated from, this build recipe, the C loops), the compile flags, the CasADi and cffi versions
+and the compiler command.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+import threading
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import casadi as ca
+import cffi
+
+from .. import compiled
+from .joint import module_functions
+
+_HERE = Path(__file__).resolve().parent
+_CSRC = _HERE / "csrc"
+_HEADER = _CSRC / "vgt_rec.h"
+_CFLAGS = ("-O3", "-fPIC", "-shared", "-ffp-contract=off")
+_GENERATED = "vgt_rec_generated"
+_LOCK = threading.Lock()
+
+
+def _sources() -> list[Path]:
+    """What shapes the library: the module recipe, the model's symbolic definition it is generated
+    from (``solve_module``...), this build recipe and the C loops (not the Python around them)."""
+    recipe = [_HERE / "joint.py", _HERE.parent / "symbolic.py", _HERE / "library.py"]
+    return recipe + sorted(p for p in _CSRC.iterdir() if p.suffix in (".c", ".h"))
+
+
+def cache_key(compiler: str) -> str:
+    """The key of the library for ``compiler``: the sources that shape it (:func:`_sources`), the
+    flags, the CasADi and cffi versions and the compiler command."""
+    digest = hashlib.sha256()
+    for path in _sources():
+        digest.update(path.name.encode())  # the names are distinct
+        digest.update(path.read_bytes())
+    digest.update(repr(_CFLAGS).encode())
+    digest.update(str(getattr(ca, "__version__", "unknown")).encode())
+    digest.update(str(cffi.__version__).encode())
+    digest.update(compiler.encode())
+    return digest.hexdigest()[:20]
+
+
+def _ffi() -> cffi.FFI:
+    ffi = cffi.FFI()
+    ffi.cdef(_HEADER.read_text())
+    return ffi
+
+
+def _compile(compiler: str, workdir: Path) -> Path:
+    generator = ca.CodeGenerator(f"{_GENERATED}.c", {"with_header": True})
+    for f in module_functions():
+        generator.add(f)
+    generator.generate(str(workdir) + os.sep)
+    library = workdir / "library.so"
+    command = [compiler, *_CFLAGS, "-I", str(_CSRC), "-I", str(workdir), "-o", str(library)]
+    command += [str(workdir / f"{_GENERATED}.c"), str(_CSRC / "vgt_rec.c"), "-lm"]
+    compiled._run_compiler(compiler, command)
+    if not library.is_file():
+        raise compiled._Unavailable(f"the C compiler {compiler} wrote no library")
+    return library
+
+
+def _metadata_ok(meta: Path, library: Path, key: str) -> bool:
+    try:
+        data = json.loads(compiled._read_private(meta, 1 << 16))
+        size, digest = compiled._sha256(library)
+    except (compiled._Damaged, OSError, ValueError):
+        return False
+    return bool(data.get("key") == key and data.get("size") == size and data.get("sha256") == digest)
+
+
+def _build(folder: Path, key: str, compiler: str) -> None:
+    library, meta = folder / f"vgtarm_rec_{key}.so", folder / f"vgtarm_rec_{key}.json"
+    workdir = Path(tempfile.mkdtemp(dir=folder, prefix=f".build-{os.getpid()}-"))
+    try:
+        built = _compile(compiler, workdir)
+        size, digest = compiled._sha256(built)
+        text = json.dumps({"key": key, "model": "recursive", "size": size, "sha256": digest}, indent=1)
+        (workdir / "meta.json").write_text(text)
+        os.replace(built, library)
+        os.replace(workdir / "meta.json", meta)
+    finally:
+        shutil.rmtree(workdir, ignore_errors=True)
+
+
+@cache
+def load_library() -> tuple[Any, Any]:
+    """``(ffi, lib)`` of the recursive model's library, built into the cache on first use.
+
+    Raises :class:`~vgtarm.model.compiled.BackendError` with one line when it cannot be had (no
+    compiler, a refused cache folder, a failing compile)."""
+    with _LOCK:
+        compiler = compiled.find_compiler()
+        if compiler is None:
+            raise compiled.BackendError("the recursive model needs a C compiler (cc, gcc or clang, or $CC)")
+        folder = compiled.cache_dir()
+        try:
+            compiled._check_folder(folder)
+            key = cache_key(compiler)
+            library, meta = folder / f"vgtarm_rec_{key}.so", folder / f"vgtarm_rec_{key}.json"
+            if not _metadata_ok(meta, library, key):
+                with compiled._build_lock(folder):
+                    if not _metadata_ok(meta, library, key):
+                        for path in (meta, library):
+                            with contextlib.suppress(FileNotFoundError):
+                                path.unlink()
+                        _build(folder, key, compiler)
+                if not _metadata_ok(meta, library, key):
+                    raise compiled._Unavailable("the recursive model's library failed its checks after a rebuild")
+        except compiled._Unavailable as exc:
+            raise compiled.BackendError(f"cannot build the recursive model: {exc}") from None
+        ffi = _ffi()
+        return ffi, ffi.dlopen(str(library.resolve()))
