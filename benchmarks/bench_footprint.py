@@ -145,6 +145,42 @@ def import_times(trees: dict[str, Path], runs: int, cache_home: Path) -> dict[st
     return medians
 
 
+def imported_modules(src: Path, env: dict[str, str]) -> dict[str, int]:
+    """Each module ``IMPORT_AND_LOAD`` imports and its own import time (us), from ``-X importtime``."""
+    done = subprocess.run(
+        [sys.executable, "-X", "importtime", "-c", IMPORT_AND_LOAD],
+        env={**env, "PYTHONPATH": str(src)},
+        check=True,
+        capture_output=True,
+        text=True,
+        cwd=src.parent,
+    )
+    found: dict[str, int] = {}
+    for line in done.stderr.splitlines():
+        if line.startswith("import time:") and "|" in line and not line.rstrip().endswith("imported package"):
+            own, _, name = line[len("import time:") :].split("|")
+            if own.strip().isdigit():
+                found[name.strip()] = int(own)
+    return found
+
+
+def added_imports(trees: dict[str, Path], cache_home: Path, runs: int) -> tuple[list[str], float]:
+    """Modules the current tree imports and the baseline does not, and their summed own import
+    time (median over ``runs`` measurements, s): a figure the machine's load hardly blurs."""
+    env = {k: v for k, v in os.environ.items() if k not in ("VGTARM_CACHE_DIR", "PYTHONPATH")}
+    env["XDG_CACHE_HOME"] = str(cache_home)
+    base, current = trees.values()
+    for src in (base, current):  # warm up: a first run may build the model (and take the build lock)
+        imported_modules(src, env)
+    extra = sorted(set(imported_modules(current, env)) - set(imported_modules(base, env)))
+    extra = [name for name in extra if not name.startswith("vgtarm")]  # the package's own modules differ by design
+    totals = []
+    for _ in range(runs):
+        times = imported_modules(current, env)
+        totals.append(sum(times.get(name, 0) for name in extra) * 1e-6)
+    return extra, statistics.median(totals)
+
+
 def run() -> dict[str, float]:
     runs = int(os.environ.get("VGTARM_BENCH_FOOTPRINT_RUNS", str(RUNS)))
     commit = os.environ.get("VGTARM_BENCH_FOOTPRINT_BASELINE", BASELINE)
@@ -158,10 +194,19 @@ def run() -> dict[str, float]:
         print("| --- | --- | --- | --- |")
         cache_home = Path(scratch) / "xdg-cache"
         cache_home.mkdir(mode=0o700)
-        for title, medians in import_times(trees, runs, cache_home).items():
+        medians_of = import_times(trees, runs, cache_home)
+        for title, medians in medians_of.items():
             before, after = medians.values()
             ratios[title] = after / before
             print(f"| `{title}` | {before * 1e3:.0f} ms | {after * 1e3:.0f} ms | {after / before:.3f} |")
+        extra, seconds = added_imports(trees, cache_home, runs)
+        first = next(iter(medians_of.values()))
+        share = seconds / next(iter(first.values()))
+        names = ", ".join(extra) if extra else "none"
+        print(
+            f"\nModules imported by `{next(iter(COMMANDS))}` here and not in the baseline: {names}; their own import "
+            f"time (-X importtime, median of {runs}): {seconds * 1e3:.1f} ms, {share:.1%} of the baseline's time."
+        )
         before_bytes, before_sizes = install_size(base / "pyproject.toml")
         after_bytes, after_sizes = install_size(ROOT / "pyproject.toml")
     ratios["install size"] = after_bytes / before_bytes
