@@ -19,7 +19,7 @@ PACKAGE = Path(vgtarm.__file__).resolve().parent
 ROOT = "__root__"
 #: Layers from the bottom up; a module may import its own layer and the layers below.
 LAYERS: tuple[frozenset[str], ...] = (
-    frozenset({"errors", "fileio", "memory", "markup", "machine"}),
+    frozenset({"errors", "fileio", "memory", "markup", "machine", "progress"}),
     frozenset({"model", ROOT}),
     frozenset({"paths", "ga"}),
     frozenset({"ik"}),

@@ -2,7 +2,7 @@
 
 ``vgtarm reproduce`` runs on spawned worker processes (:mod:`vgtarm.app.pool`) and a study on
 Dask's local cluster. These tests start the real thing in its own session, wait until its
-workers exist (found as descendants in ``/proc``), end the main process by SIGKILL, SIGTERM or a
+workers exist (found as descendants by psutil), end the main process by SIGKILL, SIGTERM or a
 terminal's Ctrl-C, and check that every descendant (the workers and multiprocessing's resource
 tracker) is gone within :data:`ORPHANS_END_WITHIN` seconds, the bound the project promises; the
 measured time is printed (``pytest -s``), never asserted tighter.
@@ -19,6 +19,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+import psutil
 import pytest
 
 from vgtarm.app import pool
@@ -77,37 +78,26 @@ if __name__ == "__main__":
 """
 
 
-def _stat(pid: int) -> list[str] | None:
-    """Fields of /proc/PID/stat after the name (state, ppid, pgrp, ...), None once it is gone."""
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except OSError:
-        return None
-
-
 def _alive(pid: int) -> bool:
-    fields = _stat(pid)
-    return fields is not None and fields[0] not in ("Z", "X")  # a zombie has ended
+    try:
+        return psutil.Process(pid).status() not in (psutil.STATUS_ZOMBIE, psutil.STATUS_DEAD)  # a zombie has ended
+    except psutil.NoSuchProcess:
+        return False
 
 
 def _descendants(root: int) -> list[int]:
     """Every live process below ``root`` (children, their children, ...)."""
-    parents: dict[int, list[int]] = {}
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit() and (fields := _stat(int(entry.name))) is not None and fields[0] != "Z":
-            parents.setdefault(int(fields[1]), []).append(int(entry.name))
-    found, todo = [], [root]
-    while todo:
-        children = parents.get(todo.pop(), [])
-        found += children
-        todo += children
-    return found
+    try:
+        children = psutil.Process(root).children(recursive=True)
+    except psutil.NoSuchProcess:
+        return []
+    return [child.pid for child in children if _alive(child.pid)]
 
 
 def _command_line(pid: int) -> str:
     try:
-        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-    except OSError:
+        return " ".join(psutil.Process(pid).cmdline())
+    except psutil.Error:
         return ""
 
 

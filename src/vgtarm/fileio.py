@@ -513,15 +513,10 @@ def _empty(old: Path, target: Path, what: str, owned: Collection[str]) -> None:
 
 
 def _alive(pid: int) -> bool:
-    if pid == os.getpid():
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except OSError:  # it exists but belongs to someone else
-        return True
-    return True
+    """Whether process ``pid`` exists (somebody else's too; on Linux a thread's id is no process)."""
+    import psutil  # imported here: only the clean-up of stale files needs it
+
+    return psutil.pid_exists(pid)
 
 
 def clean_stale(folder: str | os.PathLike[str]) -> list[Path]:

@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation, Slerp
 
+from .. import progress
 from . import newton, rates
 from .options import FastSettings
 from .problem import BatchState, IKProblem, Task
@@ -155,6 +156,7 @@ def solve(problem: IKProblem, task: Task, state: BatchState, q_start: Array, set
     newton.solve_in_order(problem, task, state, rest, start, settings.newton, with_rates=True)
     _rescue(problem, task, state, top[~state.converged[top]], settings)
     _complete_rates(problem, task, state, top)
+    progress.report(int(np.count_nonzero(state.converged)), n)  # each level about doubles the samples solved
     for stride in strides[1:]:
         level = level_indices(n, stride)
         new = level[~state.converged[level]]
@@ -166,6 +168,7 @@ def solve(problem: IKProblem, task: Task, state: BatchState, q_start: Array, set
             _rescue(problem, task, state, new[~converged], settings)
         if stride != 1:
             _complete_rates(problem, task, state, level)
+        progress.report(int(np.count_nonzero(state.converged)), n)
     state.method[state.converged & (state.method == "")] = METHOD
 
 

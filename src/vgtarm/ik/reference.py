@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import Bounds, OptimizeResult, minimize
 
+from .. import progress
 from ..model.codegen.ik import effort_cost, pose_constraints, rotation_from_row_major
 from ..model.definition import PAPER, Definition
 from . import kkt
@@ -197,6 +198,7 @@ def solve_path(
         state.method[i] = method
         if solution.success:
             previous = solution.q
+        progress.report(i + 1, len(task))
     done = np.flatnonzero(state.converged)
     finish(problem, task, state, done)
 

@@ -21,7 +21,8 @@ The build process ignores ``SIGXFSZ``, so a write beyond the file size limit (``
 with ``EFBIG`` instead of killing it, and a build stopped by that limit is reported as such, with
 the limit, and not as a compiler error. On a terminal, a build estimated longer than
 :data:`vgtarm.model.budget.LONG_BUILD` prints a line per phase with the time elapsed, and one every
-:data:`HEARTBEAT` seconds within a long phase, on standard error.
+:data:`HEARTBEAT` seconds within a long phase, on standard error; never after ``-q``
+(:func:`vgtarm.progress.quiet`).
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ from typing import Any
 
 from ..errors import cut
 from ..memory import size_text
+from ..progress import quiet
 from .budget import LONG_BUILD, BuildEstimate, time_text
 from .definition import Definition
 
@@ -151,9 +153,8 @@ def run(
     # process runs comes first, and the current folder of ``-c`` is the private build folder
     command = [sys.executable, "-c", code, kind, compiler, str(folder), key, str(os.getpid())]
     payload = pickle.dumps(definition, protocol=pickle.HIGHEST_PROTOCOL)
-    progress = _Progress(
-        cost.seconds("compiled" if kind == "compile" else "interpreted") > LONG_BUILD and _terminal(), kind, cost
-    )
+    long = cost.seconds("compiled" if kind == "compile" else "interpreted") > LONG_BUILD
+    progress = _Progress(long and _terminal() and not quiet(), kind, cost)  # quiet: the command's -q
     try:
         process = subprocess.Popen(
             command,

@@ -13,7 +13,8 @@ joints and twist bodies exist: :class:`~vgtarm.model.definition.StackDefinition`
 hashes that structure; stacks that differ only in dimensions, masses or limits share it.
 
 Cache folder: ``$VGTARM_CACHE_DIR`` (empty counts as unset; a relative value is taken from the
-current folder), else ``$XDG_CACHE_HOME/vgtarm`` (if absolute), else ``~/.cache/vgtarm``.
+current folder), else platformdirs' user cache folder of ``vgtarm``: on Linux
+``$XDG_CACHE_HOME/vgtarm`` (if absolute), else ``~/.cache/vgtarm``.
 Backend choice: ``$VGTARM_BACKEND`` = ``auto`` (default), ``compiled`` or ``interpreted``.
 
 Trust rules of the cache (the README repeats them for users):
@@ -49,7 +50,6 @@ Trust rules of the cache (the README repeats them for users):
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import functools
 import hashlib
 import inspect
@@ -416,15 +416,18 @@ def cache_dir() -> Path:
     """Folder of the compiled libraries, always absolute.
 
     ``$VGTARM_CACHE_DIR`` when set and not empty (a relative value is taken from the current
-    folder), else ``$XDG_CACHE_HOME/vgtarm`` when that is absolute, else ``~/.cache/vgtarm``.
+    folder), else platformdirs' user cache folder: on Linux ``$XDG_CACHE_HOME/vgtarm`` when that is
+    absolute, else ``~/.cache/vgtarm`` (macOS: ``~/Library/Caches/vgtarm``). ``RuntimeError``
+    when there is no home folder to be found.
     """
     chosen = os.environ.get("VGTARM_CACHE_DIR", "")
     if chosen:
         return Path(os.path.abspath(os.path.expanduser(chosen)))
-    base = os.environ.get("XDG_CACHE_HOME", "")
-    if not os.path.isabs(base):  # the XDG specification: a relative value is ignored
-        base = str(Path.home() / ".cache")
-    return Path(os.path.abspath(base)) / "vgtarm"
+    import platformdirs  # imported here: only this lookup needs it
+
+    # Linux: $XDG_CACHE_HOME/vgtarm when absolute (a relative value is ignored, as the XDG
+    # specification says), else ~/.cache/vgtarm; RuntimeError without a home folder
+    return Path(os.path.abspath(platformdirs.user_cache_dir("vgtarm", appauthor=False)))
 
 
 def find_compiler() -> str | None:
@@ -721,13 +724,10 @@ def _load_checked(entry: CacheEntry) -> CompiledBackend:
 
 
 def _process_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # somebody else's process: alive
-        return True
-    return True
+    """Whether process ``pid`` exists (somebody else's too; on Linux a thread's id is no process)."""
+    import psutil  # imported here: only the clean-up of build folders needs it
+
+    return psutil.pid_exists(pid)
 
 
 def _clean_stale_builds(folder: Path, prefix: str = _BUILD_PREFIX) -> None:
@@ -755,25 +755,25 @@ def _clean_stale_builds(folder: Path, prefix: str = _BUILD_PREFIX) -> None:
 
 @contextlib.contextmanager
 def _build_lock(folder: Path) -> Iterator[None]:
-    """Hold the cache's build lock (a ``flock`` on ``.lock``, released by the system if the
-    holder dies); after a long wait, go on without it (the moves into place are atomic)."""
+    """Hold the cache's build lock (filelock's ``flock`` on ``.lock``, mode 0600, never followed
+    through a symbolic link, released by the system if the holder dies); after a long wait, go on
+    without it (the moves into place are atomic). A file system without ``flock`` is an error
+    (:class:`OSError`), never a silent fall-back to a lock file that a killed holder would leave."""
+    from filelock import FileLock, Timeout  # imported here: only a build needs it
+
+    lock = FileLock(folder / ".lock", mode=0o600, poll_interval=0.1, fallback_to_soft=False)
     try:
-        fd = os.open(folder / ".lock", os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600)
+        lock.acquire(timeout=_LOCK_WAIT)
+        held = True
+    except Timeout:  # before OSError: filelock's Timeout is a TimeoutError
+        held = False
     except OSError as exc:
         raise _Unavailable(f"cannot write in the cache folder {_shown_path(folder)}: {exc.strerror or exc}") from None
     try:
-        deadline = time.monotonic() + _LOCK_WAIT
-        while True:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                break
-            except BlockingIOError:
-                if time.monotonic() > deadline:
-                    break
-                time.sleep(0.1)
         yield
     finally:
-        os.close(fd)
+        if held:
+            lock.release()
 
 
 def _compiler_failure(compiler: str, done: subprocess.CompletedProcess[str]) -> str:

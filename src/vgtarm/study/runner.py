@@ -394,10 +394,18 @@ def _start_local_cluster(workers: int) -> Any:
 
 
 def _kill_workers(cluster: Any) -> None:
-    """Kill a local cluster's worker processes at once (a graceful close waits a second or more
-    for workers busy in compiled code); the close that follows then finds them gone."""
+    """Kill a local cluster's worker processes at once, each with every process below it (a
+    graceful close waits a second or more for workers busy in compiled code); the close that
+    follows then finds them gone."""
+    import psutil
+
     for nanny in list(cluster.workers.values()):
         pid = getattr(nanny, "pid", None)  # the worker process a nanny watches
-        if isinstance(pid, int) and pid > 0:
-            with contextlib.suppress(OSError):  # already gone
-                os.kill(pid, signal.SIGKILL)
+        if not (isinstance(pid, int) and pid > 0):
+            continue
+        with contextlib.suppress(psutil.Error):  # already gone, or not ours
+            worker = psutil.Process(pid)
+            tree = [worker, *worker.children(recursive=True)]  # found before the worker dies (then orphaned)
+            for process in tree:
+                with contextlib.suppress(psutil.Error):
+                    process.kill()

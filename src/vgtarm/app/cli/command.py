@@ -20,7 +20,7 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from ... import __version__, paths
+from ... import __version__, paths, progress
 from ...errors import MESSAGE_LENGTH, ConfigError, InputError, UnreachableError, VgtarmError, cut, escape, shown
 from ...fileio import (
     atomic_folder,
@@ -39,6 +39,7 @@ from . import presets
 from . import stack as cli_stack
 from . import study as cli_study
 from . import visual as cli_visual
+from .bars import progress_bar
 from .options import add_config, joint_gains, non_negative_int, positive_float, positive_int, positive_int_at_most
 
 
@@ -53,7 +54,8 @@ def cmd_describe(args: argparse.Namespace) -> int:
 
     p = robot_description(args.config)  # no model is built: see cli_stack
     if isinstance(p, Stack):
-        return describe_stack(p)
+        with progress_bar("describe: the model at home", "step"):  # a large stack takes seconds
+            return describe_stack(p)
     home = p.home
     state, figures = model_state(p), home_figures(p)  # before any line: either may refuse in one line
     print(f"robot      {escape(p.name)}")  # a name from a user's file never drives the terminal
@@ -135,7 +137,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     model = robot.parameters.scaled(mass=args.model_mass, inertia=args.model_inertia, friction=args.model_friction)
     exact_model = (args.model_mass, args.model_inertia, args.model_friction) == (1.0, 1.0, 1.0)
     label = f"case {args.case}" if desired is None else escape(desired.name)
-    with tqdm(total=100, desc=f"{label} {args.controller}", unit="%", disable=args.quiet, leave=False) as bar:
+    with (
+        tqdm(total=100, desc=f"{label} {args.controller}", unit="%", disable=args.quiet, leave=False) as bar,
+        progress_bar("inverse kinematics", "sample"),  # of the reference: a long path or a large stack
+    ):
 
         def progress(done: int, total: int) -> None:
             bar.update(round(100 * done / total) - bar.n)
@@ -478,7 +483,8 @@ def cmd_ik(args: argparse.Namespace) -> int:
 
         placement = path_placement(robot)
         path = path if placement is None else placement.apply(path)
-    result = robot.inverse_kinematics(path, solver=args.solver, rates=args.rates, pose=rotation, **_criterion(args))
+    with progress_bar("inverse kinematics", "sample", len(path)):  # a long path or a large stack takes seconds
+        result = robot.inverse_kinematics(path, solver=args.solver, rates=args.rates, pose=rotation, **_criterion(args))
     if not result.success:
         raise UnreachableError(f"inverse kinematics did not verify every sample: {result.message}; nothing written")
     if args.output is not None:
@@ -737,9 +743,22 @@ def build_parser() -> argparse.ArgumentParser:
     cli_visual.add_parsers(sub)  # draw, animate, report
     cli_study.add_parsers(sub)  # study init, run, report
     cli_stack.add_parsers(sub)  # convert-robot
+    _add_quiet(sub)
     _accept_negative_numbers(parser)
 
     return parser
+
+
+def _add_quiet(sub: argparse._SubParsersAction) -> None:
+    """Give every command ``-q``/``--quiet`` (no progress of any kind: bars, a model build's lines)."""
+    for command in set(sub.choices.values()):
+        for action in command._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                _add_quiet(action)
+        if "-q" not in command._option_string_actions and not any(
+            isinstance(action, argparse._SubParsersAction) for action in command._actions
+        ):
+            command.add_argument("-q", "--quiet", action="store_true", help="no progress of any kind")
 
 
 #: What argparse takes for a negative number rather than an option: its own pattern (``-1``,
@@ -832,6 +851,7 @@ def _main(argv: Sequence[str] | None) -> int:
         except BrokenPipeError:
             _silence_stdout()
         raise
+    progress.set_quiet(bool(getattr(args, "quiet", False)))  # -q: no bar, no build progress lines
     try:
         status = int(args.run(args))
         sys.stdout.flush()  # a reader that went away shows here, not as a traceback at exit

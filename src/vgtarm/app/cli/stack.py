@@ -22,10 +22,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ... import progress
 from ...errors import ConfigError, cut, escape
 from ...fileio import atomic_write_text, check_output_file, parse_toml, read_text_limited
 from ...memory import size_text
-from ...model import budget, compiled
+from ...model import budget, codegen, compiled
 from ...model.parameters import ROBOT_FILE_LIMIT, RobotParameters, load_parameters
 from ...model.robot import definition_of, robot_parameters_from_dict
 from ...model.stack import Stack, stack_from_parameters, stack_to_toml
@@ -72,7 +73,12 @@ def home_figures(parameters: RobotParameters | Stack) -> HomeFigures:
     definition = definition_of(parameters)
     cost = budget.estimate(definition)
     names = ["tip"] + (["mass"] if cost.mass_seconds <= DESCRIBE_MASS_LIMIT else [])
-    functions = compiled.functions_of(definition, names)
+    steps = len(names) + 1  # each function built, then their evaluation
+    builders, built = codegen.builders_for(definition), {}
+    for k, name in enumerate(names):  # compiled.functions_of, one function at a time to report progress
+        built[name] = builders[name]()
+        progress.report(k + 1, steps)
+    functions = compiled.InterpretedBackend(built)
     home, p, n = parameters.home, parameters.vector(), parameters.n_joints
     tip = functions.evaluate("tip", [home, p], 1)[0][0]
     if "mass" not in names:
@@ -82,6 +88,7 @@ def home_figures(parameters: RobotParameters | Stack) -> HomeFigures:
         )
         return HomeFigures(tip, None, note)
     mass = functions.evaluate("mass", [home, p], 1)[0].reshape(n, n)
+    progress.report(steps, steps)
     return HomeFigures(tip, np.asarray(np.linalg.eigvalsh(mass), dtype=np.float64), "")
 
 
