@@ -15,7 +15,7 @@ pytest.importorskip("pyarrow")
 
 from vgtarm.app.cli.command import main  # noqa: E402
 from vgtarm.app.study_points import check_point, execute_point, simulate_command  # noqa: E402
-from vgtarm.errors import ConfigError, InputError  # noqa: E402
+from vgtarm.errors import ConfigError  # noqa: E402
 from vgtarm.study import TIMING_COLUMNS, load_study  # noqa: E402
 from vgtarm.study.runner import run_study  # noqa: E402
 
@@ -92,27 +92,38 @@ def test_the_local_cluster_sweeps_criterion_weight_and_estimator(criteria_run: A
     assert rows[("effort", 0.5, "kalman")]["chatter_n"] != rows[("effort", 0.5, "difference")]["chatter_n"]
 
 
-def test_a_row_is_its_single_run_and_its_simulate_command(criteria_run: Any, tmp_path: Path) -> None:
+@pytest.mark.parametrize(("weight", "estimator"), [(0.5, "kalman"), (2.0, "difference")])
+def test_a_row_is_its_single_run_and_its_simulate_command(
+    criteria_run: Any, tmp_path: Path, weight: float, estimator: str
+) -> None:
     from vgtarm.study import Store
 
     store = Store(criteria_run.folder)
     wanted = next(
         r["id"]
         for r in criteria_run.rows
-        if r["criterion"] == "effort" and r["joint_limit_weight"] == 0.5 and r["estimator"] == "kalman"
+        if r["criterion"] == "effort" and r["joint_limit_weight"] == weight and r["estimator"] == estimator
     )
     record = store.read(wanted)
     again, error = execute_point(record["inputs"], {})  # here, not on the cluster
     assert error == "" and _timeless(again) == _timeless(record["summary"])
     command = simulate_command(record["inputs"])
     assert command[command.index("--criterion") + 1] == "effort"
-    assert command[command.index("--estimator") + 1] == "kalman"
+    assert ("--estimator" in command) == (estimator != "difference")  # the default is not written
+    assert ("--joint-limit-weight" in command) == (weight != 0.5)
     out = tmp_path / "again"
     assert main([*command, "--out", str(out), "-q"]) == 0
     assert _timeless(json.loads((out / "summary.json").read_text())) == _timeless(record["summary"])
-    other = next(r["id"] for r in criteria_run.rows if r["joint_limit_weight"] == 2.0)
-    with pytest.raises(InputError, match="joint_limit_weight = 2.0: `vgtarm simulate` has no flag"):
-        simulate_command(store.read(other)["inputs"])
+
+
+def test_simulate_refuses_a_weight_without_the_effort_criterion(tmp_path: Path, capsys: pytest.CaptureFixture[str]):
+    out = tmp_path / "out"
+    assert main(["simulate", "--case", "1", "--joint-limit-weight", "0.3", "--out", str(out), "-q"]) == 1
+    err = capsys.readouterr().err
+    assert "--joint-limit-weight 0.3: applies to --criterion effort only" in err and err.count("\n") == 1
+    assert not out.exists()
+    with pytest.raises(SystemExit):
+        main(["simulate", "--case", "1", "--criterion", "effort", "--joint-limit-weight", "0"])
 
 
 @pytest.mark.parametrize(

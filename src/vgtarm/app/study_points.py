@@ -267,6 +267,7 @@ _FLAGS = {
 #: Flags given only when the input is away from its default (the command lines of before stay as they were).
 _OPTIONAL_FLAGS = {
     "criterion": "--criterion",
+    "joint_limit_weight": "--joint-limit-weight",
     "estimator": "--estimator",
     "estimator_bandwidth_hz": "--estimator-bandwidth",
 }
