@@ -4,6 +4,7 @@ rows' runs equal to ``vgtarm simulate``'s, the section's cells from the runs' su
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 
 import pytest
 
@@ -41,6 +42,8 @@ def test_the_rows_are_new_folders_beside_the_paper_runs():
     assert {r.case for r in runs if r.preset} == {1, 2}
     assert not set(folders) & {s.folder for s in paper_runs()}
     assert all(f.startswith("beyond/case") for f in folders)  # the section's existing runs have no case prefix
+    assert low_force_runs(SimpleNamespace(is_stack=False)) == runs  # type: ignore[arg-type]
+    assert low_force_runs(SimpleNamespace(is_stack=True)) == []  # type: ignore[arg-type]  (a stack: not run)
 
 
 @pytest.mark.parametrize("spec", [PresetRun(2), PresetRun(1, None)], ids=["case2-preset", "case1-observer"])

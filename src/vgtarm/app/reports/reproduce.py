@@ -134,7 +134,7 @@ def _reproduce_into(
     options = {"seed": seed, "integrator": integrator, "substeps": substeps}
     specs = list(dict.fromkeys(specs))
     extra = beyond_runs() if beyond_paper else []
-    low = low_force_runs() if beyond_paper else []  # issue 22: the low-force preset's rows
+    low = low_force_runs(robot) if beyond_paper else []  # issue 22: the low-force preset's rows
     plan = figure_plan(specs)
     results: dict[RunSpec, SimulationResult] = {}
     beyond_results: dict[BeyondRun, SimulationResult] = {}
