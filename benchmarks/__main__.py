@@ -1,7 +1,8 @@
 """Run every benchmark and print Markdown tables (paste them into docs/benchmarks.md).
 
 ``python -m benchmarks`` runs every group but ``stacks``, which compiles ten libraries from cold
-(about half an hour on two cores): name it, ``python -m benchmarks stacks``.
+(about half an hour on two cores): name it, ``python -m benchmarks stacks``; nor ``pathwide``, a
+measurement of minutes (the path-wide effort criterion of issue 22, ``docs/control.md``).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from . import (  # noqa: E402
     bench_ik,
     bench_model,
     bench_mujoco,
+    bench_path_wide,
     bench_recursive,
     bench_reproduce,
     bench_sim,
@@ -39,9 +41,10 @@ MODULES = {
     "recursive": bench_recursive,
     "export": bench_export,
     "footprint": bench_footprint,
+    "pathwide": bench_path_wide,
 }
 #: Groups run when none is named (``stacks`` is long: it compiles ten libraries from cold).
-DEFAULT = [name for name in MODULES if name != "stacks"]
+DEFAULT = [name for name in MODULES if name not in ("stacks", "pathwide")]
 
 
 def main(argv: list[str]) -> None:

@@ -49,9 +49,16 @@ def _robot(robot_text: str | None) -> Robot:
 
 @functools.lru_cache(maxsize=16)
 def _reference(
-    robot_text: str | None, case: int | None, path_text: str | None, dt: float, rates: str, duration: float | None
+    robot_text: str | None,
+    case: int | None,
+    path_text: str | None,
+    dt: float,
+    rates: str,
+    duration: float | None,
+    criterion: tuple[tuple[str, Any], ...] = (),
 ) -> JointReference:
-    """The joint reference of a case or of a path file's text, cut to ``duration``; cached."""
+    """The joint reference of a case or of a path file's text, cut to ``duration``; ``criterion``: the
+    inverse kinematics' criterion options (:func:`_criterion`; none: eq. 12); cached."""
     robot = _robot(robot_text)
     if case is not None:
         desired = case_path(robot, case, dt)  # placed on a stack at its home tip, scaled to its reach
@@ -60,9 +67,20 @@ def _reference(
         assert path_text is not None
         desired = _path_of(path_text, dt)
         name = desired.name
-    ik = robot.inverse_kinematics(desired, solver="fast", rates=rates)
+    ik = robot.inverse_kinematics(desired, solver="fast", rates=rates, **dict(criterion))
     reference = JointReference.of(ik, name=name)
     return reference if duration is None else truncate_reference(reference, duration)
+
+
+def _criterion(inputs: Inputs) -> tuple[tuple[str, Any], ...]:
+    """The inverse kinematics' options of the point's ``criterion`` as ``vgtarm simulate --criterion``
+    gives them: none for eq. 12; for the effort criterion its joint-limit weight and the expected
+    cutting force (the point's ``cutting_force`` with the tool force, else 0)."""
+    if inputs.get("criterion", "joint_limits") == "joint_limits":
+        return ()
+    force = float(inputs["cutting_force"]) if inputs["external_force"] else 0.0  # type: ignore[arg-type]
+    weight = float(inputs["joint_limit_weight"])  # type: ignore[arg-type]
+    return (("criterion", str(inputs["criterion"])), ("joint_limit_weight", weight), ("tool_force", force))
 
 
 def _path_of(text: str, dt: float) -> paths.Path:
@@ -126,6 +144,8 @@ def _options(inputs: Inputs) -> dict[str, Any]:
 
 def _metadata(robot: Robot, inputs: Inputs) -> dict[str, Any]:
     gains = _gains_metadata(inputs, robot.n_joints)
+    if inputs.get("criterion", "joint_limits") != "joint_limits":  # as `vgtarm simulate --criterion` records it
+        gains["ik_criterion"] = inputs["criterion"]
     if inputs["case"] is None:
         return {"path": inputs["path"], **gains, **task_metadata(robot)}  # as run_path records it
     placement = path_placement(robot)  # a case path on another robot than the paper's: where and how large
@@ -164,6 +184,7 @@ def execute_point(inputs: Inputs, files: Mapping[str, str]) -> tuple[dict[str, A
             float(inputs["dt"]),  # type: ignore[arg-type]
             str(inputs["rates"]),
             None if inputs["duration"] is None else float(inputs["duration"]),
+            _criterion(inputs),
         )
         result = simulate(
             robot,
@@ -243,6 +264,13 @@ _FLAGS = {
     "velocity_filter_hz": "--velocity-filter",
     "plant_engine": "--plant",
 }
+#: Flags given only when the input is away from its default (the command lines of before stay as they were).
+_OPTIONAL_FLAGS = {
+    "criterion": "--criterion",
+    "joint_limit_weight": "--joint-limit-weight",
+    "estimator": "--estimator",
+    "estimator_bandwidth_hz": "--estimator-bandwidth",
+}
 _SWITCHES = {"external_force": "--external-force", "force_sensor": "--force-sensor"}
 _STUDY_ONLY = {"kp": None, "kv": None, "threshold": None, "kp_max": None, "kv_max": None, "path": None, "dt": 1e-3}
 
@@ -265,9 +293,9 @@ def simulate_command(inputs: Inputs, *, study_folder: str | Path | None = None) 
     its default (gains beyond the GA's bounds, GA sizes, tool-force magnitudes, a path file, another
     ``dt``).
     """
-    from ..study.spec import PARAMETERS
+    from ..study.spec import all_parameters
 
-    defaults: dict[str, Value] = {k: p.default for k, p in {**PARAMETERS, **simulate_options()}.items()}
+    defaults: dict[str, Value] = {k: p.default for k, p in all_parameters().items()}
     defaults.update(_STUDY_ONLY)
     args = ["simulate", "--case", str(inputs["case"])]
     for key, value in inputs.items():
@@ -278,6 +306,9 @@ def simulate_command(inputs: Inputs, *, study_folder: str | Path | None = None) 
         elif key in _FLAGS:
             if value is not None:
                 args += [_FLAGS[key], str(value) if not isinstance(value, float) else repr(value)]
+        elif key in _OPTIONAL_FLAGS:
+            if value != defaults.get(key):
+                args += [_OPTIONAL_FLAGS[key], str(value) if not isinstance(value, float) else repr(value)]
         elif key in _SWITCHES:
             args += [_SWITCHES[key]] if value else []
         elif value != defaults.get(key, value):

@@ -25,8 +25,10 @@ seeds = 4               # seeds 0..3 of the disturbance and the GA; or [0, 7, 9]
 # cutting_force (N), disturbance (N per axis), model_mass, model_inertia, model_friction
 # (factors on the controller's model), integrator ("euler" | "semi_implicit_euler" | "rk4"),
 # substeps, and the simulator's own options where it has them (observer = "momentum",
-# observer_gain, force_sensor, encoder_resolution, velocity_noise, plant_engine = "mujoco"
-# for the MuJoCo plant with vgtarm[mujoco], ...).
+# observer_gain, force_sensor, encoder_resolution, velocity_noise, estimator ("difference" |
+# "kalman", with encoders), estimator_bandwidth_hz, plant_engine = "mujoco" for the MuJoCo plant
+# with vgtarm[mujoco], ...), and the reference's redundancy criterion ("joint_limits", eq. 12, |
+# "effort": the actuator forces) with joint_limit_weight (effort criterion only).
 [grid]
 controller = ["cfc", "scm"]
 external_force = true

@@ -17,9 +17,11 @@ every parameter (defaults filled in) and its id is a hash of its inputs, so the 
 the same ids on any machine and a changed input gives a new id.
 
 Parameters: :data:`PARAMETERS` (controller, gains, GA, tool force, controller-model errors,
-integrator) and every scalar option of the simulation's :class:`~vgtarm.simulation.Scenario` not listed
-there (observer, observer_gain, force_sensor, encoder_resolution, velocity_noise, ... whatever
-the installed simulator accepts), passed to it unchanged.
+integrator), :data:`IK_PARAMETERS` (the reference's redundancy criterion and its joint-limit
+weight; a point of eq. 12 has the weight's default, so a grid of both criteria runs eq. 12 once)
+and every scalar option of the simulation's :class:`~vgtarm.simulation.Scenario` not listed
+there (observer, observer_gain, force_sensor, encoder_resolution, velocity_noise, estimator,
+... whatever the installed simulator accepts), passed to it unchanged.
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ import numpy as np
 
 from ..errors import ConfigError, VgtarmError, cut, shown
 from ..fileio import parse_toml, read_text_limited
+from ..ik.effort import CRITERIA, DEFAULT_JOINT_LIMIT_WEIGHT
 from ..model.parameters import ROBOT_FILE_LIMIT
 from ..model.robot import robot_parameters_from_dict
 from ..paths import CSV_FILE_LIMIT, MIN_DT, from_csv
@@ -89,8 +92,17 @@ PARAMETERS: dict[str, Parameter] = {
     "model_inertia": Parameter(float, 1.0, "a factor > 0", _positive),
     "model_friction": Parameter(float, 1.0, "a factor > 0", _positive),
     "integrator": Parameter(str, "euler", f"one of {sorted(INTEGRATORS)}", choices=tuple(sorted(INTEGRATORS))),
-    "substeps": Parameter(
-        int, 1, f"a whole number from 1 to {MAX_SUBSTEPS:,}", lambda v: 1 <= v <= MAX_SUBSTEPS
+    "substeps": Parameter(int, 1, f"a whole number from 1 to {MAX_SUBSTEPS:,}", lambda v: 1 <= v <= MAX_SUBSTEPS),
+}
+
+#: The reference's redundancy criterion (issue 22): eq. 12 (``"joint_limits"``, the paper's) or the static
+#: actuator efforts (``"effort"``, with the expected cutting force when the point has the tool force), and
+#: the joint-limit weight of the effort criterion. Like the simulator's options they count in a point's id
+#: only when set or away from their default, so the ids of studies written before stay as they were.
+IK_PARAMETERS: dict[str, Parameter] = {
+    "criterion": Parameter(str, "joint_limits", f"one of {list(CRITERIA)}", choices=CRITERIA),
+    "joint_limit_weight": Parameter(
+        float, DEFAULT_JOINT_LIMIT_WEIGHT, "a weight > 0 (of eq. 12 in the effort criterion)", _positive
     ),
 }
 
@@ -129,8 +141,13 @@ def simulate_options() -> dict[str, Parameter]:
 
 
 def all_parameters() -> dict[str, Parameter]:
-    """:data:`PARAMETERS` and :func:`simulate_options`."""
-    return {**PARAMETERS, **simulate_options()}
+    """:data:`PARAMETERS`, :data:`IK_PARAMETERS` and :func:`simulate_options`."""
+    return {**PARAMETERS, **IK_PARAMETERS, **simulate_options()}
+
+
+def optional_defaults() -> dict[str, Value]:
+    """The parameters that count in a point's id only when set or away from these defaults."""
+    return {k: p.default for k, p in {**IK_PARAMETERS, **simulate_options()}.items()}
 
 
 _STUDY_KEYS = ("name", "case", "path", "duration", "dt", "rates", "robot", "seeds")
@@ -191,6 +208,8 @@ class Study:
                     for name, p in params.items():
                         inputs[name] = values.get(name, chosen.get(name, p.default))
                     inputs["seed"] = seed
+                    if inputs["criterion"] == "joint_limits":  # the weight is the effort criterion's only
+                        inputs["joint_limit_weight"] = IK_PARAMETERS["joint_limit_weight"].default
                     point_id = point_id_of(inputs, self.files, explicit=set(chosen) | set(values))
                     points.setdefault(point_id, Point(point_id, inputs))
         return list(points.values())
@@ -203,7 +222,7 @@ def point_id_of(inputs: Mapping[str, Value], files: Mapping[str, str], *, explic
     default, so an option added to the simulator later does not change existing ids.
     """
     own = set(PARAMETERS) | set(_STUDY_KEYS) | {"seed"}
-    defaults = {k: p.default for k, p in simulate_options().items()}
+    defaults = optional_defaults()
     keyed = {
         k: v
         for k, v in inputs.items()
@@ -305,6 +324,7 @@ def parse_study(data: Mapping[str, Any], *, source: str = "<study>", folder: Pat
         random[key] = _distribution(f"{source}: random.{key}", value, params[key])
     if random and draws == 0:
         raise ConfigError(f"{source}: random.draws = 0: expected a whole number >= 1 with random parameters")
+    _check_criterion(source, grid, random)
     combinations = math.prod(len(values) for values in grid.values())
     n_seeds = seeds.stop - seeds.start if isinstance(seeds, range) else len(seeds)  # len() of a vast range fails
     total = combinations * max(draws, 1) * n_seeds
@@ -316,6 +336,21 @@ def parse_study(data: Mapping[str, Any], *, source: str = "<study>", folder: Pat
     study = Study(name, shared, grid, random, draws, random_seed, tuple(seeds), files, source)
     study.points()  # draws are checked here, before any run
     return study
+
+
+def _check_criterion(
+    source: str, grid: Mapping[str, list[Value]], random: Mapping[str, tuple[str, list[Value]]]
+) -> None:
+    """Refuse a joint-limit weight in a study none of whose points uses the effort criterion."""
+    weight = "grid" if "joint_limit_weight" in grid else "random" if "joint_limit_weight" in random else None
+    if weight is None:
+        return
+    criteria = grid.get("criterion") or (random["criterion"][1] if "criterion" in random else ["joint_limits"])
+    if "effort" not in criteria:
+        raise ConfigError(
+            f"{source}: {weight}.joint_limit_weight: applies to criterion = 'effort' only; expected criterion ="
+            f" 'effort' among the [grid] or [random] values (got {sorted(set(map(str, criteria)))})"
+        )
 
 
 def _names(key: object, params: Mapping[str, Parameter]) -> str:

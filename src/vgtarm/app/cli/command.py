@@ -122,6 +122,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     presets.apply_preset(args)
     if (args.case is None) == (args.path is None):
         raise InputError("give exactly one of --case 1|2 and --path FILE")
+    _criterion(args)  # a criterion option without its criterion: refused before the work
     inputs = [args.config, args.path]
     if args.out is not None:
         check_output_folder(args.out, "--out", inputs=inputs, owned=RUN_FILES)  # before the work
@@ -420,13 +421,20 @@ def _criterion(args: argparse.Namespace) -> dict[str, Any]:
     """The inverse kinematics' criterion options of ``--criterion`` (and ``--tool-force``; ``simulate``: the
     case's cutting force when ``--external-force`` is given)."""
     force = getattr(args, "tool_force", None)
+    weight = getattr(args, "joint_limit_weight", None)
     if args.criterion == "joint_limits":  # a --tool-force is refused by the options, with its reason
+        if weight is not None:
+            raise InputError(f"--joint-limit-weight {weight!r}: applies to --criterion effort only")
         return {} if force is None else {"tool_force": force}
     if force is None:
         from ...simulation import ExternalForce
 
         force = ExternalForce().cutting_force if getattr(args, "external_force", False) else 0.0
-    return {"criterion": args.criterion, "tool_force": force}
+    return {
+        "criterion": args.criterion,
+        "tool_force": force,
+        **({} if weight is None else {"joint_limit_weight": weight}),
+    }
 
 
 def _numbers(text: str, field: str, count: int, meaning: str) -> np.ndarray:
@@ -639,6 +647,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="redundancy criterion of the reference: eq. 12 (default) or the static actuator efforts",
     )
     simulate.add_argument(
+        "--joint-limit-weight",
+        type=positive_float,
+        default=None,
+        metavar="W",
+        help="--criterion effort: the weight of eq. 12's joint-limit cost beside the efforts (default 0.5)",
+    )
+    simulate.add_argument(
         "--horizon",
         type=positive_int,
         default=20,
@@ -736,6 +751,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--criterion", choices=("joint_limits", "effort"), default="joint_limits", help="eq. 12 (default) or effort"
     )
     ik.add_argument("--tool-force", type=float, default=None, metavar="N", help="expected cutting force (effort; 0)")
+    ik.add_argument(
+        "--joint-limit-weight", type=positive_float, default=None, metavar="W", help="eq. 12's weight (effort; 0.5)"
+    )
     ik.add_argument("-o", "--output", type=Path, default=None, metavar="FILE", help="CSV file to write")
     add_config(ik)
     ik.set_defaults(run=cmd_ik)

@@ -3,8 +3,8 @@
 Kept apart from the command-line module: :func:`add_simulate_options` adds ``--estimator``,
 ``--estimator-bandwidth`` and ``--preset`` to a parser, :func:`apply_preset` fills a preset's
 settings into the parsed arguments, and :func:`simulate_options` gives the scenario's options.
-The preset's choice and the measured front it is taken from are in ``docs/control.md``
-("The trade-off: tip error against force").
+The presets themselves are defined once, in :mod:`vgtarm.app.presets` (``vgtarm reproduce`` runs
+them too); their choice and the measured front are in ``docs/control.md``.
 """
 
 from __future__ import annotations
@@ -13,19 +13,9 @@ import argparse
 from typing import Any
 
 from ...simulation.sensing import DEFAULT_ESTIMATOR_BANDWIDTH_HZ, ESTIMATORS
+from ..presets import PRESETS
 
-#: Named settings of ``vgtarm simulate --preset``: the parsed arguments they set (each replaces the
-#: option of the same name). ``low-force``: the effort criterion, the Kalman estimator and the
-#: momentum observer at the point of the measured front with the least chatter under 0.06 mm.
-PRESETS: dict[str, dict[str, Any]] = {
-    "low-force": {
-        "criterion": "effort",
-        "observer": "momentum",
-        "observer_gain": 700.0,
-        "estimator": "kalman",
-        "estimator_bandwidth": 120.0,
-    },
-}
+__all__ = ["PRESETS", "add_simulate_options", "apply_preset", "simulate_options"]
 
 
 def add_simulate_options(parser: argparse.ArgumentParser) -> None:

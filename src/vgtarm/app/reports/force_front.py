@@ -14,7 +14,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 #: The run's inputs shown beside the figures.
-SETTINGS = ("estimator", "estimator_bandwidth_hz", "observer_gain", "kp", "kv")
+SETTINGS = ("criterion", "joint_limit_weight", "estimator", "estimator_bandwidth_hz", "observer_gain", "kp", "kv")
 
 
 def pareto(points: Sequence[tuple[float, float]]) -> list[bool]:

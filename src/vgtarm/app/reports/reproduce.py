@@ -32,6 +32,7 @@ from ..pictures.plotting import plot_efforts, plot_path_3d, plot_tip_error, save
 from ..pool import Inline, Workers
 from .beyond import BeyondRun, beyond_figure, beyond_runs, beyond_section, run_beyond_one
 from .html import runs_from_reproduction, write_html_report
+from .low_force import PresetRun, low_force_runs, low_force_section, run_low_force_one
 from .runs import TABLE_COLUMNS, RunSpec, mm, paper_runs, table_row, task_note
 from .seeds import seed_section
 
@@ -139,9 +140,11 @@ def _reproduce_into(
     options = {"seed": seed, "integrator": integrator, "substeps": substeps}
     specs = list(dict.fromkeys(specs))
     extra = beyond_runs() if beyond_paper else []
+    low = low_force_runs(robot) if beyond_paper else []  # issue 22: the low-force preset's rows
     plan = figure_plan(specs)
     results: dict[RunSpec, SimulationResult] = {}
     beyond_results: dict[BeyondRun, SimulationResult] = {}
+    low_results: dict[PresetRun, SimulationResult] = {}
     figures: dict[str, str] = {}
     beyond_figure_name: list[str] = []
     with _pool(robot, workers) as pool:
@@ -171,6 +174,13 @@ def _reproduce_into(
         for other in extra:
             inputs = (other, references[(2, "exact")], folder, options)
             tasks.add(_cost(other.controller, True), _beyond_run, inputs, partial(beyond_done, other))
+        for run in low:
+            tasks.add(
+                _cost("cfc", run.external_force),
+                _low_force_run,
+                (run, folder, options),
+                partial(low_results.__setitem__, run),
+            )
         page: list[Path] = []
 
         def write_page() -> None:
@@ -214,6 +224,9 @@ def _reproduce_into(
     )
     if beyond:
         text += "\n" + "\n".join(beyond) + "\n"
+    if low:
+        base = next(((b.folder, beyond_results[b]) for b in extra if b.label == "CFC + observer" and b.realistic), None)
+        text += "\n".join(low_force_section({r: low_results[r] for r in low}, base, seed=seed)) + "\n"
     if seeds:
         if progress:
             progress(f"{seeds} seeds of every run (Dask)", len(specs), len(specs))
@@ -287,6 +300,10 @@ def _beyond_run(
     robot: Robot, spec: BeyondRun, reference: JointReference, folder: Path, options: dict[str, Any]
 ) -> SimulationResult:
     return run_beyond_one(robot, spec, reference, folder, **options)
+
+
+def _low_force_run(robot: Robot, spec: PresetRun, folder: Path, options: dict[str, Any]) -> SimulationResult:
+    return run_low_force_one(robot, spec, folder, **options)
 
 
 def _draw(robot: Robot, plan: FigurePlan, results: dict[RunSpec, SimulationResult], folder: Path) -> str:
