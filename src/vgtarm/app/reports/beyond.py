@@ -21,13 +21,13 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ...errors import SimulationError
-from ...markup import md_cell, md_code, md_text
+from ...markup import md_cell, md_text
 from ...model.robot import Robot
 from ...simulation import ExternalForce, JointReference, SimulationResult, simulate
 from ..cases import case_study, run_case
 from ..pictures.plotting import save_figure
 from . import safe_study
-from .runs import mm
+from .runs import folder_cell, mm
 
 #: Realistic sensing: leg encoder step (m) and the controller model's mass factor.
 ENCODER_RESOLUTION = 1e-6
@@ -227,7 +227,7 @@ def beyond_section(results: dict[BeyondRun, SimulationResult], figure: str) -> l
             f"| {md_cell(spec.label)} | {'realistic' if spec.realistic else 'perfect'} | {largest} |"
             f" {mm(s['rms_tip_error_m'])} | {_n(s['peak_force_n'], 1)} | {_n(s['rms_force_n'], 1)} |"
             f" {_n(s['chatter_n'], 2)} | {_n(s['rms_twist_torque_nm'], 3)} | {_n(s['actuator_energy_j'], 2)} |"
-            f" {s['ga_activations']} | {md_code(spec.folder + '/')} |"
+            f" {s['ga_activations']} | {folder_cell(spec.folder)} |"
         )
     lines += safe_study.section_lines(safe_study.load_summary(), "safe_study.png")  # issue 23: the 60 runs
     lines += ["", f"![tip error beyond the paper]({figure})", "", "### What bounds the remaining error", ""]
@@ -260,8 +260,7 @@ def beyond_section(results: dict[BeyondRun, SimulationResult], figure: str) -> l
             f"- The random disturbance alone (5 N per axis, a new value each period, faster than any observer"
             f" can follow) leaves max {mm(noise['max_tip_error_m'])} mm, RMS {mm(noise['rms_tip_error_m'])} mm,"
             " everywhere on the path: it sets the floor.",
-            f"- Together: max {mm(both[0])} mm in the slow phases, {mm(both[1])} mm elsewhere (RMS"
-            f" {mm(both[2])} mm).",
+            f"- Together: max {mm(both[0])} mm in the slow phases, {mm(both[1])} mm elsewhere (RMS {mm(both[2])} mm).",
             f"- The force sensor knows the tool force one period late, with no filter lag: max"
             f" {mm(sensor['max_tip_error_m'])} mm, RMS {mm(sensor['rms_tip_error_m'])} mm ({mm(late[0])} mm in"
             f" the slow phases, {mm(late[1])} mm elsewhere). What is left is the one-period delay, of the"

@@ -32,7 +32,7 @@ from ..pictures.plotting import plot_efforts, plot_path_3d, plot_tip_error, save
 from ..pool import Inline, Workers
 from .beyond import BeyondRun, beyond_figure, beyond_runs, beyond_section, run_beyond_one
 from .html import runs_from_reproduction, write_html_report
-from .runs import TABLE_COLUMNS, RunSpec, mm, paper_runs, table_row
+from .runs import TABLE_COLUMNS, RunSpec, folder_cell, mm, paper_runs, table_row
 from .seeds import seed_section
 
 
@@ -165,27 +165,8 @@ def _reproduce_into(
         for other in extra:
             inputs = (other, references[(2, "exact")], folder, options)
             tasks.add(_cost(other.controller, True), _beyond_run, inputs, partial(beyond_done, other))
-        page: list[Path] = []
-
-        def write_page() -> None:
-            if progress:
-                progress("figures and report", len(specs), len(specs))
-            page.append(
-                write_html_report(
-                    robot,
-                    runs_from_reproduction({spec: results[spec] for spec in specs}),
-                    folder,
-                    title="vgtarm: the paper's case studies reproduced",
-                    intro=f"The interactive companion of report.md (seed {seed}, integrator {integrator}).",
-                )
-            )
-
         while tasks.busy():
-            if not page and len(results) == len(specs):  # the page here, while the workers draw
-                write_page()
             tasks.step()
-        if not page:
-            write_page()
     results = {spec: results[spec] for spec in specs}
     figures = {p.caption: figures[p.caption] for p in plan}
     beyond = beyond_section({b: beyond_results[b] for b in extra}, beyond_figure_name[0]) if extra else []
@@ -201,6 +182,15 @@ def _reproduce_into(
         text += "\n" + "\n".join(section)
         text += "\n"
     atomic_write_text(folder / "report.md", text)
+    if progress:
+        progress("report.html", len(specs), len(specs))
+    write_html_report(  # report.md on one page, its figures inlined, with the interactive figures
+        robot,
+        runs_from_reproduction(results),
+        folder,
+        title="vgtarm: the paper's case studies reproduced",
+        markdown=text,
+    )
     return results
 
 
@@ -381,7 +371,7 @@ def render_report(
     ]
     for spec, s in summaries.items():
         *cells, folder = table_row(spec, s)
-        lines.append("| " + " | ".join(map(md_cell, cells)) + f" | {md_code(folder + '/')} |")
+        lines.append("| " + " | ".join(map(md_cell, cells)) + f" | {folder_cell(folder)} |")
     lines += ["", "## Figures", ""]
     for caption, name in figures.items():
         lines += [f"**{caption}**", "", f"![{caption}]({name})", ""]
@@ -458,7 +448,7 @@ def _reading(results: dict[RunSpec, SimulationResult], summaries: dict[RunSpec, 
             period = float(scm["dt_s"])
             verdict = "inside" if median <= period else "not yet inside"
             out.append(
-                f"  The paper says its GA \"restricts online use\". Here one activation (50 generations of 50"
+                f'  The paper says its GA "restricts online use". Here one activation (50 generations of 50'
                 f" candidates, compiled) took {median * 1e3:.2f} ms at the median and {p99 * 1e3:.2f} ms at the 99th"
                 f" percentile: {verdict} the {period * 1e3:g} ms control period it serves; the run went"
                 f" {scm['simulated_time_s'] / scm['wall_time_s']:.1f} times real time."

@@ -11,6 +11,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
+from ...markup import md_link, md_text
 from ..cases import PAPER_RESULTS
 
 
@@ -98,3 +99,12 @@ def table_row(spec: RunSpec, summary: dict[str, Any], folder: str | None = None)
         f"{s['wall_time_s']:.2f}",
         folder if folder is not None else spec.folder,
     ]
+
+
+def folder_cell(path: str, shown: str | None = None) -> str:
+    """The Markdown of a table's folder cell: the run's folder ``path`` (relative to the report,
+    ``/`` between parts) shown as ``shown`` (default ``path``) and linked, then a link to its
+    ``summary.json``; both escaped (:mod:`vgtarm.markup`)."""
+    folder = path.rstrip("/")
+    name = (shown if shown is not None else folder).rstrip("/") + "/"
+    return f"{md_link(md_text(name), folder + '/')} {md_link('summary', folder + '/summary.json')}"
