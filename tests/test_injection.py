@@ -366,7 +366,7 @@ def test_the_report_command_escapes_the_folder_of_the_issue(
     assert [t for t, _ in parsed.elements if t == "strong"] == ["strong"]  # the page's own: the robot's name
     assert "".join(parsed.text["title"]) == "<b>runs</b>"
     assert f"Runs: {folder.name}" in "".join(parsed.text["p"])
-    assert folder.name in parsed.text["td"]
+    assert folder.name + "/" in parsed.text["a"]  # the table's folder cell: a link to the run
 
 
 def test_a_saved_run_whose_case_is_not_a_number_is_refused_in_one_line(robot: Robot, tmp_path: Path) -> None:

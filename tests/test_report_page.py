@@ -19,10 +19,12 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.text import Text
 
+import vgtarm
 from tests.test_html_report import browser_tab
 from tests.test_injection import folder_name, fuzz, hostile
 from tests.test_plotting import make_result
 from tests.viz_support import short_case1_run
+from vgtarm.app.pictures.drawing import STACK_FIGURE_SIZE, pose_figure
 from vgtarm.app.pictures.plotting import comparison_figure, joint_groups, spans_decades
 from vgtarm.app.reports import reproduce as reproduce_module
 from vgtarm.app.reports.beyond import beyond_runs
@@ -311,3 +313,26 @@ def test_error_axes_are_logarithmic_where_errors_span_decades(robot):
         page = render_html(robot, [ReportRun(RunSpec(1, "cfc", False, "exact"), "run", "run", made)], max_frames=2)
         figure = page.split('id="tip-error"')[1].split("</script>")[0]
         assert ('"type":"log"' in figure.replace(" ", "")) == (scale == "log")
+
+
+def _drawn_heights(robot: Any, **options: Any) -> list[tuple[float, bool]]:
+    """Height (in) of the robot as drawn in each plane view of its pose figure, and whether all of
+    it lies inside its panel (nothing cut off)."""
+    fig = pose_figure(robot, robot.parameters.home, **options)
+    FigureCanvasAgg(fig).draw()
+    found = []
+    for ax in fig.axes[:2]:  # the plane views
+        points = np.concatenate([ax.transData.transform(line.get_xydata()) for line in ax.lines])
+        points = points[np.isfinite(points).all(axis=1)]
+        box = ax.get_window_extent()
+        inside = bool(np.all((points >= [box.x0 - 1, box.y0 - 1]) & (points <= [box.x1 + 1, box.y1 + 1])))
+        found.append((float(np.ptp(points[:, 1])) / fig.dpi, inside))
+    return found
+
+
+def test_the_six_module_drawing_is_drawn_larger_and_whole():
+    six = vgtarm.load_robot("examples/six_modules.toml")
+    now = _drawn_heights(six)
+    before = _drawn_heights(six, figsize=STACK_FIGURE_SIZE)  # the stack figure's size of before
+    for (height, inside), (earlier, _) in zip(now, before, strict=True):
+        assert inside and height > 1.25 * earlier, (height, earlier)
