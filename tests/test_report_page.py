@@ -28,7 +28,7 @@ from vgtarm.app.pictures.drawing import STACK_FIGURE_SIZE, pose_figure
 from vgtarm.app.pictures.plotting import comparison_figure, joint_groups, spans_decades
 from vgtarm.app.reports import reproduce as reproduce_module
 from vgtarm.app.reports.beyond import beyond_runs
-from vgtarm.app.reports.html import ReportRun, render_html
+from vgtarm.app.reports.html import ReportRun, figure_errors, page_figures, render_html
 from vgtarm.app.reports.markdown_html import headings, to_html
 from vgtarm.app.reports.runs import RunSpec, folder_cell
 from vgtarm.errors import escape
@@ -336,3 +336,22 @@ def test_the_six_module_drawing_is_drawn_larger_and_whole():
     before = _drawn_heights(six, figsize=STACK_FIGURE_SIZE)  # the stack figure's size of before
     for (height, inside), (earlier, _) in zip(now, before, strict=True):
         assert inside and height > 1.25 * earlier, (height, earlier)
+
+
+def test_efforts_panel_per_module_and_a_menu_that_shows_one_run(robot):
+    runs = [
+        ReportRun(RunSpec(1, "cfc", False, "exact"), "one", "one", short_case1_run(robot, "cfc", 0.05)),
+        ReportRun(RunSpec(1, "scm", False, "exact"), "two", "two", short_case1_run(robot, "scm", 0.05)),
+    ]
+    figure = {div: fig for div, _, fig in page_figures(robot, runs, max_frames=2)}["efforts"]
+    n = len(JOINT_NAMES)
+    assert len(figure["data"]) == 2 * n and [t["visible"] for t in figure["data"]] == [True] * n + [False] * n
+    titles = [figure["layout"][key]["title"]["text"] for key in ("yaxis", "yaxis2", "yaxis3")]
+    assert titles == ["module 1 (N)", "module 2 (N)", "twist (N m)"] and "yaxis4" not in figure["layout"]
+    (menu,) = figure["layout"]["updatemenus"]
+    assert [b["label"] for b in menu["buttons"]] == ["one", "two"]
+    for i, button in enumerate(menu["buttons"]):
+        assert button["args"][0]["visible"] == [k // n == i for k in range(2 * n)]
+    assert figure_errors(figure) == []
+    single = {div: fig for div, _, fig in page_figures(robot, runs[:1], max_frames=2)}["efforts"]
+    assert "updatemenus" not in single["layout"]
