@@ -245,7 +245,8 @@ def _effort_figure(runs: Sequence[ReportRun], max_points: int) -> dict[str, Any]
                 hover = f"{joint}: %{{y:.4g}} {effort_unit(names[j])}<extra>{label}</extra>"
                 data.append(
                     {"type": "scatter", "x": typed_array(t), "y": typed_array(f), "name": joint,
-                     "legendgroup": joint, "visible": i == 0, "mode": "lines",
+                     "legendgroup": f"panel {g + 1}", "legendgrouptitle": {"text": plotly_text(groups[g][0])},
+                     "visible": i == 0, "mode": "lines",
                      "line": {"color": COLOURS[k % len(COLOURS)], "width": 1.0}, "xaxis": "x" + suffix,
                      "yaxis": "y" + suffix, "hovertemplate": hover}
                 )  # fmt: skip
@@ -258,7 +259,7 @@ def _effort_figure(runs: Sequence[ReportRun], max_points: int) -> dict[str, Any]
                 + (" (the menu chooses the run)" if len(runs) > 1 else f": {plotly_text(runs[0].label)}")
             },
             "height": EFFORT_PANEL_PX * len(groups) + 140,
-            "legend": {"font": {"size": 10}, "title": {"text": "joint"}},
+            "legend": {"font": {"size": 10}, "groupclick": "toggleitem", "tracegroupgap": 6},
         }
     )
     if len(runs) > 1:
