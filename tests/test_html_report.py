@@ -30,6 +30,7 @@ from vgtarm.app.reports.html import (
 )
 from vgtarm.app.reports.reproduce import TABLE_COLUMNS, RunSpec, render_report
 from vgtarm.errors import InputError
+from vgtarm.markup import md_text
 
 #: The browser: Debian's chromium (``VGTARM_CHROMIUM`` points elsewhere).
 CHROMIUM = os.environ.get("VGTARM_CHROMIUM", "/usr/bin/chromium")
@@ -67,29 +68,35 @@ def _cells(row_html: str) -> list[str]:
 def test_page_table_is_the_markdown_reports_table(runs, page):
     markdown = render_report(runs, {}, seed=0, integrator="euler", substeps=1, wall_time_s=1.0)
     md_rows = [line for line in markdown.splitlines() if line.startswith("| 1 |")]
-    md_cells = [[c.strip().strip("`").rstrip("/") for c in row.strip("|").split("|")] for row in md_rows]
+    md_cells = [[c.strip() for c in row.strip("|").split("|")] for row in md_rows]
     table = re.search(r'<table id="summary-table">(.*?)</table>', page.read_text(), re.S).group(1)
     rows = re.findall(r"<tr>(.*?)</tr>", table, re.S)
     assert _cells(rows[0]) == list(TABLE_COLUMNS)
-    assert [_cells(r) for r in rows[1:]] == md_cells
+    html_cells = [_cells(r) for r in rows[1:]]
+    assert [cells[:-1] for cells in html_cells] == [cells[:-1] for cells in md_cells]
+    for spec, cells, md in zip(runs, html_cells, md_cells, strict=True):  # the folder cell: two links
+        assert md[-1] == f"[{md_text(spec.folder)}/]({spec.folder}/) [summary]({spec.folder}/summary.json)"
+        assert re.sub(r"<[^>]+>", "", cells[-1]) == f"{spec.folder}/ summary"
+        assert re.findall(r'href="([^"]*)"', cells[-1]) == [f"{spec.folder}/", f"{spec.folder}/summary.json"]
     assert len(md_cells) == len(runs)
 
 
-def test_page_loads_plotly_from_its_folder_once_and_needs_no_network(page):
+def test_page_is_one_file_with_plotly_inlined_once_and_needs_no_network(page):
     text = page.read_text()
-    assert re.findall(r"<script[^>]*\bsrc=\"([^\"]*)\"", text) == [PLOTLY_JS]
+    assert re.findall(r"<script[^>]*\bsrc=", text) == []
     assert "<link" not in text and "<iframe" not in text
-    assert (page.parent / PLOTLY_JS).stat().st_size > 1_000_000
+    assert text.count("window.PlotlyConfig") == 1 and text.count("* plotly.js v") == 1
+    assert sorted(p.name for p in page.parent.iterdir()) == ["report.html"]
 
 
-def test_pages_of_one_folder_share_one_plotly_js(robot, runs, tmp_path):
+def test_pages_of_one_folder_are_each_whole(robot, runs, tmp_path):
     specs = runs_from_reproduction(runs)
     first = write_html_report(robot, specs[:1], tmp_path, name="a.html", max_frames=4)
-    stamp = (tmp_path / PLOTLY_JS).stat().st_mtime_ns
-    write_html_report(robot, specs[1:], tmp_path, name="b.html", max_frames=4)
-    assert (tmp_path / PLOTLY_JS).stat().st_mtime_ns == stamp, "an identical plotly.js is not rewritten"
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.html", "b.html", PLOTLY_JS]
-    assert first.stat().st_size < 2_000_000
+    second = write_html_report(robot, specs[1:], tmp_path, name="b.html", max_frames=4)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.html", "b.html"]
+    for made in (first, second):
+        assert made.read_text().count("* plotly.js v") == 1
+        assert made.stat().st_size < 8_000_000
 
 
 def test_min_max_decimation_keeps_peaks_ends_and_order():
@@ -184,8 +191,12 @@ def test_report_command_writes_a_page_for_saved_runs(runs, tmp_path, capsys):
     for spec, result in runs.items():
         folders.append(result.save(tmp_path / spec.folder))
     assert cli.main(["report", *map(str, folders), "--out", str(tmp_path / "page")]) == 0
-    assert (tmp_path / "page" / "report.html").is_file() and (tmp_path / "page" / PLOTLY_JS).is_file()
+    made = tmp_path / "page" / "report.html"
+    assert made.is_file() and not (tmp_path / "page" / PLOTLY_JS).exists()
     assert [r.folder for r in load_runs(folders)] == [f.name for f in folders]
+    links = re.findall(r'<a href="([^"]*)">', made.read_text())  # each run's folder and summary, relative
+    assert links == [x for f in folders for x in (f"../{f.name}/", f"../{f.name}/summary.json")]
+    assert all((made.parent / link).exists() for link in links)
     assert "report written to" in capsys.readouterr().out
     assert cli.main(["report", str(tmp_path / "nothing"), "--out", str(tmp_path / "x")]) == 1
     assert "missing summary.json" in capsys.readouterr().err

@@ -288,10 +288,15 @@ def test_report_page_has_one_effort_trace_per_joint(six, run_dir):
     efforts = figures["efforts"]
     names = six.joint_names
     assert len(efforts["data"]) == len(names)
-    axes = [efforts["layout"]["yaxis" + ("" if j == 0 else str(j + 1))]["title"]["text"] for j in range(len(names))]
-    units = ["N m" if n.startswith("psi") else "N" for n in names]
-    assert axes == [f"{n} ({u})" for n, u in zip(names, units, strict=True)]
-    assert [t["hovertemplate"].split(":")[0] for t in efforts["data"]] == list(names)
+    # one panel per module's legs and one for the three twists, each trace in its module's panel
+    titles = [f"module {m} (N)" for m in range(1, 7)] + ["twists (N m)"]
+    axes = [efforts["layout"]["yaxis" + ("" if g == 0 else str(g + 1))]["title"]["text"] for g in range(len(titles))]
+    assert axes == titles and "yaxis8" not in efforts["layout"]
+    legs = [n for n in names if not n.startswith("psi")]
+    twists = [n for n in names if n.startswith("psi")]
+    assert [t["hovertemplate"].split(":")[0] for t in efforts["data"]] == legs + twists
+    panel = {t["hovertemplate"].split(":")[0]: t["yaxis"] for t in efforts["data"]}
+    assert panel["s1"] == panel["p1"] == "y" and panel["v6"] == "y6" and panel["psi3"] == panel["psi7"] == "y7"
     mechanism = figures["mechanism-1"]
     legs = next(t for t in mechanism["data"] if t.get("customdata"))
     leg_names = [n for n in names if not n.startswith("psi")]
@@ -305,8 +310,10 @@ def test_report_command_writes_the_page_of_a_stack_run(run_dir, tmp_path, capsys
     out = tmp_path / "report"
     assert cli.main(["report", str(run_dir), "--config", "examples/six_modules.toml", "--out", str(out)]) == 0
     page = (out / "report.html").read_text("utf-8")
-    assert all(f'"text":"{name} (' in page for name in ("s1", "p6", "psi3", "psi7"))
+    # a panel per module (and one for the twists), a line per joint
+    assert all(f'"text":"{panel} (' in page for panel in ("module 1", "module 6", "twists"))
     assert len(re.findall(r'"hovertemplate":"psi\d', page)) == 3
+    assert all(f'"hovertemplate":"{name}:' in page for name in ("s1", "p6", "psi3", "psi7"))
     assert "report written to" in capsys.readouterr().out
 
 

@@ -22,15 +22,18 @@ plain character.
 - :func:`md_text`, :func:`md_cell`, :func:`md_code`: Markdown (CommonMark and GitHub's dialect)
   inside a line of text, in a table cell, in a code span.
 - :func:`mpl_text`: Matplotlib text (titles, labels), where a pair of ``$`` starts math.
+- :func:`url_path`: a relative path as a link's destination (percent-encoded: no scheme, no
+  space, nothing a format reads), and :func:`md_link` a Markdown link to it.
 """
 
 from __future__ import annotations
 
 import re
+from urllib.parse import quote
 
 from .errors import escape
 
-__all__ = ["html_text", "md_cell", "md_code", "md_text", "mpl_text", "plotly_text"]
+__all__ = ["html_text", "md_cell", "md_code", "md_link", "md_text", "mpl_text", "plotly_text", "url_path"]
 
 _HTML = {"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#x27;"}
 _PLOTLY = {"&": "&amp;", "<": "&lt;", ">": "&gt;", "{": "&#123;", "}": "&#125;"}
@@ -92,6 +95,20 @@ def md_code(value: object) -> str:
 def mpl_text(value: object) -> str:
     """``value`` as Matplotlib text: a ``$`` shows as ``$`` and starts no math."""
     return _text(value).replace("$", "\\$")
+
+
+def url_path(path: str) -> str:
+    """``path`` (a relative path with ``/`` between its parts) as a link's destination: every
+    character but letters, digits, ``-._~`` and ``/`` percent-encoded (UTF-8), so it is read as a
+    path in HTML and Markdown alike, never as a scheme (``javascript:`` becomes
+    ``javascript%3A``), a query or a fragment."""
+    return quote(str(path), safe="/")
+
+
+def md_link(text: str, path: str) -> str:
+    """A Markdown link showing ``text`` (Markdown, already escaped by the caller) to the relative
+    ``path`` (:func:`url_path`)."""
+    return f"[{text}]({url_path(path)})"
 
 
 def html_table(header: list[str] | tuple[str, ...], rows: list[list[object]], *, caption: str = "") -> str:

@@ -13,7 +13,8 @@ the left axis, twist joints (angles, torques) on a twin axis on the right.
 - :func:`plot_tip_error`: tip position error against time for compared runs (Figs. 5 and 8).
 - :func:`plot_efforts`: leg forces and twist torques of one run (Figs. 6 and 9).
 - :func:`plot_joint_errors`: joint tracking errors ``q_d - q`` of one run.
-- :func:`comparison_figure`: the three views above in one figure.
+- :func:`plot_efforts_by_module`: the efforts of one run, one panel per module (and the twists).
+- :func:`comparison_figure`: the three views above in one figure (a run's ``figure.png``).
 - :func:`save_figure`: write a figure atomically, format from the suffix.
 """
 
@@ -43,6 +44,7 @@ __all__ = [
     "comparison_figure",
     "label_of",
     "plot_efforts",
+    "plot_efforts_by_module",
     "plot_joint_errors",
     "plot_path_3d",
     "plot_tip_error",
@@ -63,6 +65,39 @@ _MIN_BOX_FRACTION = 0.15
 _GA_COLOR = "tab:orange"
 #: Default size of a new figure of one panel (inches).
 _PANEL_SIZE = (7.0, 4.0)
+
+
+#: Largest ratio of the largest to the smallest positive error shown on a linear axis: errors
+#: that span more (two decades) get a logarithmic axis.
+DECADES_RATIO = 100.0
+
+
+def spans_decades(values: Sequence[Any], ratio: float = DECADES_RATIO) -> bool:
+    """Whether the positive finite numbers among ``values`` (arrays of any shape) span more than
+    ``ratio`` from the smallest to the largest: then an axis of them is logarithmic."""
+    parts = [np.asarray(v, dtype=float).ravel() for v in values]
+    flat = np.concatenate(parts) if parts else np.zeros(0)
+    positive = flat[np.isfinite(flat) & (flat > 0)]
+    return bool(positive.size) and float(positive.max()) > ratio * float(positive.min())
+
+
+def joint_groups(names: Sequence[str]) -> list[tuple[str, list[int]]]:
+    """The joints of a robot grouped for one panel each: the legs of each module (``s2, v2, p2``:
+    ``module 2``, in N), then the twist joints together (``psi...``, in N m); returns
+    ``(title, joint indices)`` in order. A name without a module number is a group of its own."""
+    legs: dict[str, list[int]] = {}
+    twists: list[int] = []
+    for j, name in enumerate(names):
+        if _is_twist(name):
+            twists.append(j)
+            continue
+        digits = name.lstrip("abcdefghijklmnopqrstuvwxyz_")
+        key = f"module {digits}" if digits.isdigit() else name
+        legs.setdefault(key, []).append(j)
+    groups = list(legs.items())
+    if twists:
+        groups.append(("twist" if len(twists) == 1 else "twists", twists))
+    return groups
 
 
 def label_of(result: SimulationResult) -> str:
@@ -128,11 +163,15 @@ def plot_path_3d(
         ax.set_ylim(mid[1] - half[1], mid[1] + half[1])
         ax.set_zlim(mid[2] - half[2], mid[2] + half[2])
         ax.set_box_aspect(tuple(2 * half), zoom=1.1)
-    for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
-        axis.set_major_locator(MaxNLocator(nbins=5, steps=[1, 2, 2.5, 5, 10]))
-    ax.set_xlabel("x (mm)", labelpad=6)
-    ax.set_ylabel("y (mm)", labelpad=6)
-    ax.set_zlabel("z (mm)", labelpad=8)
+        # fewer ticks on a short side of the box, so its labels do not run into each other
+        bins = [max(2, min(5, round(5 * h / float(half.max())))) for h in half]
+    else:
+        bins = [5, 5, 5]
+    for axis, n in zip((ax.xaxis, ax.yaxis, ax.zaxis), bins, strict=True):
+        axis.set_major_locator(MaxNLocator(nbins=n, steps=[1, 2, 2.5, 5, 10]))
+    ax.set_xlabel("x (mm)", labelpad=16)
+    ax.set_ylabel("y (mm)", labelpad=10)
+    ax.set_zlabel("z (mm)", labelpad=10)
     ax.set_title(title if title is not None else "Tip path")
     ax.legend(loc="upper left", fontsize="small")
     return ax
@@ -285,6 +324,41 @@ def plot_joint_errors(result: SimulationResult, *, ax: Axes | None = None, title
     return ax
 
 
+def plot_efforts_by_module(
+    result: SimulationResult, cell: Any, *, title: str | None = None, sharex: Axes | None = None
+) -> list[Axes]:
+    """Actuator efforts of one run in one panel per group of :func:`joint_groups` (each module's
+    legs in N, the twists in N m), stacked in the grid cell ``cell`` (a ``SubplotSpec``) of its
+    figure, sharing the time axis (labelled on the bottom panel only); each panel's legend names
+    its joints at its right; spans in GA mode are shaded. Returns the panels' Axes, top first."""
+    _check_result(result, "result")
+    names = result.joint_names
+    groups = joint_groups(names)
+    figure = cell.get_gridspec().figure
+    grid = cell.subgridspec(len(groups), 1, hspace=0.08)
+    axes: list[Axes] = []
+    for g, (group, joints) in enumerate(groups):
+        ax = figure.add_subplot(grid[g, 0], sharex=sharex if sharex is not None else (axes[0] if axes else None))
+        unit = "N m" if _is_twist(names[joints[0]]) else "N"
+        for j, colour in zip(joints, _leg_colours(len(joints)), strict=True):
+            ax.plot(result.t, result.effort[:, j], lw=1.0, color=colour, label=mpl_text(names[j]))
+        shaded = _shade_ga(ax, result)
+        handles, _ = ax.get_legend_handles_labels()
+        if shaded and g == 0:
+            handles.append(Patch(color=_GA_COLOR, alpha=0.2, label="GA gains"))
+        ax.legend(handles=handles, loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize="small", frameon=False)
+        ax.set_ylabel(f"{group} ({unit})", fontsize="small")
+        ax.yaxis.set_major_locator(MaxNLocator(nbins=4))
+        ax.tick_params(labelsize="small")
+        ax.grid(True, alpha=0.3)
+        if g < len(groups) - 1:
+            ax.tick_params(labelbottom=False)
+        axes.append(ax)
+    axes[-1].set_xlabel("time (s)")
+    axes[0].set_title(title if title is not None else f"Actuator efforts, {label_of(result)}")
+    return axes
+
+
 def comparison_figure(
     results: SimulationResult | Sequence[SimulationResult],
     *,
@@ -293,9 +367,11 @@ def comparison_figure(
 ) -> Figure:
     """One figure comparing runs: 3-D tip paths, tip errors and actuator efforts.
 
-    Top row: the 3-D tip paths (left) and the tip errors of all runs (right). Bottom row: the
-    actuator efforts of each run side by side when there are two runs, else the efforts of the
-    last run across the full width.
+    Top row: the 3-D tip paths (left) and the tip errors of all runs (right; a logarithmic axis
+    when the errors span more than two decades, :func:`spans_decades`). Below: the actuator
+    efforts of each run side by side when there are two runs, else the efforts of the last run
+    across the full width, one panel per module and one for the twists
+    (:func:`plot_efforts_by_module`), so a many-module arm reads as well as the paper's.
 
     Args:
         results: one run or a sequence of runs.
@@ -303,20 +379,24 @@ def comparison_figure(
         title: figure title (default: none).
 
     Returns:
-        The Figure (constrained layout, 14 x 10 in).
+        The Figure (constrained layout, 14 in wide, taller with more modules); no two of its texts
+        overlap.
     """
     runs, names = _runs_and_labels(results, labels)
     shown = list(zip(runs, names, strict=True)) if len(runs) == 2 else [(runs[-1], names[-1])]
-    fig = Figure(figsize=(14.0, 10.0), layout="constrained")
-    grid = fig.add_gridspec(2, 2, height_ratios=(1.1, 1.0))
-    plot_path_3d(runs, labels=names, ax=fig.add_subplot(grid[0, 0], projection="3d"))
-    plot_tip_error(runs, labels=names, ax=fig.add_subplot(grid[0, 1]))
+    groups = len(joint_groups(shown[0][0].joint_names))
+    panel = 1.25  # inches per effort panel
+    fig = Figure(figsize=(14.0, 5.6 + panel * groups + 0.8), layout="constrained")
+    grid = fig.add_gridspec(2, len(shown) if len(shown) == 2 else 1, height_ratios=(5.6, panel * groups + 0.8))
+    # an empty column between the 3-D view and the errors: the 3-D axis labels reach past their box
+    top = grid[0, :].subgridspec(1, 3, width_ratios=(1.0, 0.08, 1.1))
+    plot_path_3d(runs, labels=names, ax=fig.add_subplot(top[0, 0], projection="3d"))
+    log = spans_decades([run.tip_error for run in runs])
+    plot_tip_error(runs, labels=names, ax=fig.add_subplot(top[0, 2]), log=log)
     first: Axes | None = None
     for column, (run, name) in enumerate(shown):
-        cell = grid[1, column] if len(shown) == 2 else grid[1, :]
-        effort_ax = fig.add_subplot(cell, sharex=first, sharey=first)
-        plot_efforts(run, ax=effort_ax, title=f"Actuator efforts, {name}")
-        first = first or effort_ax
+        panels = plot_efforts_by_module(run, grid[1, column], title=f"Actuator efforts, {name}", sharex=first)
+        first = first or panels[0]
     if title is not None:
         fig.suptitle(title, fontsize="x-large")
     return fig

@@ -21,13 +21,13 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ...errors import SimulationError
-from ...markup import md_cell, md_code, md_text
+from ...markup import md_cell, md_text
 from ...model.robot import Robot
 from ...simulation import ExternalForce, JointReference, SimulationResult, simulate
 from ..cases import case_study, run_case
 from ..pictures.plotting import save_figure
 from . import safe_study
-from .runs import mm
+from .runs import folder_cell, mm
 
 #: Realistic sensing: leg encoder step (m) and the controller model's mass factor.
 ENCODER_RESOLUTION = 1e-6
@@ -229,7 +229,7 @@ def beyond_section(results: dict[BeyondRun, SimulationResult], figure: str) -> l
             f"| {md_cell(spec.label)} | {'realistic' if spec.realistic else 'perfect'} | {largest} |"
             f" {mm(s['rms_tip_error_m'])} | {_n(s['peak_force_n'], 1)} | {_n(s['rms_force_n'], 1)} |"
             f" {_n(s['chatter_n'], 2)} | {_n(s['rms_twist_torque_nm'], 3)} | {_n(s['actuator_energy_j'], 2)} |"
-            f" {s['ga_activations']} | {md_code(spec.folder + '/')} |"
+            f" {s['ga_activations']} | {folder_cell(spec.folder)} |"
         )
     lines += safe_study.section_lines(safe_study.load_summary(), "safe_study.png")  # issue 23: the 60 runs
     lines += ["", f"![tip error beyond the paper]({figure})", "", "### What bounds the remaining error", ""]

@@ -1,31 +1,37 @@
-"""``report.html``: the runs on one interactive page that opens from disk, written with Plotly.
+"""``report.html``: the report on one interactive page that opens from disk, written with Plotly.
 
-The page holds the same table as ``report.md`` (:func:`vgtarm.app.reports.runs.table_row`), zoomable
-plots of the tip error and of every actuator's effort (runs toggled from the legend: one legend
-entry per run controls all of its traces), the desired and actual tip paths in 3-D, and the
-mechanism animated along the first run of each case study, with a time slider and a play button.
+The page is ``report.md`` itself (:mod:`.markdown_html` converts the one Markdown text, so both
+hold the same sections under the same headings: the comparison table, the figures, the reading,
+the section beyond the paper and what bounds the remaining error), each run linked to its folder
+and its ``summary.json``, and, under "Figures", zoomable plots of the tip error and of every
+actuator's effort (grouped per module; a menu chooses the run when there are several), the
+desired and actual tip paths in 3-D, and the mechanism animated along the first run of each case
+study, with a time slider and a play button. ``vgtarm report`` writes the same page for saved runs
+from a Markdown text of its own (:func:`runs_markdown`: the title, the table, the figures).
 
-Light enough to open at once:
-
-- every time series is decimated for display by :func:`decimate_min_max`, which keeps the smallest
-  and the largest sample of each bucket, so peaks (the maximum error) survive;
-- plotly.js is not embedded: the page loads ``plotly.min.js`` from its own folder, written once
-  there (the same copy serves every page of the folder), so it opens from disk with no server
-  and no network.
+One self-contained file that opens from disk with no server, network or file beside it: Plotly's
+own writer (:func:`plotly.io.to_html`) writes each figure, plotly.js inlined once before the first;
+the report's PNG figures are inlined as ``data:`` images. Light enough to open at once: every
+time series is decimated for display by :func:`decimate_min_max`, which keeps the smallest and the
+largest sample of each bucket, so peaks (the maximum error) survive.
 
 Users name things on the page: the runs' folders, the robot, the joints, the title, and a saved
-run's metadata (its controller). Every such string goes through :mod:`vgtarm.markup`, into the
-page's HTML by :func:`~vgtarm.markup.html_text` and into the figures by
-:func:`~vgtarm.markup.plotly_text` (Plotly reads tags and ``%{...}`` in its labels), so it shows
-as written and adds no element, attribute or link; ``intro`` and ``title`` are plain text too.
+run's metadata (its controller). Every such string goes through :mod:`vgtarm.markup`: into the
+Markdown by :func:`~vgtarm.markup.md_text` (then the converter writes every character through
+:func:`~vgtarm.markup.html_text`), into the figures by :func:`~vgtarm.markup.plotly_text` (Plotly
+reads tags and ``%{...}`` in its labels), into links percent-encoded by
+:func:`~vgtarm.markup.url_path`, so it shows as written and adds no element, attribute or link;
+``intro`` and ``title`` are plain text too.
 """
 
 from __future__ import annotations
 
 import base64
 import json
+import os
+import re
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -36,17 +42,20 @@ from numpy.typing import ArrayLike, NDArray
 from ... import errors
 from ...errors import InputError
 from ...fileio import atomic_write_text
-from ...markup import html_text, plotly_text
+from ...markup import html_text, md_cell, md_text, plotly_text
 from ...model.robot import Robot
 from ...simulation.result import MODE_GA, SimulationResult
 from ..pictures.animation import check_same_robot
 from ..pictures.drawing import CLOSENESS_COLOURS, MM
 from ..pictures.geometry import MechanismGeometry, mechanism_geometries
-from .runs import TABLE_COLUMNS, RunSpec, table_row
+from ..pictures.plotting import joint_groups, spans_decades
+from .markdown_html import headings, to_html
+from .runs import TABLE_COLUMNS, RunSpec, folder_cell, table_row
 
 Array = NDArray[np.float64]
 
-#: Name of the shared plotly.js file written beside the pages.
+#: Name of the plotly.js file that pages before the self-contained ones loaded from their folder
+#: (a folder of such a page, holding it, may still be replaced by a new page).
 PLOTLY_JS = "plotly.min.js"
 #: Largest number of points of one displayed time series.
 MAX_POINTS = 1200
@@ -57,9 +66,8 @@ COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e
 #: Colour scale of the legs' closeness to a limit (as the Matplotlib drawing: green to red).
 CLOSENESS_SCALE = [[i / (len(CLOSENESS_COLOURS) - 1), c] for i, c in enumerate(CLOSENESS_COLOURS)]
 _COLOURBAR_TITLE = "legs: closeness<br>to a limit<br>(0 mid-range,<br>1 at a limit)"
-#: Height of one panel of the efforts' figure (px): the paper's 7 joints, and a robot of more joints.
-EFFORT_PANEL_PX = 150
-EFFORT_PANEL_PX_MANY = 110
+#: Height of one panel of the efforts' figure (px): one panel per module and one for the twists.
+EFFORT_PANEL_PX = 190
 
 
 @dataclass(frozen=True)
@@ -71,6 +79,13 @@ class ReportRun:
     label: str
     folder: str
     result: SimulationResult
+    #: The run's folder as the page links it: relative to the page's folder, or absolute (then
+    #: made relative to it); empty for ``folder``.
+    path: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.path:
+            object.__setattr__(self, "path", self.folder)
 
 
 def spec_of(result: SimulationResult) -> RunSpec:
@@ -183,11 +198,14 @@ def _error_figure(runs: Sequence[ReportRun], max_points: int) -> dict[str, Any]:
             {"type": "scatter", "x": typed_array(t), "y": typed_array(e), "name": label, "mode": "lines",
              "line": {"color": COLOURS[i % len(COLOURS)], "width": 1.2}}
         )  # fmt: skip
+    log = spans_decades([run.result.tip_error[: run.result.completed] for run in runs])
+    yaxis: dict[str, Any] = {"title": {"text": "tip error (mm)" + (", log scale" if log else "")}}
+    yaxis.update({"type": "log", "exponentformat": "power"} if log else {"rangemode": "tozero"})
     layout = _layout(
         {
             "title": {"text": "Tip error |P(q_d) - P(q)| (click a legend entry to hide or show a run; drag to zoom)"},
             "xaxis": {"title": {"text": "time (s)"}},
-            "yaxis": {"title": {"text": "tip error (mm)"}, "type": "log", "exponentformat": "power"},
+            "yaxis": yaxis,
             "height": 480,
             "legend": {"font": {"size": 10}},
         }
@@ -201,39 +219,66 @@ def effort_unit(joint: str) -> str:
 
 
 def _effort_figure(runs: Sequence[ReportRun], max_points: int) -> dict[str, Any]:
+    """One panel per module's legs and one for the twists (:func:`joint_groups`), a colour per joint
+    of a panel; with several runs a menu chooses the run shown (all of them at once would be
+    runs x joints lines)."""
     from plotly.subplots import make_subplots
 
     names = runs[0].result.joint_names  # every run has them (checked by page_figures)
-    n = len(names)
+    groups = joint_groups(names)
     # the panels' axes as Plotly's subplots lay them out (a figure without traces is cheap to build)
-    grid = make_subplots(rows=n, cols=1, shared_xaxes=True, vertical_spacing=0.012)
-    for j, joint in enumerate(names):
-        title = f"{plotly_text(joint)} ({effort_unit(joint)})"
-        grid.update_yaxes(title_text=title, title_font={"size": 10}, row=j + 1, col=1)
-    grid.update_xaxes(title_text="time (s)", row=n, col=1)
+    grid = make_subplots(rows=len(groups), cols=1, shared_xaxes=True, vertical_spacing=0.04)
+    for g, (title, joints) in enumerate(groups):
+        unit = effort_unit(names[joints[0]])
+        grid.update_yaxes(title_text=f"{plotly_text(title)} ({unit})", title_font={"size": 11}, row=g + 1, col=1)
+    grid.update_xaxes(title_text="time (s)", row=len(groups), col=1)
     axes = grid.to_plotly_json()["layout"]
     data = []
+    owner: list[int] = []
     for i, run in enumerate(runs):
-        colour = COLOURS[i % len(COLOURS)]
         label = plotly_text(run.label)
-        for j in range(n):
-            t, f = _series(run.result, run.result.effort[:, j], max_points)
-            suffix = "" if j == 0 else str(j + 1)
-            hover = f"{plotly_text(names[j])}: %{{y:.4g}} {effort_unit(names[j])}<extra>{label}</extra>"
-            data.append(
-                {"type": "scatter", "x": typed_array(t), "y": typed_array(f), "name": label,
-                 "legendgroup": label, "showlegend": j == 0, "mode": "lines",
-                 "line": {"color": colour, "width": 1.0}, "xaxis": "x" + suffix, "yaxis": "y" + suffix,
-                 "hovertemplate": hover}
-            )  # fmt: skip
+        for g, (_, joints) in enumerate(groups):
+            suffix = "" if g == 0 else str(g + 1)
+            for k, j in enumerate(joints):
+                t, f = _series(run.result, run.result.effort[:, j], max_points)
+                joint = plotly_text(names[j])
+                hover = f"{joint}: %{{y:.4g}} {effort_unit(names[j])}<extra>{label}</extra>"
+                data.append(
+                    {"type": "scatter", "x": typed_array(t), "y": typed_array(f), "name": joint,
+                     "legendgroup": f"panel {g + 1}", "legendgrouptitle": {"text": plotly_text(groups[g][0])},
+                     "visible": i == 0, "mode": "lines",
+                     "line": {"color": COLOURS[k % len(COLOURS)], "width": 1.0}, "xaxis": "x" + suffix,
+                     "yaxis": "y" + suffix, "hovertemplate": hover}
+                )  # fmt: skip
+                owner.append(i)
     layout = _layout(
         {
             **{key: value for key, value in axes.items() if key != "template"},
-            "title": {"text": "Actuator efforts (legend toggles a run in every panel)"},
-            "height": (EFFORT_PANEL_PX if n <= 7 else EFFORT_PANEL_PX_MANY) * n + 120,
-            "legend": {"font": {"size": 10}},
+            "title": {
+                "text": "Actuator efforts, one panel per module"
+                + (" (the menu chooses the run)" if len(runs) > 1 else f": {plotly_text(runs[0].label)}")
+            },
+            "height": EFFORT_PANEL_PX * len(groups) + 140,
+            "legend": {"font": {"size": 10}, "groupclick": "toggleitem", "tracegroupgap": 6},
         }
     )
+    if len(runs) > 1:
+        layout["updatemenus"] = [
+            {
+                "type": "dropdown",
+                "x": 0.0,
+                "xanchor": "left",
+                "y": 1.0,
+                "yanchor": "bottom",
+                "pad": {"b": 8},
+                "active": 0,
+                "buttons": [
+                    {"label": plotly_text(run.label), "method": "restyle",
+                     "args": [{"visible": [o == i for o in owner]}]}
+                    for i, run in enumerate(runs)
+                ],
+            }
+        ]  # fmt: skip
     return {"data": data, "layout": layout}
 
 
@@ -488,29 +533,23 @@ def mechanism_figure(
     return {"data": [*static, *first], "layout": layout, "frames": frames}
 
 
-def write_plotly_js(folder: str | Path) -> Path:
-    """Write ``plotly.min.js`` into ``folder`` unless the same copy is already there."""
-    from plotly.offline import get_plotlyjs
-
-    target = Path(folder) / PLOTLY_JS
-    text = get_plotlyjs()
-    if not (
-        target.is_file() and target.stat().st_size == len(text.encode("utf-8")) and target.read_text("utf-8") == text
-    ):
-        atomic_write_text(target, text)
-    return target
-
-
 _STYLE = """
 body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 1.5em auto; max-width: 1200px;
-       color: #222; padding: 0 1em; }
+       color: #222; padding: 0 1em; line-height: 1.45; }
 table { border-collapse: collapse; font-size: 13px; margin: 1em 0; }
 th, td { border: 1px solid #ccc; padding: 3px 7px; text-align: right; }
 th { background: #f2f2f2; }
-td:nth-child(-n+5) { text-align: left; }
+td:nth-child(-n+5), td:last-child { text-align: left; }
+img { max-width: 100%; height: auto; }
+code { font-size: 92%; background: #f4f4f4; padding: 0 2px; }
 .plot { margin: 1.5em 0; border-top: 1px solid #ddd; padding-top: 0.5em; }
 .note { color: #555; font-size: 13px; }
+.caption { font-weight: bold; }
 """
+#: The heading of the section that gets the interactive figures (report.md's "Figures").
+FIGURES_HEADING = "Figures"
+#: A figure file the page embeds: a plain file name of the report's folder.
+_FIGURE_FILE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*\.png$")
 
 
 def page_figures(
@@ -549,45 +588,110 @@ def page_figures(
     return figures
 
 
+def runs_markdown(
+    robot: Robot, runs: Sequence[ReportRun], *, title: str = "vgtarm: runs", intro: str = "", base: str | Path = "."
+) -> str:
+    """The Markdown of a page of saved runs (``vgtarm report``): the title, ``intro``, the table of
+    ``report.md`` with each run linked to its folder and summary (relative to ``base``, the page's
+    folder) and the heading under which the page puts its figures. Users' strings are escaped."""
+    lines = [
+        f"# {md_text(title)}",
+        "",
+        f"{md_text(intro)} Generated on {time.strftime('%Y-%m-%d %H:%M')} for robot"
+        f" **{md_text(robot.parameters.name)}**.",
+        "",
+        "## Maximum tip error",
+        "",
+        "| " + " | ".join(TABLE_COLUMNS) + " |",
+        "|" + " --- |" * len(TABLE_COLUMNS),
+    ]
+    for run in runs:
+        *cells, folder = table_row(run.spec, run.result.summary(), run.folder)
+        lines.append("| " + " | ".join(map(md_cell, cells)) + f" | {folder_cell(_relative(run.path, base), folder)} |")
+    lines += ["", f"## {FIGURES_HEADING}", ""]
+    return "\n".join(lines) + "\n"
+
+
+def _relative(path: str, base: str | Path) -> str:
+    """``path`` (a run's folder) relative to ``base``, with ``/`` between its parts."""
+    if not os.path.isabs(path):
+        return Path(path).as_posix()
+    return Path(os.path.relpath(path, os.path.abspath(base))).as_posix()
+
+
+def _embedded_image(folder: Path | None) -> Callable[[str, str], str]:
+    """The HTML of a figure line of the Markdown: the PNG of ``folder`` inlined (base64), so the page
+    needs no file beside it; a name that is not a plain PNG of the folder, or a missing file,
+    shows its caption and file name instead."""
+
+    def image(alt: str, name: str) -> str:
+        path = None if folder is None or not _FIGURE_FILE.match(name) else folder / name
+        if path is None or not path.is_file():
+            return f'<p class="note">[{html_text(alt)}: {html_text(name)}]</p>'
+        data = base64.b64encode(path.read_bytes()).decode("ascii")
+        return f'<p><img src="data:image/png;base64,{data}" alt="{html_text(alt)}"></p>'
+
+    return image
+
+
 def render_html(
     robot: Robot,
     runs: Sequence[ReportRun],
     *,
     title: str = "vgtarm: runs",
     intro: str = "",
+    markdown: str | None = None,
+    figures_folder: str | Path | None = None,
+    base: str | Path = ".",
     max_points: int = MAX_POINTS,
     max_frames: int = MAX_FRAMES,
 ) -> str:
-    """The page's HTML (it expects ``plotly.min.js`` beside it). ``title`` and ``intro`` (a sentence
-    before the page's own note) are plain text, shown as written."""
+    """The page's HTML, one self-contained file: plotly.js inlined once, the figures' PNGs inlined.
+
+    The page is ``markdown`` (``report.md``'s text) converted by :mod:`.markdown_html`, with the
+    interactive figures of ``runs`` after its "Figures" heading (appended under one if it has
+    none) and the figure files it names read from ``figures_folder``; without ``markdown`` it is
+    :func:`runs_markdown` of ``title`` and ``intro`` (plain text, shown as written) with links
+    relative to ``base``. ``title`` is also the page's ``<title>``."""
     import plotly.io as pio
 
     figures = page_figures(robot, runs, max_points=max_points, max_frames=max_frames)
-    header = "".join(f"<th>{html_text(c)}</th>" for c in TABLE_COLUMNS)
-    rows = []
-    for run in runs:
-        cells = table_row(run.spec, run.result.summary(), run.folder)
-        rows.append("<tr>" + "".join(f"<td>{html_text(c)}</td>" for c in cells) + "</tr>")
+    if markdown is None:
+        markdown = runs_markdown(robot, runs, title=title, intro=intro, base=base)
+    if FIGURES_HEADING not in [h.text for h in headings(markdown)]:
+        markdown += f"\n## {FIGURES_HEADING}\n"
+    config = {"displaylogo": False, "responsive": True}
+    plots = [
+        f'<p class="note">Interactive: drag to zoom or rotate, click a legend entry to hide or show a run. Lengths'
+        f" in mm; every curve is decimated for display (at most {max_points} points, keeping each bucket's"
+        " extremes).</p>"
+    ]
+    for k, (div_id, heading, fig) in enumerate(figures):
+        body = pio.to_html(
+            fig,
+            validate=False,
+            include_plotlyjs=k == 0,  # plotly.js inlined once, before the first figure
+            full_html=False,
+            div_id=div_id,
+            auto_play=False,
+            config=config,
+        )
+        plots.append(f'<div class="plot"><p class="caption">{html_text(heading)}</p>{body}</div>')
+    folder = None if figures_folder is None else Path(figures_folder)
+    body_html = to_html(
+        markdown,
+        image=_embedded_image(folder),
+        after_heading={FIGURES_HEADING: "\n".join(plots)},
+        first_table_id="summary-table",
+    )
     parts = [
         "<!DOCTYPE html>",
         '<html lang="en"><head><meta charset="utf-8">',
         f"<title>{html_text(title)}</title>",
-        f'<script src="{PLOTLY_JS}"></script>',
         f"<style>{_STYLE}</style></head><body>",
-        f"<h1>{html_text(title)}</h1>",
-        f'<p class="note">{html_text(intro)} Generated on {time.strftime("%Y-%m-%d %H:%M")} for robot'
-        f" <b>{html_text(robot.parameters.name)}</b>. Lengths in mm on the plots; plots are decimated for display"
-        f" (at most {max_points} points per curve, keeping each bucket's extremes).</p>",
-        "<h2>Maximum tip error</h2>",
-        f'<table id="summary-table"><thead><tr>{header}</tr></thead><tbody>{"".join(rows)}</tbody></table>',
+        body_html,
+        "</body></html>",
     ]
-    config = {"displaylogo": False, "responsive": True}
-    for div_id, heading, fig in figures:
-        body = pio.to_html(
-            fig, validate=False, include_plotlyjs=False, full_html=False, div_id=div_id, auto_play=False, config=config
-        )
-        parts.append(f'<div class="plot"><h2>{html_text(heading)}</h2>{body}</div>')
-    parts.append("</body></html>")
     return "\n".join(parts) + "\n"
 
 
@@ -599,14 +703,25 @@ def write_html_report(
     name: str = "report.html",
     title: str = "vgtarm: runs",
     intro: str = "",
+    markdown: str | None = None,
     max_points: int = MAX_POINTS,
     max_frames: int = MAX_FRAMES,
 ) -> Path:
-    """Write the page ``out/name`` and the folder's shared ``plotly.min.js``; returns the page's path."""
+    """Write the page ``out/name`` (see :func:`render_html`; the figures it names are read from
+    ``out``, the runs linked relative to it); returns the page's path."""
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
-    text = render_html(robot, runs, title=title, intro=intro, max_points=max_points, max_frames=max_frames)
-    write_plotly_js(folder)
+    text = render_html(
+        robot,
+        runs,
+        title=title,
+        intro=intro,
+        markdown=markdown,
+        figures_folder=folder,
+        base=folder,
+        max_points=max_points,
+        max_frames=max_frames,
+    )
     return atomic_write_text(folder / name, text)
 
 
@@ -622,7 +737,7 @@ def load_runs(folders: Sequence[str | Path]) -> list[ReportRun]:
             raise InputError(f"run folder {errors.cut(str(path), 200)}: {exc}") from None
         what = f"case {spec.case}" if spec.case else spec.name
         label = f"{what} {spec.label} ({path.name})" if what else f"{path.name}: {spec.label}"
-        runs.append(ReportRun(spec=spec, label=label, folder=path.name, result=result))
+        runs.append(ReportRun(spec=spec, label=label, folder=path.name, result=result, path=os.path.abspath(path)))
     return runs
 
 

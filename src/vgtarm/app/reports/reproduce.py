@@ -33,7 +33,7 @@ from ..pool import Inline, Workers
 from .beyond import BeyondRun, beyond_figure, beyond_runs, beyond_section, run_beyond_one
 from .html import runs_from_reproduction, write_html_report
 from .low_force import PresetRun, low_force_runs, low_force_section, run_low_force_one
-from .runs import TABLE_COLUMNS, RunSpec, mm, paper_runs, table_row, task_note
+from .runs import TABLE_COLUMNS, RunSpec, folder_cell, mm, paper_runs, table_row, task_note
 from .seeds import seed_section
 
 
@@ -181,35 +181,8 @@ def _reproduce_into(
                 (run, folder, options),
                 partial(low_results.__setitem__, run),
             )
-        page: list[Path] = []
-
-        def write_page() -> None:
-            if progress:
-                progress("figures and report", len(specs), len(specs))
-            page.append(
-                write_html_report(
-                    robot,
-                    runs_from_reproduction({spec: results[spec] for spec in specs}),
-                    folder,
-                    title="vgtarm: the paper's case studies reproduced",
-                    intro=" ".join(
-                        filter(
-                            None,
-                            [
-                                f"The interactive companion of report.md (seed {seed}, integrator {integrator}).",
-                                task_note(results[spec].metadata for spec in specs),
-                            ],
-                        )
-                    ),
-                )
-            )
-
         while tasks.busy():
-            if not page and len(results) == len(specs):  # the page here, while the workers draw
-                write_page()
             tasks.step()
-        if not page:
-            write_page()
     results = {spec: results[spec] for spec in specs}
     figures = {p.caption: figures[p.caption] for p in plan}
     beyond = beyond_section({b: beyond_results[b] for b in extra}, beyond_figure_name[0]) if extra else []
@@ -234,6 +207,15 @@ def _reproduce_into(
         text += "\n" + "\n".join(section)
         text += "\n"
     atomic_write_text(folder / "report.md", text)
+    if progress:
+        progress("report.html", len(specs), len(specs))
+    write_html_report(  # report.md on one page, its figures inlined, with the interactive figures
+        robot,
+        runs_from_reproduction(results),
+        folder,
+        title="vgtarm: the paper's case studies reproduced",
+        markdown=text,
+    )
     return results
 
 
@@ -432,7 +414,7 @@ def render_report(
     ]
     for spec, s in summaries.items():
         *cells, folder = table_row(spec, s)
-        lines.append("| " + " | ".join(map(md_cell, cells)) + f" | {md_code(folder + '/')} |")
+        lines.append("| " + " | ".join(map(md_cell, cells)) + f" | {folder_cell(folder)} |")
     lines += ["", "## Figures", ""]
     for caption, name in figures.items():
         lines += [f"**{caption}**", "", f"![{caption}]({name})", ""]

@@ -11,6 +11,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from ...markup import md_link, md_text
 from ..cases import PAPER_RESULTS
 
 
@@ -110,3 +111,12 @@ def task_note(summaries: Iterable[Mapping[str, Any]]) -> str:
         f"Task: {'; '.join(tasks)} (the robot's tip cannot leave it; the inverse kinematics tracks the path's"
         " coordinates there and spends the remaining freedom on eq. 12)."
     )
+
+
+def folder_cell(path: str, shown: str | None = None) -> str:
+    """The Markdown of a table's folder cell: the run's folder ``path`` (relative to the report,
+    ``/`` between parts) shown as ``shown`` (default ``path``) and linked, then a link to its
+    ``summary.json``; both escaped (:mod:`vgtarm.markup`)."""
+    folder = path.rstrip("/")
+    name = (shown if shown is not None else folder).rstrip("/") + "/"
+    return f"{md_link(md_text(name), folder + '/')} {md_link('summary', folder + '/summary.json')}"
