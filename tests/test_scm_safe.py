@@ -18,12 +18,14 @@ import pytest
 from vgtarm.app.cases import case_study, joint_reference, run_case
 from vgtarm.control import SwitchingControl
 from vgtarm.control.safety import admitted_interval, damping_table, loop_matrix, spectral_radius
+from vgtarm.control.scm import dropped_at
 from vgtarm.errors import InputError, SimulationError
 from vgtarm.model.closedloop import ClosedLoopDriver, LoopSettings
 from vgtarm.model.compiled import CompiledBackend
 from vgtarm.simulation import simulate
 from vgtarm.simulation.engines import compiled_ga
-from vgtarm.simulation.simulator import loop_arrays
+from vgtarm.simulation.scenario import Scenario
+from vgtarm.simulation.simulator import drive, loop_arrays, prepare
 
 DT = 1e-3
 FILTER = math.exp(-2.0 * math.pi * 100.0 * DT)  # the default 100 Hz velocity filter
@@ -244,16 +246,25 @@ def test_realistic_sensing_paper_diverges_safe_holds(robot):
     assert safe.summary()["max_tip_error_m"] < 0.82e-3
 
 
-def _held_pattern(run, hold):
+def _held_pattern(run, hold, seen=None, watch_from=None):
     """Check the hold in a run's modes: an admitted set (not dropped for the fixed gains) controls
-    exactly ``hold`` samples from its activation, with no activation in between; a dropped one its
-    sample only. Returns the count of admitted activations."""
+    exactly ``hold`` samples from its activation, with no activation in between, unless the drop
+    rule (:func:`dropped_at` on the recorded ``seen`` errors, from period ``watch_from``) says where
+    it was dropped: it then controls the samples before that one only; a set not admitted controls
+    its sample only. Returns the counts of admitted activations and of held sets dropped."""
     n = len(run.mode)
     samples = [a.sample for a in run.activations]
-    admitted = 0
+    admitted = drops = 0
+    spans = []
     for i, a in enumerate(run.activations):
         dropped = a.best_fitness == a.fixed_gains_fitness
         span = 1 if dropped else min(hold, n - a.sample)
+        if not dropped and seen is not None:
+            at = dropped_at(seen, a.sample, hold, watch_from)
+            if at is not None:
+                span, drops = at - a.sample, drops + 1
+                assert seen[at] > seen[a.sample], f"set from {a.sample} dropped at {at}: the error did not rise"
+        spans.append(span)
         admitted += not dropped
         held = run.mode[a.sample : a.sample + span]
         assert (held == 1).all(), f"activation at {a.sample}: expected {span} GA samples"
@@ -262,10 +273,18 @@ def _held_pattern(run, hold):
         end = a.sample + span
         if end < n and (i + 1 == len(samples) or samples[i + 1] != end):
             assert run.mode[end] == 0, f"sample {end} after the hold from {a.sample}: expected the fixed gains"
-    assert np.count_nonzero(run.mode == 1) == sum(
-        1 if a.best_fitness == a.fixed_gains_fitness else min(hold, n - a.sample) for a in run.activations
-    )
-    return admitted
+    assert np.count_nonzero(run.mode == 1) == sum(spans)
+    return admitted, drops
+
+
+def _run_with_seen(robot, ref, scm, **options):
+    """A run and the error its controller saw at each sample where the threshold was tested (the
+    compiled loop's record, ``LoopArrays.seen``), from the simulator's own steps."""
+    run = prepare(robot, ref, scm, Scenario.of(None, options))
+    outcome = drive(run)
+    result = run.result(outcome, None)
+    assert result.success, result.message
+    return result, run.job.arrays.seen.copy(), outcome
 
 
 @pytest.mark.parametrize("hold", [1, 7, 20])
@@ -279,7 +298,7 @@ def test_an_admitted_gain_set_is_held_for_exactly_its_hold(robot, monkeypatch, h
     from vgtarm.simulation import engines
 
     ref = joint_reference(robot, 2, duration=0.3)
-    scm = replace(case_study(2).controller("scm", variant="safe"), hold=hold)
+    scm = replace(case_study(2).controller("scm", variant="safe"), hold=hold, watch_from=None)
     assert scm.hold_periods == hold and scm.measured_switching
     runs = []
     for in_loop in (True, False, True):
@@ -288,8 +307,9 @@ def test_an_admitted_gain_set_is_held_for_exactly_its_hold(robot, monkeypatch, h
         runs.append(simulate(robot, ref, scm, external_force=force, seed=2, encoder_resolution=1e-6))
     inside = runs[0]
     assert inside.success and len(inside.activations) > 2
-    admitted = _held_pattern(inside, hold)
+    admitted, _ = _held_pattern(inside, hold)
     assert admitted > 0, "expected admitted gain sets"
+    assert inside.summary()["scm_hold_drops"] == 0
     for other in runs[1:]:
         for name in ("q", "qd", "effort", "tip_error", "mode"):
             np.testing.assert_array_equal(getattr(other, name), getattr(inside, name), err_msg=name)
@@ -306,9 +326,55 @@ def test_the_hold_survives_pauses_and_chunks(robot):
     options = dict(external_force=case_study(2).external_force, seed=5, encoder_resolution=1e-6)
     whole = simulate(robot, ref, scm, **options)
     chunked = simulate(robot, ref, scm, progress=lambda k, n: None, **options)
-    _held_pattern(whole, scm.hold_periods)
+    assert whole.summary()["scm_hold_drops"] > 0  # the drop rule crosses chunks and pauses too
     for name in ("q", "effort", "mode"):
         np.testing.assert_array_equal(getattr(chunked, name), getattr(whole, name), err_msg=name)
+    assert chunked.summary()["scm_hold_drops"] == whole.summary()["scm_hold_drops"]
+
+
+def test_dropped_at_is_the_drop_rule():
+    """The rule written out, on hand-made errors: the first period from ``watch_from`` whose error
+    exceeds the one at the activation (equal is kept), never at or past the hold."""
+    seen = np.array([0.0, 3.0, 9.0, 2.0, 3.0, 3.5, 1.0])
+    assert dropped_at(seen, 1, 6, 2) == 5  # period 1 (9.0) is not watched; 3.0 is not above 3.0
+    assert dropped_at(seen, 1, 6, 1) == 2
+    assert dropped_at(seen, 1, 4, 2) is None  # 3.5 comes at period 4, after the hold of 4
+    assert dropped_at(seen, 3, 10, 1) == 4  # the end of the recorded errors: kept until then
+    assert dropped_at(seen, 6, 10, 1) is None
+
+
+@pytest.mark.parametrize("hold", [10, 20])
+def test_a_held_set_whose_error_rises_is_dropped_within_one_period(robot, monkeypatch, hold):
+    """Case 2 with the tool force and 1 um encoders, 0.4 s: every held set whose seen error (the
+    controller model's tip at the encoder readings) rises above its value at the set's activation,
+    from period 2 on, runs the fixed gains at that very period, and a set whose error never does
+    is held its whole hold (:func:`dropped_at` applied to the recorded errors: the rule written
+    out, apart from both loops); the GA inside the compiled loop (csrc/ga.c) and called per
+    activation from Python (engines.py) make the same run to the last bit."""
+    if not isinstance(robot.backend, CompiledBackend):
+        pytest.skip("no C compiler")
+    from vgtarm.simulation import engines
+
+    ref = joint_reference(robot, 2, duration=0.4)
+    scm = replace(case_study(2).controller("scm", variant="safe"), hold=hold)
+    assert scm.watch_from == 2
+    options = dict(external_force=case_study(2).external_force, seed=2, encoder_resolution=1e-6)
+    runs = []
+    for in_loop in (True, False):
+        monkeypatch.setattr(engines, "GA_IN_LOOP", in_loop)
+        runs.append(_run_with_seen(robot, ref, scm, **options))
+    (inside, seen, outcome), (other, seen_other, outcome_other) = runs
+    admitted, drops = _held_pattern(inside, hold, seen, scm.watch_from)
+    assert drops > 0 and admitted > drops, f"expected sets dropped and sets held: {drops} of {admitted}"
+    assert len(outcome.drops) == drops == inside.summary()["scm_hold_drops"]
+    assert outcome.drops == outcome_other.drops
+    # the error the loop recorded is the one the controller saw (computed apart, in NumPy)
+    measured = inside.tip_error_measured
+    written = ~np.isnan(seen)
+    np.testing.assert_allclose(seen[written], measured[written], rtol=1e-9, atol=1e-12)
+    for name in ("q", "qd", "effort", "tip_error", "mode"):
+        np.testing.assert_array_equal(getattr(other, name), getattr(inside, name), err_msg=name)
+    np.testing.assert_array_equal(seen_other, seen)
 
 
 def test_the_safe_variant_switches_on_the_measured_tip_error(robot):
@@ -322,7 +388,8 @@ def test_the_safe_variant_switches_on_the_measured_tip_error(robot):
     safe = case_study(2).controller("scm", variant="safe")
     options = dict(external_force=case_study(2).external_force, seed=1, encoder_resolution=1e-6)
     for switch_on in ("measured", "true"):
-        run = simulate(robot, ref, replace(safe, switch_on=switch_on), **options)
+        # no drop rule here: a dropped set's sample runs the fixed gains above the threshold
+        run = simulate(robot, ref, replace(safe, switch_on=switch_on, watch_from=None), **options)
         seen = run.tip_error_measured if switch_on == "measured" else run.tip_error
         assert seen is not None and len(run.activations) > 3
         activations = [a.sample for a in run.activations]
@@ -339,6 +406,10 @@ def test_hold_and_switch_on_are_checked_at_the_boundary():
     for bad in (0, 21, 2.5, True):
         with pytest.raises(InputError, match="hold = "):
             replace(safe, hold=bad)
+    for bad in (0, 2.0, "2", False):
+        with pytest.raises(InputError, match="watch_from = "):
+            replace(safe, watch_from=bad)
+    assert (replace(safe, hold=5, watch_from=9).watch_period, replace(safe, watch_from=None).watch_period) == (5, 10)
     with pytest.raises(InputError, match="switch_on = 'estimated'"):
         replace(safe, switch_on="estimated")
     with pytest.raises(InputError, match="the paper's variant holds"):
