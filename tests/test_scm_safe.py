@@ -3,8 +3,10 @@
 The admission (``control/safety.py`` for the interval, ``csrc/ga.c`` for the test) is held to an
 independent computation: NumPy's eigenvalues of the full ``4n x 4n`` loop matrix, and a
 simulation of the linear error dynamics; the compiled GA never admits a candidate whose loop
-has a pole outside the margin circle; runs are reproducible per seed; the paper's variant stays
-the library default (``tests/test_ga_compiled.py`` holds it bit for bit).
+has a pole outside the margin circle; runs are reproducible per seed; a held set whose seen error
+rises above its value at the switch is dropped at that period (the rule written out in
+``dropped_at``, applied to recorded errors); the safe variant is the library's default, and the
+paper's, asked for by name, is held bit for bit by ``tests/test_ga_compiled.py``.
 """
 
 from __future__ import annotations
@@ -198,7 +200,7 @@ def test_compiled_ga_never_admits_an_unstable_candidate(safe_ga):
 
 
 def test_safe_variant_is_checked_at_the_boundary():
-    scm = case_study(2).controller("scm")
+    scm = case_study(2).controller("scm", variant="paper")
     with pytest.raises(InputError, match="variant = 'risky'"):
         replace(scm, variant="risky")
     with pytest.raises(InputError, match="stability_radius = 1.0"):
@@ -206,7 +208,7 @@ def test_safe_variant_is_checked_at_the_boundary():
     with pytest.raises(InputError, match="fixed Kv"):
         SwitchingControl.with_gains(15000.0, [600.0, 500, 600, 600, 600, 600, 600], variant="safe",
                                     kp_bounds=(0.0, 15000.0), kv_bounds=(0.0, 600.0))  # fmt: skip
-    assert SwitchingControl.with_gains(5000.0, 300.0).variant == "paper"
+    assert SwitchingControl.with_gains(5000.0, 300.0).variant == "safe"  # the library's default too
     with pytest.raises(InputError, match="damping = 'soft'"):
         replace(scm, variant="safe", damping="soft")
     with pytest.raises(InputError, match="stiffness_box = 6: the fixed gains are not exactly representable"):
@@ -394,12 +396,12 @@ def test_the_safe_variant_switches_on_the_measured_tip_error(robot):
         assert seen is not None and len(run.activations) > 3
         activations = [a.sample for a in run.activations]
         assert seen[run.mode == 0].max() <= safe.threshold < seen[activations].min(), switch_on
-    paper = case_study(2).controller("scm")
+    paper = case_study(2).controller("scm", variant="paper")
     assert (paper.hold_periods, paper.measured_switching) == (1, False)
 
 
 def test_hold_and_switch_on_are_checked_at_the_boundary():
-    scm = case_study(2).controller("scm")
+    scm = case_study(2).controller("scm", variant="paper")
     safe = replace(scm, variant="safe")
     assert (safe.hold_periods, safe.horizon) == (10, 20)
     assert replace(safe, horizon=1).hold_periods == 1
