@@ -439,3 +439,96 @@ def test_the_damping_table_is_kept_in_the_cache_folder(tmp_path, monkeypatch):
     monkeypatch.setenv("VGTARM_CACHE_DIR", str(tmp_path))
     np.testing.assert_array_equal(np.array(safety.damping_table.__wrapped__(*args)), np.array(computed))
     assert np.array_equal(np.array(safety.damping_table.__wrapped__(*args)), np.array(computed), equal_nan=True)
+
+
+def test_the_library_default_is_the_safe_variant():
+    """Users get the safe variant from the Python API as from the command line and the studies;
+    the paper's is there by name."""
+    import inspect
+
+    from vgtarm.app.cases import run_path
+
+    assert SwitchingControl.with_gains(5000.0, 300.0).variant == "safe"
+    assert case_study(2).controller("scm").variant == "safe"
+    assert case_study(2).controller("scm", variant="paper").variant == "paper"
+    for function in (run_case, run_path):
+        assert inspect.signature(function).parameters["scm_variant"].default == "safe", function.__name__
+    with pytest.raises(InputError, match="hold: options of the switching method, not of cfc"):
+        case_study(2).controller("cfc", hold=5)
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--scm-hold", "5"], "--scm-hold 5: options of the switching method; expected --controller scm"),
+        (["--controller", "scm", "--scm-variant", "paper", "--scm-switch-on", "true"], "expected --scm-variant safe"),
+        (
+            ["--controller", "scm", "--scm-hold", "21"],
+            r"--scm-hold 21: expected at most the GA's horizon \(--horizon 20\)",
+        ),
+        (["--controller", "scm", "--horizon", "4", "--scm-hold", "5"], r"\(--horizon 4\)"),
+        (["--controller", "scm", "--scm-hold", "0"], "argument --scm-hold: expected a whole number >= 1, got 0"),
+        (["--controller", "scm", "--scm-hold", "x"], "argument --scm-hold"),
+        (["--controller", "scm", "--scm-switch-on", "estimated"], "argument --scm-switch-on: invalid choice"),
+    ],
+)
+def test_the_scm_options_of_simulate_are_checked(capsys, tmp_path, argv, message):
+    import re
+
+    from vgtarm.app.cli.command import main
+
+    out = tmp_path / "run"
+    try:
+        status = main(["simulate", "--case", "2", "--duration", "0.01", "-q", "--out", str(out), *argv])
+    except SystemExit as exit_:  # argparse's own refusal
+        status = exit_.code
+    err = capsys.readouterr().err
+    assert status != 0 and re.search(message, err), err
+    assert not out.exists(), "a refused run left a folder"
+
+
+def test_the_scm_options_of_simulate_are_stored_in_the_summary(capsys, tmp_path, robot):
+    """--scm-hold and --scm-switch-on reach the controller and the summary (so the run can be
+    repeated), with the drop rule's period and count."""
+    import json
+
+    from vgtarm.app.cli.command import main
+
+    if not isinstance(robot.backend, CompiledBackend):
+        pytest.skip("no C compiler")
+    out = tmp_path / "run"
+    argv = ["simulate", "--case", "2", "--duration", "0.1", "--external-force", "--controller", "scm", "-q"]
+    assert main([*argv, "--scm-hold", "5", "--scm-switch-on", "true", "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert (summary["scm_variant"], summary["scm_hold"], summary["scm_switch_on"]) == ("safe", 5, "true")
+    assert summary["scm_watch_from"] == 2 and isinstance(summary["scm_hold_drops"], int)
+    assert summary["ga_activations"] > 0
+    capsys.readouterr()
+
+
+def test_studies_pass_the_scm_options_to_the_safe_variant_only():
+    """``scm_hold`` and ``scm_switch_on`` are study parameters: checked, given to the safe points'
+    controller (a sweep over the variant runs the paper's points without them), repeated by the
+    points' ``vgtarm simulate`` command, and left out of the ids at their defaults."""
+    from vgtarm.app.study_points import _controller, simulate_command
+    from vgtarm.errors import ConfigError
+    from vgtarm.study import parse_study
+    from vgtarm.study.spec import point_id_of
+
+    data = {
+        "study": {"name": "t", "case": 2, "duration": 0.01, "seeds": 1},
+        "grid": {"controller": "scm", "scm_variant": ["safe", "paper"], "scm_hold": 4, "scm_switch_on": "true"},
+    }
+    safe, paper = sorted(parse_study(data).points(), key=lambda p: p.inputs["scm_variant"] != "safe")
+    controller = _controller(safe.inputs, 7)
+    assert (controller.hold_periods, controller.measured_switching) == (4, False)
+    assert _controller(paper.inputs, 7).hold_periods == 1
+    command = simulate_command(safe.inputs)
+    assert command[command.index("--scm-hold") + 1] == "4" and "--scm-switch-on" in command
+    assert "--scm-hold" not in simulate_command(paper.inputs)
+    for key, bad in (("scm_hold", 0), ("scm_hold", 2.5), ("scm_switch_on", "estimated")):
+        with pytest.raises(ConfigError, match=f"{key} = "):
+            parse_study({**data, "grid": {**data["grid"], key: bad}})
+    plain = {k: v for k, v in paper.inputs.items() if k not in ("scm_hold", "scm_switch_on")}
+    defaults = {**plain, "scm_hold": None, "scm_switch_on": None}
+    assert point_id_of(defaults, {}) == point_id_of(plain, {}) != point_id_of(paper.inputs, {})
