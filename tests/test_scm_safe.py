@@ -532,3 +532,29 @@ def test_studies_pass_the_scm_options_to_the_safe_variant_only():
     plain = {k: v for k, v in paper.inputs.items() if k not in ("scm_hold", "scm_switch_on")}
     defaults = {**plain, "scm_hold": None, "scm_switch_on": None}
     assert point_id_of(defaults, {}) == point_id_of(plain, {}) != point_id_of(paper.inputs, {})
+
+
+def test_the_drop_rule_resumes_exactly_after_pauses_inside_samples(robot, monkeypatch):
+    """The compiled loop paused inside (nearly) every sample (RK4 with three sub-steps, a budget of
+    one or two units a call), dropped samples included: the same run and drops as in one call."""
+    if not isinstance(robot.backend, CompiledBackend):
+        pytest.skip("no C compiler")
+    from functools import partial
+
+    from vgtarm.simulation import engines
+
+    ref = joint_reference(robot, 2, duration=0.4)
+    scm = replace(case_study(2).controller("scm", variant="safe"), hold=10)
+    options = dict(
+        external_force=case_study(2).external_force, seed=2, encoder_resolution=1e-6, integrator="rk4", substeps=3
+    )
+    runs = []
+    for budget in (None, 2, 1):
+        monkeypatch.setattr(engines, "ClosedLoopDriver", partial(ClosedLoopDriver, slice_budget=budget))
+        runs.append(_run_with_seen(robot, ref, scm, **options))
+    (whole, _, outcome) = runs[0]
+    assert len(outcome.drops) > 0
+    for result, _, sliced in runs[1:]:
+        assert sliced.drops == outcome.drops
+        for name in ("q", "qd", "effort", "tip_error", "mode"):
+            np.testing.assert_array_equal(getattr(result, name), getattr(whole, name), err_msg=name)
