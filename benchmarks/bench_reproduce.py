@@ -90,7 +90,7 @@ def run() -> list[Row]:
                 references[key] = joint_reference(robot, spec.case, rates=spec.rates)
             results[spec] = run_case(
                 robot, spec.case, controller=spec.controller, external_force=spec.external_force,
-                rates=spec.rates, reference=references[key],
+                rates=spec.rates, reference=references[key], scm_variant="paper",
             )  # fmt: skip
         phases["the paper's 12 runs"] = time.perf_counter() - start
         phases["the 14 runs beyond the paper (saved)"], extra = _clock(

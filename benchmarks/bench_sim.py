@@ -36,7 +36,7 @@ def run() -> list[Row]:
         ),
     ]
     start = time.perf_counter()
-    scm_result = run_case(robot, 1, controller="scm", reference=reference)
+    scm_result = run_case(robot, 1, controller="scm", reference=reference, scm_variant="paper")
     scm = time.perf_counter() - start
     rows.append(
         Row("case 1, SCM with every GA activation", scm, "step", steps, "real time", duration, "faster than real time")

@@ -25,6 +25,7 @@ def runs(robot, references):
             controller=spec.controller,
             external_force=spec.external_force,
             reference=references[spec.case],
+            scm_variant="paper",  # the paper's numbers: its variant
         )
     return out
 

@@ -143,7 +143,7 @@ def test_the_predictions_single_precision_decode_is_numpys_rounded_to_float(lib,
 def test_decode_inside_the_activation_matches_numpy(lib, robot):
     """The activation's 8-bit fast path: its best genes are a decoded code."""
     ref = reference(robot, duration=0.05)
-    scm = SwitchingControl.with_gains(5000.0, 300.0, threshold=1e-9, ga=GAOptions(max_generations=3))
+    scm = SwitchingControl.with_gains(5000.0, 300.0, variant="paper", threshold=1e-9, ga=GAOptions(max_generations=3))
     compiled = _ga(robot, ref, scm)
     out = compiled.activate(1, ref.q[1] + 1e-4, ref.qd[1], seed=3)
     lower, upper = scm.bounds()
@@ -276,7 +276,9 @@ def test_cheap_predictions_agree_with_the_exact_one(lib, robot, stable_scale):
     """Joint errors of a few tenths of a millimetre (the switching threshold's scale): the
     quadratic map is within 1e-3 relative of the exact prediction, the linear map is not as good."""
     ref = reference(robot, duration=0.1)
-    scm = SwitchingControl.with_gains(5000.0, 300.0, kp_bounds=(0, 15000), kv_bounds=(0, 600), exact_above=0.0)
+    scm = SwitchingControl.with_gains(
+        5000.0, 300.0, variant="paper", kp_bounds=(0, 15000), kv_bounds=(0, 600), exact_above=0.0
+    )
     compiled = _ga(robot, ref, scm)
     rng = np.random.default_rng(4)
     lower, upper = scm.bounds()
@@ -310,7 +312,7 @@ def test_cheap_predictions_agree_with_the_exact_one(lib, robot, stable_scale):
 def test_trust_region_falls_back_to_the_exact_map(lib, robot):
     """Candidates whose predicted joint error leaves the region get the exact map for those steps."""
     ref = reference(robot, duration=0.1)
-    scm = SwitchingControl.with_gains(5000.0, 300.0, kp_bounds=(0, 15000), kv_bounds=(0, 600))
+    scm = SwitchingControl.with_gains(5000.0, 300.0, variant="paper", kp_bounds=(0, 15000), kv_bounds=(0, 600))
     compiled = _ga(robot, ref, scm)
     rng = np.random.default_rng(9)
     lower, upper = scm.bounds()
@@ -336,7 +338,7 @@ def test_tip_derivatives_are_computed_in_c_for_the_rows_a_window_needs(lib, robo
     only those rows, equal to the model's batch evaluation (another route into the same
     generated functions), and not again for an overlapping window."""
     ref = reference(robot, duration=0.2)
-    scm = SwitchingControl.with_gains(5000.0, 300.0, ga=GAOptions(max_generations=2))
+    scm = SwitchingControl.with_gains(5000.0, 300.0, variant="paper", ga=GAOptions(max_generations=2))
     compiled = _ga(robot, ref, scm)
     k, h = 30, scm.horizon
     compiled.activate(k, ref.q[k] + 1e-4, ref.qd[k], seed=1)
@@ -358,7 +360,9 @@ def test_trust_region_counts_only_the_joints_that_move_the_tip(lib, robot):
     keeps a candidate inside the region (the same cost as the map without a region, bit for bit),
     and the cost still agrees with the exact prediction."""
     ref = reference(robot, duration=0.1)
-    scm = SwitchingControl.with_gains(5000.0, 300.0, kp_bounds=(0, 15000), kv_bounds=(0, 600), exact_above=1e-3)
+    scm = SwitchingControl.with_gains(
+        5000.0, 300.0, variant="paper", kp_bounds=(0, 15000), kv_bounds=(0, 600), exact_above=1e-3
+    )
     compiled = _ga(robot, ref, scm)
     n = len(ref.q[0])
     rng = np.random.default_rng(12)
@@ -388,7 +392,7 @@ def test_trust_region_counts_only_the_joints_that_move_the_tip(lib, robot):
 
 def test_activation_is_reproducible_per_seed_and_never_worse_than_the_seeded_gains(lib, robot):
     ref = reference(robot, duration=0.1)
-    scm = SwitchingControl.with_gains(5000.0, 300.0)
+    scm = SwitchingControl.with_gains(5000.0, 300.0, variant="paper")
     compiled = _ga(robot, ref, scm)
     q0, qd0 = ref.q[10] + 3e-4, ref.qd[10] - 1e-3
     a = compiled.activate(10, q0, qd0, seed=11)
@@ -406,7 +410,7 @@ def test_any_thread_count_gives_the_same_activation_bit_for_bit(lib, robot, pred
     """The prediction's blocks are shared out between threads; every candidate's cost depends on
     its own lane only, so 1, 2 or 3 threads give the same activation, counters included."""
     ref = reference(robot, duration=0.1)
-    scm = SwitchingControl.with_gains(5000.0, 300.0, prediction=prediction)
+    scm = SwitchingControl.with_gains(5000.0, 300.0, variant="paper", prediction=prediction)
     compiled = _ga(robot, ref, scm)
     q0, qd0 = ref.q[10] + 3e-4, ref.qd[10] - 1e-3
     runs = []
@@ -440,7 +444,7 @@ def test_ga_threads_come_from_the_environment(monkeypatch):
 def test_a_ga_whose_best_is_the_seeded_gains_returns_them_exactly(lib, robot):
     """With a one-step horizon no candidate can do better than the seeded fixed gains."""
     ref = reference(robot, duration=0.05)
-    scm = SwitchingControl.with_gains(4321.0, 123.0, horizon=1)
+    scm = SwitchingControl.with_gains(4321.0, 123.0, variant="paper", horizon=1)
     compiled = _ga(robot, ref, scm)
     out = compiled.activate(5, ref.q[5] + 2e-4, ref.qd[5], seed=1)
     seeded = ga.decode(scm.initial_bits(), *scm.bounds())[0]
@@ -451,7 +455,7 @@ def test_a_ga_whose_best_is_the_seeded_gains_returns_them_exactly(lib, robot):
 def test_compiled_ga_finds_gains_as_good_as_the_numpy_ga(lib, robot):
     """Same problem, the paper's settings, ten seeds each: the two GAs reach the same quality."""
     ref = reference(robot, duration=0.1)
-    scm = SwitchingControl.with_gains(5000.0, 300.0, prediction="exact")
+    scm = SwitchingControl.with_gains(5000.0, 300.0, variant="paper", prediction="exact")
     compiled = _ga(robot, ref, scm)
     k, q0, qd0 = 10, ref.q[10] + 3e-4, ref.qd[10] - 2e-3
     window = slice(k, k + scm.horizon + 1)
@@ -475,7 +479,7 @@ def test_compiled_ga_finds_gains_as_good_as_the_numpy_ga(lib, robot):
 
 def test_switching_control_run_is_reproducible_bit_for_bit(lib, robot):
     ref = reference(robot, duration=0.2)
-    scm = SwitchingControl.with_gains(5000.0, 300.0, threshold=5e-5)
+    scm = SwitchingControl.with_gains(5000.0, 300.0, variant="paper", threshold=5e-5)
     runs = [simulate(robot, ref, scm, external_force=ExternalForce(), seed=s) for s in (3, 3, 4)]
     assert runs[0].activations
     for name in ("q", "qd", "effort", "tip_error"):
@@ -495,7 +499,7 @@ def test_the_ga_inside_the_compiled_loop_gives_the_per_activation_run_bit_for_bi
     from vgtarm.simulation import engines
 
     ref = reference(robot, duration=0.12)
-    scm = SwitchingControl.with_gains(5000.0, 300.0, threshold=threshold)
+    scm = SwitchingControl.with_gains(5000.0, 300.0, variant="paper", threshold=threshold)
     options = dict(observer="momentum", encoder_resolution=1e-6, velocity_filter_hz=100.0) if sensing else {}
     runs = []
     for in_loop in (True, False):
@@ -527,7 +531,7 @@ def test_the_switching_loop_in_slices_is_bit_for_bit_the_loop_in_one_call(lib, r
     from vgtarm.model.closedloop import LoopSettings
 
     ref = reference(robot, duration=0.03)
-    scm = SwitchingControl.with_gains(5000.0, 300.0, threshold=2e-5)
+    scm = SwitchingControl.with_gains(5000.0, 300.0, variant="paper", threshold=2e-5)
     n = len(ref.t)
     settings = LoopSettings(
         dt=ref.dt,
@@ -565,7 +569,7 @@ def test_switching_control_without_a_compiler_runs_the_numpy_ga(robot, caplog):
     """The interpreter fallback (no C compiler) still runs switching control, slowly."""
     slow = vgtarm.Robot(robot.parameters, InterpretedBackend(build_functions()))
     ref = reference(robot, duration=0.02)
-    scm = SwitchingControl.with_gains(5000.0, 300.0, threshold=1e-9, ga=GAOptions(max_generations=2))
+    scm = SwitchingControl.with_gains(5000.0, 300.0, variant="paper", threshold=1e-9, ga=GAOptions(max_generations=2))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         run = simulate(slow, ref, scm, initial_state=(ref.q[0] + 1e-4, ref.qd[0]))
@@ -577,6 +581,6 @@ def test_switching_control_without_a_compiler_runs_the_numpy_ga(robot, caplog):
 
 def test_bad_prediction_settings_are_named():
     with pytest.raises(vgtarm.InputError, match="prediction = 'cubic'"):
-        SwitchingControl.with_gains(1.0, 1.0, prediction="cubic")
+        SwitchingControl.with_gains(1.0, 1.0, variant="paper", prediction="cubic")
     with pytest.raises(vgtarm.InputError, match="exact_above"):
-        SwitchingControl.with_gains(1.0, 1.0, exact_above=-1.0)
+        SwitchingControl.with_gains(1.0, 1.0, variant="paper", exact_above=-1.0)

@@ -143,8 +143,10 @@ def test_workers_build_a_stacks_robot_and_make_its_runs_bit_for_bit(tmp_path):
 
     six = load_robot(Path(__file__).resolve().parents[1] / "examples" / "six_modules.toml")
     reference = joint_reference(six, 1, duration=0.1)
-    here = run_case(six, 1, controller="scm", reference=reference, seed=2)
+    here = run_case(six, 1, controller="scm", reference=reference, seed=2, scm_variant="paper")
     with Workers(1, six.parameters) as pool:
-        there = pool.submit(partial(run_case, controller="scm", reference=reference, seed=2), 1).result()
+        there = pool.submit(
+            partial(run_case, controller="scm", reference=reference, seed=2, scm_variant="paper"), 1
+        ).result()
     for name in ("q", "effort", "tip_error"):
         np.testing.assert_array_equal(getattr(here, name), getattr(there, name), err_msg=name)

@@ -99,7 +99,7 @@ def _engine(robot, controller, **options):
 
 
 def test_each_engine_is_picked_by_the_plant_and_the_controller(robot, monkeypatch):
-    scm = SwitchingControl.with_gains(5000.0, 300.0, threshold=5e-5, ga=GAOptions(max_generations=3))
+    scm = SwitchingControl.with_gains(5000.0, 300.0, variant="paper", threshold=5e-5, ga=GAOptions(max_generations=3))
     assert type(_engine(robot, CFC)) is engines.CompiledLoop
     assert type(_engine(robot, scm)) is engines.CompiledSwitchingLoop
     monkeypatch.setattr(engines, "GA_IN_LOOP", False)
@@ -114,7 +114,7 @@ def test_every_engine_gives_the_same_switching_run(robot, monkeypatch):
     """The compiled GA inside the loop and the same GA called from Python per activation: one
     bookkeeping of modes, activations and GA time, bit for bit."""
     ref = smooth_reference(robot, duration=0.1)
-    scm = SwitchingControl.with_gains(5000.0, 300.0, threshold=5e-5, ga=GAOptions(max_generations=3))
+    scm = SwitchingControl.with_gains(5000.0, 300.0, variant="paper", threshold=5e-5, ga=GAOptions(max_generations=3))
     inside = simulate(robot, ref, scm, external_force=ExternalForce(), seed=2)
     monkeypatch.setattr(engines, "GA_IN_LOOP", False)
     outside = simulate(robot, ref, scm, external_force=ExternalForce(), seed=2)

@@ -3,8 +3,10 @@
 The admission (``control/safety.py`` for the interval, ``csrc/ga.c`` for the test) is held to an
 independent computation: NumPy's eigenvalues of the full ``4n x 4n`` loop matrix, and a
 simulation of the linear error dynamics; the compiled GA never admits a candidate whose loop
-has a pole outside the margin circle; runs are reproducible per seed; the paper's variant stays
-the library default (``tests/test_ga_compiled.py`` holds it bit for bit).
+has a pole outside the margin circle; runs are reproducible per seed; a held set whose seen error
+rises above its value at the switch is dropped at that period (the rule written out in
+``dropped_at``, applied to recorded errors); the safe variant is the library's default, and the
+paper's, asked for by name, is held bit for bit by ``tests/test_ga_compiled.py``.
 """
 
 from __future__ import annotations
@@ -18,12 +20,14 @@ import pytest
 from vgtarm.app.cases import case_study, joint_reference, run_case
 from vgtarm.control import SwitchingControl
 from vgtarm.control.safety import admitted_interval, damping_table, loop_matrix, spectral_radius
+from vgtarm.control.scm import dropped_at
 from vgtarm.errors import InputError, SimulationError
 from vgtarm.model.closedloop import ClosedLoopDriver, LoopSettings
 from vgtarm.model.compiled import CompiledBackend
 from vgtarm.simulation import simulate
 from vgtarm.simulation.engines import compiled_ga
-from vgtarm.simulation.simulator import loop_arrays
+from vgtarm.simulation.scenario import Scenario
+from vgtarm.simulation.simulator import drive, loop_arrays, prepare
 
 DT = 1e-3
 FILTER = math.exp(-2.0 * math.pi * 100.0 * DT)  # the default 100 Hz velocity filter
@@ -196,7 +200,7 @@ def test_compiled_ga_never_admits_an_unstable_candidate(safe_ga):
 
 
 def test_safe_variant_is_checked_at_the_boundary():
-    scm = case_study(2).controller("scm")
+    scm = case_study(2).controller("scm", variant="paper")
     with pytest.raises(InputError, match="variant = 'risky'"):
         replace(scm, variant="risky")
     with pytest.raises(InputError, match="stability_radius = 1.0"):
@@ -204,7 +208,7 @@ def test_safe_variant_is_checked_at_the_boundary():
     with pytest.raises(InputError, match="fixed Kv"):
         SwitchingControl.with_gains(15000.0, [600.0, 500, 600, 600, 600, 600, 600], variant="safe",
                                     kp_bounds=(0.0, 15000.0), kv_bounds=(0.0, 600.0))  # fmt: skip
-    assert SwitchingControl.with_gains(5000.0, 300.0).variant == "paper"
+    assert SwitchingControl.with_gains(5000.0, 300.0).variant == "safe"  # the library's default too
     with pytest.raises(InputError, match="damping = 'soft'"):
         replace(scm, variant="safe", damping="soft")
     with pytest.raises(InputError, match="stiffness_box = 6: the fixed gains are not exactly representable"):
@@ -244,16 +248,25 @@ def test_realistic_sensing_paper_diverges_safe_holds(robot):
     assert safe.summary()["max_tip_error_m"] < 0.82e-3
 
 
-def _held_pattern(run, hold):
+def _held_pattern(run, hold, seen=None, watch_from=None):
     """Check the hold in a run's modes: an admitted set (not dropped for the fixed gains) controls
-    exactly ``hold`` samples from its activation, with no activation in between; a dropped one its
-    sample only. Returns the count of admitted activations."""
+    exactly ``hold`` samples from its activation, with no activation in between, unless the drop
+    rule (:func:`dropped_at` on the recorded ``seen`` errors, from period ``watch_from``) says where
+    it was dropped: it then controls the samples before that one only; a set not admitted controls
+    its sample only. Returns the counts of admitted activations and of held sets dropped."""
     n = len(run.mode)
     samples = [a.sample for a in run.activations]
-    admitted = 0
+    admitted = drops = 0
+    spans = []
     for i, a in enumerate(run.activations):
         dropped = a.best_fitness == a.fixed_gains_fitness
         span = 1 if dropped else min(hold, n - a.sample)
+        if not dropped and seen is not None:
+            at = dropped_at(seen, a.sample, hold, watch_from)
+            if at is not None:
+                span, drops = at - a.sample, drops + 1
+                assert seen[at] > seen[a.sample], f"set from {a.sample} dropped at {at}: the error did not rise"
+        spans.append(span)
         admitted += not dropped
         held = run.mode[a.sample : a.sample + span]
         assert (held == 1).all(), f"activation at {a.sample}: expected {span} GA samples"
@@ -262,10 +275,18 @@ def _held_pattern(run, hold):
         end = a.sample + span
         if end < n and (i + 1 == len(samples) or samples[i + 1] != end):
             assert run.mode[end] == 0, f"sample {end} after the hold from {a.sample}: expected the fixed gains"
-    assert np.count_nonzero(run.mode == 1) == sum(
-        1 if a.best_fitness == a.fixed_gains_fitness else min(hold, n - a.sample) for a in run.activations
-    )
-    return admitted
+    assert np.count_nonzero(run.mode == 1) == sum(spans)
+    return admitted, drops
+
+
+def _run_with_seen(robot, ref, scm, **options):
+    """A run and the error its controller saw at each sample where the threshold was tested (the
+    compiled loop's record, ``LoopArrays.seen``), from the simulator's own steps."""
+    run = prepare(robot, ref, scm, Scenario.of(None, options))
+    outcome = drive(run)
+    result = run.result(outcome, None)
+    assert result.success, result.message
+    return result, run.job.arrays.seen.copy(), outcome
 
 
 @pytest.mark.parametrize("hold", [1, 7, 20])
@@ -279,7 +300,7 @@ def test_an_admitted_gain_set_is_held_for_exactly_its_hold(robot, monkeypatch, h
     from vgtarm.simulation import engines
 
     ref = joint_reference(robot, 2, duration=0.3)
-    scm = replace(case_study(2).controller("scm", variant="safe"), hold=hold)
+    scm = replace(case_study(2).controller("scm", variant="safe"), hold=hold, watch_from=None)
     assert scm.hold_periods == hold and scm.measured_switching
     runs = []
     for in_loop in (True, False, True):
@@ -288,8 +309,9 @@ def test_an_admitted_gain_set_is_held_for_exactly_its_hold(robot, monkeypatch, h
         runs.append(simulate(robot, ref, scm, external_force=force, seed=2, encoder_resolution=1e-6))
     inside = runs[0]
     assert inside.success and len(inside.activations) > 2
-    admitted = _held_pattern(inside, hold)
+    admitted, _ = _held_pattern(inside, hold)
     assert admitted > 0, "expected admitted gain sets"
+    assert inside.summary()["scm_hold_drops"] == 0
     for other in runs[1:]:
         for name in ("q", "qd", "effort", "tip_error", "mode"):
             np.testing.assert_array_equal(getattr(other, name), getattr(inside, name), err_msg=name)
@@ -306,9 +328,55 @@ def test_the_hold_survives_pauses_and_chunks(robot):
     options = dict(external_force=case_study(2).external_force, seed=5, encoder_resolution=1e-6)
     whole = simulate(robot, ref, scm, **options)
     chunked = simulate(robot, ref, scm, progress=lambda k, n: None, **options)
-    _held_pattern(whole, scm.hold_periods)
+    assert whole.summary()["scm_hold_drops"] > 0  # the drop rule crosses chunks and pauses too
     for name in ("q", "effort", "mode"):
         np.testing.assert_array_equal(getattr(chunked, name), getattr(whole, name), err_msg=name)
+    assert chunked.summary()["scm_hold_drops"] == whole.summary()["scm_hold_drops"]
+
+
+def test_dropped_at_is_the_drop_rule():
+    """The rule written out, on hand-made errors: the first period from ``watch_from`` whose error
+    exceeds the one at the activation (equal is kept), never at or past the hold."""
+    seen = np.array([0.0, 3.0, 9.0, 2.0, 3.0, 3.5, 1.0])
+    assert dropped_at(seen, 1, 6, 2) == 5  # period 1 (9.0) is not watched; 3.0 is not above 3.0
+    assert dropped_at(seen, 1, 6, 1) == 2
+    assert dropped_at(seen, 1, 4, 2) is None  # 3.5 comes at period 4, after the hold of 4
+    assert dropped_at(seen, 3, 10, 1) == 4  # the end of the recorded errors: kept until then
+    assert dropped_at(seen, 6, 10, 1) is None
+
+
+@pytest.mark.parametrize("hold", [10, 20])
+def test_a_held_set_whose_error_rises_is_dropped_within_one_period(robot, monkeypatch, hold):
+    """Case 2 with the tool force and 1 um encoders, 0.4 s: every held set whose seen error (the
+    controller model's tip at the encoder readings) rises above its value at the set's activation,
+    from period 2 on, runs the fixed gains at that very period, and a set whose error never does
+    is held its whole hold (:func:`dropped_at` applied to the recorded errors: the rule written
+    out, apart from both loops); the GA inside the compiled loop (csrc/ga.c) and called per
+    activation from Python (engines.py) make the same run to the last bit."""
+    if not isinstance(robot.backend, CompiledBackend):
+        pytest.skip("no C compiler")
+    from vgtarm.simulation import engines
+
+    ref = joint_reference(robot, 2, duration=0.4)
+    scm = replace(case_study(2).controller("scm", variant="safe"), hold=hold)
+    assert scm.watch_from == 2
+    options = dict(external_force=case_study(2).external_force, seed=2, encoder_resolution=1e-6)
+    runs = []
+    for in_loop in (True, False):
+        monkeypatch.setattr(engines, "GA_IN_LOOP", in_loop)
+        runs.append(_run_with_seen(robot, ref, scm, **options))
+    (inside, seen, outcome), (other, seen_other, outcome_other) = runs
+    admitted, drops = _held_pattern(inside, hold, seen, scm.watch_from)
+    assert drops > 0 and admitted > drops, f"expected sets dropped and sets held: {drops} of {admitted}"
+    assert len(outcome.drops) == drops == inside.summary()["scm_hold_drops"]
+    assert outcome.drops == outcome_other.drops
+    # the error the loop recorded is the one the controller saw (computed apart, in NumPy)
+    measured = inside.tip_error_measured
+    written = ~np.isnan(seen)
+    np.testing.assert_allclose(seen[written], measured[written], rtol=1e-9, atol=1e-12)
+    for name in ("q", "qd", "effort", "tip_error", "mode"):
+        np.testing.assert_array_equal(getattr(other, name), getattr(inside, name), err_msg=name)
+    np.testing.assert_array_equal(seen_other, seen)
 
 
 def test_the_safe_variant_switches_on_the_measured_tip_error(robot):
@@ -322,23 +390,28 @@ def test_the_safe_variant_switches_on_the_measured_tip_error(robot):
     safe = case_study(2).controller("scm", variant="safe")
     options = dict(external_force=case_study(2).external_force, seed=1, encoder_resolution=1e-6)
     for switch_on in ("measured", "true"):
-        run = simulate(robot, ref, replace(safe, switch_on=switch_on), **options)
+        # no drop rule here: a dropped set's sample runs the fixed gains above the threshold
+        run = simulate(robot, ref, replace(safe, switch_on=switch_on, watch_from=None), **options)
         seen = run.tip_error_measured if switch_on == "measured" else run.tip_error
         assert seen is not None and len(run.activations) > 3
         activations = [a.sample for a in run.activations]
         assert seen[run.mode == 0].max() <= safe.threshold < seen[activations].min(), switch_on
-    paper = case_study(2).controller("scm")
+    paper = case_study(2).controller("scm", variant="paper")
     assert (paper.hold_periods, paper.measured_switching) == (1, False)
 
 
 def test_hold_and_switch_on_are_checked_at_the_boundary():
-    scm = case_study(2).controller("scm")
+    scm = case_study(2).controller("scm", variant="paper")
     safe = replace(scm, variant="safe")
     assert (safe.hold_periods, safe.horizon) == (10, 20)
     assert replace(safe, horizon=1).hold_periods == 1
     for bad in (0, 21, 2.5, True):
         with pytest.raises(InputError, match="hold = "):
             replace(safe, hold=bad)
+    for bad in (0, 2.0, "2", False):
+        with pytest.raises(InputError, match="watch_from = "):
+            replace(safe, watch_from=bad)
+    assert (replace(safe, hold=5, watch_from=9).watch_period, replace(safe, watch_from=None).watch_period) == (5, 10)
     with pytest.raises(InputError, match="switch_on = 'estimated'"):
         replace(safe, switch_on="estimated")
     with pytest.raises(InputError, match="the paper's variant holds"):
@@ -366,3 +439,122 @@ def test_the_damping_table_is_kept_in_the_cache_folder(tmp_path, monkeypatch):
     monkeypatch.setenv("VGTARM_CACHE_DIR", str(tmp_path))
     np.testing.assert_array_equal(np.array(safety.damping_table.__wrapped__(*args)), np.array(computed))
     assert np.array_equal(np.array(safety.damping_table.__wrapped__(*args)), np.array(computed), equal_nan=True)
+
+
+def test_the_library_default_is_the_safe_variant():
+    """Users get the safe variant from the Python API as from the command line and the studies;
+    the paper's is there by name."""
+    import inspect
+
+    from vgtarm.app.cases import run_path
+
+    assert SwitchingControl.with_gains(5000.0, 300.0).variant == "safe"
+    assert case_study(2).controller("scm").variant == "safe"
+    assert case_study(2).controller("scm", variant="paper").variant == "paper"
+    for function in (run_case, run_path):
+        assert inspect.signature(function).parameters["scm_variant"].default == "safe", function.__name__
+    with pytest.raises(InputError, match="hold: options of the switching method, not of cfc"):
+        case_study(2).controller("cfc", hold=5)
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--scm-hold", "5"], "--scm-hold 5: options of the switching method; expected --controller scm"),
+        (["--controller", "scm", "--scm-variant", "paper", "--scm-switch-on", "true"], "expected --scm-variant safe"),
+        (
+            ["--controller", "scm", "--scm-hold", "21"],
+            r"--scm-hold 21: expected at most the GA's horizon \(--horizon 20\)",
+        ),
+        (["--controller", "scm", "--horizon", "4", "--scm-hold", "5"], r"\(--horizon 4\)"),
+        (["--controller", "scm", "--scm-hold", "0"], "argument --scm-hold: expected a whole number >= 1, got 0"),
+        (["--controller", "scm", "--scm-hold", "x"], "argument --scm-hold"),
+        (["--controller", "scm", "--scm-switch-on", "estimated"], "argument --scm-switch-on: invalid choice"),
+    ],
+)
+def test_the_scm_options_of_simulate_are_checked(capsys, tmp_path, argv, message):
+    import re
+
+    from vgtarm.app.cli.command import main
+
+    out = tmp_path / "run"
+    try:
+        status = main(["simulate", "--case", "2", "--duration", "0.01", "-q", "--out", str(out), *argv])
+    except SystemExit as exit_:  # argparse's own refusal
+        status = exit_.code
+    err = capsys.readouterr().err
+    assert status != 0 and re.search(message, err), err
+    assert not out.exists(), "a refused run left a folder"
+
+
+def test_the_scm_options_of_simulate_are_stored_in_the_summary(capsys, tmp_path, robot):
+    """--scm-hold and --scm-switch-on reach the controller and the summary (so the run can be
+    repeated), with the drop rule's period and count."""
+    import json
+
+    from vgtarm.app.cli.command import main
+
+    if not isinstance(robot.backend, CompiledBackend):
+        pytest.skip("no C compiler")
+    out = tmp_path / "run"
+    argv = ["simulate", "--case", "2", "--duration", "0.1", "--external-force", "--controller", "scm", "-q"]
+    assert main([*argv, "--scm-hold", "5", "--scm-switch-on", "true", "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert (summary["scm_variant"], summary["scm_hold"], summary["scm_switch_on"]) == ("safe", 5, "true")
+    assert summary["scm_watch_from"] == 2 and isinstance(summary["scm_hold_drops"], int)
+    assert summary["ga_activations"] > 0
+    capsys.readouterr()
+
+
+def test_studies_pass_the_scm_options_to_the_safe_variant_only():
+    """``scm_hold`` and ``scm_switch_on`` are study parameters: checked, given to the safe points'
+    controller (a sweep over the variant runs the paper's points without them), repeated by the
+    points' ``vgtarm simulate`` command, and left out of the ids at their defaults."""
+    from vgtarm.app.study_points import _controller, simulate_command
+    from vgtarm.errors import ConfigError
+    from vgtarm.study import parse_study
+    from vgtarm.study.spec import point_id_of
+
+    data = {
+        "study": {"name": "t", "case": 2, "duration": 0.01, "seeds": 1},
+        "grid": {"controller": "scm", "scm_variant": ["safe", "paper"], "scm_hold": 4, "scm_switch_on": "true"},
+    }
+    safe, paper = sorted(parse_study(data).points(), key=lambda p: p.inputs["scm_variant"] != "safe")
+    controller = _controller(safe.inputs, 7)
+    assert (controller.hold_periods, controller.measured_switching) == (4, False)
+    assert _controller(paper.inputs, 7).hold_periods == 1
+    command = simulate_command(safe.inputs)
+    assert command[command.index("--scm-hold") + 1] == "4" and "--scm-switch-on" in command
+    assert "--scm-hold" not in simulate_command(paper.inputs)
+    for key, bad in (("scm_hold", 0), ("scm_hold", 2.5), ("scm_switch_on", "estimated")):
+        with pytest.raises(ConfigError, match=f"{key} = "):
+            parse_study({**data, "grid": {**data["grid"], key: bad}})
+    plain = {k: v for k, v in paper.inputs.items() if k not in ("scm_hold", "scm_switch_on")}
+    defaults = {**plain, "scm_hold": None, "scm_switch_on": None}
+    assert point_id_of(defaults, {}) == point_id_of(plain, {}) != point_id_of(paper.inputs, {})
+
+
+def test_the_drop_rule_resumes_exactly_after_pauses_inside_samples(robot, monkeypatch):
+    """The compiled loop paused inside (nearly) every sample (RK4 with three sub-steps, a budget of
+    one or two units a call), dropped samples included: the same run and drops as in one call."""
+    if not isinstance(robot.backend, CompiledBackend):
+        pytest.skip("no C compiler")
+    from functools import partial
+
+    from vgtarm.simulation import engines
+
+    ref = joint_reference(robot, 2, duration=0.4)
+    scm = replace(case_study(2).controller("scm", variant="safe"), hold=10)
+    options = dict(
+        external_force=case_study(2).external_force, seed=2, encoder_resolution=1e-6, integrator="rk4", substeps=3
+    )
+    runs = []
+    for budget in (None, 2, 1):
+        monkeypatch.setattr(engines, "ClosedLoopDriver", partial(ClosedLoopDriver, slice_budget=budget))
+        runs.append(_run_with_seen(robot, ref, scm, **options))
+    (whole, _, outcome) = runs[0]
+    assert len(outcome.drops) > 0
+    for result, _, sliced in runs[1:]:
+        assert sliced.drops == outcome.drops
+        for name in ("q", "qd", "effort", "tip_error", "mode"):
+            np.testing.assert_array_equal(getattr(result, name), getattr(whole, name), err_msg=name)

@@ -107,7 +107,7 @@ def test_compiled_loop_matches_its_numpy_twin(robot, integrator):
 
 def test_same_seed_same_numbers_bit_for_bit(robot):
     ref = smooth_reference(robot, duration=0.3)
-    scm = SwitchingControl.with_gains(5000.0, 300.0, threshold=5e-5, ga=GAOptions(max_generations=8))
+    scm = SwitchingControl.with_gains(5000.0, 300.0, variant="paper", threshold=5e-5, ga=GAOptions(max_generations=8))
     runs = [simulate(robot, ref, scm, external_force=ExternalForce(), seed=seed) for seed in (7, 7, 8)]
     for name in ("q", "qd", "effort", "f_ext", "tip_error"):
         np.testing.assert_array_equal(getattr(runs[0], name), getattr(runs[1], name))
@@ -120,7 +120,9 @@ def test_same_seed_same_numbers_bit_for_bit(robot):
 def test_switching_happens_when_and_only_when_the_error_exceeds_the_threshold(robot):
     ref = smooth_reference(robot, duration=0.3)
     threshold = 5e-5
-    scm = SwitchingControl.with_gains(5000.0, 300.0, threshold=threshold, ga=GAOptions(max_generations=10))
+    scm = SwitchingControl.with_gains(
+        5000.0, 300.0, variant="paper", threshold=threshold, ga=GAOptions(max_generations=10)
+    )
     run = simulate(robot, ref, scm)
     assert run.activations
     above = run.tip_error > threshold
@@ -133,13 +135,17 @@ def test_switching_happens_when_and_only_when_the_error_exceeds_the_threshold(ro
 
 def test_fitness_prediction_horizon_decides_whether_gains_matter(robot):
     ref = smooth_reference(robot, duration=0.3)
-    one_step = SwitchingControl.with_gains(5000.0, 300.0, threshold=5e-5, horizon=1, ga=GAOptions(max_generations=5))
+    one_step = SwitchingControl.with_gains(
+        5000.0, 300.0, variant="paper", threshold=5e-5, horizon=1, ga=GAOptions(max_generations=5)
+    )
     run = simulate(robot, ref, one_step)
     # A one-step Euler prediction does not depend on the gains: the GA cannot improve on them
     # and the run is that of computed force control.
     assert all(a.best_fitness == a.fixed_gains_fitness for a in run.activations)
     np.testing.assert_array_equal(run.q, simulate(robot, ref, CFC).q)
-    longer = SwitchingControl.with_gains(5000.0, 300.0, threshold=5e-5, horizon=20, ga=GAOptions(max_generations=20))
+    longer = SwitchingControl.with_gains(
+        5000.0, 300.0, variant="paper", threshold=5e-5, horizon=20, ga=GAOptions(max_generations=20)
+    )
     assert any(a.best_fitness < a.fixed_gains_fitness for a in simulate(robot, ref, longer).activations)
 
 
@@ -238,7 +244,7 @@ def test_bad_simulation_arguments_are_named(robot, kwargs, message):
 
 def test_results_are_saved_atomically_with_the_summary_keys(robot, tmp_path):
     ref = smooth_reference(robot, duration=0.1)
-    scm = SwitchingControl.with_gains(5000.0, 300.0, threshold=5e-5, ga=GAOptions(max_generations=3))
+    scm = SwitchingControl.with_gains(5000.0, 300.0, variant="paper", threshold=5e-5, ga=GAOptions(max_generations=3))
     run = simulate(robot, ref, scm, metadata={"case": "smooth"})
     out = run.save(tmp_path / "run")
     summary = json.loads((out / "summary.json").read_text())

@@ -239,13 +239,13 @@ def test_the_paper_robot_as_a_stack_equals_the_reference_robot_to_1e_14_in_every
 @pytest.fixture(scope="module")
 def six_scm_run(six, six_run):
     reference, _ = six_run
-    return run_case(six, 1, controller="scm", reference=reference, seed=3)
+    return run_case(six, 1, controller="scm", reference=reference, seed=3, scm_variant="paper")
 
 
 def test_switching_control_runs_on_the_six_module_arm_with_2_n_squared_genes(six, six_run, six_scm_run):
     reference, _ = six_run
     n = six.n_joints
-    controller = case_study(1).controller("scm", n_joints=n)
+    controller = case_study(1).controller("scm", n_joints=n, variant="paper")
     lower, upper = controller.bounds()
     assert lower.shape == upper.shape == (2 * n * n,)
     result = six_scm_run
@@ -254,9 +254,9 @@ def test_switching_control_runs_on_the_six_module_arm_with_2_n_squared_genes(six
     assert all(a.best_fitness <= a.fixed_gains_fitness for a in result.activations)
     size = 0.06 * path_placement(six).scale
     assert result.summary()["max_tip_error_m"] < 1e-2 * size
-    again = run_case(six, 1, controller="scm", reference=reference, seed=3)
+    again = run_case(six, 1, controller="scm", reference=reference, seed=3, scm_variant="paper")
     np.testing.assert_array_equal(again.q, result.q)
-    other = run_case(six, 1, controller="scm", reference=reference, seed=4)
+    other = run_case(six, 1, controller="scm", reference=reference, seed=4, scm_variant="paper")
     assert not np.array_equal(other.q, result.q)
 
 
@@ -264,7 +264,7 @@ def test_switching_control_with_a_one_step_horizon_is_cfc_on_the_six_module_arm(
     """A one-step prediction does not depend on the gains: the GA keeps the seeded fixed gains
     and the run is computed force control's, bit for bit (as on the paper's robot)."""
     reference, cfc = six_run
-    result = run_case(six, 1, controller="scm", reference=reference, horizon=1)
+    result = run_case(six, 1, controller="scm", reference=reference, horizon=1, scm_variant="paper")
     assert result.activations
     assert all(a.best_fitness == a.fixed_gains_fitness for a in result.activations)
     np.testing.assert_array_equal(result.q, cfc.q)

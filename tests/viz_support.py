@@ -16,5 +16,9 @@ def short_case1_run(robot: vgtarm.Robot, controller: str = "cfc", duration: floa
     case = case_study(1)
     reference = robot.inverse_kinematics(paths.case1(1e-3, duration=duration))
     return simulate(
-        robot, reference, case.controller(controller), seed=0, metadata={"case": 1, "case_title": case.title}
+        robot,
+        reference,
+        case.controller(controller, variant="paper"),
+        seed=0,
+        metadata={"case": 1, "case_title": case.title},
     )

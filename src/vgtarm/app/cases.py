@@ -31,7 +31,7 @@ The case gains are scalars: each case's ``Kp`` and ``Kv`` apply to every joint o
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -89,12 +89,16 @@ class CaseStudy:
         horizon: int = 20,
         ga: GAOptions | None = None,
         n_joints: int = N_JOINTS,
-        variant: str = "paper",
+        variant: str = "safe",
+        **scm_options: Any,
     ) -> ComputedForceControl | SwitchingControl:
         """``"cfc"``: computed force control with the case's gains (the same on each of the robot's
         ``n_joints`` joints); ``"scm"``: the switching method around the same gains, with ``2 n_joints^2``
-        genes, in its ``variant`` (``"paper"``, the reproduction's, or ``"safe"``)."""
+        genes, in its ``variant`` (``"safe"``, the default, or ``"paper"``, the reproduction's) and
+        with ``scm_options`` (``hold``, ``switch_on``, ... of :class:`SwitchingControl`)."""
         if name == "cfc":
+            if scm_options:
+                raise InputError(f"{', '.join(sorted(scm_options))}: options of the switching method, not of cfc")
             return ComputedForceControl.with_gains(self.kp, self.kv, n_joints)
         if name == "scm":
             return SwitchingControl.with_gains(
@@ -107,6 +111,7 @@ class CaseStudy:
                 horizon=horizon,
                 ga=ga or GAOptions(),
                 variant=variant,
+                **scm_options,
             )
         raise InputError(f"controller = {name!r}: expected one of {list(CONTROLLERS)}")
 
@@ -333,7 +338,8 @@ def run_case(
     controller_model: RobotParameters | Stack | None = None,
     reference: JointReference | None = None,
     progress: Callable[[int, int], None] | None = None,
-    scm_variant: str = "paper",
+    scm_variant: str = "safe",
+    scm_options: Mapping[str, Any] | None = None,
     kp: float | tuple[float, ...] | None = None,
     kv: float | tuple[float, ...] | None = None,
     **options: Any,
@@ -343,8 +349,9 @@ def run_case(
     ``kp``, ``kv``: gains other than the case's (one value for every joint, or one per joint),
     recorded in the summary.
 
-    ``scm_variant``: the switching method's variant (``"paper"``: the paper's, as the
-    reproduction runs it; ``"safe"``: gains admitted on the discrete loop first).
+    ``scm_variant``: the switching method's variant (``"safe"``, the default: gains admitted on
+    the discrete loop first; ``"paper"``: the paper's, as the reproduction runs it);
+    ``scm_options``: further options of :class:`SwitchingControl` (``hold``, ``switch_on``).
 
     ``reference`` reuses a joint reference computed before (it must match ``dt`` and ``rates``);
     ``options`` go to :func:`vgtarm.simulation.simulate` (observer, force sensor, sensing, ...).
@@ -358,9 +365,8 @@ def run_case(
     if kp is not None or kv is not None:  # recorded only when given: the paper's runs stay as they were
         metadata.update(_gain_metadata(case, robot.n_joints))
     options = {"integrator": integrator, "substeps": substeps, "seed": seed, "progress": progress, **options}
-    return _run(
-        robot, case, ref, metadata, controller, external_force, horizon, ga, scm_variant, controller_model, options
-    )
+    scm = (scm_variant, dict(scm_options or {}))
+    return _run(robot, case, ref, metadata, controller, external_force, horizon, ga, scm, controller_model, options)
 
 
 #: The gains of a run on a user's path unless given: case 1's (as a study's path file).
@@ -380,7 +386,8 @@ def run_path(
     ga: GAOptions | None = None,
     controller_model: RobotParameters | Stack | None = None,
     reference: JointReference | None = None,
-    scm_variant: str = "paper",
+    scm_variant: str = "safe",
+    scm_options: Mapping[str, Any] | None = None,
     metadata: dict[str, Any] | None = None,
     **options: Any,
 ) -> SimulationResult:
@@ -403,7 +410,8 @@ def run_path(
         **task_metadata(robot),
         **(metadata or {}),
     }
-    return _run(robot, case, ref, info, controller, external_force, horizon, ga, scm_variant, controller_model, options)
+    scm = (scm_variant, dict(scm_options or {}))
+    return _run(robot, case, ref, info, controller, external_force, horizon, ga, scm, controller_model, options)
 
 
 def _gain_metadata(case: CaseStudy, n_joints: int) -> dict[str, Any]:
@@ -423,14 +431,14 @@ def _run(
     external_force: bool,
     horizon: int,
     ga: GAOptions | None,
-    scm_variant: str,
+    scm: tuple[str, dict[str, Any]],
     controller_model: RobotParameters | Stack | None,
     options: dict[str, Any],
 ) -> SimulationResult:
     return simulate(
         robot,
         reference,
-        case.controller(controller, horizon=horizon, ga=ga, n_joints=robot.n_joints, variant=scm_variant),
+        case.controller(controller, horizon=horizon, ga=ga, n_joints=robot.n_joints, variant=scm[0], **scm[1]),
         controller_model=controller_model,
         external_force=case.external_force if external_force else None,
         metadata=metadata,

@@ -112,9 +112,18 @@ def _controller(inputs: Inputs, n_joints: int) -> ComputedForceControl | Switchi
             horizon=int(inputs["horizon"]),  # type: ignore[arg-type]
             prediction=inputs["prediction"],
             variant=inputs["scm_variant"],
+            **_safe_options(inputs),
             ga=GAOptions(population_size=int(inputs["ga_population"]), max_generations=int(inputs["ga_generations"])),  # type: ignore[arg-type]
         )
     raise InputError(f"controller = {inputs['controller']!r}: expected one of ['cfc', 'scm']")
+
+
+def _safe_options(inputs: Inputs) -> dict[str, Any]:
+    """``scm_hold`` and ``scm_switch_on`` as options of the safe variant (a study that sweeps the
+    variant runs the paper's points without them: it holds a set for its sample only)."""
+    if inputs["scm_variant"] != "safe":
+        return {}
+    return {"hold": inputs.get("scm_hold"), "switch_on": inputs.get("scm_switch_on")}
 
 
 def _number(value: Value, default: float | tuple[float, ...]) -> float | tuple[float, ...]:
@@ -253,6 +262,8 @@ _FLAGS = {
     "rates": "--rates",
     "horizon": "--horizon",
     "scm_variant": "--scm-variant",
+    "scm_hold": "--scm-hold",
+    "scm_switch_on": "--scm-switch-on",
     "duration": "--duration",
     "model_mass": "--model-mass",
     "model_inertia": "--model-inertia",
@@ -304,6 +315,9 @@ def simulate_command(inputs: Inputs, *, study_folder: str | Path | None = None) 
         if key in ("kp", "kv") and value is not None and _gain_flag_repeats(inputs, key):
             args += [f"--{key}", repr(float(value))]
         elif key in _FLAGS:
+            safe = (inputs["controller"], inputs["scm_variant"]) == ("scm", "safe")
+            if key in ("scm_hold", "scm_switch_on") and not safe:
+                continue  # options of the safe variant only, which the run did not use
             if value is not None:
                 args += [_FLAGS[key], str(value) if not isinstance(value, float) else repr(value)]
         elif key in _OPTIONAL_FLAGS:

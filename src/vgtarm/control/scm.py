@@ -78,9 +78,9 @@ class SwitchingControl:
             only when the discrete loop it closes (hold, velocity filter, model error up to
             ``model_error``) has every pole inside ``stability_radius``, and a tuned set not
             predicted to lower the error below the fixed gains' dropped for them
-            (:mod:`vgtarm.control.safety`, ``docs/control.md``). The library's default stays
-            ``"paper"`` so that existing scripts run unchanged; ``vgtarm simulate`` defaults to
-            ``safe``.
+            (:mod:`vgtarm.control.safety`, ``docs/control.md``); a held set whose seen error rises
+            is dropped (``watch_from``). ``"safe"`` is the default, as in ``vgtarm simulate`` and
+            the studies; the paper's runs and figures ask for ``"paper"`` by name.
         model_error: safe variant: bound of the controller model's relative mass error (0.1: the
             model's mass within 10 % of the plant's).
         stability_radius: safe variant: every pole of the admitted loop lies inside this circle.
@@ -102,6 +102,13 @@ class SwitchingControl:
         switch_on: safe variant: the tip error the threshold is tested on: ``"measured"`` (the
             controller model's tip at the measured joints, what a real controller has; ``None``
             means this) or ``"true"`` (the plant's, as the paper's variant).
+        watch_from: safe variant: a held set is dropped for the fixed gains at the first held
+            period, from this one on, whose seen error (the one the threshold is tested on)
+            exceeds the error seen at its activation (the activation's sample is period 0; that
+            period and the later ones then run with the fixed gains until the threshold calls the
+            GA again). Default 2: the first period whose joints the set's efforts have moved (with
+            the paper's explicit Euler the joints at period 1 do not depend on them); ``None``:
+            held sets are never dropped during their hold. See :func:`dropped_at`.
 
     In the paper's variant the GA runs at every control period whose error exceeds the threshold,
     on the true error. Holding its gains for several periods is not offered there: gains tuned
@@ -119,13 +126,14 @@ class SwitchingControl:
     seed_fixed_gains: bool = True
     prediction: str = "quadratic"
     exact_above: float = 3e-3
-    variant: str = "paper"
+    variant: str = "safe"
     model_error: float = 0.1
     stability_radius: float = 0.99
     damping: str = "tuned"
     stiffness_box: int = 5
     hold: int | None = None
     switch_on: str | None = None
+    watch_from: int | None = 2
     name: str = "scm"
 
     def __post_init__(self) -> None:
@@ -170,6 +178,13 @@ class SwitchingControl:
                     f"hold = {shown(self.hold)}: expected a whole number of control periods in [1, {self.horizon}]"
                     " (the horizon) or None"
                 )
+        if self.watch_from is not None:
+            whole = isinstance(self.watch_from, int | np.integer) and not isinstance(self.watch_from, bool)
+            if not (whole and 1 <= self.watch_from <= MAX_HORIZON):
+                raise InputError(
+                    f"watch_from = {shown(self.watch_from)}: expected a whole number of control periods in"
+                    f" [1, {MAX_HORIZON}] (from the hold on: never) or None (never drop a held set)"
+                )
         if self.switch_on is not None and self.switch_on not in SWITCH_ON:
             raise InputError(f"switch_on = {shown(self.switch_on)}: expected one of {list(SWITCH_ON)} or None")
         if self.variant == "paper" and (self.hold not in (None, 1) or self.switch_on not in (None, "true")):
@@ -186,6 +201,12 @@ class SwitchingControl:
         if self.variant != "safe":
             return 1
         return int(max(self.horizon // 2, 1) if self.hold is None else self.hold)
+
+    @property
+    def watch_period(self) -> int:
+        """The first held period whose seen error may drop the set (``hold_periods``: none)."""
+        hold = self.hold_periods
+        return hold if self.watch_from is None else min(int(self.watch_from), hold)
 
     @property
     def measured_switching(self) -> bool:
@@ -291,6 +312,24 @@ class SwitchingControl:
         result = minimize(cost, lower, upper, options=self.ga, seed=rng, initial=initial)
         Kp, Kv = self.split(result.x)
         return Gains.of(Kp, Kv), result
+
+
+def dropped_at(seen: ArrayLike, activation: int, hold: int, watch_from: int) -> int | None:
+    """The drop rule of a held gain set, written out: the sample where the set activated at sample
+    ``activation`` and held ``hold`` periods is dropped for the fixed gains, given the error the
+    controller saw at each sample (``seen``, as the threshold is tested on), or ``None`` when it
+    controls its whole hold. It is dropped at the first period ``j`` in ``[watch_from, hold)`` whose
+    seen error exceeds the one at the activation (``seen[activation + j] > seen[activation]``).
+    The compiled loop (``csrc/ga.c``) and the per-activation loop (``engines.py``) decide as this
+    function does; the tests hold them to it on recorded runs."""
+    errors = np.asarray(seen, dtype=float)
+    for j in range(max(watch_from, 1), hold):
+        k = activation + j
+        if k >= len(errors):
+            return None
+        if errors[k] > errors[activation]:
+            return k
+    return None
 
 
 def predict_tip_error(

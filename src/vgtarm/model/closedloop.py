@@ -156,6 +156,8 @@ class LoopArrays:
         self.tau_hat = np.full((n, n_joints), np.nan)
         #: the Kalman estimator's q^, v^, d^ and model acceleration (unused by the other estimator)
         self.x_hat = np.full((n, 4, n_joints), np.nan)
+        #: the tip error the switching threshold was tested on, at each sample where it was (NaN elsewhere)
+        self.seen = np.full(n, np.nan)
         fields = {name: _ptr(a) for name, a in self.inputs.items()}
         fields.update(
             q=_ptr(self.q),
@@ -168,6 +170,7 @@ class LoopArrays:
             qd_meas=_ptr(self.qd_meas),
             tau_hat=_ptr(self.tau_hat),
             x_hat=_ptr(self.x_hat),
+            seen=_ptr(self.seen),
         )
         self.struct = ffi().new("vgt_run *", {"n": n, **fields})
 
@@ -179,6 +182,8 @@ SLICE_SECONDS = 0.05
 FIRST_SLICE_BUDGET = 2_000
 #: Bounds of the measured slice budget.
 SLICE_BUDGET_RANGE = (100, 100_000_000)
+#: Settings structures a driver keeps built (the safe variant's hold makes one per activation).
+_SETTINGS_KEPT = 64
 
 
 class ClosedLoopDriver:
@@ -218,6 +223,8 @@ class ClosedLoopDriver:
         key = (settings, arrays.n_joints, arrays.n_margins)
         s = self._settings.get(key)
         if s is None:  # the switching loop alternates two settings thousands of times: build each once
+            if len(self._settings) >= _SETTINGS_KEPT:  # a held set's watch: one threshold per activation
+                self._settings.clear()
             s = self._settings[key] = settings.struct(arrays.n_joints, arrays.n_margins)
         kp = np.ascontiguousarray(Kp, dtype=np.float64)
         kv = np.ascontiguousarray(Kv, dtype=np.float64)
@@ -540,13 +547,17 @@ class CompiledGA:
             dropped=bool(self._result.dropped),
         )
 
-    def bind_switching(self, seeds: NDArray[np.int64], hold: int = 1) -> None:
+    def bind_switching(self, seeds: NDArray[np.int64], hold: int = 1, watch_from: int = 2) -> None:
         """Prepare switching control in the loop (:meth:`ClosedLoopDriver.simulate_switching`):
         ``seeds`` are the generator seeds of the GA activations in order, one each, and bound the
         activations recorded (the loop returns when the records are full); an admitted gain set
-        controls ``hold`` periods from its activation (1: that sample only, the paper's)."""
+        controls ``hold`` periods from its activation (1: that sample only, the paper's) unless the
+        error seen at one of them, from period ``watch_from`` on (the activation's sample is period
+        0; ``hold`` or more: never), exceeds the one seen at the activation: the set is then dropped
+        there for the fixed gains."""
         capacity = len(seeds)
-        self.held = np.zeros(self.n, dtype=np.uint8)  # 1 at the samples a held set controlled
+        # 1 at the samples a held set controlled, 2 where one was dropped for the fixed gains
+        self.held = np.zeros(self.n, dtype=np.uint8)
         self._seeds = np.ascontiguousarray(np.asarray(seeds, dtype=np.int64).view(np.uint64))
         self._records: dict[str, NDArray[Any]] = {
             **{n: np.zeros(capacity, dtype=np.int64) for n in ("sample", "generations", "evaluations", "threads")},
@@ -571,6 +582,7 @@ class CompiledGA:
                 "best": ffi().cast("double *", work[2 * self.n_joints :].ctypes.data),
                 "backoff": 1,
                 "hold": hold,
+                "watch_from": watch_from,
                 "held": ffi().cast("unsigned char *", self.held.ctypes.data),
             },
         )

@@ -22,7 +22,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
 import numpy as np
@@ -84,6 +84,7 @@ class Advance:
     stop: int
     activations: tuple[RawActivation, ...] = ()
     held: tuple[int, ...] = ()  # samples controlled by a held gain set (safe variant), no GA run
+    drops: tuple[int, ...] = ()  # samples where a held set was dropped for the fixed gains (its error rose)
 
 
 @dataclass(frozen=True)
@@ -120,26 +121,49 @@ class _SteppedLoop:
         self._admitted = False  # the last activation's set was admitted (the safe variant, compiled)
         self._hold_left = 0  # samples the last admitted set still controls (as csrc/ga.c holds it)
         self._held: Gains | None = None
+        self._watch: LoopSettings | None = None  # the held set's settings: dropped above the error at its switch
 
     def advance(self, k: int, k_end: int) -> Advance:
         job = self.job
         found: list[RawActivation] = []
         held: list[int] = []
+        drops: list[int] = []
+
+        def made(status: int, stop: int) -> Advance:
+            return Advance(status, stop, tuple(found), tuple(held), tuple(drops))
+
         while True:
-            if self._hold_left > 0 and self._held is not None:
+            if self._hold_left > 0 and self._held is not None and self._watch is not None:
                 end = min(k + self._hold_left, k_end)
-                status, after = self.loop.simulate(job.unswitched, job.arrays, self._held.Kp, self._held.Kv, k, end)
-                held.extend(range(k, end if status == DONE else min(after, end)))
+                period = job.controller.hold_periods - self._hold_left  # of sample k, from the activation's
+                watch = self._watch
+                if period < job.controller.watch_period:  # before the gains can act on the error: not watched
+                    watch, end = job.unswitched, min(end, k + job.controller.watch_period - period)
+                status, after = self.loop.simulate(watch, job.arrays, self._held.Kp, self._held.Kv, k, end)
+                done = end if status == DONE else min(after, end)
+                held.extend(range(k, done))
                 self._hold_left -= end - k
+                if status == ABOVE_THRESHOLD:  # the seen error rose above its value at the switch
+                    self._hold_left, self._held, self._watch = 0, None, None
+                    drops.append(after)
+                    status, stop = self.loop.simulate(
+                        job.unswitched, job.arrays, job.gains.Kp, job.gains.Kv, after, after + 1
+                    )
+                    if status != DONE:
+                        return made(status, stop)
+                    k = after + 1
+                    if k >= k_end:
+                        return made(DONE, k_end)
+                    continue
                 if status != DONE:
-                    return Advance(status, after, tuple(found), tuple(held))
+                    return made(status, after)
                 k = end
                 if k >= k_end:
-                    return Advance(DONE, k_end, tuple(found), tuple(held))
+                    return made(DONE, k_end)
                 continue
             status, stop = self.loop.simulate(job.settings, job.arrays, job.gains.Kp, job.gains.Kv, k, k_end)
             if status != ABOVE_THRESHOLD:
-                return Advance(status, k_end if status == DONE else stop, tuple(found), tuple(held))
+                return made(status, k_end if status == DONE else stop)
             started = time.perf_counter()
             self._admitted = False
             gains, activation = self._tune(stop)
@@ -147,11 +171,13 @@ class _SteppedLoop:
             found.append(RawActivation(stop, *activation, time.perf_counter() - started))
             if self._admitted and job.controller.hold_periods > 1:
                 self._hold_left, self._held = job.controller.hold_periods - 1, gains
+                # held while the error seen stays at or below the one seen at this switch
+                self._watch = replace(job.unswitched, threshold=float(job.arrays.seen[stop]))
             if status != DONE:
-                return Advance(status, after, tuple(found), tuple(held))
+                return made(status, after)
             k = stop + 1
             if k >= k_end:
-                return Advance(DONE, k_end, tuple(found), tuple(held))
+                return made(DONE, k_end)
 
     def _tune(self, k: int) -> tuple[Gains, tuple[int, int, float, float]]:
         """Run the GA at sample ``k``; returns the gains and (generations, evaluations, best, fixed).
@@ -225,7 +251,7 @@ class CompiledSwitchingLoop:
         self.ga = compiled_ga(job.controller, self.loop, job.model, job.arrays, job.dt, job.settings)
         # one seed per sample, drawn as the stepped loop draws them one by one (the same numbers)
         seeds = np.asarray(job.ga_rng.integers(0, 2**63, size=int(job.arrays.n), dtype=np.int64))
-        self.ga.bind_switching(seeds, hold=job.controller.hold_periods)
+        self.ga.bind_switching(seeds, hold=job.controller.hold_periods, watch_from=job.controller.watch_period)
 
     def advance(self, k: int, k_end: int) -> Advance:
         job = self.job
@@ -236,7 +262,8 @@ class CompiledSwitchingLoop:
         assert status != ABOVE_THRESHOLD  # the records hold one activation per sample
         records = self.ga.records(first, int(self.ga.switching.count))
         end = k_end if status == DONE else stop
-        held = tuple((np.flatnonzero(self.ga.held[k:end]) + k).tolist())
+        held = tuple((np.flatnonzero(self.ga.held[k:end] == 1) + k).tolist())
+        drops = tuple((np.flatnonzero(self.ga.held[k:end] == 2) + k).tolist())
         found = tuple(
             RawActivation(
                 sample=int(sample),
@@ -248,7 +275,7 @@ class CompiledSwitchingLoop:
             )
             for i, sample in enumerate(records["sample"].tolist())
         )
-        return Advance(status, k_end if status == DONE else stop, found, held)
+        return Advance(status, k_end if status == DONE else stop, found, held, drops)
 
 
 def engine_for(plant: Robot, plant_engine: str, job: Job) -> Engine:

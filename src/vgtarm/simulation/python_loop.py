@@ -174,6 +174,7 @@ class PythonLoop:
                         seen = np.linalg.norm(inp["tip_d"][k] - self.model.tip_position(arrays.q_meas[k]))
                     except (AssemblyError, InputError):
                         return NOT_FINITE, k
+                arrays.seen[k] = seen
                 if seen > settings.threshold:
                     return ABOVE_THRESHOLD, k
             try:

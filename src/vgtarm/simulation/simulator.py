@@ -230,12 +230,20 @@ class Run:
             message=message,
             wall_time_s=outcome.wall_time_s,
             ga_time_s=sum((a.wall_time_s for a in outcome.activations), 0.0),
-            metadata={**self.metadata(), **dict(metadata or {})},
+            metadata={**self.metadata(), **self._drops(outcome), **dict(metadata or {})},
             effort_estimate=_blank(arrays.tau_hat, mode) if self.sensing.loop_observer != "none" else None,
             tip_error_measured=(
                 _measured_tip_error(self.job.model, arrays, self.tip_d, mode) if self.sensing.active else None
             ),
         )
+
+    def _drops(self, outcome: Outcome) -> dict[str, Any]:
+        """The safe variant's held gain sets dropped for the fixed gains because the error seen
+        rose above its value at their switch (the summary's ``scm_hold_drops``)."""
+        controller = self.controller
+        if isinstance(controller, SwitchingControl) and controller.variant == "safe":
+            return {"scm_hold_drops": len(outcome.drops)}
+        return {}
 
     def metadata(self) -> dict[str, Any]:
         """The summary's entries that describe the run (before the caller's ``metadata``)."""
@@ -269,6 +277,7 @@ class Run:
                         "scm_stability_radius": controller.stability_radius,
                         "scm_hold": controller.hold_periods,
                         "scm_switch_on": "measured" if controller.measured_switching else "true",
+                        "scm_watch_from": controller.watch_from,
                     }
                     if controller.variant == "safe"
                     else {}
@@ -375,6 +384,7 @@ class Outcome:
     mode: np.ndarray
     activations: tuple[RawActivation, ...]
     wall_time_s: float
+    drops: tuple[int, ...] = ()  # samples where a held gain set was dropped for the fixed gains
 
 
 def drive(run: Run, progress: Progress | None = None) -> Outcome:
@@ -383,6 +393,7 @@ def drive(run: Run, progress: Progress | None = None) -> Outcome:
     n = run.n
     mode = np.full(n, MODE_NOT_RUN, dtype=np.int8)
     found: list[RawActivation] = []
+    drops: list[int] = []
     start = time.perf_counter()
     engine = engine_for(run.plant, run.scenario.plant_engine, run.job)
     chunk = max(n // 100, 1) if progress else n
@@ -396,6 +407,7 @@ def drive(run: Run, progress: Progress | None = None) -> Outcome:
             mode[activation.sample] = MODE_GA
         mode[list(step.held)] = MODE_GA  # a held set's samples: its gains, no GA run
         found.extend(step.activations)
+        drops.extend(step.drops)
         if status != DONE:
             break
         k = k_end
@@ -405,7 +417,7 @@ def drive(run: Run, progress: Progress | None = None) -> Outcome:
     success = status in (DONE, ABOVE_THRESHOLD) and k >= n
     if not success:
         mode[stop:] = MODE_NOT_RUN
-    return Outcome(status, stop, success, mode, tuple(found), wall)
+    return Outcome(status, stop, success, mode, tuple(found), wall, tuple(drops))
 
 
 def loop_arrays(

@@ -40,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from ..control.scm import MAX_HORIZON, SWITCH_ON
 from ..errors import ConfigError, VgtarmError, cut, shown
 from ..fileio import parse_toml, read_text_limited
 from ..ik.effort import CRITERIA, DEFAULT_JOINT_LIMIT_WEIGHT
@@ -78,6 +79,15 @@ PARAMETERS: dict[str, Parameter] = {
     "threshold": Parameter(float, None, "a tip error > 0 (m; SCM; default: the case's)", _positive),
     "horizon": Parameter(int, 20, "a whole number >= 1 (control periods; SCM)", lambda v: v >= 1),
     "scm_variant": Parameter(str, "safe", "one of ['paper', 'safe'] (SCM)", choices=("paper", "safe")),
+    "scm_hold": Parameter(
+        int,
+        None,
+        "a whole number of control periods from 1 to the horizon (safe SCM; default half the horizon)",
+        lambda v: 1 <= v <= MAX_HORIZON,
+    ),
+    "scm_switch_on": Parameter(
+        str, None, f"one of {list(SWITCH_ON)} (safe SCM; default 'measured')", choices=SWITCH_ON
+    ),
     "prediction": Parameter(
         str, "quadratic", "one of ['exact', 'linear', 'quadratic']", choices=("exact", "linear", "quadratic")
     ),
@@ -151,6 +161,9 @@ def optional_defaults() -> dict[str, Value]:
 
 
 _STUDY_KEYS = ("name", "case", "path", "duration", "dt", "rates", "robot", "seeds")
+#: Parameters added after studies were run: they count in a point's id only away from their
+#: default, so the ids of existing studies stay.
+_LATER_PARAMETERS = frozenset({"scm_hold", "scm_switch_on"})
 _RATES = ("exact", "finite_difference")
 _DISTRIBUTIONS = ("uniform", "log_uniform", "normal", "integers", "choice")
 #: Largest study file read (bytes).
@@ -221,8 +234,9 @@ def point_id_of(inputs: Mapping[str, Value], files: Mapping[str, str], *, explic
     Options passed through to the simulator count only when set explicitly or away from their
     default, so an option added to the simulator later does not change existing ids.
     """
-    own = set(PARAMETERS) | set(_STUDY_KEYS) | {"seed"}
+    own = (set(PARAMETERS) - _LATER_PARAMETERS) | set(_STUDY_KEYS) | {"seed"}
     defaults = optional_defaults()
+    defaults.update({k: PARAMETERS[k].default for k in _LATER_PARAMETERS})
     keyed = {
         k: v
         for k, v in inputs.items()

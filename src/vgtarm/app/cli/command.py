@@ -21,6 +21,7 @@ from typing import Any, NoReturn
 import numpy as np
 
 from ... import __version__, paths, progress
+from ...control.scm import MAX_HORIZON, SWITCH_ON
 from ...errors import MESSAGE_LENGTH, ConfigError, InputError, UnreachableError, VgtarmError, cut, escape, shown
 from ...fileio import (
     atomic_folder,
@@ -123,6 +124,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if (args.case is None) == (args.path is None):
         raise InputError("give exactly one of --case 1|2 and --path FILE")
     _criterion(args)  # a criterion option without its criterion: refused before the work
+    scm_options = _scm_options(args)  # refused before any work
     inputs = [args.config, args.path]
     if args.out is not None:
         check_output_folder(args.out, "--out", inputs=inputs, owned=RUN_FILES)  # before the work
@@ -155,6 +157,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             rates=args.rates,
             horizon=args.horizon,
             scm_variant=args.scm_variant,
+            scm_options=scm_options,
             controller_model=None if exact_model else model,
             progress=progress,
             observer=args.observer,
@@ -260,6 +263,32 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                 atomic_write_text(written / ROBOT_COPY, robot_text)
         print(f"results written to {escape(str(moved.get(args.out, args.out)))}")  # escaped: never drives the terminal
     return 0
+
+
+def _scm_options(args: argparse.Namespace) -> dict[str, Any]:
+    """``--scm-hold`` and ``--scm-switch-on`` as options of the safe switching method, refused in one
+    line naming the option where they cannot apply (the run's summary records them: ``scm_hold``,
+    ``scm_switch_on``)."""
+    given = {
+        flag: value
+        for flag, value in (("--scm-hold", args.scm_hold), ("--scm-switch-on", args.scm_switch_on))
+        if value is not None
+    }
+    if not given:
+        return {}
+    shown_flags = " ".join(f"{flag} {shown(value)}" for flag, value in given.items())
+    if args.controller != "scm":
+        raise InputError(f"{shown_flags}: options of the switching method; expected --controller scm")
+    if args.scm_variant != "safe":
+        raise InputError(
+            f"{shown_flags} with --scm-variant {args.scm_variant}: the paper's variant holds a gain set for its"
+            " sample only and switches on the true error; expected --scm-variant safe"
+        )
+    if args.scm_hold is not None and args.scm_hold > args.horizon:
+        raise InputError(
+            f"--scm-hold {args.scm_hold}: expected at most the GA's horizon (--horizon {args.horizon}) control periods"
+        )
+    return {"hold": args.scm_hold, "switch_on": args.scm_switch_on}
 
 
 def _check_scm_gains(
@@ -664,6 +693,21 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("paper", "safe"),
         default="safe",
         help="switching method: the paper's GA, or safe (gains admitted on the discrete loop first; default)",
+    )
+    simulate.add_argument(
+        "--scm-hold",
+        type=positive_int_at_most(MAX_HORIZON, "control periods"),
+        default=None,
+        metavar="N",
+        help="--scm-variant safe: control periods an admitted gain set is held from its switch, unless the error "
+        "it sees rises above its value at the switch (1 to the horizon; default half the horizon)",
+    )
+    simulate.add_argument(
+        "--scm-switch-on",
+        choices=SWITCH_ON,
+        default=None,
+        help="--scm-variant safe: the tip error the threshold is tested on: measured (the controller model's tip "
+        "at the encoder readings; default) or true (the plant's, as the paper's variant)",
     )
     for name in ("mass", "inertia", "friction"):
         simulate.add_argument(

@@ -55,7 +55,7 @@ def make_images(robot: Robot, out: str | Path) -> list[Path]:
     """Write both pictures into ``out``; returns their paths."""
     folder = Path(out)
     home = write_png(_pixels(pose_figure(robot, robot.parameters.home, dpi=80)), folder / "robot_home.png")
-    run = run_case(robot, 1, controller="scm", seed=0)
+    run = run_case(robot, 1, controller="scm", seed=0, scm_variant="paper")  # the paper's case 1 run
     pixels, _ = animation_frame(robot, run, FRAME_TIME_S, dpi=70)
     frame = write_png(pixels, folder / "animation_frame.png")
     return [home, frame]

@@ -33,7 +33,7 @@ from ..pool import Inline, Workers
 from .beyond import BeyondRun, beyond_figure, beyond_runs, beyond_section, run_beyond_one
 from .html import runs_from_reproduction, write_html_report
 from .low_force import PresetRun, low_force_runs, low_force_section, run_low_force_one
-from .runs import TABLE_COLUMNS, RunSpec, folder_cell, mm, paper_runs, table_row, task_note
+from .runs import TABLE_COLUMNS, RunSpec, folder_cell, mm, paper_runs, table_row
 from .seeds import seed_section
 
 

@@ -333,6 +333,7 @@ int vgt_simulate_slice(const vgt_model *m, const vgt_settings *s, const vgt_run 
                     double m0 = td[0] - tip_m[0], m1 = td[1] - tip_m[1], m2 = td[2] - tip_m[2];
                     seen = sqrt(m0 * m0 + m1 * m1 + m2 * m2);
                 }
+                if (r->seen) r->seen[k] = seen;
                 if (seen > s->threshold) { status = VGT_ABOVE_THRESHOLD; *stop = k; break; }
             }
             if (observe(m, s, r, &wk, k)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }

@@ -1242,7 +1242,13 @@ int vgt_simulate_switching(const vgt_model *m, const vgt_settings *s, const vgt_
     vgt_slice *slice = sw->slice;
     long k = k0;
     int status;
-    if (sw->pending) { /* finish the activation's sample where the last call paused */
+    if (sw->pending == 3) { /* finish the sample of a dropped held set where the last call paused */
+        status = vgt_simulate_slice(m, unswitched, r, Kp, Kv, k, k + 1, stop, slice);
+        if (status == VGT_PAUSED) return status;
+        sw->pending = 0;
+        if (status != VGT_DONE) return status;
+        k += 1;
+    } else if (sw->pending) { /* finish the activation's sample where the last call paused */
         const long record = sw->count;
         const double start = seconds();
         const double *kp = sw->pending == 1 ? sw->best : Kp, *kv = sw->pending == 1 ? sw->best + nn : Kv;
@@ -1256,12 +1262,36 @@ int vgt_simulate_switching(const vgt_model *m, const vgt_settings *s, const vgt_
     }
     while (k < k1) {
         if (sw->hold_left > 0) { /* an admitted set held over the periods it was certified frozen for */
-            const long end = k + sw->hold_left < k1 ? k + sw->hold_left : k1;
-            status = vgt_simulate_slice(m, unswitched, r, sw->best, sw->best + nn, k, end, stop, slice);
-            const long done = status == VGT_DONE ? end : *stop; /* paused: *stop is not finished yet */
+            /* while the error seen at each held sample stays at or below the one seen at the
+             * activation (the threshold of `watch`, tested before the sample is controlled) */
+            vgt_settings watch = *unswitched;
+            watch.threshold = sw->hold_above;
+            watch.threshold_measured = s->threshold_measured;
+            long end = k + sw->hold_left < k1 ? k + sw->hold_left : k1;
+            const long period = sw->hold - sw->hold_left; /* of sample k, counted from the activation's */
+            if (period < sw->watch_from) { /* before the gains can act on the error: not watched */
+                watch.threshold = 0.0;
+                if (k + sw->watch_from - period < end) end = k + sw->watch_from - period;
+            }
+            status = vgt_simulate_slice(m, &watch, r, sw->best, sw->best + nn, k, end, stop, slice);
+            /* paused: *stop is not finished yet; above: *stop was not controlled */
+            const long done = status == VGT_DONE ? end : *stop;
             if (sw->held)
                 for (long i = k; i < done && i < end; ++i) sw->held[i] = 1;
             sw->hold_left -= (done < end ? done : end) - k;
+            if (status == VGT_ABOVE_THRESHOLD) { /* the set did not lower the error: dropped at once */
+                k = *stop;
+                sw->hold_left = 0;
+                if (sw->held) sw->held[k] = 2;
+                status = vgt_simulate_slice(m, unswitched, r, Kp, Kv, k, k + 1, stop, slice);
+                if (status == VGT_PAUSED) {
+                    sw->pending = 3;
+                    return status;
+                }
+                if (status != VGT_DONE) return status;
+                k += 1;
+                continue;
+            }
             if (status != VGT_DONE) return status; /* failed or paused (the next call resumes it) */
             k = end;
             continue;
@@ -1318,7 +1348,10 @@ int vgt_simulate_switching(const vgt_model *m, const vgt_settings *s, const vgt_
             sw->threads[record] = out.threads;
             kp = sw->best;
             kv = sw->best + nn;
-            if (sw->hold > 1 && !out.dropped) sw->hold_left = sw->hold - 1;
+            if (sw->hold > 1 && !out.dropped) {
+                sw->hold_left = sw->hold - 1;
+                sw->hold_above = r->seen ? r->seen[k] : INFINITY;
+            }
         }
         status = vgt_simulate_slice(m, unswitched, r, kp, kv, k, k + 1, stop, slice);
         sw->wall_time[record] = seconds() - start;

@@ -101,6 +101,8 @@ typedef struct {
     double *tau_hat;                        /* (n, nj) estimated external joint efforts      */
     double *x_hat;                          /* (n, 4 nj) Kalman estimator: q^, v^, d^ and the */
                                             /* model's acceleration over the period before   */
+    double *seen;                           /* (n) the tip error the threshold was tested on, */
+                                            /* at each sample where it was (NULL: not kept)  */
 } vgt_run;
 
 /* Evaluate one generated function over n samples (batch.c). */
@@ -238,17 +240,24 @@ typedef struct {
     long backoff;                 /* length of the next such spell (doubles while stalls repeat,    */
                                   /* back to 1 after an activation on threads without one; init 1) */
     int pending;                  /* a call paused inside an activation's sample: 1 under the GA's */
-                                  /* gains (best), 2 under the fixed ones (the last sample); 0 none */
+                                  /* gains (best), 2 under the fixed ones (the last sample); 3 in  */
+                                  /* the sample of a dropped held set (fixed gains, no record); 0 none */
     long hold;                    /* periods an admitted (not dropped) gain set controls, counting  */
                                   /* its activation's sample (0 or 1: that sample only, the paper)  */
     long hold_left;               /* samples the current set still controls after its activation's */
-    unsigned char *held;          /* (n) 1 at each sample controlled by a held set (NULL: hold <= 1) */
+    unsigned char *held;          /* (n) 1 at each sample controlled by a held set, 2 at the sample */
+                                  /* where one was dropped (the fixed gains) (NULL: hold <= 1)      */
+    double hold_above;            /* the error seen at the held set's activation: the set is dropped */
+                                  /* at the first held sample whose seen error exceeds it           */
+    long watch_from;              /* the first held period (the activation's sample is 0) watched  */
 } vgt_switching;
 
 /* Samples k0 .. k1-1 under the switching control method: the fixed gains Kp, Kv while the tip
  * error stays within s->threshold; at a sample above it, one GA activation from the measured
  * state, whose gains control that sample (with `unswitched`, s without the threshold) and, when
- * sw->hold > 1 and the set was not dropped, the next sw->hold - 1 samples too (held). Returns
+ * sw->hold > 1 and the set was not dropped, the next sw->hold - 1 samples too (held), unless the
+ * error seen at one of them (the threshold's, r->seen) exceeds the one seen at the activation:
+ * the set is then dropped and that sample runs with the fixed gains (`unswitched`). Returns
  * VGT_DONE, a failure status (with *stop), VGT_ABOVE_THRESHOLD with *stop = the sample when
  * the records are full, or VGT_PAUSED with *stop = the sample to continue from when sw->slice's
  * budget ran out (call again with k0 = *stop; the results are the same bit for bit). */
