@@ -77,6 +77,6 @@ def test_the_section_shows_each_rows_force_figures(robot, tmp_path):
     for line, run in zip(rows, expected, strict=True):
         s = run.summary()
         assert f"| {s['rms_force_n']:.2f} | {s['chatter_n']:.2f} | {s['actuator_energy_j']:.2f} |" in line
-    assert "`beyond/cfc_observer_realistic/`" in rows[2]
+    assert "[beyond/cfc\\_observer\\_realistic/](beyond/cfc_observer_realistic/)" in rows[2]
     reading = [line for line in lines if line.startswith("- Case")]
     assert len(reading) == 2 and "RMS leg force" in reading[1]

@@ -47,6 +47,7 @@ SECTIONS = [
     "Reading",
     "Beyond the paper: tracking under the tool force",
     "Safe switching control on 60 runs (issue 23)",
+    "The low-force preset (issue 22)",
     "What bounds the remaining error",
 ]
 
@@ -114,8 +115,8 @@ def reproduction(robot, tmp_path_factory) -> Path:
     """``reproduce`` of two case-1 runs with the section beyond the paper, on references cut to 0.3 s."""
     full_reference = reproduce_module.joint_reference
 
-    def short(robot, case, rates="exact"):
-        full = full_reference(robot, case, rates=rates)
+    def short(robot, case, rates="exact", duration=None):
+        full = full_reference(robot, case, rates=rates, duration=duration)
         keep = slice(0, SHORT_SAMPLES)
         return JointReference(full.t[keep], full.q[keep], full.qd[keep], full.qdd[keep])
 

@@ -29,6 +29,8 @@ from ..pictures.plotting import save_figure
 from . import safe_study
 from .runs import folder_cell, mm
 
+#: The heading of the section's last subsection (other subsections of runs beyond the paper go before it).
+BOUNDS_HEADING = "### What bounds the remaining error"
 #: Realistic sensing: leg encoder step (m) and the controller model's mass factor.
 ENCODER_RESOLUTION = 1e-6
 MODEL_MASS = 1.1
@@ -234,7 +236,7 @@ def beyond_section(results: dict[BeyondRun, SimulationResult], figure: str) -> l
             f" {s['ga_activations']} | {folder_cell(spec.folder)} |"
         )
     lines += safe_study.section_lines(safe_study.load_summary(), "safe_study.png")  # issue 23: the 60 runs
-    lines += ["", f"![tip error beyond the paper]({figure})", "", "### What bounds the remaining error", ""]
+    lines += ["", f"![tip error beyond the paper]({figure})", "", BOUNDS_HEADING, ""]
     by_label = {(spec.label, spec.realistic): s for spec, s in summaries.items()}
     cfc = by_label.get(("CFC", False))
     observed = by_label.get(("CFC + observer", False))

@@ -22,7 +22,7 @@ from ...simulation import SimulationResult
 from ..cases import case_study, joint_reference, run_case
 from ..presets import PRESETS, preset_options
 from .beyond import ENCODER_RESOLUTION, MODEL_MASS
-from .runs import mm
+from .runs import folder_cell, mm
 
 #: The preset shown, and the options of the run it is compared with (the section's CFC + observer).
 PRESET = "low-force"
@@ -156,7 +156,7 @@ def low_force_section(
         lines.append(
             f"| {case} | {md_cell(label)} | {largest} | {mm(s['max_tip_error_after_transient_m'])} |"
             f" {mm(s['rms_tip_error_m'])} | {_n(s['peak_force_n'], 1)} | {_n(s['rms_force_n'], 2)} |"
-            f" {_n(s['chatter_n'], 2)} | {_n(s['actuator_energy_j'], 2)} | {md_code(folder + '/')} |"
+            f" {_n(s['chatter_n'], 2)} | {_n(s['actuator_energy_j'], 2)} | {folder_cell(folder)} |"
         )
     lines += ["", *_reading(rows)]
     return lines

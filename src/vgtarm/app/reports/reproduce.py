@@ -30,7 +30,7 @@ from ...simulation.result import MODE_GA, ROBOT_COPY
 from ..cases import case_study, joint_reference, run_case
 from ..pictures.plotting import plot_efforts, plot_path_3d, plot_tip_error, save_figure
 from ..pool import Inline, Workers
-from .beyond import BeyondRun, beyond_figure, beyond_runs, beyond_section, run_beyond_one
+from .beyond import BOUNDS_HEADING, BeyondRun, beyond_figure, beyond_runs, beyond_section, run_beyond_one
 from .html import runs_from_reproduction, write_html_report
 from .low_force import PresetRun, low_force_runs, low_force_section, run_low_force_one
 from .runs import TABLE_COLUMNS, RunSpec, folder_cell, mm, paper_runs, table_row
@@ -69,8 +69,9 @@ def reproduce(
     duration: float | None = None,
 ) -> Reproduction:
     """Run the paper's combinations, save every run, the figures, ``report.md`` and the interactive
-    ``report.html`` (with ``plotly.min.js`` beside it) into ``out``; with ``beyond_paper`` also the
-    section on the disturbance observer, the force sensor and realistic sensing (:mod:`.beyond`);
+    ``report.html`` (report.md on one self-contained page) into ``out``; with ``beyond_paper`` also the
+    section on the disturbance observer, the force sensor and realistic sensing (:mod:`.beyond`) and the
+    low-force preset's rows (:mod:`.low_force`);
     with ``seeds`` >= 1 also the mean and spread of every run over seeds ``0..seeds-1``
     (:func:`.seeds.seed_section`, a study run on a local Dask cluster into ``out/seeds``; ``config``:
     the robot file ``robot`` was loaded from, for the study's workers).
@@ -195,11 +196,13 @@ def _reproduce_into(
         wall_time_s=time.perf_counter() - start,
         duration=duration,
     )
+    if low:  # beside the other runs beyond the paper, before what bounds their error
+        base = next(((b.folder, beyond_results[b]) for b in extra if b.label == "CFC + observer" and b.realistic), None)
+        section = low_force_section({r: low_results[r] for r in low}, base, seed=seed)
+        at = beyond.index(BOUNDS_HEADING) if BOUNDS_HEADING in beyond else len(beyond)
+        beyond = [*beyond[:at], *section, *([""] if at < len(beyond) else []), *beyond[at:]]
     if beyond:
         text += "\n" + "\n".join(beyond) + "\n"
-    if low:
-        base = next(((b.folder, beyond_results[b]) for b in extra if b.label == "CFC + observer" and b.realistic), None)
-        text += "\n".join(low_force_section({r: low_results[r] for r in low}, base, seed=seed)) + "\n"
     if seeds:
         if progress:
             progress(f"{seeds} seeds of every run (Dask)", len(specs), len(specs))
