@@ -135,7 +135,10 @@ def ga_export(
         _array("lower", lower),
         _array("upper", upper),
         "    static const uint64_t seeded[] = {" + ", ".join(f"0x{int(b):016X}ULL" for b in bits) + "};",
+        "    vgtc_params controller; /* the controller's model: the GA predicts with it */",
+        "    vgtc_default_params(&controller);",
         "    memset(params, 0, sizeof *params);",
+        "    memcpy(params->model, controller.model, sizeof params->model);",
         f"    params->dt = {_hex(dt)};",
         f"    params->population = {population};",
         f"    params->generations = {options.max_generations};",
@@ -176,7 +179,7 @@ def ga_export(
         "hold": controller.hold_periods,
         "fused_multiply_add": bool(fuses),
     }
-    return GAExport(config, tuple(line for line in lines if line), settings)
+    return GAExport(config, (*(line for line in lines if line), ""), settings)
 
 
 def _hex(x: float) -> str:
