@@ -1,9 +1,10 @@
 /* The genetic algorithm of switching control for a real-time target (see vgtc_ga.h).
  *
  * Every operation follows vgtarm/model/csrc/ga.c (the simulation's compiled GA) in the same order
- * with the same arithmetic; the comments name the function of ga.c each part mirrors. Where ga.c
- * evaluates eight candidates per vector, this file evaluates one candidate at a time: the lanes of
- * ga.c's vectors never mix, so each candidate's numbers are those of its lane. Build with
+ * with the same arithmetic; the comments name the function of ga.c each part mirrors. ga.c keeps
+ * eight candidates in a vector of the GCC extensions; this file keeps them in arrays of
+ * VGTC_GA_LANES floats with the loops over the lanes innermost (the compiler may vectorise them).
+ * The lanes never mix, so each candidate's numbers are those of its lane in ga.c. Build with
  * -ffp-contract=off (the Makefile and CMakeLists.txt do): the fused multiply-adds of ga.c's kernel
  * are written out as fmaf (VGTC_GA_FMA), and no other operation may be fused.
  */
@@ -272,108 +273,131 @@ static double safe_admit(const vgtc_ga_params *g, double *kp, double *kv)
 
 /* ---- prediction (ga.c: gains_from_bytes_scalar, safe_repair, block_kernel, predict_one_block) - */
 
-/* One candidate's gains from its bits, in single precision (gains_from_bytes_scalar). */
-static void gains_from_bytes(const vgtc_ga *x, const uint64_t *bits, float *K)
+enum { LANES = VGTC_GA_LANES };
+
+/* The gains of candidates rows[0 .. count), one lane each, in single precision
+ * (gains_from_bytes_scalar: lanes past count get code 0). */
+static void gains_from_bytes(vgtc_ga *x, int count, const uint64_t *const *rows)
 {
-    int gi;
-    for (gi = 0; gi < VGTC_GA_GENES; ++gi) {
-        const unsigned code = gene_byte(bits, gi);
-        float value = x->lo[gi] + (float)code * x->step[gi];
-        value = value < x->hi[gi] ? value : x->hi[gi];
-        K[gi] = code == 255u ? x->hi[gi] : value;
-    }
+    int gi, c;
+    for (gi = 0; gi < VGTC_GA_GENES; ++gi)
+        for (c = 0; c < LANES; ++c) {
+            const unsigned code = c < count ? gene_byte(rows[c], gi) : 0u;
+            float value = x->lo[gi] + (float)code * x->step[gi];
+            value = value < x->hi[gi] ? value : x->hi[gi];
+            x->K[gi][c] = code == 255u ? x->hi[gi] : value;
+        }
 }
 
-/* The predicted squared tip error of the gains K summed over the steps inside the trust region
- * (one lane of block_kernel); the steps outside are listed in x->far, x->far_at. */
-static double kernel(vgtc_ga *x, const float *K, long *n_far)
+/* The predicted squared tip errors of the block's gains summed over the steps inside the trust
+ * region (block_kernel, lane by lane); the steps outside are listed in x->far, x->far_at. */
+static void kernel(vgtc_ga *x, int count, double *sum, long *n_far)
 {
     const int nj = VGTC_NJ, nn = VGTC_NJ * VGTC_NJ;
     const float dt = (float)x->p.dt;
     const float limit2 = x->p.exact_above > 0.0 ? (float)(x->p.exact_above * x->p.exact_above) : INFINITY;
-    float E[VGTC_NJ], Ed[VGTC_NJ], a[VGTC_NJ], total = 0.0f;
+    float E[VGTC_NJ][LANES], Ed[VGTC_NJ][LANES], a[VGTC_NJ][LANES], total[LANES];
     long j;
-    int i, l, m, k;
-    for (i = 0; i < nj; ++i) {
-        E[i] = (float)(x->q_d[i] - x->q0[i]);
-        Ed[i] = (float)(x->qd_d[i] - x->qd0[i]);
-    }
+    int i, l, m, k, c;
+    for (i = 0; i < nj; ++i)
+        for (c = 0; c < LANES; ++c) {
+            E[i][c] = (float)(x->q_d[i] - x->q0[i]);
+            Ed[i][c] = (float)(x->qd_d[i] - x->qd0[i]);
+        }
+    for (c = 0; c < LANES; ++c) total[c] = 0.0f;
     *n_far = 0;
     for (j = 0; j < x->horizon; ++j) {
         const float *r = x->r + j * nj, *s = x->s + j * nj;
         const float *J = x->jac_f + (j + 1) * 3 * nj, *off = x->off_f + (j + 1) * 3;
-        float norm2 = 0.0f, t[3], square;
+        float norm2[LANES], t[3][LANES];
         for (i = 0; i < nj; ++i) {
-            const float *kp = K + i * nj, *kv = K + nn + i * nj;
-            float p0, v0;
+            const int ip = i * nj, iv = nn + i * nj;
+            float p0[LANES], v0[LANES];
             if (nj == 1) {
-                p0 = kp[0] * E[0];
-                v0 = kv[0] * Ed[0];
+                for (c = 0; c < LANES; ++c) {
+                    p0[c] = x->K[ip][c] * E[0][c];
+                    v0[c] = x->K[iv][c] * Ed[0][c];
+                }
             } else { /* the first product is fused with the second (GCC contracts a*b + c*d so) */
-                p0 = FMA(kp[0], E[0], kp[1] * E[1]);
-                v0 = FMA(kv[0], Ed[0], kv[1] * Ed[1]);
+                for (c = 0; c < LANES; ++c) {
+                    p0[c] = FMA(x->K[ip][c], E[0][c], x->K[ip + 1][c] * E[1][c]);
+                    v0[c] = FMA(x->K[iv][c], Ed[0][c], x->K[iv + 1][c] * Ed[1][c]);
+                }
             }
-            for (l = 2; l < nj; ++l) {
-                p0 = FMA(kp[l], E[l], p0);
-                v0 = FMA(kv[l], Ed[l], v0);
+            for (l = 2; l < nj; ++l)
+                for (c = 0; c < LANES; ++c) {
+                    p0[c] = FMA(x->K[ip + l][c], E[l][c], p0[c]);
+                    v0[c] = FMA(x->K[iv + l][c], Ed[l][c], v0[c]);
+                }
+            for (c = 0; c < LANES; ++c) a[i][c] = p0[c] + v0[c];
+        }
+        for (c = 0; c < LANES; ++c) norm2[c] = 0.0f;
+        for (i = 0; i < nj; ++i)
+            for (c = 0; c < LANES; ++c) {
+                E[i][c] = FMA(dt, Ed[i][c], E[i][c]) + r[i];
+                Ed[i][c] = FMA(-dt, a[i][c], Ed[i][c]) + s[i];
+                norm2[c] += x->moves[i] ? E[i][c] * E[i][c] : 0.0f;
             }
-            a[i] = p0 + v0;
-        }
-        for (i = 0; i < nj; ++i) {
-            E[i] = FMA(dt, Ed[i], E[i]) + r[i];
-            Ed[i] = FMA(-dt, a[i], Ed[i]) + s[i];
-            norm2 += x->moves[i] ? E[i] * E[i] : 0.0f;
-        }
-        for (k = 0; k < 3; ++k) t[k] = off[k];
+        for (k = 0; k < 3; ++k)
+            for (c = 0; c < LANES; ++c) t[k][c] = off[k];
         for (l = 0; l < nj; ++l)
-            for (k = 0; k < 3; ++k) t[k] = FMA(J[k * nj + l], E[l], t[k]);
+            for (k = 0; k < 3; ++k)
+                for (c = 0; c < LANES; ++c) t[k][c] = FMA(J[k * nj + l], E[l][c], t[k][c]);
         if (x->p.quadratic) {
             const float *coef = x->coef + j * 3 * nn;
             for (k = 0; k < 3; ++k)
                 for (l = 0; l < nj; ++l) {
-                    const float *c = coef + k * nn + l * nj;
-                    float u;
+                    const float *cf = coef + k * nn + l * nj;
+                    float u[LANES];
                     if (!x->row_used[k * nj + l]) continue;
-                    u = l + 1 < nj ? FMA(c[l], E[l], c[l + 1] * E[l + 1]) : c[l] * E[l];
-                    for (m = l + 2; m < nj; ++m) u = FMA(c[m], E[m], u);
-                    t[k] = FMA(u, E[l], t[k]);
+                    if (l + 1 < nj)
+                        for (c = 0; c < LANES; ++c) u[c] = FMA(cf[l], E[l][c], cf[l + 1] * E[l + 1][c]);
+                    else
+                        for (c = 0; c < LANES; ++c) u[c] = cf[l] * E[l][c];
+                    for (m = l + 2; m < nj; ++m)
+                        for (c = 0; c < LANES; ++c) u[c] = FMA(cf[m], E[m][c], u[c]);
+                    for (c = 0; c < LANES; ++c) t[k][c] = FMA(u[c], E[l][c], t[k][c]);
                 }
         }
-        if (norm2 > limit2) {
-            const long f = (*n_far)++;
-            x->far_at[f] = j;
-            for (i = 0; i < nj; ++i) x->far[f * nj + i] = E[i];
-        } else {
-            square = FMA(t[2], t[2], FMA(t[0], t[0], t[1] * t[1]));
-            total += square;
+        for (c = 0; c < LANES; ++c) {
+            const float square = FMA(t[2][c], t[2][c], FMA(t[0][c], t[0][c], t[1][c] * t[1][c]));
+            total[c] += norm2[c] > limit2 ? 0.0f : square;
         }
+        for (c = 0; c < count; ++c)
+            if (norm2[c] > limit2) {
+                const long f = (*n_far)++;
+                x->far_at[f] = (long)c * x->horizon + j;
+                for (i = 0; i < nj; ++i) x->far[f * nj + i] = E[i][c];
+            }
     }
-    return (double)total;
+    for (c = 0; c < LANES; ++c) sum[c] = (double)total[c];
 }
 
-/* The predicted tip error of the candidate with the given bits (predict_one_block). */
-static int predict(vgtc_ga *x, const uint64_t *bits, double *cost)
+/* The predicted tip errors of candidates rows[0 .. count), count <= LANES (predict_one_block). */
+static int predict_block(vgtc_ga *x, int count, const uint64_t *const *rows, double *cost)
 {
     const int nj = VGTC_NJ, nn = VGTC_NJ * VGTC_NJ;
-    double penalty = 0.0, sum;
+    double penalty[LANES], sum[LANES];
     long n_far, f;
-    int i;
-    gains_from_bytes(x, bits, x->K);
-    if (x->p.safe) {
-        double kp[VGTC_NJ * VGTC_NJ], kv[VGTC_NJ * VGTC_NJ];
-        for (i = 0; i < nn; ++i) {
-            kp[i] = (double)x->K[i];
-            kv[i] = (double)x->K[nn + i];
+    int i, c;
+    gains_from_bytes(x, count, rows);
+    for (c = 0; c < LANES; ++c) penalty[c] = 0.0;
+    if (x->p.safe) /* safe_repair */
+        for (c = 0; c < count; ++c) {
+            double kp[VGTC_NJ * VGTC_NJ], kv[VGTC_NJ * VGTC_NJ];
+            for (i = 0; i < nn; ++i) {
+                kp[i] = (double)x->K[i][c];
+                kv[i] = (double)x->K[nn + i][c];
+            }
+            penalty[c] = safe_admit(&x->p, kp, kv);
+            for (i = 0; i < nn; ++i) {
+                x->K[i][c] = (float)kp[i];
+                x->K[nn + i][c] = (float)kv[i];
+            }
         }
-        penalty = safe_admit(&x->p, kp, kv);
-        for (i = 0; i < nn; ++i) {
-            x->K[i] = (float)kp[i];
-            x->K[nn + i] = (float)kv[i];
-        }
-    }
-    sum = kernel(x, x->K, &n_far);
+    kernel(x, count, sum, &n_far);
     for (f = 0; f < n_far; ++f) { /* the exact forward kinematics of the predicted joints */
-        const long j = x->far_at[f];
+        const long lane = x->far_at[f] / x->horizon, j = x->far_at[f] % x->horizon;
         const double *td = x->tip_d + 3 * (j + 1);
         double q[VGTC_NJ], tip[3], d0, d1, d2;
         for (i = 0; i < nj; ++i) q[i] = x->q_d[(j + 1) * nj + i] - (double)x->far[f * nj + i];
@@ -384,11 +408,24 @@ static int predict(vgtc_ga *x, const uint64_t *bits, double *cost)
         d0 = td[0] - tip[0];
         d1 = td[1] - tip[1];
         d2 = td[2] - tip[2];
-        sum += d0 * d0 + d1 * d1 + d2 * d2;
+        sum[lane] += d0 * d0 + d1 * d1 + d2 * d2;
         x->exact_steps++;
     }
-    *cost = isfinite(sum) ? sqrt(sum) : INFINITY;
-    if (x->p.safe && penalty > 0.0) *cost = penalty;
+    for (c = 0; c < count; ++c) {
+        cost[c] = isfinite(sum[c]) ? sqrt(sum[c]) : INFINITY;
+        if (x->p.safe && penalty[c] > 0.0) cost[c] = penalty[c];
+    }
+    return VGTC_GA_OK;
+}
+
+/* The predicted tip errors of candidates rows[0 .. n) (predict: blocks of LANES). */
+static int predict(vgtc_ga *x, long n, const uint64_t *const *rows, double *cost)
+{
+    long b;
+    for (b = 0; b < n; b += LANES) {
+        const int status = predict_block(x, n - b < LANES ? (int)(n - b) : LANES, rows + b, cost + b);
+        if (status != VGTC_GA_OK) return status;
+    }
     return VGTC_GA_OK;
 }
 
@@ -544,8 +581,8 @@ int vgtc_ga_activate(vgtc_ga *ga, long horizon, const double *q0, const double *
             for (w = 0; w < W; ++w) row[w] = ga->valid[w] ? rng_next(&rng) & ga->valid[w] : 0;
         }
     }
-    for (k = 0; k < P; ++k)
-        if ((status = predict(ga, pop + (long)k * W, cost + k)) != VGTC_GA_OK) return status;
+    for (k = 0; k < P; ++k) ga->rows[k] = pop + (long)k * W;
+    if ((status = predict(ga, P, ga->rows, cost)) != VGTC_GA_OK) return status;
     for (k = 0; k < P; ++k) cost[k] = clean_cost(cost[k]);
     evaluations = P;
     seeded_cost = ga->p.n_seeded > 0 ? cost[0] : NAN;
@@ -595,11 +632,9 @@ int vgtc_ga_activate(vgtc_ga *ga, long horizon, const double *q0, const double *
             else
                 ga->fresh[n_fresh++] = k;
         }
-        for (f = 0; f < n_fresh; ++f) {
-            double c;
-            if ((status = predict(ga, children + ga->fresh[f] * W, &c)) != VGTC_GA_OK) return status;
-            ga->new_cost[ga->fresh[f]] = clean_cost(c);
-        }
+        for (f = 0; f < n_fresh; ++f) ga->rows[f] = children + ga->fresh[f] * W;
+        if ((status = predict(ga, n_fresh, ga->rows, ga->work)) != VGTC_GA_OK) return status;
+        for (f = 0; f < n_fresh; ++f) ga->new_cost[ga->fresh[f]] = clean_cost(ga->work[f]);
         evaluations += n_fresh;
         for (k = 0; k < E; ++k) { /* elitism */
             memcpy(next + (long)k * W, pop + ga->order[k] * W, sizeof(uint64_t) * (size_t)W);

@@ -7,9 +7,10 @@
  * activation (state, reference window, seed) gives the simulation's gains bit for bit. Unlike
  * ga.c it uses no heap, no threads and no intrinsics: every buffer is a member of vgtc_ga, sized
  * at compile time from VGTC_NJ and the GA's sizes in vgtc_config.h (population, words per
- * individual, horizon, mutation flips); the candidates are predicted one at a time in single
- * precision, with fmaf exactly where the simulation's vectorised kernel fuses (VGTC_GA_FMA: 1 when
- * the exporting machine ran the kernel with FMA, as x86-64-v3 machines do).
+ * individual, horizon, mutation flips); the candidates are predicted in blocks of VGTC_GA_LANES in
+ * single precision, in plain loops over the block that the compiler may vectorise (-O3
+ * -march=native does), with fmaf exactly where the simulation's vectorised kernel fuses
+ * (VGTC_GA_FMA: 1 when the exporting machine ran that kernel with FMA, as x86-64-v3 machines do).
  *
  * The fitness is the predicted tip error of a gain candidate over the horizon under the
  * controller's model (vgtarm/control/scm.py): the joint errors on the linear recursion of computed
@@ -34,6 +35,7 @@ extern "C" {
 #endif
 
 #define VGTC_GA_GENES (2 * VGTC_NJ * VGTC_NJ) /* Kp then Kv, row by row */
+#define VGTC_GA_LANES 8 /* candidates predicted together (the inner loops run over them: vectorisable) */
 
 /* What vgtc_ga_init and vgtc_ga_activate return (the controller's status codes). */
 enum vgtc_ga_status {
@@ -103,9 +105,10 @@ typedef struct {
     double expectation[VGTC_GA_POPULATION], work[2 * VGTC_GA_POPULATION], parent_cost[VGTC_GA_POPULATION];
     long order[VGTC_GA_POPULATION], pool[VGTC_GA_POPULATION], fresh[VGTC_GA_POPULATION];
     long flips[VGTC_GA_MAX_FLIPS + 1];
-    float K[VGTC_GA_GENES];                               /* one candidate's gains               */
-    float far[(VGTC_GA_HORIZON + 1) * VGTC_NJ];           /* its joint errors outside the region */
-    long far_at[VGTC_GA_HORIZON + 1];
+    float K[VGTC_GA_GENES][VGTC_GA_LANES];                /* a block's gains, one lane each      */
+    float far[VGTC_GA_LANES * (VGTC_GA_HORIZON + 1) * VGTC_NJ]; /* joint errors outside the region */
+    long far_at[VGTC_GA_LANES * (VGTC_GA_HORIZON + 1)];  /* their lane * horizon + step          */
+    const uint64_t *rows[VGTC_GA_POPULATION];             /* the candidates of a prediction      */
     long exact_steps;
     /* work of the generated functions */
     const double *arg[VGTC_SZ_ARG];
