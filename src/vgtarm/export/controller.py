@@ -57,7 +57,7 @@ OBSERVERS = ("none", "momentum")
 #: Values of ``switching`` (or a :class:`~vgtarm.control.SwitchingControl`).
 SWITCHING = (None, "safe", "paper")
 #: The GA of switching control, copied when it is exported.
-GA_FILES = ("vgtc_ga.h", "vgtc_ga.c")
+GA_FILES = ("vgtc_ga.h", "vgtc_ga.c", "vgtc_switching.h", "vgtc_switching.c")
 #: Longest a check compile may run (s).
 COMPILE_TIMEOUT = 600.0
 #: CasADi's template code leaves parameters unused; the generated file says so to the compiler.
@@ -304,9 +304,9 @@ def _write(
         shutil.copyfile(TEMPLATE_DIR / name, folder / name)
     if ga:  # the library's sources gain the GA
         for name, old, new in (
-            ("Makefile", "vgtc_defaults.o", "vgtc_defaults.o vgtc_ga.o"),
-            ("Makefile", "vgt_control.h", "vgt_control.h vgtc_ga.h"),
-            ("CMakeLists.txt", "vgtc_defaults.c", "vgtc_defaults.c vgtc_ga.c"),
+            ("Makefile", "vgtc_defaults.o", "vgtc_defaults.o vgtc_ga.o vgtc_switching.o"),
+            ("Makefile", "vgt_control.h", "vgt_control.h vgtc_ga.h vgtc_switching.h"),
+            ("CMakeLists.txt", "vgtc_defaults.c", "vgtc_defaults.c vgtc_ga.c vgtc_switching.c"),
         ):
             (folder / name).write_text((folder / name).read_text().replace(old, new))
     shutil.copyfile(SHARED_HEADER, folder / SHARED_HEADER.name)
@@ -340,7 +340,7 @@ def _write(
         "#include <string.h>",
         "",
         '#include "vgtarm_controller.h"',
-        *(['#include "vgtc_ga.h"'] if ga else []),
+        *(['#include "vgtc_switching.h"'] if ga else []),
         "",
         f"const double vgtc_home[VGTC_NJ] = {{{', '.join(_c_number(v) for v in home)}}};",
         "const int vgtc_joint_is_angle[VGTC_NJ] = {"

@@ -166,7 +166,15 @@ def ga_export(
             "    memcpy(params->safe_lo_tab, kv_lo, sizeof kv_lo);",
             "    memcpy(params->safe_hi_tab, kv_hi, sizeof kv_hi);",
         ]
-    lines += ["}", ""]
+    lines += [
+        "}",
+        "void vgtc_switching_default_params(vgtc_switching_params *params)",
+        "{",
+        "    memset(params, 0, sizeof *params);",
+        f"    params->threshold = {_hex(controller.threshold)};",
+        f"    params->hold = {controller.hold_periods};",
+        "}",
+    ]
     settings = {
         "variant": controller.variant,
         "threshold_m": controller.threshold,
@@ -177,6 +185,7 @@ def ga_export(
         "generations": options.max_generations,
         "elite": elite,
         "hold": controller.hold_periods,
+        "switch_on": "measured" if controller.measured_switching else "true",
         "fused_multiply_add": bool(fuses),
     }
     return GAExport(config, (*(line for line in lines if line), ""), settings)
