@@ -57,7 +57,7 @@ OBSERVERS = ("none", "momentum")
 #: Values of ``switching`` (or a :class:`~vgtarm.control.SwitchingControl`).
 SWITCHING = (None, "safe", "paper")
 #: The GA of switching control, copied when it is exported.
-GA_FILES = ("vgtc_ga.h", "vgtc_ga.c", "vgtc_switching.h", "vgtc_switching.c")
+GA_FILES = ("vgtc_ga.h", "vgtc_ga.c", "vgtc_switching.h", "vgtc_switching.c", "ga_timing.c")
 #: Longest a check compile may run (s).
 COMPILE_TIMEOUT = 600.0
 #: CasADi's template code leaves parameters unused; the generated file says so to the compiler.
@@ -306,7 +306,16 @@ def _write(
         for name, old, new in (
             ("Makefile", "vgtc_defaults.o", "vgtc_defaults.o vgtc_ga.o vgtc_switching.o"),
             ("Makefile", "vgt_control.h", "vgt_control.h vgtc_ga.h vgtc_switching.h"),
+            ("Makefile", "all: libvgtc.a replay rt_loop", "all: libvgtc.a replay rt_loop ga_timing"),
+            ("Makefile", "libvgtc.a replay rt_loop\n", "libvgtc.a replay rt_loop ga_timing\n"),
+            (
+                "Makefile",
+                "\nclean:",
+                "\nga_timing: ga_timing.o libvgtc.a\n"
+                "\t$(CC) $(CFLAGS) $(EXACT) $(LDFLAGS) -o $@ ga_timing.o libvgtc.a $(LDLIBS)\n\nclean:",
+            ),
             ("CMakeLists.txt", "vgtc_defaults.c", "vgtc_defaults.c vgtc_ga.c vgtc_switching.c"),
+            ("CMakeLists.txt", "foreach(program replay rt_loop)", "foreach(program replay rt_loop ga_timing)"),
         ):
             (folder / name).write_text((folder / name).read_text().replace(old, new))
     shutil.copyfile(SHARED_HEADER, folder / SHARED_HEADER.name)

@@ -42,7 +42,7 @@ from .switching import switching_controller
 HARNESS = Path(__file__).resolve().parent / "harness" / "harness.c"
 MODEL_CSRC = Path(__file__).resolve().parent.parent / "model" / "csrc"
 #: The programs of an export (each has its own main): not part of the library.
-PROGRAMS = ("replay.c", "rt_loop.c")
+PROGRAMS = ("replay.c", "rt_loop.c", "ga_timing.c")
 #: Flags of the shared library: the compiled model library's (no contraction, no fast math).
 LIBRARY_FLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off")
 
