@@ -20,6 +20,7 @@ import pytest
 
 import vgtarm
 from vgtarm.app.cases import case_study, joint_reference
+from vgtarm.control import SwitchingControl
 from vgtarm.errors import InputError
 from vgtarm.export import export_controller, simulate_exported
 from vgtarm.export.controller import STRICT_FLAGS
@@ -45,7 +46,7 @@ def robot() -> vgtarm.Robot:
 
 
 @pytest.fixture(scope="module")
-def reference(robot: vgtarm.Robot):  # type: ignore[no-untyped-def]
+def reference(robot: vgtarm.Robot):
     return joint_reference(robot, 2, duration=0.2)
 
 
@@ -53,18 +54,22 @@ def reference(robot: vgtarm.Robot):  # type: ignore[no-untyped-def]
 def exports(robot: vgtarm.Robot, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("switching")
     return {
-        variant: export_controller(
-            robot, root / variant, kp=CASE.kp, kv=CASE.kv, switching=CASE.controller("scm", variant=variant)
-        ).folder
+        variant: export_controller(robot, root / variant, kp=CASE.kp, kv=CASE.kv, switching=_scm(variant)).folder
         for variant in VARIANTS
     }
 
 
+def _scm(variant: str, **options: int) -> SwitchingControl:
+    scm = CASE.controller("scm", variant=variant, **options)  # type: ignore[arg-type]
+    assert isinstance(scm, SwitchingControl)
+    return scm
+
+
 @pytest.mark.parametrize("variant", VARIANTS)
-def test_activations_equal_the_simulations_ga(variant, robot, reference, exports):  # type: ignore[no-untyped-def]
+def test_activations_equal_the_simulations_ga(variant, robot, reference, exports):
     """The same windows, states and seeds: the exported GA returns the simulation's activation bit
     for bit (its gains, its costs and its work), including windows cut short at the end."""
-    scm = CASE.controller("scm", variant=variant)
+    scm = _scm(variant)
     arrays = loop_arrays(robot, robot, reference, initial_state=(reference.q[0], reference.qd[0]))
     theirs = compiled_ga(scm, ClosedLoopDriver(robot.backend), robot, arrays, reference.dt)
     rng = np.random.default_rng(11)
@@ -94,10 +99,10 @@ def test_activations_equal_the_simulations_ga(variant, robot, reference, exports
     [("paper", {}), ("safe", {}), ("safe", {"encoder_resolution": 1e-6})],
     ids=["paper", "safe", "safe, encoders"],
 )
-def test_closed_through_the_exported_switching_control_equals_simulate(variant, options, robot, reference, tmp_path):  # type: ignore[no-untyped-def]
+def test_closed_through_the_exported_switching_control_equals_simulate(variant, options, robot, reference, tmp_path):
     """Case 2 with the tool force, switching control closed through the exported C: every effort
     sample, state and activation equals simulate's, bit for bit (within 1e-12 a fortiori)."""
-    scm = CASE.controller("scm", variant=variant)
+    scm = _scm(variant)
     folder = export_controller(robot, tmp_path / "x", kp=CASE.kp, kv=CASE.kv, switching=scm, **options).folder
     theirs = simulate(robot, reference, scm, external_force=CASE.external_force, **options)
     mine = simulate_exported(folder, robot, reference, external_force=CASE.external_force, controller=scm, **options)
@@ -111,14 +116,14 @@ def test_closed_through_the_exported_switching_control_equals_simulate(variant, 
     ]
 
 
-def test_another_switching_controller_than_the_exported_one_is_refused(robot, reference, exports):  # type: ignore[no-untyped-def]
-    other = CASE.controller("scm", variant="paper", horizon=10)
+def test_another_switching_controller_than_the_exported_one_is_refused(robot, reference, exports):
+    other = _scm("paper", horizon=10)
     with pytest.raises(InputError, match="horizon") as caught:
         simulate_exported(exports["paper"], robot, reference, controller=other)
     assert "\n" not in str(caught.value)
 
 
-def _compilers() -> list:  # type: ignore[type-arg]
+def _compilers() -> list:
     return [
         pytest.param("gcc", marks=pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc is not installed")),
         pytest.param("clang", marks=pytest.mark.skipif(shutil.which("clang") is None, reason=CLANG_MISSING)),
@@ -136,7 +141,7 @@ def _make(folder: Path, build: Path, compiler: str, flags: str) -> Path:
 
 
 @pytest.mark.parametrize("compiler", _compilers())
-def test_builds_strict_and_times_its_activations(compiler, exports, tmp_path):  # type: ignore[no-untyped-def]
+def test_builds_strict_and_times_its_activations(compiler, exports, tmp_path):
     """-std=c99 -Wall -Wextra -Werror -pedantic -O2, and the Makefile's own -O3 -march=native: no
     warning; ga_timing runs activations and reports their times (not asserted: measured)."""
     strict = " ".join(f for f in STRICT_FLAGS if f != "-ffp-contract=off")
@@ -199,7 +204,7 @@ int main(void)
 
 @pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc is not installed")
 @pytest.mark.parametrize("variant", VARIANTS)
-def test_clean_under_address_and_undefined_behaviour_sanitizers(variant, exports, tmp_path):  # type: ignore[no-untyped-def]
+def test_clean_under_address_and_undefined_behaviour_sanitizers(variant, exports, tmp_path):
     flags = "-std=c99 -O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined -fno-sanitize-recover=all"
     build = _make(exports[variant], tmp_path / "asan", "gcc", flags)
     (build / "driver.c").write_text(_DRIVER)
@@ -216,7 +221,7 @@ def test_clean_under_address_and_undefined_behaviour_sanitizers(variant, exports
         assert "runtime error" not in done.stderr and "activations" in done.stdout
 
 
-def test_the_library_uses_only_libm_and_string_functions(exports, tmp_path):  # type: ignore[no-untyped-def]
+def test_the_library_uses_only_libm_and_string_functions(exports, tmp_path):
     """No heap, no threads, no I/O in the library: its objects import libm and memcpy/memset only."""
     build = _make(exports["safe"], tmp_path / "nm", "gcc", "-std=c99 -O2")
     undefined = subprocess.run(["nm", "-u", str(build / "libvgtc.a")], capture_output=True, text=True, check=True)
@@ -236,9 +241,9 @@ def test_the_library_uses_only_libm_and_string_functions(exports, tmp_path):  # 
         ({"ga": GAOptions(stall_generations=5)}, "stall_generations"),
     ],
 )
-def test_what_is_not_exported_is_refused_in_one_line(options, field, robot, tmp_path):  # type: ignore[no-untyped-def]
+def test_what_is_not_exported_is_refused_in_one_line(options, field, robot, tmp_path):
     bounds = {"kp_bounds": CASE.kp_bounds, "kv_bounds": CASE.kv_bounds}
-    scm = vgtarm.control.SwitchingControl.with_gains(CASE.kp, CASE.kv, 7, **bounds, **options)
+    scm = SwitchingControl.with_gains(CASE.kp, CASE.kv, 7, **bounds, **options)
     with pytest.raises(InputError, match=field) as caught:
         export_controller(robot, tmp_path / "out", switching=scm)
     assert "\n" not in str(caught.value)
@@ -248,13 +253,13 @@ def test_what_is_not_exported_is_refused_in_one_line(options, field, robot, tmp_
     assert not (tmp_path / "out").exists()
 
 
-def test_the_exported_ga_of_an_export_without_switching_is_refused(robot, tmp_path):  # type: ignore[no-untyped-def]
+def test_the_exported_ga_of_an_export_without_switching_is_refused(robot, tmp_path):
     folder = export_controller(robot, tmp_path / "cfc", check_build=False).folder
     with pytest.raises(InputError, match="without switching control"):
         ExportedGA(folder)
 
 
-def test_the_fused_kernel_is_recognised_from_the_cpu_flags(monkeypatch):  # type: ignore[no-untyped-def]
+def test_the_fused_kernel_is_recognised_from_the_cpu_flags(monkeypatch):
     """ga.c's kernel fuses on x86-64 only in its x86-64-v3 clone: every v3 flag is needed."""
     import platform
 

@@ -65,7 +65,9 @@ class ExportedGA:
         try:
             self.settings: dict[str, Any] = json.loads((self.folder / "export.json").read_text())
         except (OSError, ValueError) as exc:
-            raise InputError(f"exported controller {shown(str(folder), 200)}: no readable export.json ({exc})") from None
+            raise InputError(
+                f"exported controller {shown(str(folder), 200)}: no readable export.json ({exc})"
+            ) from None
         if not self.settings.get("switching"):
             raise InputError(
                 f"exported controller {shown(str(folder), 200)}: exported without switching control"

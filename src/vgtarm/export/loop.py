@@ -31,8 +31,8 @@ from ..model import interface
 from ..model.closedloop import DONE, ClosedLoopDriver
 from ..model.compiled import CompiledBackend, find_compiler
 from ..model.robot import Robot
-from ..simulation.reference import HasJointReference
 from ..simulation.engines import RawActivation
+from ..simulation.reference import HasJointReference
 from ..simulation.result import MODE_FIXED, MODE_GA, MODE_NOT_RUN, SimulationResult
 from ..simulation.scenario import MODEL_ENGINE, Scenario
 from ..simulation.simulator import Outcome, prepare
@@ -136,8 +136,10 @@ class CompiledExport:
     def new_switching(self) -> Any:
         """Switching control initialised with the export's own values (controller, GA, threshold)."""
         ffi, lib = self.ffi, self.lib
-        owners = [ffi.new("char[]", int(size())) for size in (lib.vgtc_params_size, lib.vgtc_ga_params_size,
-                                                                lib.vgtc_switching_params_size)]
+        owners = [
+            ffi.new("char[]", int(size()))
+            for size in (lib.vgtc_params_size, lib.vgtc_ga_params_size, lib.vgtc_switching_params_size)
+        ]
         control = ffi.cast("vgtc_params *", owners[0])
         ga = ffi.cast("vgtc_ga_params *", owners[1])
         params = ffi.cast("vgtc_switching_params *", owners[2])
@@ -216,11 +218,10 @@ def _simulate_switching(
     arrays = job.arrays
     n = int(arrays.n)
     # the GA's seeds: one per sample, drawn as the simulation's loop draws them
-    seeds = np.ascontiguousarray(
-        np.asarray(job.ga_rng.integers(0, 2**63, size=n, dtype=np.int64)).view(np.uint64)
-    )
+    seeds = np.ascontiguousarray(np.asarray(job.ga_rng.integers(0, 2**63, size=n, dtype=np.int64)).view(np.uint64))
     inp = arrays.inputs
     ref = np.ascontiguousarray(np.hstack([inp["q_d"], inp["qd_d"], inp["qdd_d"]]), dtype=np.float64)
+    assert isinstance(plant.backend, CompiledBackend)  # checked by simulate_exported
     driver = ClosedLoopDriver(plant.backend)
     loop_settings = job.settings.struct(arrays.n_joints, arrays.n_margins)
     switching = compiled.new_switching()

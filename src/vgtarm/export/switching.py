@@ -69,9 +69,7 @@ def switching_controller(switching: str | SwitchingControl, kp: Any, kv: Any, n:
     return SwitchingControl.with_gains(kp, kv, n, kp_bounds=(0.0, kp_top), kv_bounds=(0.0, kv_top), variant=switching)
 
 
-def ga_export(
-    controller: SwitchingControl, n: int, dt: float, velocity_filter: float | None, fuses: bool
-) -> GAExport:
+def ga_export(controller: SwitchingControl, n: int, dt: float, velocity_filter: float | None, fuses: bool) -> GAExport:
     """The GA's part of an export for a robot of ``n`` joints at period ``dt``; the safe variant is
     admitted on a loop whose velocities are filtered with ``velocity_filter`` (None: measured).
     What the export does not reproduce is refused in one line."""
