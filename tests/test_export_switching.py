@@ -156,7 +156,7 @@ def test_builds_strict_and_times_its_activations(compiler, exports, tmp_path):
     assert done.returncode == 0 and done.stderr == "", done.stderr
 
 
-#: A driver of vgtc_switching_step (threshold 0: every period activates, sets held in the safe
+#: A driver of vgtc_switching_step (a tiny threshold: every period activates, sets held in the safe
 #: variant), for the sanitizers.
 _DRIVER = r"""
 #include <math.h>
@@ -175,7 +175,7 @@ int main(void)
     vgtc_ga_default_params(&ga);
     vgtc_switching_default_params(&params);
     ga.generations = 3;
-    params.threshold = 0.0;
+    params.threshold = 1e-12;
     if (vgtc_switching_init(&sw, &control, &ga, &params) != VGTC_OK) return 2;
     for (int k = 0; k < 60; ++k) {
         for (int i = 0; i < VGTC_NJ; ++i) {

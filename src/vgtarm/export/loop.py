@@ -201,6 +201,7 @@ def _check_switching(exported: Mapping[str, Any], controller: SwitchingControl) 
         "elite": ga.elite_count,
         "hold": controller.hold_periods,
         "switch_on": "measured" if controller.measured_switching else "true",
+        "watch_from": int(getattr(controller, "watch_period", controller.hold_periods)),
     }
     for key, value in wanted.items():
         if exported.get(key) != value:
@@ -266,6 +267,7 @@ def _simulate_switching(
     wall = time.perf_counter() - started
     at = int(stop[0])
     mode = np.where(mode_ga == 1, MODE_GA, MODE_FIXED).astype(np.int8)
+    drops = tuple(np.flatnonzero(mode_ga == 2).tolist())  # held sets dropped for the fixed gains
     success = status == DONE
     if not success:
         mode[at:] = MODE_NOT_RUN
@@ -280,7 +282,9 @@ def _simulate_switching(
         )
         for i in range(int(count[0]))
     )
-    outcome = Outcome(status, at, success, mode, found, wall)
+    # the drops are recorded where the simulator's outcome keeps them (vgtarm with the drop rule)
+    kept = {"drops": drops} if "drops" in {f.name for f in dataclasses.fields(Outcome)} else {}
+    outcome = Outcome(status, at, success, mode, found, wall, **kept)
     extra = {"exported_controller": str(compiled.folder), **dict(metadata or {})}
     result = run.result(outcome, extra)
     if int(refused[0]) < 0:

@@ -171,6 +171,7 @@ def ga_export(controller: SwitchingControl, n: int, dt: float, velocity_filter: 
         "    memset(params, 0, sizeof *params);",
         f"    params->threshold = {_hex(controller.threshold)};",
         f"    params->hold = {controller.hold_periods};",
+        f"    params->watch_from = {_watch_from(controller)};",
         "}",
     ]
     settings = {
@@ -184,9 +185,16 @@ def ga_export(controller: SwitchingControl, n: int, dt: float, velocity_filter: 
         "elite": elite,
         "hold": controller.hold_periods,
         "switch_on": "measured" if controller.measured_switching else "true",
+        "watch_from": _watch_from(controller),
         "fused_multiply_add": bool(fuses),
     }
     return GAExport(config, (*(line for line in lines if line), ""), settings)
+
+
+def _watch_from(controller: SwitchingControl) -> int:
+    """The first held period whose error may drop a held set (the hold: never); a controller
+    without the drop rule (``watch_period``) never drops one."""
+    return int(getattr(controller, "watch_period", controller.hold_periods))
 
 
 def _hex(x: float) -> str:

@@ -11,7 +11,8 @@ int vgtc_switching_init(vgtc_switching *sw, const vgtc_params *control, const vg
 {
     int status;
     if (!sw || !control || !ga || !params) return VGTC_BAD_ARGUMENT;
-    if (!(params->threshold >= 0.0 && isfinite(params->threshold)) || params->hold < 1 || params->hold > ga->horizon)
+    if (!(params->threshold >= 0.0 && isfinite(params->threshold)) || params->hold < 1 || params->hold > ga->horizon
+        || params->watch_from < 1)
         return VGTC_BAD_PARAMETER;
     if (fabs(ga->dt - control->dt) > 0.0) return VGTC_BAD_PARAMETER;
     memset(sw, 0, sizeof *sw);
@@ -35,9 +36,41 @@ int vgtc_switching_step(vgtc_switching *sw, double t, const double *q_meas, cons
     }
     Kp = sw->control.p.Kp;
     Kv = sw->control.p.Kv;
-    sw->activated = sw->held = sw->ran = 0;
+    sw->activated = sw->held = sw->ran = sw->dropped_hold = 0;
     sw->error_seen = NAN;
+    if (sw->hold_left <= 0 || sw->p.hold - sw->hold_left >= sw->p.watch_from) { /* the error is tested */
+        if ((status = vgtc_readings(&sw->control, q_meas, qd_meas, qm, vm)) != VGTC_OK) {
+            memset(efforts, 0, sizeof(double) * VGTC_NJ);
+            return status;
+        }
+        if (isnan(error)) { /* what the controller sees: its model's tip at the readings */
+            double tip[3], m0, m1, m2;
+            const double *arg[VGTC_SZ_ARG];
+            double *res[VGTC_SZ_RES];
+            arg[0] = qm;
+            arg[1] = sw->control.p.model;
+            res[0] = tip;
+            if (vgt_tip(arg, res, sw->control.iw, sw->control.w, 0)) {
+                memset(efforts, 0, sizeof(double) * VGTC_NJ);
+                return VGTC_FUNCTION_FAILED;
+            }
+            m0 = tip_d[0] - tip[0];
+            m1 = tip_d[1] - tip[1];
+            m2 = tip_d[2] - tip[2];
+            error = sqrt(m0 * m0 + m1 * m1 + m2 * m2);
+        }
+        sw->error_seen = error;
+    }
     if (sw->hold_left > 0) { /* an admitted set held over the periods it was certified for */
+        if (sw->p.hold - sw->hold_left >= sw->p.watch_from && error > sw->hold_above) {
+            /* its error rose: dropped, this period under the fixed gains (no GA) */
+            status = vgtc_step_gains(&sw->control, t, q_meas, qd_meas, ref, f_meas, Kp, Kv, efforts);
+            if (status >= 0) {
+                sw->hold_left = 0;
+                sw->dropped_hold = 1;
+            }
+            return status;
+        }
         status = vgtc_step_gains(&sw->control, t, q_meas, qd_meas, ref, f_meas, sw->gains, sw->gains + nn, efforts);
         if (status >= 0) {
             sw->hold_left -= 1;
@@ -45,29 +78,8 @@ int vgtc_switching_step(vgtc_switching *sw, double t, const double *q_meas, cons
         }
         return status;
     }
-    if ((status = vgtc_readings(&sw->control, q_meas, qd_meas, qm, vm)) != VGTC_OK) {
-        memset(efforts, 0, sizeof(double) * VGTC_NJ);
-        return status;
-    }
-    if (isnan(error)) { /* what the controller sees: its model's tip at the readings */
-        double tip[3], m0, m1, m2;
-        const double *arg[VGTC_SZ_ARG];
-        double *res[VGTC_SZ_RES];
-        arg[0] = qm;
-        arg[1] = sw->control.p.model;
-        res[0] = tip;
-        if (vgt_tip(arg, res, sw->control.iw, sw->control.w, 0)) {
-            memset(efforts, 0, sizeof(double) * VGTC_NJ);
-            return VGTC_FUNCTION_FAILED;
-        }
-        m0 = tip_d[0] - tip[0];
-        m1 = tip_d[1] - tip[1];
-        m2 = tip_d[2] - tip[2];
-        error = sqrt(m0 * m0 + m1 * m1 + m2 * m2);
-    }
     long hold_left = 0;
-    sw->error_seen = error;
-    if (error > sw->p.threshold) {
+    if (sw->p.threshold > 0.0 && error > sw->p.threshold) { /* (a threshold of 0: never switched) */
         const long horizon = sw->ga.p.horizon < rows - 1 ? sw->ga.p.horizon : rows - 1;
         sw->activated = 1;
         if (horizon > 0) { /* the last period has nothing left to predict: it keeps the fixed gains */
@@ -83,6 +95,9 @@ int vgtc_switching_step(vgtc_switching *sw, double t, const double *q_meas, cons
         }
     }
     status = vgtc_step_gains(&sw->control, t, q_meas, qd_meas, ref, f_meas, Kp, Kv, efforts);
-    if (status >= 0) sw->hold_left = hold_left;
+    if (status >= 0) {
+        sw->hold_left = hold_left;
+        sw->hold_above = error;
+    }
     return status;
 }

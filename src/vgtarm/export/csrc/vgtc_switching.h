@@ -6,7 +6,9 @@
  * stays within, the fixed gains control; in a period above it, one GA activation from the
  * controller's readings (joints and velocities) over the reference window ahead chooses the gains
  * of that period and, in the safe variant when the set was admitted (not dropped), of the next
- * hold - 1 periods too, during which the threshold is not tested.
+ * hold - 1 periods too, during which the threshold is not tested; from the held period watch_from
+ * on, a set whose error seen rises above the one seen at its activation is dropped: that period
+ * runs with the fixed gains (no GA) and the next ones as usual.
  *
  * The tip error tested: the paper's variant tests the true tip error, which the controller does
  * not see (a tracker measures it; pass it as `error`); the safe variant by default tests what the
@@ -29,8 +31,11 @@ extern "C" {
 #endif
 
 typedef struct {
-    double threshold;        /* tip error above which the GA runs (m)                              */
+    double threshold;        /* tip error above which the GA runs (m; 0: never)                    */
     long hold;               /* periods an admitted set controls from its activation (1: paper)    */
+    long watch_from;         /* the first held period (the activation's is 0) at which a set whose  */
+                             /* error seen exceeds the one seen at its activation is dropped for  */
+                             /* the fixed gains (>= hold: never)                                  */
 } vgtc_switching_params;
 
 typedef struct {
@@ -38,11 +43,13 @@ typedef struct {
     vgtc_ga ga;              /* the GA                                                              */
     vgtc_switching_params p;
     long hold_left;          /* periods the current set still controls                              */
+    double hold_above;       /* the error seen at its activation                                    */
     double gains[VGTC_GA_GENES]; /* the GA's last gains: Kp then Kv, row-major                      */
     /* what the last period did */
     int activated;           /* 1: the error was above the threshold (the GA ran unless no row was ahead) */
     int held;                /* 1: a held set controlled it                                         */
     int ran;                 /* 1: the GA ran (its record in `result`)                              */
+    int dropped_hold;        /* 1: a held set was dropped here (its error rose): the fixed gains    */
     double error_seen;       /* the error tested (NaN when a held set controlled)                   */
     vgtc_ga_result result;
 } vgtc_switching;

@@ -80,7 +80,7 @@ size_t vgtc_switching_params_size(void) { return sizeof(vgtc_switching_params); 
  * the reference rows from the period on (ref: r->n rows of 3 nj), the desired tip rows, the true
  * tip error when `true_error` (the paper's variant tests it), else NAN (what the controller sees),
  * and the next unused seed of `seeds`. mode[k] = 1 where the GA's gains controlled period k
- * (activated or held), as the simulation's MODE_GA; each activation's record is written to
+ * (activated or held), as the simulation's MODE_GA, 2 where a held set was dropped; each activation's record is written to
  * sample, generations, evaluations, best_cost, seeded_cost, wall (*count of them). */
 int vgtc_harness_run_switching(const vgt_model *m, const vgt_settings *s, const vgt_run *r, vgtc_switching *sw,
                                const double *t, const double *ref, const uint64_t *seeds, int true_error, long k0,
@@ -121,7 +121,7 @@ int vgtc_harness_run_switching(const vgt_model *m, const vgt_settings *s, const 
                                      true_error ? r->error[k] : NAN, force, seeds[seeds_used], F);
         clock_gettime(CLOCK_MONOTONIC, &w1);
         if (cs < 0) { *controller_status = cs; status = VGT_FUNCTION_FAILED; *stop = k; break; }
-        mode[k] = (signed char)(sw->activated || sw->held);
+        mode[k] = (signed char)(sw->dropped_hold ? 2 : sw->activated || sw->held);
         if (sw->activated) {
             const long i = (*count)++;
             sample[i] = k;
