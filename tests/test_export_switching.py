@@ -111,6 +111,8 @@ def test_closed_through_the_exported_switching_control_equals_simulate(variant, 
     np.testing.assert_array_equal(mine.effort, theirs.effort)
     np.testing.assert_array_equal(mine.q, theirs.q)
     np.testing.assert_array_equal(mine.mode, theirs.mode)
+    # the safe variant's held sets dropped when their error rose (vgtarm with the drop rule)
+    assert mine.metadata.get("scm_hold_drops") == theirs.metadata.get("scm_hold_drops")
     assert [(a.sample, a.evaluations, a.best_fitness, a.fixed_gains_fitness) for a in mine.activations] == [
         (a.sample, a.evaluations, a.best_fitness, a.fixed_gains_fitness) for a in theirs.activations
     ]
@@ -242,7 +244,7 @@ def test_the_library_uses_only_libm_and_string_functions(exports, tmp_path):
     ],
 )
 def test_what_is_not_exported_is_refused_in_one_line(options, field, robot, tmp_path):
-    bounds = {"kp_bounds": CASE.kp_bounds, "kv_bounds": CASE.kv_bounds}
+    bounds = {"kp_bounds": CASE.kp_bounds, "kv_bounds": CASE.kv_bounds, "variant": "paper"}
     scm = SwitchingControl.with_gains(CASE.kp, CASE.kv, 7, **bounds, **options)
     with pytest.raises(InputError, match=field) as caught:
         export_controller(robot, tmp_path / "out", switching=scm)
