@@ -14,6 +14,7 @@ single_threaded_blas()  # as the vgtarm command does, before NumPy is imported
 
 from . import (  # noqa: E402
     bench_export,
+    bench_export_ga,
     bench_ga,
     bench_ik,
     bench_model,
@@ -37,6 +38,7 @@ MODULES = {
     "stacks": bench_stacks,
     "recursive": bench_recursive,
     "export": bench_export,
+    "export-ga": bench_export_ga,
 }
 #: Groups run when none is named (``stacks`` is long: it compiles ten libraries from cold).
 DEFAULT = [name for name in MODULES if name != "stacks"]

@@ -1,0 +1,90 @@
+"""Switching control's GA exported (issue 25): the time of an activation in the exported C.
+
+For each variant (``paper``, ``safe``) of case 2's switching control: the export's GA
+(``vgtc_ga.c``) compiled as its Makefile does by default (-O3 -march=native) and, for comparison,
+at the portable -O2 (fmaf a libm call, no vectorisation), run on the same activations as the
+simulation's compiled GA (``ga.c``, one thread: the baseline of the same run): windows of case
+2's reference from states 0.3 mm / 3 mm/s off it, every ``k``-th sample, each with its own seed.
+Every activation's gains are checked equal between the two (bit for bit). The times are measured
+in C around each call (``harness/ga_harness.c``) and in Python around the simulation's call.
+``VGTARM_BENCH_EXPORT_GA_N`` sets the activations per variant (default 1000).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import vgtarm
+from vgtarm.app.cases import case_study, joint_reference
+from vgtarm.control import SwitchingControl
+from vgtarm.export import export_controller
+from vgtarm.export.galoop import FLAGS, ExportedGA
+from vgtarm.model.closedloop import ClosedLoopDriver
+from vgtarm.simulation.engines import compiled_ga
+from vgtarm.simulation.simulator import loop_arrays
+
+#: The export's Makefile default for a switching export (shared-library form).
+NATIVE = ("-std=c99", "-O3", "-march=native", "-fPIC", "-shared", "-ffp-contract=off")
+
+
+def _percentiles(seconds: np.ndarray) -> str:
+    p50, p99, p999 = np.percentile(seconds, [50, 99, 99.9]) * 1e3
+    return f"{p50:.3f} ms | {p99:.3f} ms | {p999:.3f} ms | {seconds.max() * 1e3:.3f} ms"
+
+
+def run() -> dict[str, dict[str, float]]:
+    count = int(os.environ.get("VGTARM_BENCH_EXPORT_GA_N", "1000"))
+    case = case_study(2)
+    robot = vgtarm.load_robot()
+    reference = joint_reference(robot, 2, duration=4.0)
+    n = len(reference.t)
+    rng = np.random.default_rng(0)
+    ks = np.linspace(0, n - 2, count).astype(int)
+    q0 = reference.q[ks] + rng.normal(scale=3e-4, size=(count, 7))
+    qd0 = reference.qd[ks] + rng.normal(scale=3e-3, size=(count, 7))
+    seeds = rng.integers(0, 2**63, size=count)
+    out: dict[str, dict[str, float]] = {}
+    print(f"\n### The exported GA of switching control (case 2, {count} activations per variant)\n")
+    print("| variant | build | p50 | p99 | p99.9 | max | over 1 ms | equal to ga.c |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+    for variant in ("paper", "safe"):
+        scm = case.controller("scm", variant=variant)
+        assert isinstance(scm, SwitchingControl)
+        arrays = loop_arrays(robot, robot, reference, initial_state=(reference.q[0], reference.qd[0]))
+        simulation = compiled_ga(scm, ClosedLoopDriver(robot.backend), robot, arrays, reference.dt)
+        simulation._ga.threads = 1
+        horizons = np.minimum(scm.horizon, n - 1 - ks)
+        inp = arrays.inputs
+        rows = np.hstack([inp["q_d"], inp["qd_d"], inp["qdd_d"]])
+        baseline = np.empty(count)
+        genes = np.empty((count, 2 * 49))
+        for i, k in enumerate(ks):
+            started = time.perf_counter()
+            genes[i] = simulation.activate(int(k), q0[i], qd0[i], int(seeds[i])).genes
+            baseline[i] = time.perf_counter() - started
+        print(
+            f"| {variant} | simulation's ga.c, 1 thread (baseline) | {_percentiles(baseline)} |"
+            f" {(baseline > 1e-3).sum()} | |"
+        )
+        with tempfile.TemporaryDirectory(prefix="vgtc-ga-bench-") as scratch:
+            folder = export_controller(robot, Path(scratch) / variant, kp=case.kp, kv=case.kv, switching=scm).folder
+            for name, flags in (("-O3 -march=native (Makefile)", NATIVE), ("-O2 portable", FLAGS)):
+                done = ExportedGA(folder, flags=flags).run(ks, horizons, q0, qd0, rows, inp["tip_d"], seeds)
+                equal = int(sum(np.array_equal(a, b) for a, b in zip(done.genes, genes, strict=True)))
+                ratio = np.median(done.seconds) / np.median(baseline)
+                print(
+                    f"| {variant} | export, {name} | {_percentiles(done.seconds)} |"
+                    f" {(done.seconds > 1e-3).sum()} | {equal} of {count}; median {ratio:.2f}x ga.c's |"
+                )
+                out[f"{variant} {name}"] = {
+                    "p50": float(np.median(done.seconds)),
+                    "p99": float(np.percentile(done.seconds, 99)),
+                    "max": float(done.seconds.max()),
+                }
+        out[f"{variant} ga.c"] = {"p50": float(np.median(baseline)), "max": float(baseline.max())}
+    return out
