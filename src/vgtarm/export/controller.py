@@ -40,7 +40,7 @@ from ..model.parameters import RobotParameters
 from ..model.robot import Robot
 from ..model.stack import Stack
 from ..simulation.sensing import DEFAULT_VELOCITY_FILTER_HZ, sensing_settings
-from .switching import GAExport, ga_export, simulator_fuses, switching_controller
+from .switching import GAExport, ga_export, simulator_fuses, switching_controller, switching_readme
 
 #: The hand-written files copied into every export (``csrc/`` of this package).
 TEMPLATE_DIR = Path(__file__).resolve().parent / "csrc"
@@ -444,6 +444,7 @@ def _write_readme(folder: Path, robot: Robot, settings: dict[str, Any], descript
             velocity_text=settings["velocity"],
             ref_columns=1 + 3 * n,
             meas_columns=1 + 2 * n + 3,
+            switching_text=switching_readme(settings["switching"]),
         )
     )
     (folder / "README.md").write_text(text)

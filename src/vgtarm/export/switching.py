@@ -191,6 +191,50 @@ def ga_export(controller: SwitchingControl, n: int, dt: float, velocity_filter: 
     return GAExport(config, (*(line for line in lines if line), ""), settings)
 
 
+def switching_readme(settings: dict[str, Any] | None) -> str:
+    """The export README's part on switching control (``settings``: export.json's ``switching``)."""
+    if not settings:
+        return " Switching control (the paper's GA) is not part of this export (`--switching safe|paper`)."
+    hold = settings["hold"]
+    return f"""
+
+## Switching control ({settings["variant"]} variant)
+
+`vgtc_switching.h` runs the switching control method around the controller: while the tip error
+stays within {settings["threshold_m"]:g} m the fixed gains control; in a period above it one GA
+activation ({settings["population"]} individuals, {settings["generations"]} generations, the
+{settings["prediction"]} prediction over {settings["horizon"]} periods) chooses the gains
+{"of that period" if hold == 1 else f"of that period and, when admitted, of the next {hold - 1}"}.
+The threshold is tested on {
+        "the tip error the controller sees, |tip_d - P^(q_meas)| (pass NAN)"
+        if settings["switch_on"] == "measured"
+        else "the true tip error, which the controller does not see: a tracker measures it"
+    }.
+
+```c
+static vgtc_switching sw;         /* the controller, its GA and their work arrays: no heap */
+vgtc_params p; vgtc_ga_params g; vgtc_switching_params s;
+vgtc_default_params(&p); vgtc_ga_default_params(&g); vgtc_switching_default_params(&s);
+if (vgtc_switching_init(&sw, &p, &g, &s) != VGTC_OK) ...;
+/* each period: `rows` reference rows (q_d, qd_d, qdd_d) and desired tips from this one on */
+int status = vgtc_switching_step(&sw, t, q_meas, qd_meas, ref_rows, rows, tip_d_rows,
+                                 NAN /* or the measured tip error */, f_meas, seed, efforts);
+```
+
+`vgtc_ga.c` is the simulation's GA (`ga.c`) rewritten for a real-time target: every buffer sized
+at compile time (`vgtc_config.h`), no heap, no threads, no intrinsics; the same random stream
+(xoshiro256** seeded through splitmix64, one seed per activation) and the same arithmetic, so an
+activation from the same state, window and seed returns the simulation's gains bit for bit
+(tested, and the loop closed through this folder equals `vgtarm simulate`). The simulation's
+kernel fuses multiply-adds on this machine: `VGTC_GA_FMA` = {int(settings["fused_multiply_add"])}
+writes them as `fmaf`. For speed build with `-O3 -march=native` (the Makefile's default here):
+`fmaf` becomes an instruction and the loops over the eight candidates of a block vectorise; at a
+portable -O2 an activation is tens of times slower. An activation takes about 1 ms on a desktop
+x86-64 core (`./ga_timing 1000` measures it here): a period with an activation overruns a 1 ms
+period unless the GA runs on its own core a period ahead, or with fewer generations
+(`vgtc_ga_params.generations`)."""
+
+
 def _watch_from(controller: SwitchingControl) -> int:
     """The first held period whose error may drop a held set (the hold: never); a controller
     without the drop rule (``watch_period``) never drops one."""
