@@ -289,6 +289,32 @@ static void gains_from_bytes(vgtc_ga *x, int count, const uint64_t *const *rows)
         }
 }
 
+/* Operations on the LANES values of a block, one loop each (the compiler vectorises them). */
+static void lanes_mul(float *restrict r, const float *restrict a, const float *restrict b)
+{
+    int c;
+    for (c = 0; c < LANES; ++c) r[c] = a[c] * b[c];
+}
+
+static void lanes_mul_s(float *restrict r, float a, const float *restrict b)
+{
+    int c;
+    for (c = 0; c < LANES; ++c) r[c] = a * b[c];
+}
+
+/* r = a b + r, fused where ga.c's kernel fuses (FMA) */
+static void lanes_fma(float *restrict r, const float *restrict a, const float *restrict b)
+{
+    int c;
+    for (c = 0; c < LANES; ++c) r[c] = FMA(a[c], b[c], r[c]);
+}
+
+static void lanes_fma_s(float *restrict r, float a, const float *restrict b)
+{
+    int c;
+    for (c = 0; c < LANES; ++c) r[c] = FMA(a, b[c], r[c]);
+}
+
 /* The predicted squared tip errors of the block's gains summed over the steps inside the trust
  * region (block_kernel, lane by lane); the steps outside are listed in x->far, x->far_at. */
 static void kernel(vgtc_ga *x, int count, double *sum, long *n_far)
@@ -309,40 +335,40 @@ static void kernel(vgtc_ga *x, int count, double *sum, long *n_far)
     for (j = 0; j < x->horizon; ++j) {
         const float *r = x->r + j * nj, *s = x->s + j * nj;
         const float *J = x->jac_f + (j + 1) * 3 * nj, *off = x->off_f + (j + 1) * 3;
-        float norm2[LANES], t[3][LANES];
+        float norm2[LANES], t[3][LANES], square[LANES];
         for (i = 0; i < nj; ++i) {
             const int ip = i * nj, iv = nn + i * nj;
             float p0[LANES], v0[LANES];
             if (nj == 1) {
-                for (c = 0; c < LANES; ++c) {
-                    p0[c] = x->K[ip][c] * E[0][c];
-                    v0[c] = x->K[iv][c] * Ed[0][c];
-                }
+                lanes_mul(p0, x->K[ip], E[0]);
+                lanes_mul(v0, x->K[iv], Ed[0]);
             } else { /* the first product is fused with the second (GCC contracts a*b + c*d so) */
-                for (c = 0; c < LANES; ++c) {
-                    p0[c] = FMA(x->K[ip][c], E[0][c], x->K[ip + 1][c] * E[1][c]);
-                    v0[c] = FMA(x->K[iv][c], Ed[0][c], x->K[iv + 1][c] * Ed[1][c]);
-                }
+                lanes_mul(p0, x->K[ip + 1], E[1]);
+                lanes_fma(p0, x->K[ip], E[0]);
+                lanes_mul(v0, x->K[iv + 1], Ed[1]);
+                lanes_fma(v0, x->K[iv], Ed[0]);
             }
-            for (l = 2; l < nj; ++l)
-                for (c = 0; c < LANES; ++c) {
-                    p0[c] = FMA(x->K[ip + l][c], E[l][c], p0[c]);
-                    v0[c] = FMA(x->K[iv + l][c], Ed[l][c], v0[c]);
-                }
+            for (l = 2; l < nj; ++l) {
+                lanes_fma(p0, x->K[ip + l], E[l]);
+                lanes_fma(v0, x->K[iv + l], Ed[l]);
+            }
             for (c = 0; c < LANES; ++c) a[i][c] = p0[c] + v0[c];
         }
         for (c = 0; c < LANES; ++c) norm2[c] = 0.0f;
-        for (i = 0; i < nj; ++i)
-            for (c = 0; c < LANES; ++c) {
-                E[i][c] = FMA(dt, Ed[i][c], E[i][c]) + r[i];
-                Ed[i][c] = FMA(-dt, a[i][c], Ed[i][c]) + s[i];
-                norm2[c] += x->moves[i] ? E[i][c] * E[i][c] : 0.0f;
-            }
+        for (i = 0; i < nj; ++i) {
+            lanes_fma_s(E[i], dt, Ed[i]);
+            for (c = 0; c < LANES; ++c) E[i][c] += r[i];
+            lanes_fma_s(Ed[i], -dt, a[i]);
+            for (c = 0; c < LANES; ++c) Ed[i][c] += s[i];
+            if (x->moves[i])
+                for (c = 0; c < LANES; ++c) norm2[c] += E[i][c] * E[i][c];
+            else
+                for (c = 0; c < LANES; ++c) norm2[c] += 0.0f;
+        }
         for (k = 0; k < 3; ++k)
             for (c = 0; c < LANES; ++c) t[k][c] = off[k];
         for (l = 0; l < nj; ++l)
-            for (k = 0; k < 3; ++k)
-                for (c = 0; c < LANES; ++c) t[k][c] = FMA(J[k * nj + l], E[l][c], t[k][c]);
+            for (k = 0; k < 3; ++k) lanes_fma_s(t[k], J[k * nj + l], E[l]);
         if (x->p.quadratic) {
             const float *coef = x->coef + j * 3 * nn;
             for (k = 0; k < 3; ++k)
@@ -350,19 +376,20 @@ static void kernel(vgtc_ga *x, int count, double *sum, long *n_far)
                     const float *cf = coef + k * nn + l * nj;
                     float u[LANES];
                     if (!x->row_used[k * nj + l]) continue;
-                    if (l + 1 < nj)
-                        for (c = 0; c < LANES; ++c) u[c] = FMA(cf[l], E[l][c], cf[l + 1] * E[l + 1][c]);
-                    else
-                        for (c = 0; c < LANES; ++c) u[c] = cf[l] * E[l][c];
-                    for (m = l + 2; m < nj; ++m)
-                        for (c = 0; c < LANES; ++c) u[c] = FMA(cf[m], E[m][c], u[c]);
-                    for (c = 0; c < LANES; ++c) t[k][c] = FMA(u[c], E[l][c], t[k][c]);
+                    if (l + 1 < nj) {
+                        lanes_mul_s(u, cf[l + 1], E[l + 1]);
+                        lanes_fma_s(u, cf[l], E[l]);
+                    } else {
+                        lanes_mul_s(u, cf[l], E[l]);
+                    }
+                    for (m = l + 2; m < nj; ++m) lanes_fma_s(u, cf[m], E[m]);
+                    lanes_fma(t[k], u, E[l]);
                 }
         }
-        for (c = 0; c < LANES; ++c) {
-            const float square = FMA(t[2][c], t[2][c], FMA(t[0][c], t[0][c], t[1][c] * t[1][c]));
-            total[c] += norm2[c] > limit2 ? 0.0f : square;
-        }
+        lanes_mul(square, t[1], t[1]);
+        lanes_fma(square, t[0], t[0]);
+        lanes_fma(square, t[2], t[2]);
+        for (c = 0; c < LANES; ++c) total[c] += norm2[c] > limit2 ? 0.0f : square[c];
         for (c = 0; c < count; ++c)
             if (norm2[c] > limit2) {
                 const long f = (*n_far)++;
