@@ -1,7 +1,7 @@
 """Switching control's GA exported (issue 25): the time of an activation in the exported C.
 
 For each variant (``paper``, ``safe``) of case 2's switching control: the export's GA
-(``vgtc_ga.c``) compiled as its Makefile does by default (-O3 -march=native) and, for comparison,
+(``vgtc_ga.c``) compiled as its Makefile does by default (-O2 -march=native) and, for comparison,
 at the portable -O2 (fmaf a libm call, no vectorisation), run on the same activations as the
 simulation's compiled GA (``ga.c``, one thread: the baseline of the same run): windows of case
 2's reference from states 0.3 mm / 3 mm/s off it, every ``k``-th sample, each with its own seed.
@@ -29,7 +29,7 @@ from vgtarm.simulation.engines import compiled_ga
 from vgtarm.simulation.simulator import loop_arrays
 
 #: The export's Makefile default for a switching export (shared-library form).
-NATIVE = ("-std=c99", "-O3", "-march=native", "-fPIC", "-shared", "-ffp-contract=off")
+NATIVE = ("-std=c99", "-O2", "-march=native", "-fPIC", "-shared", "-ffp-contract=off")
 
 
 def _percentiles(seconds: np.ndarray) -> str:
@@ -73,7 +73,7 @@ def run() -> dict[str, dict[str, float]]:
         )
         with tempfile.TemporaryDirectory(prefix="vgtc-ga-bench-") as scratch:
             folder = export_controller(robot, Path(scratch) / variant, kp=case.kp, kv=case.kv, switching=scm).folder
-            for name, flags in (("-O3 -march=native (Makefile)", NATIVE), ("-O2 portable", FLAGS)):
+            for name, flags in (("-O2 -march=native (Makefile)", NATIVE), ("-O2 portable", FLAGS)):
                 done = ExportedGA(folder, flags=flags).run(ks, horizons, q0, qd0, rows, inp["tip_d"], seeds)
                 equal = int(sum(np.array_equal(a, b) for a, b in zip(done.genes, genes, strict=True)))
                 ratio = np.median(done.seconds) / np.median(baseline)

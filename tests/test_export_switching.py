@@ -144,7 +144,7 @@ def _make(folder: Path, build: Path, compiler: str, flags: str) -> Path:
 
 @pytest.mark.parametrize("compiler", _compilers())
 def test_builds_strict_and_times_its_activations(compiler, exports, tmp_path):
-    """-std=c99 -Wall -Wextra -Werror -pedantic -O2, and the Makefile's own -O3 -march=native: no
+    """-std=c99 -Wall -Wextra -Werror -pedantic -O2, and the Makefile's own -O2 -march=native: no
     warning; ga_timing runs activations and reports their times (not asserted: measured)."""
     strict = " ".join(f for f in STRICT_FLAGS if f != "-ffp-contract=off")
     for variant in VARIANTS:

@@ -310,7 +310,7 @@ def _write(
             (  # the GA wants its fmaf as an instruction and its lane loops vectorised
                 "Makefile",
                 "CFLAGS ?= -std=c99 -O2 -Wall",
-                "CFLAGS ?= -std=c99 -O3 -march=native -Wall",
+                "CFLAGS ?= -std=c99 -O2 -march=native -Wall",
             ),
             ("Makefile", "libvgtc.a replay rt_loop\n", "libvgtc.a replay rt_loop ga_timing\n"),
             (

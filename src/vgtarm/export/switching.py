@@ -227,7 +227,7 @@ at compile time (`vgtc_config.h`), no heap, no threads, no intrinsics; the same 
 activation from the same state, window and seed returns the simulation's gains bit for bit
 (tested, and the loop closed through this folder equals `vgtarm simulate`). The simulation's
 kernel fuses multiply-adds on this machine: `VGTC_GA_FMA` = {int(settings["fused_multiply_add"])}
-writes them as `fmaf`. For speed build with `-O3 -march=native` (the Makefile's default here):
+writes them as `fmaf`. For speed build with `-O2 -march=native` (the Makefile's default here):
 `fmaf` becomes an instruction and the loops over the eight candidates of a block vectorise; at a
 portable -O2 an activation is tens of times slower. An activation takes about 1 ms on a desktop
 x86-64 core (`./ga_timing 1000` measures it here): a period with an activation overruns a 1 ms
