@@ -16,15 +16,17 @@ import os
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 import vgtarm
 from vgtarm.app.cases import case_study, joint_reference
 from vgtarm.control import SwitchingControl
-from vgtarm.export import export_controller
+from vgtarm.export import CompiledExport, export_controller, simulate_exported
 from vgtarm.export.galoop import FLAGS, ExportedGA
 from vgtarm.model.closedloop import ClosedLoopDriver
+from vgtarm.simulation import simulate
 from vgtarm.simulation.engines import compiled_ga
 from vgtarm.simulation.simulator import loop_arrays
 
@@ -87,4 +89,46 @@ def run() -> dict[str, dict[str, float]]:
                     "max": float(done.seconds.max()),
                 }
         out[f"{variant} ga.c"] = {"p50": float(np.median(baseline)), "max": float(baseline.max())}
+    out.update(_in_the_loop(case, robot))
+    return out
+
+
+def _in_the_loop(case: Any, robot: vgtarm.Robot) -> dict[str, dict[str, float]]:
+    """Case 2 with the tool force, the whole run, closed through the export built -O2
+    -march=native: the time of each period with an activation (GA and CFC step, measured in C)
+    against simulate's own activations (ga.c, one thread), the same activations."""
+    duration = float(os.environ.get("VGTARM_BENCH_EXPORT_GA_SECONDS", "4.0"))
+    reference = joint_reference(robot, 2, duration=duration)
+    out: dict[str, dict[str, float]] = {}
+    print(f"\n#### In the loop: case 2 with the tool force, {duration:g} s, every activation\n")
+    print(
+        "| variant | activations | simulate (ga.c, 1 thread) p50 / p99 / max | export p50 / p99 / max |"
+        " export over 1 ms | efforts equal |"
+    )
+    print("| --- | --- | --- | --- | --- | --- |")
+    for variant in ("paper", "safe"):
+        scm = case.controller("scm", variant=variant)
+        previous = os.environ.get("VGTARM_THREADS")
+        os.environ["VGTARM_THREADS"] = "1"
+        try:
+            theirs = simulate(robot, reference, scm, external_force=case.external_force)
+        finally:
+            if previous is None:
+                del os.environ["VGTARM_THREADS"]
+            else:
+                os.environ["VGTARM_THREADS"] = previous
+        with tempfile.TemporaryDirectory(prefix="vgtc-ga-loop-") as scratch:
+            folder = export_controller(robot, Path(scratch) / variant, kp=case.kp, kv=case.kv, switching=scm).folder
+            compiled = CompiledExport(folder, extra_flags=("-march=native",))
+            mine = simulate_exported(compiled, robot, reference, external_force=case.external_force, controller=scm)
+        a = np.array([x.wall_time_s for x in theirs.activations])
+        b = np.array([x.wall_time_s for x in mine.activations])
+        cells = [
+            " / ".join(f"{v * 1e3:.3f}" for v in (np.median(t), np.percentile(t, 99), t.max())) + " ms" for t in (a, b)
+        ]
+        print(
+            f"| {variant} | {len(b)} | {cells[0]} | {cells[1]} | {(b > 1e-3).sum()} |"
+            f" {np.array_equal(mine.effort, theirs.effort)} |"
+        )
+        out[f"{variant} loop"] = {"p50": float(np.median(b)), "p99": float(np.percentile(b, 99)), "max": float(b.max())}
     return out

@@ -90,7 +90,13 @@ class CompiledExport:
         n_joints: its joint count.
     """
 
-    def __init__(self, folder: str | os.PathLike[str], *, compiler: str | None = None) -> None:
+    def __init__(
+        self,
+        folder: str | os.PathLike[str],
+        *,
+        compiler: str | None = None,
+        extra_flags: tuple[str, ...] = (),
+    ) -> None:
         self.folder = Path(folder).absolute()
         try:
             self.settings: dict[str, Any] = json.loads((self.folder / "export.json").read_text())
@@ -108,7 +114,7 @@ class CompiledExport:
         try:
             library = Path(scratch) / "libvgtc_harness.so"
             # the export's folder first: its vgt_control.h is the copy the controller uses
-            command = [chosen, *LIBRARY_FLAGS, "-I", str(self.folder), "-I", str(MODEL_CSRC)]
+            command = [chosen, *LIBRARY_FLAGS, *extra_flags, "-I", str(self.folder), "-I", str(MODEL_CSRC)]
             command += ["-o", str(library), *sources, str(HARNESS), "-lm"]
             run_compiler(command, "the exported controller with the simulation harness")
             self.ffi = FFI()
