@@ -26,6 +26,7 @@ from vgtarm.control import SwitchingControl
 from vgtarm.export import CompiledExport, export_controller, simulate_exported
 from vgtarm.export.galoop import FLAGS, ExportedGA
 from vgtarm.model.closedloop import ClosedLoopDriver
+from vgtarm.model.compiled import CompiledBackend
 from vgtarm.simulation import simulate
 from vgtarm.simulation.engines import compiled_ga
 from vgtarm.simulation.simulator import loop_arrays
@@ -43,6 +44,8 @@ def run() -> dict[str, dict[str, float]]:
     count = int(os.environ.get("VGTARM_BENCH_EXPORT_GA_N", "1000"))
     case = case_study(2)
     robot = vgtarm.load_robot()
+    assert isinstance(robot.backend, CompiledBackend), "the benchmark compares compiled GAs: a C compiler is needed"
+    backend = robot.backend
     reference = joint_reference(robot, 2, duration=4.0)
     n = len(reference.t)
     rng = np.random.default_rng(0)
@@ -58,7 +61,7 @@ def run() -> dict[str, dict[str, float]]:
         scm = case.controller("scm", variant=variant)
         assert isinstance(scm, SwitchingControl)
         arrays = loop_arrays(robot, robot, reference, initial_state=(reference.q[0], reference.qd[0]))
-        simulation = compiled_ga(scm, ClosedLoopDriver(robot.backend), robot, arrays, reference.dt)
+        simulation = compiled_ga(scm, ClosedLoopDriver(backend), robot, arrays, reference.dt)
         simulation._ga.threads = 1
         horizons = np.minimum(scm.horizon, n - 1 - ks)
         inp = arrays.inputs
