@@ -15,6 +15,7 @@ single_threaded_blas()  # as the vgtarm command does, before NumPy is imported
 
 from . import (  # noqa: E402
     bench_export,
+    bench_export_ga,
     bench_footprint,
     bench_ga,
     bench_ik,
@@ -40,6 +41,7 @@ MODULES = {
     "stacks": bench_stacks,
     "recursive": bench_recursive,
     "export": bench_export,
+    "export-ga": bench_export_ga,
     "footprint": bench_footprint,
     "pathwide": bench_path_wide,
 }

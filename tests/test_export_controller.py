@@ -246,7 +246,7 @@ def test_bad_robot_and_bad_options_are_one_line(robot, tmp_path):  # type: ignor
         command.run(parser.parse_args(["--out", str(tmp_path / "out"), "--config", str(bad)]))
     assert "\n" not in str(caught.value)
     for options, field in (
-        ({"switching": "paper"}, "switching"),
+        ({"switching": "fast"}, "switching"),
         ({"observer": "kalman"}, "observer"),
         ({"observer": "momentum", "observer_gain": 5000.0}, "observer_gain"),
         ({"kp": [1.0, 2.0]}, "Kp"),

@@ -29,7 +29,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--observer-gain", type=float, default=None, metavar="K_O", help="observer gain (1/s; default 0.5/dt)"
     )
     parser.add_argument("--force-sensor", action="store_true", help="feed the measured tool force forward instead")
-    parser.add_argument("--switching", choices=("paper",), default=None, help="switching control (not exported yet)")
+    parser.add_argument(
+        "--switching",
+        choices=("safe", "paper"),
+        default=None,
+        help="export switching control too, its GA in C (default: computed force control only)",
+    )
     parser.add_argument("--kp", type=float, default=15000.0, help="position gain, every joint (1/s^2; case 2's)")
     parser.add_argument("--kv", type=float, default=600.0, help="velocity gain, every joint (1/s; case 2's)")
     parser.add_argument("--dt", type=float, default=1e-3, help="control period (s)")
@@ -65,7 +70,8 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"wrote {escape(str(done.folder))}: controller of {escape(str(settings['robot']))} ({done.n_joints} joints,"
         f" observer "
-        f"{settings['observer']}, velocities {settings['velocity']}, dt = {settings['dt_s']:g} s); "
+        f"{settings['observer']}, velocities {settings['velocity']}, dt = {settings['dt_s']:g} s"
+        f"{', switching control ' + settings['switching']['variant'] if settings['switching'] else ''}); "
         f"checked with {done.compiler or 'no compiler'}; build it with make or cmake (README.md)"
     )
     return 0

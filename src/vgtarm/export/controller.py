@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..control.gains import Gains
+from ..control.scm import SwitchingControl
 from ..errors import InputError, VgtarmError, cut, shown
 from ..fileio import atomic_folder, atomic_write_text
 from ..model import codegen
@@ -39,6 +40,7 @@ from ..model.parameters import RobotParameters
 from ..model.robot import Robot
 from ..model.stack import Stack
 from ..simulation.sensing import DEFAULT_VELOCITY_FILTER_HZ, sensing_settings
+from .switching import GAExport, ga_export, simulator_fuses, switching_controller, switching_readme
 
 #: The hand-written files copied into every export (``csrc/`` of this package).
 TEMPLATE_DIR = Path(__file__).resolve().parent / "csrc"
@@ -52,8 +54,10 @@ MODEL_FUNCTIONS = ("cfc", "tip", "id", "jac")
 STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", "-ffp-contract=off")
 #: Values of ``observer`` (the force sensor is ``force_sensor=True``, as in simulate).
 OBSERVERS = ("none", "momentum")
-#: Values of ``switching``.
-SWITCHING = (None, "paper")
+#: Values of ``switching`` (or a :class:`~vgtarm.control.SwitchingControl`).
+SWITCHING = (None, "safe", "paper")
+#: The GA of switching control, copied when it is exported.
+GA_FILES = ("vgtc_ga.h", "vgtc_ga.c", "vgtc_switching.h", "vgtc_switching.c", "ga_timing.c")
 #: Longest a check compile may run (s).
 COMPILE_TIMEOUT = 600.0
 #: CasADi's template code leaves parameters unused; the generated file says so to the compiler.
@@ -105,8 +109,9 @@ def export_controller(
     velocity_filter_hz: float = DEFAULT_VELOCITY_FILTER_HZ,
     limit_tolerance: float = 0.05,
     effort_max: ArrayLike | None = None,
-    switching: str | None = None,
+    switching: str | SwitchingControl | None = None,
     check_build: bool = True,
+    fused_multiply_add: bool | None = None,
 ) -> ExportedController:
     """Write the controller of ``robot`` as a self-contained C99 folder ``out_dir``.
 
@@ -130,7 +135,14 @@ def export_controller(
         limit_tolerance: how far (m, rad) a reading may lie beyond a joint limit before the
             controller refuses the step.
         effort_max: a clip of each effort (a number or n values; default none).
-        switching: ``None``; ``"paper"`` (switching control with the GA) is not exported yet.
+        switching: ``None`` (computed force control), or switching control's GA exported beside it
+            (``vgtc_ga.c``, see its header): ``"safe"``, ``"paper"`` (the variants, around the fixed
+            gains ``kp``, ``kv`` with the GA's gains in [0, kp], [0, kv]: case 2's bounds) or a
+            :class:`~vgtarm.control.SwitchingControl` as simulate gets it. 8-bit genes and the
+            linear or quadratic prediction only (refused in one line otherwise).
+        fused_multiply_add: whether the exported GA fuses multiply-adds where the simulation's
+            vectorised kernel does (default: as the simulation's kernel does on this machine,
+            :func:`~.switching.simulator_fuses`), so its activations equal the simulation's.
         check_build: compile the folder's C with :data:`STRICT_FLAGS` before putting it in place
             (``$CC``, else cc, gcc or clang); a failure raises :class:`ExportError`.
 
@@ -144,13 +156,8 @@ def export_controller(
     """
     if not isinstance(robot, Robot):
         raise InputError(f"robot = {shown(robot)}: expected a vgtarm.Robot (vgtarm.load_robot)")
-    if switching not in SWITCHING:
-        raise InputError(f"switching = {switching!r}: expected one of {list(SWITCHING)}")
-    if switching == "paper":
-        raise InputError(
-            "switching = 'paper': switching control is not exported yet (its GA, csrc/ga.c, uses "
-            "OpenMP, AVX2 and the heap); export computed force control with switching = None"
-        )
+    if not isinstance(switching, SwitchingControl) and switching not in SWITCHING:
+        raise InputError(f"switching = {switching!r}: expected one of {list(SWITCHING)} or a SwitchingControl")
     if observer not in OBSERVERS:
         raise InputError(f"observer = {observer!r}: expected one of {list(OBSERVERS)}")
     if not (isinstance(dt, int | float) and not isinstance(dt, bool) and math.isfinite(dt) and 0 < dt <= 1):
@@ -175,6 +182,11 @@ def export_controller(
     if not (math.isfinite(tolerance) and tolerance >= 0):
         raise InputError(f"limit_tolerance = {shown(limit_tolerance)}: expected a distance >= 0 (m, rad)")
     clip = _effort_max(effort_max, n)
+    ga = None
+    if switching is not None:
+        scm = switching_controller(switching, gains.Kp, gains.Kv, n)
+        fuses = simulator_fuses() if fused_multiply_add is None else bool(fused_multiply_add)
+        ga = ga_export(scm, n, float(dt), sensing.velocity_filter if sensing.active else None, fuses)
     compiler = None
     if check_build:
         compiler = find_compiler()
@@ -205,11 +217,11 @@ def export_controller(
         "velocity_filter": sensing.velocity_filter,
         "limit_tolerance": tolerance,
         "effort_max": [None if math.isinf(v) else v for v in clip.tolist()],
-        "switching": None,
+        "switching": ga.settings if ga is not None else None,
         "casadi": str(getattr(ca, "__version__", "unknown")),
     }
     with atomic_folder(out_dir, "output folder", owned=()) as folder:
-        _write(folder, robot, model, gains, sensing.observer_gain, settings, clip)
+        _write(folder, robot, model, gains, sensing.observer_gain, settings, clip, ga)
         if compiler is not None:
             check_compile(folder, compiler)
         files = tuple(sorted(p.name for p in folder.iterdir()))
@@ -251,11 +263,11 @@ def _c_array(name: str, values: Iterable[float], indent: str = "    ") -> str:
     return f"{indent}static const double {name}[] = {{{body}}};\n"
 
 
-def _generate_model(folder: Path, robot: Robot) -> dict[str, Any]:
+def _generate_model(folder: Path, robot: Robot, names: Sequence[str] = MODEL_FUNCTIONS) -> dict[str, Any]:
     """``vgtc_model.c/.h``: the controller's model functions, built as the compiled library builds
     them (same builders, same definition), so they compute the same numbers."""
     builders = codegen.builders_for(robot.definition)
-    functions = [builders[name]() for name in MODEL_FUNCTIONS]
+    functions = [builders[name]() for name in names]
     generator = ca.CodeGenerator("vgtc_model.c", {"with_header": True, "prefix": "vgtc_"})
     for f in functions:
         generator.add(f)
@@ -283,12 +295,34 @@ def _write(
     observer_gain: float,
     settings: dict[str, Any],
     clip: np.ndarray,
+    ga: GAExport | None = None,
 ) -> None:
     n = robot.n_joints
     p = model.parameter_vector
-    sizes = _generate_model(folder, robot)
-    for name in COPIED:
+    sizes = _generate_model(folder, robot, MODEL_FUNCTIONS + (("tip_hessian",) if ga else ()))
+    for name in COPIED + (GA_FILES if ga else ()):
         shutil.copyfile(TEMPLATE_DIR / name, folder / name)
+    if ga:  # the library's sources gain the GA
+        for name, old, new in (
+            ("Makefile", "vgtc_defaults.o", "vgtc_defaults.o vgtc_ga.o vgtc_switching.o"),
+            ("Makefile", "vgt_control.h", "vgt_control.h vgtc_ga.h vgtc_switching.h"),
+            ("Makefile", "all: libvgtc.a replay rt_loop", "all: libvgtc.a replay rt_loop ga_timing"),
+            (  # the GA wants its fmaf as an instruction and its lane loops vectorised
+                "Makefile",
+                "CFLAGS ?= -std=c99 -O2 -Wall",
+                "CFLAGS ?= -std=c99 -O2 -march=native -Wall",
+            ),
+            ("Makefile", "libvgtc.a replay rt_loop\n", "libvgtc.a replay rt_loop ga_timing\n"),
+            (
+                "Makefile",
+                "\nclean:",
+                "\nga_timing: ga_timing.o libvgtc.a\n"
+                "\t$(CC) $(CFLAGS) $(EXACT) $(LDFLAGS) -o $@ ga_timing.o libvgtc.a $(LDLIBS)\n\nclean:",
+            ),
+            ("CMakeLists.txt", "vgtc_defaults.c", "vgtc_defaults.c vgtc_ga.c vgtc_switching.c"),
+            ("CMakeLists.txt", "foreach(program replay rt_loop)", "foreach(program replay rt_loop ga_timing)"),
+        ):
+            (folder / name).write_text((folder / name).read_text().replace(old, new))
     shutil.copyfile(SHARED_HEADER, folder / SHARED_HEADER.name)
     observer = {"none": "VGTC_OBSERVER_NONE", "momentum": "VGTC_OBSERVER_MOMENTUM", "force": "VGTC_OBSERVER_FORCE"}
     description = _description(settings)
@@ -302,6 +336,7 @@ def _write(
         f'#define VGTC_ROBOT "{_c_string(settings["robot"])}"',
         f'#define VGTC_DESCRIPTION "{_c_string(description)}"',
         f'#define VGTC_JOINT_NAMES "{_c_string(", ".join(robot.joint_names))}"',
+        *(ga.config if ga else ()),
         "/* the robot's home pose (m, rad) and which joints are angles */",
         "extern const double vgtc_home[VGTC_NJ];",
         "extern const int vgtc_joint_is_angle[VGTC_NJ];",
@@ -319,6 +354,7 @@ def _write(
         "#include <string.h>",
         "",
         '#include "vgtarm_controller.h"',
+        *(['#include "vgtc_switching.h"'] if ga else []),
         "",
         f"const double vgtc_home[VGTC_NJ] = {{{', '.join(_c_number(v) for v in home)}}};",
         "const int vgtc_joint_is_angle[VGTC_NJ] = {"
@@ -351,6 +387,7 @@ def _write(
         "    memcpy(params->effort_max, effort_max, sizeof effort_max);",
         "}",
         "",
+        *(ga.defaults if ga else ()),
     ]
     (folder / "vgtc_defaults.c").write_text("\n".join(defaults))
     _write_readme(folder, robot, settings, description, len(p))
@@ -407,6 +444,7 @@ def _write_readme(folder: Path, robot: Robot, settings: dict[str, Any], descript
             velocity_text=settings["velocity"],
             ref_columns=1 + 3 * n,
             meas_columns=1 + 2 * n + 3,
+            switching_text=switching_readme(settings["switching"]),
         )
     )
     (folder / "README.md").write_text(text)

@@ -25,21 +25,24 @@ import numpy as np
 from cffi import FFI
 
 from ..control.cfc import ComputedForceControl
+from ..control.scm import SwitchingControl
 from ..errors import InputError, SimulationError, shown
 from ..model import interface
 from ..model.closedloop import DONE, ClosedLoopDriver
 from ..model.compiled import CompiledBackend, find_compiler
 from ..model.robot import Robot
+from ..simulation.engines import RawActivation
 from ..simulation.reference import HasJointReference
-from ..simulation.result import MODE_FIXED, MODE_NOT_RUN, SimulationResult
+from ..simulation.result import MODE_FIXED, MODE_GA, MODE_NOT_RUN, SimulationResult
 from ..simulation.scenario import MODEL_ENGINE, Scenario
 from ..simulation.simulator import Outcome, prepare
 from .controller import ExportError, run_compiler
+from .switching import switching_controller
 
 HARNESS = Path(__file__).resolve().parent / "harness" / "harness.c"
 MODEL_CSRC = Path(__file__).resolve().parent.parent / "model" / "csrc"
 #: The programs of an export (each has its own main): not part of the library.
-PROGRAMS = ("replay.c", "rt_loop.c")
+PROGRAMS = ("replay.c", "rt_loop.c", "ga_timing.c")
 #: Flags of the shared library: the compiled model library's (no contraction, no fast math).
 LIBRARY_FLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off")
 
@@ -58,6 +61,24 @@ size_t vgtc_params_size(void);
 int vgtc_harness_run(const vgt_model *m, const vgt_settings *s, const vgt_run *r, vgtc_context *ctx,
                      const double *t, long k0, long k1, long *stop, int *controller_status);
 """
+#: The switching harness's declarations (exports written with ``switching``).
+_CDEF_SWITCHING = """
+typedef struct vgtc_switching_opaque vgtc_switching;
+typedef struct vgtc_ga_params_opaque vgtc_ga_params;
+typedef struct vgtc_switching_params_opaque vgtc_switching_params;
+void vgtc_ga_default_params(vgtc_ga_params *params);
+void vgtc_switching_default_params(vgtc_switching_params *params);
+int vgtc_switching_init(vgtc_switching *sw, const vgtc_params *control, const vgtc_ga_params *ga,
+                        const vgtc_switching_params *params);
+size_t vgtc_switching_size(void);
+size_t vgtc_ga_params_size(void);
+size_t vgtc_switching_params_size(void);
+int vgtc_harness_run_switching(const vgt_model *m, const vgt_settings *s, const vgt_run *r, vgtc_switching *sw,
+                               const double *t, const double *ref, const uint64_t *seeds, int true_error, long k0,
+                               long k1, long *stop, int *controller_status, signed char *mode, long *count,
+                               long *sample, long *generations, long *evaluations, double *best_cost,
+                               double *seeded_cost, double *wall);
+"""
 
 
 class CompiledExport:
@@ -69,7 +90,13 @@ class CompiledExport:
         n_joints: its joint count.
     """
 
-    def __init__(self, folder: str | os.PathLike[str], *, compiler: str | None = None) -> None:
+    def __init__(
+        self,
+        folder: str | os.PathLike[str],
+        *,
+        compiler: str | None = None,
+        extra_flags: tuple[str, ...] = (),
+    ) -> None:
         self.folder = Path(folder).absolute()
         try:
             self.settings: dict[str, Any] = json.loads((self.folder / "export.json").read_text())
@@ -87,12 +114,14 @@ class CompiledExport:
         try:
             library = Path(scratch) / "libvgtc_harness.so"
             # the export's folder first: its vgt_control.h is the copy the controller uses
-            command = [chosen, *LIBRARY_FLAGS, "-I", str(self.folder), "-I", str(MODEL_CSRC)]
+            command = [chosen, *LIBRARY_FLAGS, *extra_flags, "-I", str(self.folder), "-I", str(MODEL_CSRC)]
             command += ["-o", str(library), *sources, str(HARNESS), "-lm"]
             run_compiler(command, "the exported controller with the simulation harness")
             self.ffi = FFI()
             self.ffi.include(interface.ffi())
             self.ffi.cdef(_CDEF)
+            if self.settings.get("switching"):
+                self.ffi.cdef(_CDEF_SWITCHING)
             self.lib: Any = self.ffi.dlopen(str(library))
         finally:
             shutil.rmtree(scratch, ignore_errors=True)  # the loaded library stays mapped
@@ -109,6 +138,27 @@ class CompiledExport:
             raise ExportError(f"vgtc_init of {shown(str(self.folder), 200)}: {self._text(status)}")
         self._keep = buffer  # the context lives as long as the last one made
         return context
+
+    def new_switching(self) -> Any:
+        """Switching control initialised with the export's own values (controller, GA, threshold)."""
+        ffi, lib = self.ffi, self.lib
+        owners = [
+            ffi.new("char[]", int(size()))
+            for size in (lib.vgtc_params_size, lib.vgtc_ga_params_size, lib.vgtc_switching_params_size)
+        ]
+        control = ffi.cast("vgtc_params *", owners[0])
+        ga = ffi.cast("vgtc_ga_params *", owners[1])
+        params = ffi.cast("vgtc_switching_params *", owners[2])
+        lib.vgtc_default_params(control)
+        lib.vgtc_ga_default_params(ga)
+        lib.vgtc_switching_default_params(params)
+        buffer = ffi.new("char[]", int(lib.vgtc_switching_size()))
+        switching = ffi.cast("vgtc_switching *", buffer)
+        status = lib.vgtc_switching_init(switching, control, ga, params)
+        if status != 0:
+            raise ExportError(f"vgtc_switching_init of {shown(str(self.folder), 200)}: {self._text(status)}")
+        self._keep = buffer
+        return switching
 
     def _text(self, status: int) -> str:
         return str(self.ffi.string(self.lib.vgtc_status_text(status)).decode())
@@ -143,6 +193,116 @@ def _check_agrees(settings: Mapping[str, Any], run: Any, plant: Robot) -> None:
         raise InputError(f"plant_engine = {run.scenario.plant_engine!r}: expected {MODEL_ENGINE!r}")
 
 
+def _check_switching(exported: Mapping[str, Any], controller: SwitchingControl) -> None:
+    """Refuse, in one line, a switching controller other than the exported one."""
+    ga = controller.ga
+    wanted = {
+        "variant": controller.variant,
+        "threshold_m": controller.threshold,
+        "horizon": controller.horizon,
+        "prediction": controller.prediction,
+        "exact_above": controller.exact_above,
+        "population": ga.population_size,
+        "generations": ga.max_generations,
+        "elite": ga.elite_count,
+        "hold": controller.hold_periods,
+        "switch_on": "measured" if controller.measured_switching else "true",
+        "watch_from": int(getattr(controller, "watch_period", controller.hold_periods)),
+    }
+    for key, value in wanted.items():
+        if exported.get(key) != value:
+            raise InputError(
+                f"the exported switching control has {key} = {shown(exported.get(key))}, the controller"
+                f" {shown(value)}: export it with the run's controller"
+            )
+
+
+def _simulate_switching(
+    compiled: CompiledExport, plant: Robot, run: Any, metadata: Mapping[str, Any] | None
+) -> SimulationResult:
+    """The run of :func:`simulate_exported` under the exported switching control."""
+    job = run.job
+    arrays = job.arrays
+    n = int(arrays.n)
+    # the GA's seeds: one per sample, drawn as the simulation's loop draws them
+    seeds = np.ascontiguousarray(np.asarray(job.ga_rng.integers(0, 2**63, size=n, dtype=np.int64)).view(np.uint64))
+    inp = arrays.inputs
+    ref = np.ascontiguousarray(np.hstack([inp["q_d"], inp["qd_d"], inp["qdd_d"]]), dtype=np.float64)
+    assert isinstance(plant.backend, CompiledBackend)  # checked by simulate_exported
+    driver = ClosedLoopDriver(plant.backend)
+    loop_settings = job.settings.struct(arrays.n_joints, arrays.n_margins)
+    switching = compiled.new_switching()
+    t = np.ascontiguousarray(run.reference.t, dtype=np.float64)
+    mode_ga = np.zeros(n, dtype=np.int8)
+    records = {name: np.zeros(n, dtype=np.int64) for name in ("sample", "generations", "evaluations")}
+    costs = {name: np.zeros(n) for name in ("best_cost", "seeded_cost", "wall")}
+    ffi = compiled.ffi
+    stop, refused, count = ffi.new("long *"), ffi.new("int *"), ffi.new("long *")
+
+    def d(a: np.ndarray) -> Any:
+        return ffi.cast("double *", a.ctypes.data)
+
+    def lp(a: np.ndarray) -> Any:
+        return ffi.cast("long *", a.ctypes.data)
+
+    started = time.perf_counter()
+    status = int(
+        compiled.lib.vgtc_harness_run_switching(
+            driver.model,
+            loop_settings,
+            arrays.struct,
+            switching,
+            d(t),
+            d(ref),
+            ffi.cast("uint64_t *", seeds.ctypes.data),
+            int(not job.controller.measured_switching),
+            0,
+            n,
+            stop,
+            refused,
+            ffi.cast("signed char *", mode_ga.ctypes.data),
+            count,
+            lp(records["sample"]),
+            lp(records["generations"]),
+            lp(records["evaluations"]),
+            d(costs["best_cost"]),
+            d(costs["seeded_cost"]),
+            d(costs["wall"]),
+        )
+    )
+    wall = time.perf_counter() - started
+    at = int(stop[0])
+    mode = np.where(mode_ga == 1, MODE_GA, MODE_FIXED).astype(np.int8)
+    drops = tuple(np.flatnonzero(mode_ga == 2).tolist())  # held sets dropped for the fixed gains
+    success = status == DONE
+    if not success:
+        mode[at:] = MODE_NOT_RUN
+    found = tuple(
+        RawActivation(
+            sample=int(records["sample"][i]),
+            generations=int(records["generations"][i]),
+            evaluations=int(records["evaluations"][i]),
+            best_cost=float(costs["best_cost"][i]),
+            seeded_cost=float(costs["seeded_cost"][i]),
+            wall_time_s=float(costs["wall"][i]),
+        )
+        for i in range(int(count[0]))
+    )
+    # the drops are recorded where the simulator's outcome keeps them (vgtarm with the drop rule)
+    kept = {"drops": drops} if "drops" in {f.name for f in dataclasses.fields(Outcome)} else {}
+    outcome = Outcome(status, at, success, mode, found, wall, **kept)
+    extra = {"exported_controller": str(compiled.folder), **dict(metadata or {})}
+    result = run.result(outcome, extra)
+    if int(refused[0]) < 0:
+        text = compiled._text(int(refused[0]))
+        result = dataclasses.replace(
+            result, message=f"the exported controller refused sample {at} (t = {t[min(at, len(t) - 1)]:.4f} s): {text}"
+        )
+    if not success:
+        raise SimulationError(result.message, result)
+    return result
+
+
 def simulate_exported(
     exported: CompiledExport | str | os.PathLike[str],
     plant: Robot,
@@ -150,6 +310,7 @@ def simulate_exported(
     scenario: Scenario | None = None,
     *,
     metadata: Mapping[str, Any] | None = None,
+    controller: SwitchingControl | None = None,
     **options: Any,
 ) -> SimulationResult:
     """Close vgtarm's simulated plant through the exported controller; the record of
@@ -161,6 +322,11 @@ def simulate_exported(
     must be those the controller was exported with (dt, observer and gain, sensing, controller
     model; refused in one line otherwise); simulated velocity noise is not supported.
 
+    An export with switching control runs ``vgtc_switching_step`` each period, with the GA's seeds
+    that :func:`~vgtarm.simulation.simulate` draws for the same run, so the two runs are the same;
+    ``controller`` is the :class:`~vgtarm.control.SwitchingControl` it was exported from (default:
+    the one its variant names, around the exported gains), refused unless it agrees with the export.
+
     Raises:
         SimulationError: the run diverged or the controller refused a step (``.result`` keeps the
             samples up to then); InputError: options that differ from the export's.
@@ -171,9 +337,19 @@ def simulate_exported(
     scenario = Scenario.of(scenario, options)
     s = compiled.settings
     n = plant.n_joints
-    controller = ComputedForceControl.with_gains(np.array(s["Kp"]), np.array(s["Kv"]), n)
-    run = prepare(plant, reference, controller, scenario, metadata)
+    switching = s.get("switching")
+    law: ComputedForceControl | SwitchingControl
+    if switching:
+        law = switching_controller(controller or switching["variant"], np.array(s["Kp"]), np.array(s["Kv"]), n)
+        _check_switching(switching, law)
+    elif controller is not None:
+        raise InputError("controller: the export has no switching control (export it with switching=...)")
+    else:
+        law = ComputedForceControl.with_gains(np.array(s["Kp"]), np.array(s["Kv"]), n)
+    run = prepare(plant, reference, law, scenario, metadata)
     _check_agrees(s, run, plant)
+    if switching:
+        return _simulate_switching(compiled, plant, run, metadata)
     arrays = run.job.arrays
     driver = ClosedLoopDriver(plant.backend)
     loop_settings = run.job.settings.struct(arrays.n_joints, arrays.n_margins)

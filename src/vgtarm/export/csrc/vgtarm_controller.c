@@ -118,11 +118,48 @@ static int fail(double *efforts, int status)
     return status;
 }
 
+/* The readings the controller sees at its next period (measure in closed_loop.c): joints rounded
+ * to the encoder steps (qm), its velocity (vm) and the unfiltered differenced one (vd). */
+static void measure(const vgtc_context *ctx, const double *q_meas, const double *qd_meas, double *qm, double *vm,
+                    double *vd)
+{
+    const int n = VGTC_NJ;
+    const vgtc_params *p = &ctx->p;
+    const double *start = qd_meas ? qd_meas : ctx->zero;
+    for (int i = 0; i < n; ++i) qm[i] = vgt_quantise(q_meas[i], p->resolution[i]);
+    if (p->velocity != VGTC_VELOCITY_DIFFERENCED) {
+        memcpy(vm, qd_meas, sizeof(double) * VGTC_NJ);
+        memcpy(vd, qd_meas, sizeof(double) * VGTC_NJ);
+    } else if (ctx->k == 0) {
+        memcpy(vm, start, sizeof(double) * VGTC_NJ);
+        memcpy(vd, start, sizeof(double) * VGTC_NJ);
+    } else {
+        vgt_filtered_velocity(n, p->velocity_filter, p->dt, qm, ctx->qm1, ctx->vm1, ctx->zero, vm);
+        vgt_differenced_velocity(n, p->dt, qm, ctx->qm1, ctx->zero, vd);
+    }
+}
+
+int vgtc_readings(const vgtc_context *ctx, const double *q_meas, const double *qd_meas, double *qm, double *vm)
+{
+    double vd[VGTC_NJ];
+    if (!ctx || !ctx->ready || !q_meas || !qm || !vm) return VGTC_BAD_ARGUMENT;
+    if (ctx->p.velocity != VGTC_VELOCITY_DIFFERENCED && !qd_meas) return VGTC_BAD_ARGUMENT;
+    measure(ctx, q_meas, qd_meas, qm, vm, vd);
+    return VGTC_OK;
+}
+
 int vgtc_step(vgtc_context *ctx, double t, const double *q_meas, const double *qd_meas, const double *ref_row,
               const double *f_meas, double *efforts)
 {
+    if (!ctx) return fail(efforts, VGTC_BAD_ARGUMENT);
+    return vgtc_step_gains(ctx, t, q_meas, qd_meas, ref_row, f_meas, ctx->p.Kp, ctx->p.Kv, efforts);
+}
+
+int vgtc_step_gains(vgtc_context *ctx, double t, const double *q_meas, const double *qd_meas, const double *ref_row,
+                    const double *f_meas, const double *Kp, const double *Kv, double *efforts)
+{
     const int n = VGTC_NJ;
-    if (!ctx || !ctx->ready || !q_meas || !ref_row || !efforts) return fail(efforts, VGTC_BAD_ARGUMENT);
+    if (!ctx || !ctx->ready || !q_meas || !ref_row || !efforts || !Kp || !Kv) return fail(efforts, VGTC_BAD_ARGUMENT);
     const vgtc_params *p = &ctx->p;
     const int sensing = p->velocity == VGTC_VELOCITY_DIFFERENCED;
     const long k = ctx->k;
@@ -130,33 +167,24 @@ int vgtc_step(vgtc_context *ctx, double t, const double *q_meas, const double *q
     if (!sensing && !qd_meas) return fail(efforts, VGTC_BAD_ARGUMENT);
     if (!isfinite(t) || !finite_all(n, q_meas) || !finite_all(3 * n, ref_row)
         || ((!sensing || k == 0) && !finite_all(n, start))
-        || (p->observer == VGTC_OBSERVER_FORCE && f_meas && !finite_all(3, f_meas)))
+        || (p->observer == VGTC_OBSERVER_FORCE && f_meas && !finite_all(3, f_meas)) || !finite_all(n * n, Kp)
+        || !finite_all(n * n, Kv))
         return fail(efforts, VGTC_NOT_FINITE);
     if (k > 0 && t < ctx->t_last) return fail(efforts, VGTC_BAD_TIME);
 
     /* 1. what the controller sees (measure in closed_loop.c) */
     double qm[VGTC_NJ], vm[VGTC_NJ], vd[VGTC_NJ], tau[VGTC_NJ], F[VGTC_NJ];
-    for (int i = 0; i < n; ++i) qm[i] = vgt_quantise(q_meas[i], p->resolution[i]);
+    measure(ctx, q_meas, qd_meas, qm, vm, vd);
     for (int i = 0; i < n; ++i)
         if (qm[i] < p->q_min[i] - p->limit_tolerance || qm[i] > p->q_max[i] + p->limit_tolerance)
             return fail(efforts, VGTC_OUTSIDE_LIMITS);
-    if (!sensing) {
-        memcpy(vm, qd_meas, sizeof vm);
-        memcpy(vd, qd_meas, sizeof vd);
-    } else if (k == 0) {
-        memcpy(vm, start, sizeof vm);
-        memcpy(vd, start, sizeof vd);
-    } else {
-        vgt_filtered_velocity(n, p->velocity_filter, p->dt, qm, ctx->qm1, ctx->vm1, ctx->zero, vm);
-        vgt_differenced_velocity(n, p->dt, qm, ctx->qm1, ctx->zero, vd);
-    }
 
     /* 2. the estimate of the external efforts */
     if (observe(ctx, k, qm, vm, vd, f_meas, tau)) return fail(efforts, VGTC_FUNCTION_FAILED);
 
     /* 3. computed force control minus the estimate */
     const double *q_d = ref_row, *qd_d = ref_row + n, *qdd_d = ref_row + 2 * n;
-    const double *in_c[8] = {qm, vm, q_d, qd_d, qdd_d, p->Kp, p->Kv, p->model};
+    const double *in_c[8] = {qm, vm, q_d, qd_d, qdd_d, Kp, Kv, p->model};
     double *out_c[1] = {F};
     if (call(ctx, vgt_cfc, 8, in_c, 1, out_c)) return fail(efforts, VGTC_FUNCTION_FAILED);
     vgt_subtract_estimate(n, tau, F);

@@ -114,6 +114,15 @@ int vgtc_init(vgtc_context *ctx, const vgtc_params *params);
 int vgtc_step(vgtc_context *ctx, double t, const double *q_meas, const double *qd_meas, const double *ref_row,
               const double *f_meas, double *efforts);
 
+/* vgtc_step with the gains Kp, Kv (VGTC_NJ x VGTC_NJ, row-major) for this period instead of the
+ * parameters' (switching control's gains; see vgtc_switching.h when exported). */
+int vgtc_step_gains(vgtc_context *ctx, double t, const double *q_meas, const double *qd_meas, const double *ref_row,
+                    const double *f_meas, const double *Kp, const double *Kv, double *efforts);
+
+/* The joint readings qm and velocities vm (VGTC_NJ each) the next vgtc_step would use for these
+ * measurements, without changing the context (what switching control predicts from). */
+int vgtc_readings(const vgtc_context *ctx, const double *q_meas, const double *qd_meas, double *qm, double *vm);
+
 /* After a step: the estimate of the external joint efforts that was subtracted (VGTC_NJ values). */
 const double *vgtc_effort_estimate(const vgtc_context *ctx);
 /* After a step: the joint readings and velocities the controller used (VGTC_NJ values each). */
