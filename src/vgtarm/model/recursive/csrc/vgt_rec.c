@@ -38,6 +38,11 @@ static int work_open(work_t *k, const vgt_rec_arm *arm) {
     if (r > sz_res) sz_res = r;
     if (i > sz_iw) sz_iw = i;
     if (w > sz_w) sz_w = w;
+    vgt_rec_module_taylor_work(&a, &r, &i, &w);
+    if (a > sz_arg) sz_arg = a;
+    if (r > sz_res) sz_res = r;
+    if (i > sz_iw) sz_iw = i;
+    if (w > sz_w) sz_w = w;
     k->body = (body_t *)calloc((size_t)(arm->nb > 0 ? arm->nb : 1), sizeof(body_t));
     k->arg = (const casadi_real **)calloc((size_t)sz_arg + 1, sizeof(casadi_real *));
     k->res = (casadi_real **)calloc((size_t)sz_res + 1, sizeof(casadi_real *));
@@ -534,6 +539,24 @@ int vgt_rec_forward(const vgt_rec_arm *arm, long n, const double *q, const doubl
                 for (int e = 0; e < nd; ++e) sum += b->S[3 * r + e] * A[arm->qi[i] + e];
                 b->a[r] = sum;
             }
+        }
+    }
+    work_close(&k);
+    return 0;
+}
+
+int vgt_rec_taylor(const vgt_rec_arm *arm, long n, const double *q, double *out) {
+    work_t k;
+    if (work_open(&k, arm)) return -1;
+    for (long s = 0; s < n; ++s) {
+        int module = 0;
+        for (int i = 0; i < arm->nb; ++i) {
+            if (arm->type[i] != 3) continue;
+            double *o = out + 480 * (s * arm->nm + module);
+            k.arg[0] = q + s * arm->nq + arm->qi[i], k.arg[1] = arm->geom + 4 * i;
+            k.res[0] = o, k.res[1] = o + 12, k.res[2] = o + 48, k.res[3] = o + 156;
+            vgt_rec_module_taylor(k.arg, k.res, k.iw, k.w, 0);
+            ++module;
         }
     }
     work_close(&k);

@@ -35,3 +35,7 @@ int vgt_rec_inverse(const vgt_rec_arm *arm, long n, const double *q, const doubl
                     const double *fext, double *tau);
 int vgt_rec_forward(const vgt_rec_arm *arm, long n, const double *q, const double *qd, const double *tau,
                     const double *fext, double *qdd);
+/* The pose of every module joint (E row-major, r; without the offset tz) and its partial derivatives
+ * of orders 1 to 3 in the module's three legs: 12 + 36 + 108 + 324 = 480 values per module, modules in
+ * order, per sample (the generated vgt_rec_module_taylor). */
+int vgt_rec_taylor(const vgt_rec_arm *arm, long n, const double *q, double *out);
