@@ -21,6 +21,7 @@ from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
+import scipy.linalg
 from numpy.typing import NDArray
 
 from ..compiled import Signature
@@ -29,11 +30,23 @@ from ..outline import shapes
 from ..parameters import Body
 from ..stack.description import BODY_VALUES, Stack
 from .model import RecursiveModel
+from .second_order import tip_terms
 
 Array = NDArray[np.float64]
 
 #: The functions of the symbolic library that the recursive model provides.
-FUNCTIONS = ("fk", "tip", "jac", "mass", "bias_forces", "fd", "id")
+FUNCTIONS = (
+    "fk",
+    "tip",
+    "jac",
+    "mass",
+    "bias_forces",
+    "fd",
+    "id",
+    "ik_position",
+    "ik_position_d2",
+    "ik_position_rates",
+)
 
 
 def _body(values: Array, name: str) -> Body:
@@ -155,4 +168,34 @@ class RecursiveBackend:
             return [model.bias_forces(q, rows[1])]
         if name == "fd":
             return [model.forward_dynamics(q, rows[1], rows[2], rows[3])]
-        return [model.inverse_dynamics(q, rows[1], rows[2], rows[3])]  # "id"
+        if name == "id":
+            return [model.inverse_dynamics(q, rows[1], rows[2], rows[3])]
+        return self._ik(name, model, rows, n)
+
+    def _ik(self, name: str, model: RecursiveModel, rows: list[Array], n: int) -> list[Array]:
+        """The position task's functions (:mod:`vgtarm.model.codegen.ik`) from :func:`.second_order.tip_terms`."""
+        q, lam = model._q(rows[0]), rows[1]
+        nj = self.n
+        if name == "ik_position_d2":
+            return [tip_terms(model, q, lam, rows[2], rows[3])["d2"]]
+        out = tip_terms(model, q, lam)
+        c, J, H = out["c"], out["J"], out["H"]
+        flat = [c, J.reshape(n, -1), H.reshape(n, -1)]
+        if name == "ik_position":
+            return flat
+        # ik_position_rates: the KKT matrix [[diag(w) + H, J^T], [J, 0]] factorised once (LU) for both systems
+        w, xd, xdd = rows[2], rows[3], rows[4]
+        K = np.zeros((n, nj + 3, nj + 3))
+        K[:, :nj, :nj] = H
+        K[:, :nj, :nj][:, np.arange(nj), np.arange(nj)] += w
+        K[:, :nj, nj:] = J.transpose(0, 2, 1)
+        K[:, nj:, :nj] = J
+        lu = [scipy.linalg.lu_factor(k) for k in K]
+        rhs = np.zeros((n, nj + 3))
+        rhs[:, nj:] = xd
+        first = np.stack([scipy.linalg.lu_solve(f, r) for f, r in zip(lu, rhs, strict=True)])
+        d2 = tip_terms(model, q, lam, first[:, :nj], first[:, nj:])["d2"]
+        rhs = -d2
+        rhs[:, nj:] += xdd
+        second = np.stack([scipy.linalg.lu_solve(f, r) for f, r in zip(lu, rhs, strict=True)])
+        return [*flat, first[:, :nj], first[:, nj:], second[:, :nj], second[:, nj:]]
