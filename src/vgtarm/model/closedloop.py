@@ -197,6 +197,9 @@ class ClosedLoopDriver:
             raise ValueError(f"slice_budget = {slice_budget!r}: expected a whole number >= 1")
         self.backend = backend
         self._model = ffi().new("vgt_model *", {field: backend.call(field) for field in _MODEL_FIELDS})
+        # a backend whose loop functions find their model by the parameter vector's address (the
+        # recursive model's adapters) is told every vector before a driver sees it
+        self._bind = getattr(backend, "bind_parameters", None)
         self._lib = backend.library
         self._settings: dict[tuple[LoopSettings, int, int], Any] = {}
         self.slice_budget = slice_budget
@@ -215,6 +218,7 @@ class ClosedLoopDriver:
         self, settings: LoopSettings, arrays: LoopArrays, Kp: Array, Kv: Array, k0: int, k1: int
     ) -> tuple[int, int]:
         """Run samples ``k0 .. k1-1`` with gains ``Kp``, ``Kv`` (n x n); returns (status, stop sample)."""
+        self.bind(arrays.inputs["p_plant"], arrays.inputs["p_ctrl"])
         key = (settings, arrays.n_joints, arrays.n_margins)
         s = self._settings.get(key)
         if s is None:  # the switching loop alternates two settings thousands of times: build each once
@@ -240,6 +244,11 @@ class ClosedLoopDriver:
                 return int(status), int(stop[0])
             k = int(stop[0])  # Ctrl-C raises KeyboardInterrupt here, between two slices
 
+    def bind(self, *vectors: Array) -> None:
+        """Tell the backend the parameter vectors the drivers are about to receive (if it asks)."""
+        if self._bind is not None:
+            self._bind(*vectors)
+
     def _slice(self, n_joints: int) -> tuple[Any, Array]:
         """The ``vgt_slice`` of runs of ``n_joints`` joints and the plant state it points at."""
         made = self._slices.get(n_joints)
@@ -264,6 +273,7 @@ class ClosedLoopDriver:
         the fixed gains ``Kp``, ``Kv`` below ``settings.threshold``; above it, one activation of
         ``ga`` (bound with :meth:`CompiledGA.bind_switching`) whose gains control that sample with
         ``unswitched``. Returns (status, stop sample); the activations are in ``ga``'s records."""
+        self.bind(arrays.inputs["p_plant"], arrays.inputs["p_ctrl"], ga.parameters)
         structs = []
         for one in (settings, unswitched):
             key = (one, arrays.n_joints, arrays.n_margins)
@@ -308,6 +318,7 @@ class ClosedLoopDriver:
         ``Kp``, ``Kv`` (P, n, n) to the predicted tip-error norms (P,).
         """
         fixed = [np.ascontiguousarray(a, dtype=np.float64) for a in (p_ctrl, q0, qd0, q_d, qd_d, qdd_d, tip_d)]
+        self.bind(fixed[0])
         settings = ffi().new("vgt_settings *", {"n_joints": len(fixed[1]), "dt": dt})
         head = (self._model, settings, _ptr(fixed[0]), len(fixed[3]) - 1, *[_ptr(a) for a in fixed[1:]])
         lib = self._lib
@@ -501,6 +512,7 @@ class CompiledGA:
         self._problem.upper = _ptr(self._arrays["upper"])
         self._problem.initial_bits = ffi().cast("uint64_t *", self._initial.ctypes.data)
         self._problem.p_ctrl = _ptr(self._arrays["p_ctrl"])
+        driver.bind(self._arrays["p_ctrl"])
         self._problem.q0 = _ptr(self._state[0:1])
         self._problem.qd0 = ffi().cast("double *", self._state[1:2].ctypes.data)
         self._base = {name: _ptr(self._arrays[name]) for name in ("q_d", "qd_d", "qdd_d", "tip_d", "tip_offset", "J_d")}
@@ -520,9 +532,15 @@ class CompiledGA:
         self._ga.horizon = horizon
         return horizon
 
+    @property
+    def parameters(self) -> Array:
+        """The controller's parameter vector the GA's predictions use (the array the drivers see)."""
+        return self._arrays["p_ctrl"]
+
     def activate(self, k: int, q0: Array, qd0: Array, seed: int) -> GAActivationResult:
         """Run one activation at sample ``k`` from the state ``(q0, qd0)`` with the generator's ``seed``."""
         self._window(k, q0, qd0)
+        self.driver.bind(self.parameters)
         status = self.driver.backend.library.vgt_ga_activation(
             self.driver.model, self._settings, self._ga, self._problem, seed, self._result
         )
@@ -590,6 +608,7 @@ class CompiledGA:
         self._window(k, q0, qd0)
         g = np.ascontiguousarray(np.atleast_2d(genes), dtype=np.float64)
         cost = np.empty(len(g))
+        self.driver.bind(self.parameters)
         status = self.driver.backend.library.vgt_ga_predict(
             self.driver.model, self._settings, self._ga, self._problem, len(g), _ptr(g), _ptr(cost)
         )

@@ -18,6 +18,7 @@ compiled library: a robot with other masses or dimensions shares the backend.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 from dataclasses import replace
 
 import numpy as np
@@ -29,6 +30,8 @@ from ..definition import StackDefinition
 from ..outline import shapes
 from ..parameters import Body
 from ..stack.description import BODY_VALUES, Stack
+from .. import interface
+from .library import load_library, loop_library
 from .model import RecursiveModel
 from .second_order import tip_terms
 
@@ -99,6 +102,23 @@ def stack_from_vector(stack: Stack, p: Array) -> Stack:
     )
 
 
+#: The closed loop's functions (fields of ``vgt_model``) and the adapters that give them.
+LOOP_FUNCTIONS = {
+    "cfc": "vgt_rec_fn_cfc",
+    "fd": "vgt_rec_fn_fd",
+    "tip_state": "vgt_rec_fn_tip_state",
+    "tip": "vgt_rec_fn_tip",
+    "id": "vgt_rec_fn_id",
+    "jac": "vgt_rec_fn_jac",
+    "tip_hessian": "vgt_rec_fn_unavailable",
+}
+#: Slots of the C registry of bound parameter vectors (``vgt_rec_bind``), shared by every backend
+#: of the process: each holds the array (so its address stays its own) and its model.
+_SLOTS = 64
+_bound: dict[int, tuple[int, Array, RecursiveModel]] = {}  # address -> (slot, array, model)
+_next_slot = [0]
+
+
 class RecursiveBackend:
     """The functions :data:`FUNCTIONS` of a stack's model, evaluated by the recursive model."""
 
@@ -123,6 +143,42 @@ class RecursiveBackend:
             for key in FUNCTIONS
         }
         self._models: dict[bytes, RecursiveModel] = {stack.vector().tobytes(): RecursiveModel(stack)}
+
+    #: The compiled closed loop runs on this backend (:class:`~vgtarm.model.closedloop.ClosedLoopDriver`).
+    closed_loop = True
+
+    @property
+    def library(self) -> Any:
+        """The recursive library opened with the closed loop's interface (:func:`.library.loop_library`)."""
+        return loop_library()
+
+    def call(self, name: str) -> Any:
+        """A ``vgt_call`` of the closed loop's function ``name`` (its adapter on the recursive model)."""
+        ffi, lib = load_library()
+        address = int(ffi.cast("intptr_t", getattr(lib, LOOP_FUNCTIONS[name])))
+        loop_ffi = interface.ffi()
+        return loop_ffi.new("vgt_call *", [loop_ffi.cast("vgt_fn", address), 8, 2, 0, 0])[0]
+
+    def bind_parameters(self, *vectors: Array) -> None:
+        """Register, for the closed loop's adapters, the arm of each parameter vector (by its address:
+        the arrays must be the C-contiguous float64 arrays whose pointers the drivers receive)."""
+        ffi, lib = load_library()
+        for p in vectors:
+            if p.dtype != np.float64 or not p.flags.c_contiguous or p.shape != (self.stack.n_parameters,):
+                raise ValueError("bind_parameters: expected the stack's parameter vectors (C-contiguous float64)")
+            address = int(p.ctypes.data)
+            known = _bound.get(address)
+            if known is not None and known[1] is p and np.array_equal(known[2].stack.vector(), p):
+                continue
+            slot = known[0] if known is not None else _next_slot[0]
+            if known is None:
+                _next_slot[0] = (slot + 1) % _SLOTS
+                for old, entry in list(_bound.items()):
+                    if entry[0] == slot:
+                        del _bound[old]
+            model = RecursiveModel(stack_from_vector(self.stack, p))
+            _bound[address] = (slot, p, model)
+            lib.vgt_rec_bind(slot, ffi.cast("double *", address), model._arm)
 
     def signature(self, name: str) -> Signature:
         if name not in self._signatures:

@@ -38,29 +38,30 @@ if TYPE_CHECKING:
 Array = NDArray[np.float64]
 
 
-def _module_jets(values: Array, tz: float) -> tuple[Array, Array, Array, Array]:
-    """Homogeneous ``T`` ``(N, 4, 4)`` and its partials ``(N, 3, 4, 4)``, ``(N, 3, 3, 4, 4)``,
-    ``(N, 3, 3, 3, 4, 4)`` from the generated module values ``(N, 480)``."""
-    count = values.shape[0]
+def _module_jets(values: Array, tz: Array, third: bool) -> tuple[Array, Array, Array, Array | None]:
+    """Homogeneous ``T`` ``(N, m, 4, 4)`` and its partials ``(N, m, 3, 4, 4)``, ``(N, m, 3, 3, 4, 4)``,
+    ``(N, m, 3, 3, 3, 4, 4)`` of the ``m`` modules from the generated values ``(N, m, 480)`` and the
+    modules' offsets ``tz`` ``(m,)``."""
+    lead = values.shape[:2]
 
     def lift(block: Array, shape: tuple[int, ...], one: bool) -> Array:
-        flat = block.reshape((count, *shape, 12))
-        out = np.zeros((count, *shape, 4, 4))
-        out[..., :3, :3] = flat[..., :9].reshape((count, *shape, 3, 3))
+        flat = block.reshape((*lead, *shape, 12))
+        out = np.zeros((*lead, *shape, 4, 4))
+        out[..., :3, :3] = flat[..., :9].reshape((*lead, *shape, 3, 3))
         out[..., :3, 3] = flat[..., 9:]
         if one:
             out[..., 3, 3] = 1.0
             out[..., 2, 3] += tz
         return out
 
-    d0 = lift(values[:, :12], (), True)
-    d1 = lift(values[:, 12:48], (3,), False)
-    d2 = lift(values[:, 48:156], (3, 3), False)
-    d3 = lift(values[:, 156:480], (3, 3, 3), False)
+    d0 = lift(values[..., :12], (), True)
+    d1 = lift(values[..., 12:48], (3,), False)
+    d2 = lift(values[..., 48:156], (3, 3), False)
+    d3 = lift(values[..., 156:480], (3, 3, 3), False) if third else None
     return d0, d1, d2, d3
 
 
-def _twist_jets(theta: Array, tz: float) -> tuple[Array, Array, Array, Array]:
+def _twist_jets(theta: Array, tz: float) -> tuple[Array, Array, Array, Array | None]:
     """``T = Trans(0, 0, tz) Rz(theta)`` and its derivatives, shaped as :func:`_module_jets` with one coordinate."""
     count = theta.shape[0]
     out = []
@@ -75,18 +76,21 @@ def _twist_jets(theta: Array, tz: float) -> tuple[Array, Array, Array, Array]:
     return out[0], out[1][:, None], out[2][:, None, None], out[3][:, None, None, None]
 
 
-def _joint_jets(model: RecursiveModel, q: Array) -> list[tuple[Array, Array, Array, Array]]:
+def _joint_jets(model: RecursiveModel, q: Array, third: bool) -> list[tuple[Array, Array, Array, Array | None]]:
     """The jets of every joint's transform at ``q`` ``(N, n)``, bodies base first."""
     arrays = model._arrays
     count = q.shape[0]
     taylor = np.empty((count, model.stack.n_modules, 480))
     model._call("vgt_rec_taylor", count, q, taylor)
+    modules = np.flatnonzero(arrays["type"] == 3)
+    every = _module_jets(taylor, arrays["tz"][modules], third)
     jets = []
     module = 0
     for body in range(model.n_bodies):
         tz, start = float(arrays["tz"][body]), int(arrays["qi"][body])
         if arrays["type"][body] == 3:
-            jets.append(_module_jets(taylor[:, module], tz))
+            d3 = None if every[3] is None else every[3][:, module]
+            jets.append((every[0][:, module], every[1][:, module], every[2][:, module], d3))
             module += 1
         else:
             jets.append(_twist_jets(q[:, start], tz))
@@ -115,7 +119,7 @@ def tip_terms(
     ``[J^T lam; P]`` along ``(qd, lam_d)`` (the symbolic library's ``ik_position_d2``), and ``Pvv``
     ``(N, 3)`` (``D^2 P[qd, qd]``, the tip's acceleration at ``qdd = 0``) and ``DJ`` ``(N, 3, n)``."""
     count, n = q.shape
-    jets = _joint_jets(model, q)
+    jets = _joint_jets(model, q, qd is not None)
     qi, types = model._arrays["qi"], model._arrays["type"]
     sizes = [3 if t == 3 else 1 for t in types]
     ordered = qd is not None
@@ -125,7 +129,7 @@ def tip_terms(
     partial: list[list[Array]] = []
     for (d0, d1, d2, d3), start, k in zip(jets, qi, sizes, strict=True):
         if ordered:
-            assert qd is not None
+            assert qd is not None and d3 is not None
             v = qd[:, start : start + k]
             local.append(
                 [d0, np.einsum("nk,nkij->nij", v, d1), np.einsum("nk,nl,nklij->nij", v, v, d2)]

@@ -562,3 +562,25 @@ int vgt_rec_taylor(const vgt_rec_arm *arm, long n, const double *q, double *out)
     work_close(&k);
     return 0;
 }
+
+int vgt_rec_tip_state(const vgt_rec_arm *arm, long n, const double *q, const double *qd, double *tip, double *vel) {
+    work_t k;
+    if (work_open(&k, arm)) return -1;
+    int nb = arm->nb, nq = arm->nq;
+    for (long s = 0; s < n; ++s) {
+        joints(arm, &k, q + s * nq, NULL, NULL);
+        const body_t *last = k.body + nb - 1;
+        double t[3];
+        mul3(last->R0, arm->tip, t);
+        for (int r = 0; r < 3; ++r) tip[3 * s + r] = last->p0[r] + t[r];
+        if (vel) { /* the last body's velocity at the tip point, in base components */
+            velocities(arm, &k, qd + s * nq);
+            double w[3], u[3];
+            cross3(last->v, arm->tip, w);
+            for (int r = 0; r < 3; ++r) u[r] = last->v[3 + r] + w[r];
+            mul3(last->R0, u, vel + 3 * s);
+        }
+    }
+    work_close(&k);
+    return 0;
+}

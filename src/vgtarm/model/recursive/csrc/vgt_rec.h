@@ -39,3 +39,18 @@ int vgt_rec_forward(const vgt_rec_arm *arm, long n, const double *q, const doubl
  * of orders 1 to 3 in the module's three legs: 12 + 36 + 108 + 324 = 480 values per module, modules in
  * order, per sample (the generated vgt_rec_module_taylor). */
 int vgt_rec_taylor(const vgt_rec_arm *arm, long n, const double *q, double *out);
+/* The tip point and (vel not NULL) its velocity J_P qd, both in base components. */
+int vgt_rec_tip_state(const vgt_rec_arm *arm, long n, const double *q, const double *qd, double *tip, double *vel);
+
+/* ---- The closed loop on the recursive model (vgt_rec_loop.c) ------------------------------------
+ * The drivers of vgtarm.h call generated functions of the signature vgt_fn, whose last argument is
+ * the parameter vector p. These adapters give the same functions from the recursive loops: the arm
+ * of a parameter vector is found by its address, registered beforehand (vgt_rec_bind; slot < 64). */
+int vgt_rec_bind(int slot, const double *p, const vgt_rec_arm *arm);
+int vgt_rec_fn_cfc(const double **arg, double **res, long long *iw, double *w, int mem);
+int vgt_rec_fn_fd(const double **arg, double **res, long long *iw, double *w, int mem);
+int vgt_rec_fn_tip_state(const double **arg, double **res, long long *iw, double *w, int mem);
+int vgt_rec_fn_tip(const double **arg, double **res, long long *iw, double *w, int mem);
+int vgt_rec_fn_id(const double **arg, double **res, long long *iw, double *w, int mem);
+int vgt_rec_fn_jac(const double **arg, double **res, long long *iw, double *w, int mem);
+int vgt_rec_fn_unavailable(const double **arg, double **res, long long *iw, double *w, int mem);
