@@ -33,7 +33,7 @@ from ..stack.description import BODY_VALUES, Stack
 from .. import interface
 from .library import load_library, loop_library
 from .model import RecursiveModel
-from .second_order import tip_terms
+from .second_order import ik_terms as tip_terms
 
 Array = NDArray[np.float64]
 

@@ -225,3 +225,21 @@ def _triple(L: list[Array], D: list[Array], R: list[Array]) -> list[Array]:
             + 2 * (lr(L[1], D[1], R[0]) + lr(L[1], D[0], R[1]) + lr(L[0], D[1], R[1]))
         )
     return out
+
+
+def ik_terms(
+    model: RecursiveModel, q: Array, lam: Array, qd: Array | None = None, lam_d: Array | None = None
+) -> dict[str, Array]:
+    """As :func:`tip_terms` (``c``, ``J``, ``H`` and, with ``qd`` and ``lam_d``, ``d2``), computed per
+    sample by the C loops (``vgt_rec_ik_terms``: the same algebra; :func:`tip_terms` is its NumPy twin)."""
+    count, n = q.shape
+    arrays = [np.ascontiguousarray(a, dtype=float) for a in (q, lam)]
+    ordered = qd is not None and lam_d is not None
+    extra = [np.ascontiguousarray(a, dtype=float) for a in (qd, lam_d)] if ordered else [None, None]
+    c, J, H = np.empty((count, 3)), np.empty((count, 3, n)), np.empty((count, n, n))
+    d2 = np.empty((count, n + 3)) if ordered else None
+    model._call("vgt_rec_ik_terms", count, *arrays, *extra, c, J, H, d2)
+    out = {"c": c, "J": J, "H": H}
+    if d2 is not None:
+        out["d2"] = d2
+    return out

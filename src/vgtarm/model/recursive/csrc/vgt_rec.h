@@ -54,3 +54,8 @@ int vgt_rec_fn_tip(const double **arg, double **res, long long *iw, double *w, i
 int vgt_rec_fn_id(const double **arg, double **res, long long *iw, double *w, int mem);
 int vgt_rec_fn_jac(const double **arg, double **res, long long *iw, double *w, int mem);
 int vgt_rec_fn_unavailable(const double **arg, double **res, long long *iw, double *w, int mem);
+/* The inverse kinematics' position terms, exact: the tip c (3), its Jacobian J (3 x nq, row-major),
+ * H = d^2 (lam . P) / dq^2 (nq x nq) at multipliers lam (3); with qd and lam_d (else NULL) also d2
+ * (nq + 3): the second derivative of [J^T lam; P] along (qd, lam_d). */
+int vgt_rec_ik_terms(const vgt_rec_arm *arm, long n, const double *q, const double *lam, const double *qd,
+                     const double *lam_d, double *c, double *J, double *H, double *d2);
