@@ -22,7 +22,6 @@ from typing import Any
 from dataclasses import replace
 
 import numpy as np
-import scipy.linalg
 from numpy.typing import NDArray
 
 from ..compiled import Signature
@@ -117,6 +116,21 @@ LOOP_FUNCTIONS = {
 _SLOTS = 64
 _bound: dict[int, tuple[int, Array, RecursiveModel]] = {}  # address -> (slot, array, model)
 _next_slot = [0]
+
+
+def _solve(K: Array, rhs: Array) -> Array:
+    """``K x = rhs`` per sample (LAPACK, batched); a singular sample's row is NaN (the IK then treats
+    it as the symbolic library's QR solve's non-finite result)."""
+    try:
+        return np.asarray(np.linalg.solve(K, rhs[..., None])[..., 0])
+    except np.linalg.LinAlgError:
+        out = np.full(rhs.shape, np.nan)
+        for i in range(K.shape[0]):
+            try:
+                out[i] = np.linalg.solve(K[i], rhs[i])
+            except np.linalg.LinAlgError:
+                pass
+        return out
 
 
 class RecursiveBackend:
@@ -239,19 +253,18 @@ class RecursiveBackend:
         flat = [c, J.reshape(n, -1), H.reshape(n, -1)]
         if name == "ik_position":
             return flat
-        # ik_position_rates: the KKT matrix [[diag(w) + H, J^T], [J, 0]] factorised once (LU) for both systems
+        # ik_position_rates: the KKT matrix [[diag(w) + H, J^T], [J, 0]], solved by LAPACK for both systems
         w, xd, xdd = rows[2], rows[3], rows[4]
         K = np.zeros((n, nj + 3, nj + 3))
         K[:, :nj, :nj] = H
         K[:, :nj, :nj][:, np.arange(nj), np.arange(nj)] += w
         K[:, :nj, nj:] = J.transpose(0, 2, 1)
         K[:, nj:, :nj] = J
-        lu = [scipy.linalg.lu_factor(k) for k in K]
         rhs = np.zeros((n, nj + 3))
         rhs[:, nj:] = xd
-        first = np.stack([scipy.linalg.lu_solve(f, r) for f, r in zip(lu, rhs, strict=True)])
+        first = _solve(K, rhs)
         d2 = tip_terms(model, q, lam, first[:, :nj], first[:, nj:])["d2"]
         rhs = -d2
         rhs[:, nj:] += xdd
-        second = np.stack([scipy.linalg.lu_solve(f, r) for f, r in zip(lu, rhs, strict=True)])
+        second = _solve(K, rhs)
         return [*flat, first[:, :nj], first[:, nj:], second[:, :nj], second[:, nj:]]

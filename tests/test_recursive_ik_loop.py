@@ -1,0 +1,120 @@
+"""The inverse kinematics and the compiled closed loop on the recursive model (issue 24, steps 2).
+
+- the position task's terms (tip, Jacobian, ``H = d^2 (lam . P) / dq^2``, and the rates' second
+  derivative ``d2`` of ``[J^T lam; P]`` along ``(qd, lam_d)``, a third derivative of the kinematics)
+  from the jets of :mod:`vgtarm.model.recursive.second_order` (NumPy) equal the symbolic library's
+  functions (CasADi's automatic differentiation of the whole arm, interpreted) on stacks of 1 to 6
+  modules of every kind and ``six_modules.toml``; the C loops (``vgt_rec_ik_terms``) equal the
+  NumPy jets on arms up to 50 modules, and ``H`` is the central difference of ``J^T lam``;
+- the inverse kinematics of case 1 and computed force control of it in the compiled loop (with the
+  momentum observer under the tool force) on the recursive model equal the symbolic model's on
+  ``six_modules.toml`` (its compiled library from the cache; skipped when it is not built).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from tests.test_recursive import configurations, relative, varied_stack
+
+import vgtarm
+from vgtarm.model import compiled
+from vgtarm.model.codegen import ik as ik_codegen
+from vgtarm.model.definition import StackDefinition
+from vgtarm.model.recursive import RecursiveModel
+from vgtarm.model.recursive.second_order import ik_terms, tip_terms
+from vgtarm.model.stack import Stack, load_stack
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+TOLERANCE = 1e-10
+
+
+def ik_states(stack: Stack, n: int, seed: int) -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(seed + 7)
+    return {
+        "q": configurations(stack, n, seed),
+        "lam": rng.normal(scale=3.0, size=(n, 3)),
+        "qd": rng.normal(scale=0.5, size=(n, stack.n_joints)),
+        "lam_d": rng.normal(scale=2.0, size=(n, 3)),
+    }
+
+
+def symbolic_terms(stack: Stack, s: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The symbolic library's ``ik_position`` and ``ik_position_d2`` (CasADi, mapped over the samples)."""
+    definition = StackDefinition.of(stack)
+    count, n = s["q"].shape
+    p = stack.vector()
+    c, J, H = (np.asarray(x).T for x in ik_codegen.position_kkt(definition).map(count)(s["q"].T, s["lam"].T, p))
+    (d2,) = [np.asarray(ik_codegen.position_d2(definition).map(count)(s["q"].T, s["lam"].T, s["qd"].T, s["lam_d"].T, p)).T]
+    return {"c": c, "J": J.reshape(count, 3, n), "H": H.reshape(count, n, n), "d2": d2}
+
+
+STACKS = {f"varied {k}": (lambda k=k: varied_stack(k)) for k in range(1, 7)}
+STACKS["six_modules.toml"] = lambda: load_stack(EXAMPLES / "six_modules.toml")
+
+
+@pytest.mark.parametrize("name", list(STACKS))
+def test_terms_equal_the_symbolic_library(name: str) -> None:
+    stack = STACKS[name]()
+    s = ik_states(stack, 200, seed=3)
+    expected = symbolic_terms(stack, s)
+    model = RecursiveModel(stack)
+    jets = tip_terms(model, s["q"], s["lam"], s["qd"], s["lam_d"])
+    loops = ik_terms(model, s["q"], s["lam"], s["qd"], s["lam_d"])
+    first = ik_terms(model, s["q"], s["lam"])
+    for key in ("c", "J", "H", "d2"):
+        assert relative(jets[key], expected[key]) < TOLERANCE, key
+        assert relative(loops[key], expected[key]) < TOLERANCE, key
+    for key in ("c", "J", "H"):
+        assert np.array_equal(first[key], loops[key]), key
+
+
+@pytest.mark.parametrize("k", [12, 50])
+def test_loops_equal_jets_and_differences_on_long_arms(k: int) -> None:
+    stack = varied_stack(6)
+    modules = tuple(stack.modules[i % 6] for i in range(k))
+    stack = Stack(name=f"{k}", modules=modules, end_effector=stack.end_effector, tool=stack.tool, gravity=stack.gravity)
+    s = ik_states(stack, 20, seed=k)
+    model = RecursiveModel(stack)
+    jets = tip_terms(model, s["q"], s["lam"], s["qd"], s["lam_d"])
+    loops = ik_terms(model, s["q"], s["lam"], s["qd"], s["lam_d"])
+    for key in ("c", "J", "H", "d2"):
+        assert relative(loops[key], jets[key]) < 1e-12, key
+    H = loops["H"]
+    assert relative(H, H.transpose(0, 2, 1)) < 1e-13  # the blocks off the diagonal are mirrored exactly
+    # H is the derivative of J^T lam: central differences along random directions
+    rng = np.random.default_rng(k)
+    step = 1e-6
+    for i in range(3):
+        v = rng.normal(size=stack.n_joints)
+        plus = ik_terms(model, s["q"][i : i + 1] + step * v, s["lam"][i : i + 1])["J"][0]
+        minus = ik_terms(model, s["q"][i : i + 1] - step * v, s["lam"][i : i + 1])["J"][0]
+        difference = (plus - minus).T @ s["lam"][i] / (2 * step)
+        assert np.abs(difference - H[i] @ v).max() < 1e-6 * np.abs(H[i] @ v).max()
+
+
+def _both(path: Path) -> tuple[vgtarm.Robot, vgtarm.Robot]:
+    stack = load_stack(path)
+    if compiled.find_compiler() is None or not compiled.library_cached(StackDefinition.of(stack)):
+        pytest.skip(f"the compiled symbolic library of {path.name} is not in the cache (building it takes minutes)")
+    return vgtarm.load_robot(path, model="symbolic"), vgtarm.load_robot(path, model="recursive")
+
+
+def test_inverse_kinematics_and_closed_loop_equal_the_symbolic_model() -> None:
+    from vgtarm.app.cases import joint_reference, run_case
+
+    symbolic, recursive = _both(EXAMPLES / "six_modules.toml")
+    expected, actual = joint_reference(symbolic, 1), joint_reference(recursive, 1)
+    assert np.abs(actual.q - expected.q).max() < 1e-12
+    assert np.abs(actual.qd - expected.qd).max() < 1e-10
+    assert np.abs(actual.qdd - expected.qdd).max() < 1e-9 * np.abs(expected.qdd).max()
+    for options in ({}, {"observer": "momentum", "external_force": True}):
+        a = run_case(symbolic, 1, reference=expected, **options)
+        b = run_case(recursive, 1, reference=expected, **options)
+        assert a.success and b.success
+        assert np.abs(b.q - a.q).max() < 1e-12
+        assert np.abs(b.qd - a.qd).max() < 1e-9
+        assert relative(b.effort, a.effort) < 1e-9
+        assert np.abs(b.tip - a.tip).max() < 1e-12
