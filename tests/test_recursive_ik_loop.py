@@ -118,3 +118,23 @@ def test_inverse_kinematics_and_closed_loop_equal_the_symbolic_model() -> None:
         assert np.abs(b.qd - a.qd).max() < 1e-9
         assert relative(b.effort, a.effort) < 1e-9
         assert np.abs(b.tip - a.tip).max() < 1e-12
+
+
+def test_loop_functions_equal_the_symbolic_library() -> None:
+    """The closed loop's functions (``velocity``, ``tip_state``, ``tip_hessian``, ``cfc``) through the Robot."""
+    symbolic, recursive = _both(EXAMPLES / "six_modules.toml")
+    stack = recursive.parameters
+    count, n = 100, stack.n_joints
+    rng = np.random.default_rng(5)
+    q, qd = configurations(stack, count, seed=9), rng.normal(scale=0.5, size=(count, n))
+    gains = {"Kp": rng.normal(scale=100.0, size=(count, n * n)), "Kv": rng.normal(scale=20.0, size=(count, n * n))}
+    inputs = {
+        "velocity": {"q": q, "qd": qd},
+        "tip_state": {"q": q, "qd": qd},
+        "tip_hessian": {"q": q},
+        "cfc": {"q": q, "qd": qd, "q_d": q + 0.01, "qd_d": -qd, "qdd_d": 2 * qd, **gains},
+    }
+    for name, given in inputs.items():
+        expected, actual = symbolic.evaluate(name, given, count), recursive.evaluate(name, given, count)
+        for key in expected:
+            assert relative(actual[key], expected[key]) < TOLERANCE, (name, key)

@@ -32,7 +32,7 @@ from ..stack.description import BODY_VALUES, Stack
 from .. import interface
 from .library import load_library, loop_library
 from .model import RecursiveModel
-from .second_order import ik_terms as tip_terms
+from .second_order import ik_terms
 
 Array = NDArray[np.float64]
 
@@ -48,6 +48,10 @@ FUNCTIONS = (
     "ik_position",
     "ik_position_d2",
     "ik_position_rates",
+    "velocity",
+    "tip_state",
+    "tip_hessian",
+    "cfc",
 )
 
 
@@ -109,7 +113,7 @@ LOOP_FUNCTIONS = {
     "tip": "vgt_rec_fn_tip",
     "id": "vgt_rec_fn_id",
     "jac": "vgt_rec_fn_jac",
-    "tip_hessian": "vgt_rec_fn_unavailable",
+    "tip_hessian": "vgt_rec_fn_tip_hessian",
 }
 #: Slots of the C registry of bound parameter vectors (``vgt_rec_bind``), shared by every backend
 #: of the process: each holds the array (so its address stays its own) and its model.
@@ -240,6 +244,22 @@ class RecursiveBackend:
             return [model.forward_dynamics(q, rows[1], rows[2], rows[3])]
         if name == "id":
             return [model.inverse_dynamics(q, rows[1], rows[2], rows[3])]
+        if name in ("velocity", "tip_state"):
+            jp, jw = model.jacobians(q)
+            velocity = np.einsum("nij,nj->ni", jp, rows[1])
+            if name == "tip_state":
+                return [model.forward_kinematics(q)["tip"], velocity]
+            return [velocity, np.einsum("nij,nj->ni", jw, rows[1])]
+        if name == "tip_hessian":
+            qa = model._q(q)
+            return [
+                np.stack([ik_terms(model, qa, np.broadcast_to(e, (n, 3)))["H"] for e in np.eye(3)], axis=1).reshape(n, -1)
+            ]
+        if name == "cfc":  # M (qdd_d + Kp e + Kv e_dot) + C: inverse dynamics of the commanded acceleration
+            q_d, qd_d, qdd_d = rows[2], rows[3], rows[4]
+            Kp, Kv = rows[5].reshape(n, self.n, self.n), rows[6].reshape(n, self.n, self.n)
+            commanded = qdd_d + np.einsum("nij,nj->ni", Kp, q_d - q) + np.einsum("nij,nj->ni", Kv, qd_d - rows[1])
+            return [model.inverse_dynamics(q, rows[1], commanded)]
         return self._ik(name, model, rows, n)
 
     def _ik(self, name: str, model: RecursiveModel, rows: list[Array], n: int) -> list[Array]:
@@ -247,8 +267,8 @@ class RecursiveBackend:
         q, lam = model._q(rows[0]), rows[1]
         nj = self.n
         if name == "ik_position_d2":
-            return [tip_terms(model, q, lam, rows[2], rows[3])["d2"]]
-        out = tip_terms(model, q, lam)
+            return [ik_terms(model, q, lam, rows[2], rows[3])["d2"]]
+        out = ik_terms(model, q, lam)
         c, J, H = out["c"], out["J"], out["H"]
         flat = [c, J.reshape(n, -1), H.reshape(n, -1)]
         if name == "ik_position":
@@ -263,7 +283,7 @@ class RecursiveBackend:
         rhs = np.zeros((n, nj + 3))
         rhs[:, nj:] = xd
         first = _solve(K, rhs)
-        d2 = tip_terms(model, q, lam, first[:, :nj], first[:, nj:])["d2"]
+        d2 = ik_terms(model, q, lam, first[:, :nj], first[:, nj:])["d2"]
         rhs = -d2
         rhs[:, nj:] += xdd
         second = _solve(K, rhs)

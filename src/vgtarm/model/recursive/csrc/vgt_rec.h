@@ -53,6 +53,7 @@ int vgt_rec_fn_tip_state(const double **arg, double **res, long long *iw, double
 int vgt_rec_fn_tip(const double **arg, double **res, long long *iw, double *w, int mem);
 int vgt_rec_fn_id(const double **arg, double **res, long long *iw, double *w, int mem);
 int vgt_rec_fn_jac(const double **arg, double **res, long long *iw, double *w, int mem);
+int vgt_rec_fn_tip_hessian(const double **arg, double **res, long long *iw, double *w, int mem);
 int vgt_rec_fn_unavailable(const double **arg, double **res, long long *iw, double *w, int mem);
 /* The inverse kinematics' position terms, exact: the tip c (3), its Jacobian J (3 x nq, row-major),
  * H = d^2 (lam . P) / dq^2 (nq x nq) at multipliers lam (3); with qd and lam_d (else NULL) also d2

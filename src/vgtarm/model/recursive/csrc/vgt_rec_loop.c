@@ -120,3 +120,23 @@ int vgt_rec_fn_unavailable(const double **arg, double **res, long long *iw, doub
     (void)arg, (void)res, (void)iw, (void)w, (void)mem;
     return 1;
 }
+
+/* tip_hessian: q, p -> H (3, nq, nq), row-major: d^2 P_k / dq dq, k = 0, 1, 2 (the IK's terms at
+ * the multipliers e_k) */
+int vgt_rec_fn_tip_hessian(const double **arg, double **res, long long *iw, double *w, int mem) {
+    (void)iw, (void)w, (void)mem;
+    const vgt_rec_arm *arm = arm_of(arg[1]);
+    if (!arm) return 1;
+    int n = arm->nq;
+    double *J = (double *)malloc(sizeof(double) * (size_t)(3 * n));
+    if (!J) return 1;
+    double c[3];
+    int status = 0;
+    for (int k = 0; k < 3 && !status; ++k) {
+        double lam[3] = {0.0, 0.0, 0.0};
+        lam[k] = 1.0;
+        status = vgt_rec_ik_terms(arm, 1, arg[0], lam, NULL, NULL, c, J, res[0] + (size_t)k * n * n, NULL);
+    }
+    free(J);
+    return status ? 1 : 0;
+}
