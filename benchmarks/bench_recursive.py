@@ -18,7 +18,12 @@ the last). Figures, all in this process and run:
   serial chain with the same number of degrees of freedom and bodies: one planar joint (two
   translations, one rotation, as a module's platform moves) per module, one revolute joint per
   twist, bodies of the same masses and inertias;
-- the growth exponent ``a`` of ``y ~ n^a`` between 10 and 50 modules.
+- the growth exponent ``a`` of ``y ~ n^a`` between 10 and 50 modules;
+- **control** (:func:`control_figures`): the inverse kinematics of the whole case-1 path (placed
+  and scaled to the arm, :func:`vgtarm.app.cases.case_path`; the fast solver with exact rates) and
+  computed force control of it in the compiled closed loop, on the recursive model at 6, 10 and 50
+  modules, beside the symbolic library at 6 modules where the cache holds it; the loop's speed as
+  simulated time over wall time (real-time factor).
 
 Times are CPU time of this process (``time.process_time``): on a machine shared with other work,
 wall time counts the waits for a busy core; both are printed for the recursive model.
@@ -199,10 +204,73 @@ def _row(k: int) -> dict[str, float]:
     return row
 
 
+#: Module counts of the control figures, and the coarse step of their IK (m, times the path's scale).
+CONTROL_COUNTS = (6, 10, 50)
+TARGETS.update(cfc10=100.0, cfc50=1.0, ik50=30.0)
+
+
+def _control_row(k: int, model: str) -> dict[str, float]:
+    """IK of case 1 and CFC of it on ``family(k)`` with ``model``: wall and CPU seconds, real-time factor."""
+    import vgtarm
+    from vgtarm.app.cases import case_path, run_case
+    from vgtarm.model.robot import Robot, recursive_robot
+    from vgtarm.simulation.reference import JointReference
+
+    stack = family(k)
+    if model == "symbolic" and not library_cached(StackDefinition.of(stack)):
+        return {"k": k, "n": stack.n_joints, "ik": math.nan, "ik_cpu": math.nan, "cfc": math.nan, "rtf": math.nan}
+    robot = recursive_robot(stack) if model == "recursive" else Robot(stack)
+    path = case_path(robot, 1)
+    wall, cpu = time.perf_counter(), time.process_time()
+    ik = robot.inverse_kinematics(path)
+    ik_wall, ik_cpu = time.perf_counter() - wall, time.process_time() - cpu
+    reference = JointReference.of(ik, name="case 1")
+    wall = time.perf_counter()
+    result = run_case(robot, 1, reference=reference)
+    cfc = time.perf_counter() - wall
+    simulated = float(result.t[-1] - result.t[0])
+    assert isinstance(robot, vgtarm.Robot)
+    row = {
+        "k": k,
+        "n": stack.n_joints,
+        "ik": ik_wall,
+        "ik_cpu": ik_cpu,
+        "ik_ok": float(bool(getattr(ik, "success", True))),
+        "cfc": cfc,
+        "rtf": simulated / cfc,
+        "error": float(result.tip_error.max()),
+    }
+    print(
+        f"  {model} {k} modules: IK {ik_wall:.2f} s wall ({ik_cpu:.2f} s CPU), CFC {cfc:.2f} s for "
+        f"{simulated:.2f} s simulated ({row['rtf']:.0f}x real time), max tip error {row['error']:.2e} m",
+        flush=True,
+    )
+    return row
+
+
+def control_figures() -> list[dict[str, float]]:
+    """The control rows (module docstring), printed as a table."""
+    rows = [dict(_control_row(6, "symbolic"), model="symbolic")]  # type: ignore[dict-item]
+    rows += [dict(_control_row(k, "recursive"), model="recursive") for k in CONTROL_COUNTS]  # type: ignore[dict-item]
+    print("\n### Inverse kinematics and computed force control of case 1 (wall time, same run)\n")
+    print("| model | modules | joints | IK of the whole path | IK CPU | CFC of the path | real-time factor | max tip error |")
+    print("|" + " --- |" * 8)
+    for r in rows:
+        if not math.isfinite(r["ik"]):
+            print(f"| {r['model']} | {r['k']:.0f} | {r['n']:.0f} | not in the cache | | | | |")
+            continue
+        print(
+            f"| {r['model']} | {r['k']:.0f} | {r['n']:.0f} | {r['ik']:.2f} s | {r['ik_cpu']:.2f} s | {r['cfc']:.2f} s | "
+            f"{r['rtf']:.0f}x | {r['error']:.2e} m |"
+        )
+    return rows
+
+
 def run() -> list[dict[str, float]]:
     rows = [_row(k) for k in MODULE_COUNTS]
     build = _build_figures()
     _print(rows, build)
+    control_figures()
     return rows
 
 

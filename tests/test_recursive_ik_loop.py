@@ -13,6 +13,8 @@
 
 from __future__ import annotations
 
+import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -138,3 +140,32 @@ def test_loop_functions_equal_the_symbolic_library() -> None:
         expected, actual = symbolic.evaluate(name, given, count), recursive.evaluate(name, given, count)
         for key in expected:
             assert relative(actual[key], expected[key]) < TOLERANCE, (name, key)
+
+
+def test_which_model_a_robot_uses(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """Long stacks default to the recursive model; the paper's robot and short stacks keep the symbolic
+    one; ``model=`` and ``--model`` force either (the paper's robot refuses the recursive one)."""
+    from vgtarm.app.cli import main
+    from vgtarm.errors import ConfigError
+    from vgtarm.model.robot import RECURSIVE_FROM_MODULES, _robot_of, default_model
+
+    monkeypatch.delenv("VGTARM_MODEL", raising=False)
+    short = load_stack(EXAMPLES / "six_modules.toml")
+    modules = tuple(short.modules[i % short.n_modules] for i in range(RECURSIVE_FROM_MODULES))
+    long = Stack(name="long", modules=modules, end_effector=short.end_effector, tool=short.tool, gravity=short.gravity)
+    assert default_model(short) == "symbolic" and default_model(long) == "recursive"
+    assert _robot_of(long, None).backend.kind == "recursive"
+    paper = vgtarm.load_robot()
+    assert paper.backend.kind != "recursive"
+    with pytest.raises(ConfigError, match="paper's robot keeps its symbolic model"):
+        vgtarm.load_robot(model="recursive")
+    home = [repr(float(v)) for v in short.home]
+    outputs = []
+    for model in ("symbolic", "recursive"):
+        if model == "symbolic" and not compiled.library_cached(StackDefinition.of(short)):
+            continue
+        assert main(["fk", *home, "--config", str(EXAMPLES / "six_modules.toml"), "--model", model]) == 0
+        outputs.append(capsys.readouterr().out)
+        assert "VGTARM_MODEL" not in os.environ  # the command's choice ends with it
+    numbers = [np.array([float(x) for x in re.findall(r"-?\d+\.?\d*(?:e[-+]?\d+)?", out)]) for out in outputs]
+    assert all(np.allclose(x, numbers[0], rtol=1e-9, atol=1e-12) for x in numbers)  # the same, to rounding
