@@ -28,9 +28,21 @@ typedef struct {
     casadi_real **res;
     casadi_int *iw;
     casadi_real *w;
+    int owned; /* 1: the memory at body was allocated for this call */
 } work_t;
 
-static int work_open(work_t *k, const vgt_rec_arm *arm) {
+/* The scratch of one call: the bodies and the generated functions' work arrays (with those of the
+ * module's derivatives up to order 3 when taylor is set: they are large). The common case reuses a
+ * buffer of the calling thread (zeroed, as calloc would give it), so a closed-loop step allocates
+ * nothing; the large one is allocated per call. */
+typedef struct {
+    void *memory;
+    size_t size;
+} scratch_t;
+
+static _Thread_local scratch_t thread_scratch = {NULL, 0};
+
+static int work_open_sized(work_t *k, const vgt_rec_arm *arm, int taylor) {
     casadi_int sz_arg = 0, sz_res = 0, sz_iw = 0, sz_w = 0, a, r, i, w;
     vgt_rec_module_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
     vgt_rec_module_kin_work(&a, &r, &i, &w);
@@ -38,25 +50,44 @@ static int work_open(work_t *k, const vgt_rec_arm *arm) {
     if (r > sz_res) sz_res = r;
     if (i > sz_iw) sz_iw = i;
     if (w > sz_w) sz_w = w;
-    vgt_rec_module_taylor_work(&a, &r, &i, &w);
-    if (a > sz_arg) sz_arg = a;
-    if (r > sz_res) sz_res = r;
-    if (i > sz_iw) sz_iw = i;
-    if (w > sz_w) sz_w = w;
-    k->body = (body_t *)calloc((size_t)(arm->nb > 0 ? arm->nb : 1), sizeof(body_t));
-    k->arg = (const casadi_real **)calloc((size_t)sz_arg + 1, sizeof(casadi_real *));
-    k->res = (casadi_real **)calloc((size_t)sz_res + 1, sizeof(casadi_real *));
-    k->iw = (casadi_int *)calloc((size_t)sz_iw + 1, sizeof(casadi_int));
-    k->w = (casadi_real *)calloc((size_t)sz_w + 1, sizeof(casadi_real));
-    if (!k->body || !k->arg || !k->res || !k->iw || !k->w) {
-        free(k->body), free((void *)k->arg), free(k->res), free(k->iw), free(k->w);
-        return -1;
+    if (taylor) {
+        vgt_rec_module_taylor_work(&a, &r, &i, &w);
+        if (a > sz_arg) sz_arg = a;
+        if (r > sz_res) sz_res = r;
+        if (i > sz_iw) sz_iw = i;
+        if (w > sz_w) sz_w = w;
     }
+    size_t nb = (size_t)(arm->nb > 0 ? arm->nb : 1);
+    size_t bodies = nb * sizeof(body_t), args = ((size_t)sz_arg + 1) * sizeof(casadi_real *);
+    size_t ress = ((size_t)sz_res + 1) * sizeof(casadi_real *), iws = ((size_t)sz_iw + 1) * sizeof(casadi_int);
+    size_t ws = ((size_t)sz_w + 1) * sizeof(casadi_real);
+    size_t total = bodies + args + ress + iws + ws + 64;
+    char *memory;
+    if (taylor) {
+        memory = (char *)calloc(total, 1);
+        if (!memory) return -1;
+    } else {
+        if (thread_scratch.size < total) {
+            void *grown = realloc(thread_scratch.memory, total);
+            if (!grown) return -1;
+            thread_scratch.memory = grown, thread_scratch.size = total;
+        }
+        memory = (char *)thread_scratch.memory;
+        memset(memory, 0, total);
+    }
+    k->body = (body_t *)memory;
+    k->arg = (const casadi_real **)(memory + bodies);
+    k->res = (casadi_real **)(memory + bodies + args);
+    k->iw = (casadi_int *)(memory + bodies + args + ress);
+    k->w = (casadi_real *)(memory + bodies + args + ress + iws);
+    k->owned = taylor;
     return 0;
 }
 
+static int work_open(work_t *k, const vgt_rec_arm *arm) { return work_open_sized(k, arm, 0); }
+
 static void work_close(work_t *k) {
-    free(k->body), free((void *)k->arg), free(k->res), free(k->iw), free(k->w);
+    if (k->owned) free(k->body);
 }
 
 /* ---- small 3-vector and spatial helpers ------------------------------------------------------ */
@@ -547,7 +578,7 @@ int vgt_rec_forward(const vgt_rec_arm *arm, long n, const double *q, const doubl
 
 int vgt_rec_taylor(const vgt_rec_arm *arm, long n, const double *q, double *out) {
     work_t k;
-    if (work_open(&k, arm)) return -1;
+    if (work_open_sized(&k, arm, 1)) return -1;
     for (long s = 0; s < n; ++s) {
         int module = 0;
         for (int i = 0; i < arm->nb; ++i) {
@@ -663,7 +694,7 @@ static void triple_jet(int order, const double *L, const double *D, const double
 int vgt_rec_ik_terms(const vgt_rec_arm *arm, long n, const double *q, const double *lam, const double *qd,
                      const double *lam_d, double *c, double *J, double *H, double *d2) {
     work_t k;
-    if (work_open(&k, arm)) return -1;
+    if (work_open_sized(&k, arm, 1)) return -1;
     int nb = arm->nb, nq = arm->nq, order = qd ? 3 : 1;
     /* per body: T (3 jets), the partials D (3 coordinates x 3 jets), the second partials (3 x 3) */
     double *T = (double *)malloc(sizeof(double) * (size_t)nb * 48);
