@@ -15,13 +15,16 @@ from __future__ import annotations
 
 import os
 import re
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
-from tests.test_recursive import configurations, relative, varied_stack
 
 import vgtarm
+from tests.test_recursive import configurations, relative, varied_stack
 from vgtarm.model import compiled
 from vgtarm.model.codegen import ik as ik_codegen
 from vgtarm.model.definition import StackDefinition
@@ -49,12 +52,14 @@ def symbolic_terms(stack: Stack, s: dict[str, np.ndarray]) -> dict[str, np.ndarr
     count, n = s["q"].shape
     p = stack.vector()
     c, J, H = (np.asarray(x).T for x in ik_codegen.position_kkt(definition).map(count)(s["q"].T, s["lam"].T, p))
-    (d2,) = [np.asarray(ik_codegen.position_d2(definition).map(count)(s["q"].T, s["lam"].T, s["qd"].T, s["lam_d"].T, p)).T]
+    (d2,) = [
+        np.asarray(ik_codegen.position_d2(definition).map(count)(s["q"].T, s["lam"].T, s["qd"].T, s["lam_d"].T, p)).T
+    ]
     return {"c": c, "J": J.reshape(count, 3, n), "H": H.reshape(count, n, n), "d2": d2}
 
 
-STACKS = {f"varied {k}": (lambda k=k: varied_stack(k)) for k in range(1, 7)}
-STACKS["six_modules.toml"] = lambda: load_stack(EXAMPLES / "six_modules.toml")
+STACKS: dict[str, Callable[[], Stack]] = {f"varied {k}": partial(varied_stack, k) for k in range(1, 7)}
+STACKS["six_modules.toml"] = partial(load_stack, EXAMPLES / "six_modules.toml")
 
 
 @pytest.mark.parametrize("name", list(STACKS))
@@ -112,7 +117,8 @@ def test_inverse_kinematics_and_closed_loop_equal_the_symbolic_model() -> None:
     assert np.abs(actual.q - expected.q).max() < 1e-12
     assert np.abs(actual.qd - expected.qd).max() < 1e-10
     assert np.abs(actual.qdd - expected.qdd).max() < 1e-9 * np.abs(expected.qdd).max()
-    for options in ({}, {"observer": "momentum", "external_force": True}):
+    runs: list[dict[str, Any]] = [{}, {"observer": "momentum", "external_force": True}]
+    for options in runs:
         a = run_case(symbolic, 1, reference=expected, **options)
         b = run_case(recursive, 1, reference=expected, **options)
         assert a.success and b.success

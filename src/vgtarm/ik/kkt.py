@@ -286,7 +286,13 @@ def _smallest_pivot(matrix: Array) -> float:
 
 
 def _curvature_lapack(
-    problem: IKProblem, W: Array, J: Array, active: NDArray[np.bool_], certificate: Array, need: Array, scale: float
+    problem: IKProblem,
+    W: Array,
+    J: Array,
+    active: NDArray[np.bool_],
+    certificate: Array,
+    need: NDArray[np.intp],
+    scale: float,
 ) -> Array:
     """:func:`reduced_curvature`'s second and third stages, per sample with LAPACK (:data:`LAPACK_FROM`)."""
     nj = problem.n

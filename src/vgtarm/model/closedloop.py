@@ -13,7 +13,7 @@ import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,6 +22,9 @@ from ..errors import ConfigError, shown
 from ..machine import usable_cpus
 from .compiled import CompiledBackend
 from .interface import enum, ffi
+
+if TYPE_CHECKING:
+    from .recursive.backend import RecursiveBackend
 
 Array = NDArray[np.float64]
 
@@ -192,7 +195,7 @@ class ClosedLoopDriver:
     long (it cannot pause inside a sample).
     """
 
-    def __init__(self, backend: CompiledBackend, *, slice_budget: int | None = None) -> None:
+    def __init__(self, backend: CompiledBackend | RecursiveBackend, *, slice_budget: int | None = None) -> None:
         if slice_budget is not None and not (isinstance(slice_budget, int) and slice_budget >= 1):
             raise ValueError(f"slice_budget = {slice_budget!r}: expected a whole number >= 1")
         self.backend = backend
@@ -374,7 +377,6 @@ class GAActivationResult:
     dropped: bool = False  #: safe variant: the fixed gains replaced the GA's best (see ``csrc/ga.c``)
 
 
-
 #: Most threads the GA's prediction uses by default: a generation of the paper's GA predicts about
 #: 40 children, five blocks of eight, so a fourth thread is the last that can shorten it.
 MAX_GA_THREADS = 4
@@ -491,11 +493,7 @@ class CompiledGA:
                 "horizon": horizon,
                 "exact_above": exact_above,
                 "threads": ga_threads() if threads is None else threads,
-                **(
-                    {"safe": 1, "safe_kv": safe[0], "safe_lo": safe[1], "safe_hi": safe[2]}
-                    if safe is not None
-                    else {}
-                ),
+                **({"safe": 1, "safe_kv": safe[0], "safe_lo": safe[1], "safe_hi": safe[2]} if safe is not None else {}),
             },
         )
         if safe is not None and damping is not None:

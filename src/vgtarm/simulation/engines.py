@@ -198,7 +198,7 @@ class CompiledLoop(_SteppedLoop):
 
     def __init__(self, plant: Robot, job: Job) -> None:
         assert _looped(plant)
-        super().__init__(ClosedLoopDriver(plant.backend), job)
+        super().__init__(ClosedLoopDriver(plant.backend), job)  # type: ignore[arg-type]
 
 
 class NumpyLoop(_SteppedLoop):
@@ -221,7 +221,7 @@ class CompiledSwitchingLoop:
     def __init__(self, plant: Robot, job: Job) -> None:
         self.job = job
         assert _looped(plant)
-        self.loop = ClosedLoopDriver(plant.backend)
+        self.loop = ClosedLoopDriver(plant.backend)  # type: ignore[arg-type]
         self.ga = compiled_ga(job.controller, self.loop, job.model, job.arrays, job.dt, job.settings)
         # one seed per sample, drawn as the stepped loop draws them one by one (the same numbers)
         seeds = np.asarray(job.ga_rng.integers(0, 2**63, size=int(job.arrays.n), dtype=np.int64))

@@ -67,7 +67,10 @@ class HomeFigures:
 
 
 def home_figures(parameters: RobotParameters | Stack) -> HomeFigures:
-    if isinstance(parameters, Stack) and (os.environ.get("VGTARM_MODEL", "") or default_model(parameters)) == "recursive":
+    if (
+        isinstance(parameters, Stack)
+        and (os.environ.get("VGTARM_MODEL", "") or default_model(parameters)) == "recursive"
+    ):
         model = RecursiveModel(parameters)
         tip = model.forward_kinematics(parameters.home)["tip"]
         eigenvalues = np.asarray(np.linalg.eigvalsh(model.mass_matrix(parameters.home)), dtype=np.float64)

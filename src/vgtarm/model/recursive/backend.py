@@ -18,18 +18,18 @@ compiled library: a robot with other masses or dimensions shares the backend.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import interface
 from ..compiled import Signature
 from ..definition import StackDefinition
 from ..outline import shapes
 from ..parameters import Body
 from ..stack.description import BODY_VALUES, Stack
-from .. import interface
 from .library import load_library, loop_library
 from .model import RecursiveModel
 from .second_order import ik_terms
@@ -253,7 +253,9 @@ class RecursiveBackend:
         if name == "tip_hessian":
             qa = model._q(q)
             return [
-                np.stack([ik_terms(model, qa, np.broadcast_to(e, (n, 3)))["H"] for e in np.eye(3)], axis=1).reshape(n, -1)
+                np.stack([ik_terms(model, qa, np.broadcast_to(e, (n, 3)))["H"] for e in np.eye(3)], axis=1).reshape(
+                    n, -1
+                )
             ]
         if name == "cfc":  # M (qdd_d + Kp e + Kv e_dot) + C: inverse dynamics of the commanded acceleration
             q_d, qd_d, qdd_d = rows[2], rows[3], rows[4]

@@ -156,5 +156,7 @@ def loop_library() -> Any:
     out = interface.ffi().new("long[]", len(interface.layout_fields()))
     library.vgt_layout(out)
     if list(out) != interface.python_layout():
-        raise compiled.BackendError("the recursive model's loop library lays out the interface's structures unlike cffi")
+        raise compiled.BackendError(
+            "the recursive model's loop library lays out the interface's structures unlike cffi"
+        )
     return library

@@ -131,12 +131,8 @@ def tip_terms(
         if ordered:
             assert qd is not None and d3 is not None
             v = qd[:, start : start + k]
-            local.append(
-                [d0, np.einsum("nk,nkij->nij", v, d1), np.einsum("nk,nl,nklij->nij", v, v, d2)]
-            )
-            partial.append(
-                [d1, np.einsum("nl,nklij->nkij", v, d2), np.einsum("nl,nm,nklmij->nkij", v, v, d3)]
-            )
+            local.append([d0, np.einsum("nk,nkij->nij", v, d1), np.einsum("nk,nl,nklij->nij", v, v, d2)])
+            partial.append([d1, np.einsum("nl,nklij->nkij", v, d2), np.einsum("nl,nm,nklmij->nkij", v, v, d3)])
         else:
             local.append([d0])
             partial.append([d1])
