@@ -175,3 +175,18 @@ def test_which_model_a_robot_uses(monkeypatch: pytest.MonkeyPatch, capsys: pytes
         assert "VGTARM_MODEL" not in os.environ  # the command's choice ends with it
     numbers = [np.array([float(x) for x in re.findall(r"-?\d+\.?\d*(?:e[-+]?\d+)?", out)]) for out in outputs]
     assert all(np.allclose(x, numbers[0], rtol=1e-9, atol=1e-12) for x in numbers)  # the same, to rounding
+
+
+def test_switching_control_with_the_compiled_ga_equals_the_symbolic_model() -> None:
+    """Switching control of case 2 from a perturbed start (the GA in the loop activates 41 times in
+    0.1 s), its predictions through the adapters: the same activations and run as the symbolic model."""
+    from vgtarm.app.cases import joint_reference, run_case
+
+    symbolic, recursive = _both(EXAMPLES / "six_modules.toml")
+    reference = joint_reference(symbolic, 2, duration=0.1)
+    start = (reference.q[0] + 0.004, np.zeros(reference.q.shape[1]))
+    a = run_case(symbolic, 2, reference=reference, controller="scm", initial_state=start)
+    b = run_case(recursive, 2, reference=reference, controller="scm", initial_state=start)
+    assert a.success and b.success and len(a.activations) == len(b.activations) > 10
+    assert np.abs(b.q - a.q).max() < 1e-11
+    assert relative(b.effort, a.effort) < 1e-8
