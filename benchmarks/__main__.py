@@ -8,6 +8,8 @@ measurement of minutes (the path-wide effort criterion of issue 22, ``docs/contr
 from __future__ import annotations
 
 import sys
+from types import SimpleNamespace
+from typing import Any
 
 from vgtarm._entry import single_threaded_blas
 
@@ -30,7 +32,7 @@ from . import (  # noqa: E402
 )
 from .common import machine  # noqa: E402
 
-MODULES = {
+MODULES: dict[str, Any] = {
     "model": bench_model,
     "sim": bench_sim,
     "ga": bench_ga,
@@ -40,13 +42,15 @@ MODULES = {
     "reproduce": bench_reproduce,
     "stacks": bench_stacks,
     "recursive": bench_recursive,
+    # the control figures of the recursive model alone (IK and CFC of case 1; also run by "recursive")
+    "recursive-control": SimpleNamespace(run=bench_recursive.control_figures),
     "export": bench_export,
     "export-ga": bench_export_ga,
     "footprint": bench_footprint,
     "pathwide": bench_path_wide,
 }
 #: Groups run when none is named (``stacks`` is long: it compiles ten libraries from cold).
-DEFAULT = [name for name in MODULES if name not in ("stacks", "pathwide")]
+DEFAULT = [name for name in MODULES if name not in ("stacks", "pathwide", "recursive-control")]
 
 
 def main(argv: list[str]) -> None:

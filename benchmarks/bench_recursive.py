@@ -18,7 +18,12 @@ the last). Figures, all in this process and run:
   serial chain with the same number of degrees of freedom and bodies: one planar joint (two
   translations, one rotation, as a module's platform moves) per module, one revolute joint per
   twist, bodies of the same masses and inertias;
-- the growth exponent ``a`` of ``y ~ n^a`` between 10 and 50 modules.
+- the growth exponent ``a`` of ``y ~ n^a`` between 10 and 50 modules;
+- **control** (:func:`control_figures`): the inverse kinematics of the whole case-1 path (placed
+  and scaled to the arm, :func:`vgtarm.app.cases.case_path`; the fast solver with exact rates) and
+  computed force control of it in the compiled closed loop, on the recursive model at 6, 10 and 50
+  modules, beside the symbolic library at 6 modules where the cache holds it; the loop's speed as
+  simulated time over wall time (real-time factor).
 
 Times are CPU time of this process (``time.process_time``): on a machine shared with other work,
 wall time counts the waits for a busy core; both are printed for the recursive model.
@@ -34,6 +39,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -199,10 +205,126 @@ def _row(k: int) -> dict[str, float]:
     return row
 
 
+#: Module counts of the control figures: IK of case 1 and CFC of it; at :data:`LOOP_ONLY` modules the
+#: loop alone, on a joint reference of small sinusoids about home for case 1's 6.283 s (the IK of the
+#: whole path on 50 modules does not finish in minutes: docs/benchmarks.md).
+CONTROL_COUNTS = (6, 10, 20)
+LOOP_ONLY = (50,)
+TARGETS.update(cfc10=100.0, cfc50=1.0, ik50=30.0)
+
+
+def _control_row(k: int, model: str) -> dict[str, float]:
+    """IK of case 1 and CFC of it on ``family(k)`` with ``model``: wall and CPU seconds, real-time factor."""
+    import vgtarm
+    from vgtarm.app.cases import case_path, run_case
+    from vgtarm.model.robot import Robot, recursive_robot
+    from vgtarm.simulation.reference import JointReference
+
+    stack = family(k)
+    if model == "symbolic" and not library_cached(StackDefinition.of(stack)):
+        return {"k": k, "n": stack.n_joints, "ik": math.nan, "cfc": math.nan}
+    robot = recursive_robot(stack) if model == "recursive" else Robot(stack)
+    path = case_path(robot, 1)
+    wall, cpu = time.perf_counter(), time.process_time()
+    ik = robot.inverse_kinematics(path)
+    ik_wall, ik_cpu = time.perf_counter() - wall, time.process_time() - cpu
+    reference = JointReference.of(ik, name="case 1")
+    wall, cpu = time.perf_counter(), time.process_time()
+    result = run_case(robot, 1, reference=reference)
+    cfc, cfc_cpu = time.perf_counter() - wall, time.process_time() - cpu
+    simulated = float(result.t[-1] - result.t[0])
+    assert isinstance(robot, vgtarm.Robot)
+    row = {
+        "k": k,
+        "n": stack.n_joints,
+        "ik": ik_wall,
+        "ik_cpu": ik_cpu,
+        "ik_ok": float(bool(getattr(ik, "success", True))),
+        "cfc": cfc,
+        "cfc_cpu": cfc_cpu,
+        "rtf": simulated / cfc,
+        "rtf_cpu": simulated / cfc_cpu,
+        "error": float(result.tip_error.max()),
+    }
+    print(
+        f"  {model} {k} modules: IK {ik_wall:.2f} s wall ({ik_cpu:.2f} s CPU), CFC {cfc:.2f} s for "
+        f"{simulated:.2f} s simulated ({row['rtf']:.0f}x real time), max tip error {row['error']:.2e} m",
+        flush=True,
+    )
+    return row
+
+
+def _loop_row(k: int) -> dict[str, float]:
+    """CFC in the compiled loop on ``family(k)`` (recursive) along sinusoids about home: loop speed only."""
+    from vgtarm.app.cases import run_case
+    from vgtarm.model.robot import recursive_robot
+    from vgtarm.simulation.reference import JointReference
+
+    stack = family(k)
+    robot = recursive_robot(stack)
+    t = np.arange(6284, dtype=np.float64) * 1e-3
+    span = (stack.upper - stack.lower) * 0.05
+    phase = np.linspace(0.0, np.pi, stack.n_joints)
+    w = 2 * np.pi / 6.283
+    q = stack.home + span * np.sin(w * t[:, None] + phase)
+    qd = span * w * np.cos(w * t[:, None] + phase)
+    qdd = -span * w * w * np.sin(w * t[:, None] + phase)
+    reference = JointReference(t=t, q=q, qd=qd, qdd=qdd, rates="exact", name="sinusoids", tip=robot.tip_position(q))
+    wall = time.perf_counter()
+    cpu = time.process_time()
+    result = run_case(robot, 1, reference=reference)
+    cfc, cfc_cpu = time.perf_counter() - wall, time.process_time() - cpu
+    simulated = float(result.t[-1] - result.t[0])
+    row = {
+        "k": k,
+        "n": stack.n_joints,
+        "ik": math.nan,
+        "ik_cpu": math.nan,
+        "cfc": cfc,
+        "cfc_cpu": cfc_cpu,
+        "rtf": simulated / cfc,
+        "rtf_cpu": simulated / cfc_cpu,
+        "error": float(result.tip_error.max()),
+    }
+    print(
+        f"  recursive {k} modules, loop only: CFC {cfc:.2f} s wall ({cfc_cpu:.2f} s CPU) for {simulated:.2f} s",
+        flush=True,
+    )
+    return row
+
+
+def control_figures() -> list[dict[str, Any]]:
+    """The control rows (module docstring), printed as a table."""
+    rows: list[dict[str, Any]] = [dict(_control_row(6, "symbolic"), model="symbolic")]
+    rows += [dict(_control_row(k, "recursive"), model="recursive") for k in CONTROL_COUNTS]
+    rows += [dict(_loop_row(k), model="recursive") for k in LOOP_ONLY]
+    print("\n### Inverse kinematics and computed force control of case 1 (wall time, same run)\n")
+    print(
+        "| model | modules | joints | IK of the whole path (wall) | IK CPU | CFC of the path (wall) | CFC CPU "
+        "| real time / wall | real time / CPU | max tip error |"
+    )
+    print("|" + " --- |" * 10)
+    for r in rows:
+        if not math.isfinite(r["cfc"]):
+            print(f"| {r['model']} | {r['k']:.0f} | {r['n']:.0f} | not in the cache | | | | | | |")
+            continue
+        ik = (
+            f"{r['ik']:.2f} s | {r['ik_cpu']:.2f} s"
+            if math.isfinite(r["ik"])
+            else "(loop only: sinusoids about home) | -"
+        )
+        print(
+            f"| {r['model']} | {r['k']:.0f} | {r['n']:.0f} | {ik} | {r['cfc']:.2f} s | {r['cfc_cpu']:.2f} s | "
+            f"{r['rtf']:.0f}x | {r['rtf_cpu']:.0f}x | {r['error']:.2e} m |"
+        )
+    return rows
+
+
 def run() -> list[dict[str, float]]:
     rows = [_row(k) for k in MODULE_COUNTS]
     build = _build_figures()
     _print(rows, build)
+    control_figures()
     return rows
 
 

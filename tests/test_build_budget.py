@@ -144,7 +144,8 @@ def test_limits_are_validated_and_named(monkeypatch):
 def test_describe_of_fifty_modules_returns_promptly_and_builds_nothing(tmp_path, fifty):
     cache = private_cache(tmp_path)
     start = time.monotonic()
-    done = vgtarm_command(["describe", "--config", str(fifty)], environment(cache))
+    # the symbolic model, as forced (a stack of 50 modules runs on the recursive one by default)
+    done = vgtarm_command(["describe", "--config", str(fifty)], environment(cache, VGTARM_MODEL="symbolic"))
     elapsed = time.monotonic() - start
     print(f"describe of 50 modules: {elapsed:.2f} s")
     assert done.returncode == 0 and not done.stderr, done.stderr
@@ -177,7 +178,7 @@ def test_describe_evaluates_a_small_stack_without_building_it(tmp_path):
 def test_building_fifty_modules_is_refused_up_front_in_one_line(tmp_path, fifty, backend, what):
     cache = private_cache(tmp_path)
     start = time.monotonic()
-    done = vgtarm_command(home_args(fifty), environment(cache, VGTARM_BACKEND=backend))
+    done = vgtarm_command(home_args(fifty), environment(cache, VGTARM_BACKEND=backend, VGTARM_MODEL="symbolic"))
     elapsed = time.monotonic() - start
     assert done.returncode == 1 and not done.stdout
     assert len(lines(done.stderr)) == 1, done.stderr
@@ -194,7 +195,7 @@ def test_the_python_api_refuses_fifty_modules_before_any_work(tmp_path, fifty, m
     monkeypatch.delenv("VGTARM_BACKEND", raising=False)
     monkeypatch.delenv(budget.TIME_LIMIT_VARIABLE, raising=False)
     with pytest.raises(budget.BuildRefused, match=r"^building the compiled model of stack '50 paper modules'"):
-        vgtarm.load_robot(fifty)
+        vgtarm.load_robot(fifty, model="symbolic")  # forced: 50 modules run on the recursive model by default
 
 
 # ----------------------------------------------------------------------------- Ctrl-C and the parent's death

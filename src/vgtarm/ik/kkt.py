@@ -42,6 +42,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
+import scipy.linalg.lapack
 from numpy.typing import NDArray
 
 from .options import Tolerances
@@ -241,6 +243,8 @@ def reduced_curvature(problem: IKProblem, W: Array, J: Array, active: NDArray[np
     need = np.flatnonzero(~(certificate > 0))
     if need.size == 0:
         return certificate
+    if nj >= LAPACK_FROM:
+        return _curvature_lapack(problem, W, J, active, certificate, need, scale)
     certificate[need] = ldl_pivots(W[need]).min(axis=1) / scale
     need = need[~(certificate[need] > 0)]
     if need.size == 0:
@@ -261,6 +265,50 @@ def reduced_curvature(problem: IKProblem, W: Array, J: Array, active: NDArray[np
     projector = np.eye(nj) - rows.transpose(0, 2, 1) @ through
     M = projector @ W[need] @ projector + scale * (np.eye(nj) - projector)
     certificate[need] = ldl_pivots(M).min(axis=1) / scale
+    return certificate
+
+
+#: From this many joints on (a long stack), :func:`reduced_curvature` factorises each sample's matrix
+#: with LAPACK's Cholesky (``dpotrf``: the pivots are the squares of its diagonal) and projects with an
+#: orthonormal basis of the active rows only, instead of the vectorised ``LDL^T`` loop in NumPy and
+#: the projector through the Gram matrix of every inequality row: the same certificate, ``O(n^3 / 3)``
+#: per sample in compiled code. Below it (the paper's robot) the NumPy loop is faster, and unchanged.
+LAPACK_FROM = 30
+
+
+def _smallest_pivot(matrix: Array) -> float:
+    """The smallest ``LDL^T`` pivot of a symmetric matrix: from LAPACK's Cholesky when it is positive
+    definite, else from :func:`ldl_pivots` (then it is <= 0, or not a number)."""
+    factor, info = scipy.linalg.lapack.dpotrf(matrix, lower=0, clean=0)
+    if info == 0:
+        return float(np.diagonal(factor).min() ** 2)
+    return float(ldl_pivots(matrix[None].copy()).min())
+
+
+def _curvature_lapack(
+    problem: IKProblem,
+    W: Array,
+    J: Array,
+    active: NDArray[np.bool_],
+    certificate: Array,
+    need: NDArray[np.intp],
+    scale: float,
+) -> Array:
+    """:func:`reduced_curvature`'s second and third stages, per sample with LAPACK (:data:`LAPACK_FROM`)."""
+    nj = problem.n
+    for i in need.tolist():
+        pivot = _smallest_pivot(W[i])
+        if pivot > 0:
+            certificate[i] = pivot / scale
+            continue
+        rows = np.concatenate([J[i], problem.A[active[i]]])
+        basis, r, _ = scipy.linalg.qr(rows.T, mode="economic", pivoting=True)
+        rank = int((np.abs(np.diagonal(r)) > 1e-12 * max(1.0, float(np.abs(r).max()))).sum())
+        Q = basis[:, :rank]  # orthonormal basis of the span of the active rows; P = I - Q Q^T
+        WQ = W[i] @ Q
+        M = W[i] - Q @ WQ.T - WQ @ Q.T + Q @ (Q.T @ WQ) @ Q.T + scale * (Q @ Q.T)
+        certificate[i] = _smallest_pivot((M + M.T) / 2) / scale
+    assert certificate.shape[0] == W.shape[0] and nj == W.shape[1]
     return certificate
 
 

@@ -13,7 +13,7 @@ import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,6 +22,9 @@ from ..errors import ConfigError, shown
 from ..machine import usable_cpus
 from .compiled import CompiledBackend
 from .interface import enum, ffi
+
+if TYPE_CHECKING:
+    from .recursive.backend import RecursiveBackend
 
 Array = NDArray[np.float64]
 
@@ -197,11 +200,14 @@ class ClosedLoopDriver:
     long (it cannot pause inside a sample).
     """
 
-    def __init__(self, backend: CompiledBackend, *, slice_budget: int | None = None) -> None:
+    def __init__(self, backend: CompiledBackend | RecursiveBackend, *, slice_budget: int | None = None) -> None:
         if slice_budget is not None and not (isinstance(slice_budget, int) and slice_budget >= 1):
             raise ValueError(f"slice_budget = {slice_budget!r}: expected a whole number >= 1")
         self.backend = backend
         self._model = ffi().new("vgt_model *", {field: backend.call(field) for field in _MODEL_FIELDS})
+        # a backend whose loop functions find their model by the parameter vector's address (the
+        # recursive model's adapters) is told every vector before a driver sees it
+        self._bind = getattr(backend, "bind_parameters", None)
         self._lib = backend.library
         self._settings: dict[tuple[LoopSettings, int, int], Any] = {}
         self.slice_budget = slice_budget
@@ -220,6 +226,7 @@ class ClosedLoopDriver:
         self, settings: LoopSettings, arrays: LoopArrays, Kp: Array, Kv: Array, k0: int, k1: int
     ) -> tuple[int, int]:
         """Run samples ``k0 .. k1-1`` with gains ``Kp``, ``Kv`` (n x n); returns (status, stop sample)."""
+        self.bind(arrays.inputs["p_plant"], arrays.inputs["p_ctrl"])
         key = (settings, arrays.n_joints, arrays.n_margins)
         s = self._settings.get(key)
         if s is None:  # the switching loop alternates two settings thousands of times: build each once
@@ -247,6 +254,11 @@ class ClosedLoopDriver:
                 return int(status), int(stop[0])
             k = int(stop[0])  # Ctrl-C raises KeyboardInterrupt here, between two slices
 
+    def bind(self, *vectors: Array) -> None:
+        """Tell the backend the parameter vectors the drivers are about to receive (if it asks)."""
+        if self._bind is not None:
+            self._bind(*vectors)
+
     def _slice(self, n_joints: int) -> tuple[Any, Array]:
         """The ``vgt_slice`` of runs of ``n_joints`` joints and the plant state it points at."""
         made = self._slices.get(n_joints)
@@ -271,6 +283,7 @@ class ClosedLoopDriver:
         the fixed gains ``Kp``, ``Kv`` below ``settings.threshold``; above it, one activation of
         ``ga`` (bound with :meth:`CompiledGA.bind_switching`) whose gains control that sample with
         ``unswitched``. Returns (status, stop sample); the activations are in ``ga``'s records."""
+        self.bind(arrays.inputs["p_plant"], arrays.inputs["p_ctrl"], ga.parameters)
         structs = []
         for one in (settings, unswitched):
             key = (one, arrays.n_joints, arrays.n_margins)
@@ -315,6 +328,7 @@ class ClosedLoopDriver:
         ``Kp``, ``Kv`` (P, n, n) to the predicted tip-error norms (P,).
         """
         fixed = [np.ascontiguousarray(a, dtype=np.float64) for a in (p_ctrl, q0, qd0, q_d, qd_d, qdd_d, tip_d)]
+        self.bind(fixed[0])
         settings = ffi().new("vgt_settings *", {"n_joints": len(fixed[1]), "dt": dt})
         head = (self._model, settings, _ptr(fixed[0]), len(fixed[3]) - 1, *[_ptr(a) for a in fixed[1:]])
         lib = self._lib
@@ -368,7 +382,6 @@ class GAActivationResult:
     exact_steps: int = 0
     threads: int = 1  #: threads predicting at the end of the activation
     dropped: bool = False  #: safe variant: the fixed gains replaced the GA's best (see ``csrc/ga.c``)
-
 
 
 #: Most threads the GA's prediction uses by default: a generation of the paper's GA predicts about
@@ -487,11 +500,7 @@ class CompiledGA:
                 "horizon": horizon,
                 "exact_above": exact_above,
                 "threads": ga_threads() if threads is None else threads,
-                **(
-                    {"safe": 1, "safe_kv": safe[0], "safe_lo": safe[1], "safe_hi": safe[2]}
-                    if safe is not None
-                    else {}
-                ),
+                **({"safe": 1, "safe_kv": safe[0], "safe_lo": safe[1], "safe_hi": safe[2]} if safe is not None else {}),
             },
         )
         if safe is not None and damping is not None:
@@ -508,6 +517,7 @@ class CompiledGA:
         self._problem.upper = _ptr(self._arrays["upper"])
         self._problem.initial_bits = ffi().cast("uint64_t *", self._initial.ctypes.data)
         self._problem.p_ctrl = _ptr(self._arrays["p_ctrl"])
+        driver.bind(self._arrays["p_ctrl"])
         self._problem.q0 = _ptr(self._state[0:1])
         self._problem.qd0 = ffi().cast("double *", self._state[1:2].ctypes.data)
         self._base = {name: _ptr(self._arrays[name]) for name in ("q_d", "qd_d", "qdd_d", "tip_d", "tip_offset", "J_d")}
@@ -527,9 +537,15 @@ class CompiledGA:
         self._ga.horizon = horizon
         return horizon
 
+    @property
+    def parameters(self) -> Array:
+        """The controller's parameter vector the GA's predictions use (the array the drivers see)."""
+        return self._arrays["p_ctrl"]
+
     def activate(self, k: int, q0: Array, qd0: Array, seed: int) -> GAActivationResult:
         """Run one activation at sample ``k`` from the state ``(q0, qd0)`` with the generator's ``seed``."""
         self._window(k, q0, qd0)
+        self.driver.bind(self.parameters)
         status = self.driver.backend.library.vgt_ga_activation(
             self.driver.model, self._settings, self._ga, self._problem, seed, self._result
         )
@@ -602,6 +618,7 @@ class CompiledGA:
         self._window(k, q0, qd0)
         g = np.ascontiguousarray(np.atleast_2d(genes), dtype=np.float64)
         cost = np.empty(len(g))
+        self.driver.bind(self.parameters)
         status = self.driver.backend.library.vgt_ga_predict(
             self.driver.model, self._settings, self._ga, self._problem, len(g), _ptr(g), _ptr(cost)
         )

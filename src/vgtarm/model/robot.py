@@ -542,16 +542,31 @@ class Robot:
         return t.reshape(shape), v.reshape(shape)
 
 
-#: The models a stack's Robot can run on (``load_robot(model=...)``, ``$VGTARM_MODEL``). The
-#: symbolic one stays the default until the inverse kinematics and the control run on the recursive
-#: one (issue 24); a stack too large to build is still refused up front (:mod:`.budget`).
+#: The models a stack's Robot can run on (``load_robot(model=...)``, ``$VGTARM_MODEL``, ``--model``).
 MODEL_CHOICES = ("symbolic", "recursive")
+
+#: A stack of this many modules or more runs on the recursive model unless told otherwise. Measured
+#: (``docs/benchmarks.md``): the recursive model is as fast as the symbolic library from two modules
+#: and 3 to 4 times faster at six (forward dynamics, IK of case 1, computed force control), and it
+#: builds nothing per arm, while the symbolic library of seven modules takes minutes to build and
+#: grows as ``n^2`` in code; up to six modules the symbolic library stays the default because it
+#: has every function (the pose and effort IK tasks, energies, the centres of mass' Jacobians).
+RECURSIVE_FROM_MODULES = 7
+
+
+def default_model(parameters: RobotParameters | Stack) -> str:
+    """The model a robot runs on when none is chosen: the paper's robot, and a stack of fewer than
+    :data:`RECURSIVE_FROM_MODULES` modules, the symbolic one; a longer stack the recursive one."""
+    if isinstance(parameters, Stack) and parameters.n_modules >= RECURSIVE_FROM_MODULES:
+        return "recursive"
+    return "symbolic"
 
 
 def recursive_robot(stack: Stack) -> Robot:
     """A robot of ``stack`` on the recursive model (:mod:`vgtarm.model.recursive`): forward kinematics,
-    Jacobians, ``M``, ``C``, forward and inverse dynamics in ``O(n)``, nothing compiled for the arm;
-    the inverse kinematics and the control functions are not on it yet (refused by name)."""
+    Jacobians, ``M``, ``C``, forward and inverse dynamics in ``O(n)``, the position task's inverse
+    kinematics and the compiled closed loop, nothing compiled for the arm; the functions it lacks
+    (the pose and effort IK tasks, energies, ...) are refused by name."""
     if not isinstance(stack, Stack):
         raise InputError(f"stack = {shown(stack)}: expected a Stack (the recursive model is for stacks of modules)")
     return Robot(stack, RecursiveBackend(stack))
@@ -559,7 +574,7 @@ def recursive_robot(stack: Stack) -> Robot:
 
 def _robot_of(parameters: RobotParameters | Stack, model: str | None) -> Robot:
     """The robot of ``parameters`` on the chosen model (the paper's robot: always its symbolic one)."""
-    choice = (os.environ.get("VGTARM_MODEL", "") or "symbolic") if model is None else model
+    choice = (os.environ.get("VGTARM_MODEL", "") or default_model(parameters)) if model is None else model
     if choice not in MODEL_CHOICES:
         where = "model" if model is not None else "$VGTARM_MODEL"
         raise ConfigError(f"{where} = {shown(choice)}: expected one of {', '.join(MODEL_CHOICES)}")
@@ -581,9 +596,11 @@ def load_robot(config: str | Path | None = None, *, model: str | None = None) ->
     (:func:`load_parameters`). Either way a bad file raises one
     :class:`~vgtarm.errors.ConfigError` line naming the field.
 
-    ``model`` (default ``$VGTARM_MODEL``, else ``symbolic``) chooses a stack's model: ``symbolic``
-    (the compiled symbolic library) or ``recursive`` (:func:`recursive_robot`: any size at once, but
-    no inverse kinematics or control on it yet). The paper's robot always runs on its symbolic model.
+    ``model`` (default ``$VGTARM_MODEL``, else :func:`default_model`: ``recursive`` for a stack of
+    :data:`RECURSIVE_FROM_MODULES` modules or more) chooses a stack's model: ``symbolic`` (the
+    compiled symbolic library) or ``recursive`` (:func:`recursive_robot`: any size at once; the
+    position-task IK and the closed loop, not the pose and effort tasks). The paper's robot always
+    runs on its symbolic model.
     """
     if config is None:
         return _robot_of(load_parameters(None), model)

@@ -223,8 +223,8 @@ class CompiledLoop(_SteppedLoop):
     """Our equations in the compiled loop; the GA, if any, called from Python per activation."""
 
     def __init__(self, plant: Robot, job: Job) -> None:
-        assert isinstance(plant.backend, CompiledBackend)
-        super().__init__(ClosedLoopDriver(plant.backend), job)
+        assert _looped(plant)
+        super().__init__(ClosedLoopDriver(plant.backend), job)  # type: ignore[arg-type]
 
 
 class NumpyLoop(_SteppedLoop):
@@ -246,8 +246,8 @@ class CompiledSwitchingLoop:
 
     def __init__(self, plant: Robot, job: Job) -> None:
         self.job = job
-        assert isinstance(plant.backend, CompiledBackend)
-        self.loop = ClosedLoopDriver(plant.backend)
+        assert _looped(plant)
+        self.loop = ClosedLoopDriver(plant.backend)  # type: ignore[arg-type]
         self.ga = compiled_ga(job.controller, self.loop, job.model, job.arrays, job.dt, job.settings)
         # one seed per sample, drawn as the stepped loop draws them one by one (the same numbers)
         seeds = np.asarray(job.ga_rng.integers(0, 2**63, size=int(job.arrays.n), dtype=np.int64))
@@ -278,12 +278,18 @@ class CompiledSwitchingLoop:
         return Advance(status, k_end if status == DONE else stop, found, held, drops)
 
 
+def _looped(robot: Robot) -> bool:
+    """Whether ``robot``'s backend runs the compiled closed loop (a compiled symbolic library, or the
+    recursive model's library with its adapters)."""
+    return isinstance(robot.backend, CompiledBackend) or bool(getattr(robot.backend, "closed_loop", False))
+
+
 def engine_for(plant: Robot, plant_engine: str, job: Job) -> Engine:
     """The engine of a run: a registered plant's, else the compiled loop (with the GA inside it
     under switching control) when both models are compiled, else the NumPy loop."""
     if plant_engine != MODEL_ENGINE:
         return RegisteredLoop(plant_engine, plant, job)
-    if not (isinstance(plant.backend, CompiledBackend) and isinstance(job.model.backend, CompiledBackend)):
+    if not (_looped(plant) and _looped(job.model)):
         return NumpyLoop(plant, job)
     switching = isinstance(job.controller, SwitchingControl)
     if switching and GA_IN_LOOP and job.controller.ga.stall_generations is None:

@@ -914,6 +914,10 @@ def _main(argv: Sequence[str] | None) -> int:
             _silence_stdout()
         raise
     progress.set_quiet(bool(getattr(args, "quiet", False)))  # -q: no bar, no build progress lines
+    model = getattr(args, "model", None)
+    before = os.environ.get("VGTARM_MODEL")
+    if model is not None:  # --model: every robot this command loads (and its worker processes)
+        os.environ["VGTARM_MODEL"] = model
     try:
         status = int(args.run(args))
         sys.stdout.flush()  # a reader that went away shows here, not as a traceback at exit
@@ -930,3 +934,9 @@ def _main(argv: Sequence[str] | None) -> int:
     except OSError as exc:
         print(_error_line(exc), file=sys.stderr)
         return 1
+    finally:
+        if model is not None:  # the process's own choice again (main runs in tests, in-process)
+            if before is None:
+                os.environ.pop("VGTARM_MODEL", None)
+            else:
+                os.environ["VGTARM_MODEL"] = before

@@ -39,6 +39,18 @@ def add_config(parser: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="robot TOML file (default: the shipped reference robot)",
     )
+    add_model(parser)
+
+
+def add_model(parser: argparse.ArgumentParser) -> None:
+    """``--model symbolic|recursive``: a stack's model (:func:`vgtarm.model.robot.default_model` unless given)."""
+    parser.add_argument(
+        "--model",
+        choices=("symbolic", "recursive"),
+        default=None,
+        help="a stack's model: the compiled symbolic library or the recursive O(n) one (default: $VGTARM_MODEL, "
+        "else recursive from 7 modules on); the paper's robot is always symbolic",
+    )
 
 
 def joint_gains(text: str, option: str, joint_names: tuple[str, ...]) -> float | tuple[float, ...]:

@@ -15,6 +15,7 @@ would cost (:func:`model_state`).
 from __future__ import annotations
 
 import argparse
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -28,7 +29,8 @@ from ...fileio import atomic_write_text, check_output_file, parse_toml, read_tex
 from ...memory import size_text
 from ...model import budget, codegen, compiled
 from ...model.parameters import ROBOT_FILE_LIMIT, RobotParameters, load_parameters
-from ...model.robot import definition_of, robot_parameters_from_dict
+from ...model.recursive import RecursiveModel
+from ...model.robot import default_model, definition_of, robot_parameters_from_dict
 from ...model.stack import Stack, stack_from_parameters, stack_to_toml
 
 #: ``vgtarm describe`` evaluates the mass matrix at home when building its function alone is
@@ -66,6 +68,18 @@ class HomeFigures:
 
 
 def home_figures(parameters: RobotParameters | Stack) -> HomeFigures:
+    if (
+        isinstance(parameters, Stack)
+        and (os.environ.get("VGTARM_MODEL", "") or default_model(parameters)) == "recursive"
+    ):
+        model = RecursiveModel(parameters)
+        tip = model.forward_kinematics(parameters.home)["tip"]
+        eigenvalues = np.asarray(np.linalg.eigvalsh(model.mass_matrix(parameters.home)), dtype=np.float64)
+        return HomeFigures(tip, eigenvalues, "")
+    return _symbolic_home_figures(parameters)
+
+
+def _symbolic_home_figures(parameters: RobotParameters | Stack) -> HomeFigures:
     """The tip and the mass matrix's eigenvalues at home, from the functions of the model's one
     definition run by CasADi's interpreter: the tip always (the kinematics alone: 0.06 s for fifty
     modules), the mass matrix when its construction is estimated shorter than
@@ -96,6 +110,9 @@ def model_state(parameters: RobotParameters | Stack) -> str:
     """What a command that needs the model would do: load the compiled library from the cache, or
     build it (its estimated cost, and whether it would be refused), or use the interpreter."""
     definition = definition_of(parameters)
+    chosen = os.environ.get("VGTARM_MODEL", "") or default_model(parameters)
+    if isinstance(parameters, Stack) and chosen == "recursive":
+        return "the recursive model (nothing to build per arm; --model symbolic for the compiled symbolic library)"
     cost = budget.estimate(definition)
     choice = compiled.backend_choice()
     if choice == "interpreted":

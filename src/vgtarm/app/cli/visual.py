@@ -15,6 +15,7 @@ from ...errors import InputError, escape
 from ...fileio import atomic_folder, check_output_file, check_output_folder, placements
 from ...model.parameters import JOINT_NAMES
 from ...model.robot import load_robot
+from .options import add_model
 
 #: Picture formats of ``vgtarm draw``.
 PICTURE_FORMATS = (".png", ".svg", ".pdf")
@@ -34,6 +35,7 @@ def _config(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--config", type=Path, default=None, metavar="FILE", help="robot TOML file (default: the reference robot)"
     )
+    add_model(parser)
 
 
 def cmd_draw(args: argparse.Namespace) -> int:

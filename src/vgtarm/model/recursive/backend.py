@@ -19,21 +19,40 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import interface
 from ..compiled import Signature
 from ..definition import StackDefinition
 from ..outline import shapes
 from ..parameters import Body
 from ..stack.description import BODY_VALUES, Stack
+from .library import load_library, loop_library
 from .model import RecursiveModel
+from .second_order import ik_terms
 
 Array = NDArray[np.float64]
 
 #: The functions of the symbolic library that the recursive model provides.
-FUNCTIONS = ("fk", "tip", "jac", "mass", "bias_forces", "fd", "id")
+FUNCTIONS = (
+    "fk",
+    "tip",
+    "jac",
+    "mass",
+    "bias_forces",
+    "fd",
+    "id",
+    "ik_position",
+    "ik_position_d2",
+    "ik_position_rates",
+    "velocity",
+    "tip_state",
+    "tip_hessian",
+    "cfc",
+)
 
 
 def _body(values: Array, name: str) -> Body:
@@ -86,6 +105,38 @@ def stack_from_vector(stack: Stack, p: Array) -> Stack:
     )
 
 
+#: The closed loop's functions (fields of ``vgt_model``) and the adapters that give them.
+LOOP_FUNCTIONS = {
+    "cfc": "vgt_rec_fn_cfc",
+    "fd": "vgt_rec_fn_fd",
+    "tip_state": "vgt_rec_fn_tip_state",
+    "tip": "vgt_rec_fn_tip",
+    "id": "vgt_rec_fn_id",
+    "jac": "vgt_rec_fn_jac",
+    "tip_hessian": "vgt_rec_fn_tip_hessian",
+}
+#: Slots of the C registry of bound parameter vectors (``vgt_rec_bind``), shared by every backend
+#: of the process: each holds the array (so its address stays its own) and its model.
+_SLOTS = 64
+_bound: dict[int, tuple[int, Array, RecursiveModel]] = {}  # address -> (slot, array, model)
+_next_slot = [0]
+
+
+def _solve(K: Array, rhs: Array) -> Array:
+    """``K x = rhs`` per sample (LAPACK, batched); a singular sample's row is NaN (the IK then treats
+    it as the symbolic library's QR solve's non-finite result)."""
+    try:
+        return np.asarray(np.linalg.solve(K, rhs[..., None])[..., 0])
+    except np.linalg.LinAlgError:
+        out = np.full(rhs.shape, np.nan)
+        for i in range(K.shape[0]):
+            try:
+                out[i] = np.linalg.solve(K[i], rhs[i])
+            except np.linalg.LinAlgError:
+                pass
+        return out
+
+
 class RecursiveBackend:
     """The functions :data:`FUNCTIONS` of a stack's model, evaluated by the recursive model."""
 
@@ -110,6 +161,42 @@ class RecursiveBackend:
             for key in FUNCTIONS
         }
         self._models: dict[bytes, RecursiveModel] = {stack.vector().tobytes(): RecursiveModel(stack)}
+
+    #: The compiled closed loop runs on this backend (:class:`~vgtarm.model.closedloop.ClosedLoopDriver`).
+    closed_loop = True
+
+    @property
+    def library(self) -> Any:
+        """The recursive library opened with the closed loop's interface (:func:`.library.loop_library`)."""
+        return loop_library()
+
+    def call(self, name: str) -> Any:
+        """A ``vgt_call`` of the closed loop's function ``name`` (its adapter on the recursive model)."""
+        ffi, lib = load_library()
+        address = int(ffi.cast("intptr_t", getattr(lib, LOOP_FUNCTIONS[name])))
+        loop_ffi = interface.ffi()
+        return loop_ffi.new("vgt_call *", [loop_ffi.cast("vgt_fn", address), 8, 2, 0, 0])[0]
+
+    def bind_parameters(self, *vectors: Array) -> None:
+        """Register, for the closed loop's adapters, the arm of each parameter vector (by its address:
+        the arrays must be the C-contiguous float64 arrays whose pointers the drivers receive)."""
+        ffi, lib = load_library()
+        for p in vectors:
+            if p.dtype != np.float64 or not p.flags.c_contiguous or p.shape != (self.stack.n_parameters,):
+                raise ValueError("bind_parameters: expected the stack's parameter vectors (C-contiguous float64)")
+            address = int(p.ctypes.data)
+            known = _bound.get(address)
+            if known is not None and known[1] is p and np.array_equal(known[2].stack.vector(), p):
+                continue
+            slot = known[0] if known is not None else _next_slot[0]
+            if known is None:
+                _next_slot[0] = (slot + 1) % _SLOTS
+                for old, entry in list(_bound.items()):
+                    if entry[0] == slot:
+                        del _bound[old]
+            model = RecursiveModel(stack_from_vector(self.stack, p))
+            _bound[address] = (slot, p, model)
+            lib.vgt_rec_bind(slot, ffi.cast("double *", address), model._arm)
 
     def signature(self, name: str) -> Signature:
         if name not in self._signatures:
@@ -155,4 +242,51 @@ class RecursiveBackend:
             return [model.bias_forces(q, rows[1])]
         if name == "fd":
             return [model.forward_dynamics(q, rows[1], rows[2], rows[3])]
-        return [model.inverse_dynamics(q, rows[1], rows[2], rows[3])]  # "id"
+        if name == "id":
+            return [model.inverse_dynamics(q, rows[1], rows[2], rows[3])]
+        if name in ("velocity", "tip_state"):
+            jp, jw = model.jacobians(q)
+            velocity = np.einsum("nij,nj->ni", jp, rows[1])
+            if name == "tip_state":
+                return [model.forward_kinematics(q)["tip"], velocity]
+            return [velocity, np.einsum("nij,nj->ni", jw, rows[1])]
+        if name == "tip_hessian":
+            qa = model._q(q)
+            return [
+                np.stack([ik_terms(model, qa, np.broadcast_to(e, (n, 3)))["H"] for e in np.eye(3)], axis=1).reshape(
+                    n, -1
+                )
+            ]
+        if name == "cfc":  # M (qdd_d + Kp e + Kv e_dot) + C: inverse dynamics of the commanded acceleration
+            q_d, qd_d, qdd_d = rows[2], rows[3], rows[4]
+            Kp, Kv = rows[5].reshape(n, self.n, self.n), rows[6].reshape(n, self.n, self.n)
+            commanded = qdd_d + np.einsum("nij,nj->ni", Kp, q_d - q) + np.einsum("nij,nj->ni", Kv, qd_d - rows[1])
+            return [model.inverse_dynamics(q, rows[1], commanded)]
+        return self._ik(name, model, rows, n)
+
+    def _ik(self, name: str, model: RecursiveModel, rows: list[Array], n: int) -> list[Array]:
+        """The position task's functions (:mod:`vgtarm.model.codegen.ik`) from :func:`.second_order.tip_terms`."""
+        q, lam = model._q(rows[0]), rows[1]
+        nj = self.n
+        if name == "ik_position_d2":
+            return [ik_terms(model, q, lam, rows[2], rows[3])["d2"]]
+        out = ik_terms(model, q, lam)
+        c, J, H = out["c"], out["J"], out["H"]
+        flat = [c, J.reshape(n, -1), H.reshape(n, -1)]
+        if name == "ik_position":
+            return flat
+        # ik_position_rates: the KKT matrix [[diag(w) + H, J^T], [J, 0]], solved by LAPACK for both systems
+        w, xd, xdd = rows[2], rows[3], rows[4]
+        K = np.zeros((n, nj + 3, nj + 3))
+        K[:, :nj, :nj] = H
+        K[:, :nj, :nj][:, np.arange(nj), np.arange(nj)] += w
+        K[:, :nj, nj:] = J.transpose(0, 2, 1)
+        K[:, nj:, :nj] = J
+        rhs = np.zeros((n, nj + 3))
+        rhs[:, nj:] = xd
+        first = _solve(K, rhs)
+        d2 = ik_terms(model, q, lam, first[:, :nj], first[:, nj:])["d2"]
+        rhs = -d2
+        rhs[:, nj:] += xdd
+        second = _solve(K, rhs)
+        return [*flat, first[:, :nj], first[:, nj:], second[:, :nj], second[:, nj:]]

@@ -15,7 +15,11 @@ Everything a recursive algorithm needs of the joint is derived here by automatic
   ``vee(E^T Edot)``, velocity of the platform centre ``E^T rdot``), stored row-major;
 - ``c`` ``(6,)``: the bias ``Sdot qd`` (componentwise time derivative of ``S(q)`` in platform
   coordinates, Featherstone's apparent derivative ``c_J``);
-- the passive angles ``alpha, beta, gamma, theta``.
+- the passive angles ``alpha, beta, gamma, theta``;
+- ``taylor``: the pose ``(E, r)`` (12 values as in ``pose``) and its first, second and third
+  partial derivatives in the three legs (``3 x 12``, ``9 x 12``, ``27 x 12``: derivative index
+  ``k`` slowest, then ``l``, ``m``), for the exact second- and third-order terms of the inverse
+  kinematics (:mod:`.second_order`).
 
 The geometry ``g = (b, d, cos phi, sin phi)`` is an input, not a constant, so one generated
 function serves every module of every arm: the module type's recipe is this file alone.
@@ -59,9 +63,20 @@ def module_expressions(q: SX, qd: SX, g: SX) -> dict[str, SX]:
     }
 
 
+def module_taylor(q: SX, g: SX) -> list[SX]:
+    """The pose (12) and its partial derivatives of orders 1, 2, 3 in ``q`` (``3**k x 12`` each, flat)."""
+    pose = module_expressions(q, SX.sym("qd", 3), g)["pose"]  # the pose does not depend on qd
+    out = [pose]
+    current = pose
+    for _ in range(3):
+        current = ca.vec(ca.jacobian(current, q))  # derivative index slowest in the next order's layout
+        out.append(current)
+    return out
+
+
 def module_functions() -> list[ca.Function]:
-    """The generated functions: ``vgt_rec_module_kin(q, g) -> (pose, S, passive)`` and
-    ``vgt_rec_module(q, qd, g) -> (pose, S, c)``."""
+    """The generated functions: ``vgt_rec_module_kin(q, g) -> (pose, S, passive)``,
+    ``vgt_rec_module(q, qd, g) -> (pose, S, c)`` and ``vgt_rec_module_taylor(q, g) -> (d0, d1, d2, d3)``."""
     q, qd, g = SX.sym("q", 3), SX.sym("qd", 3), SX.sym("g", len(GEOMETRY))
     e = module_expressions(q, qd, g)
     opts = {"cse": True}
@@ -71,4 +86,7 @@ def module_functions() -> list[ca.Function]:
     full = ca.Function(
         "vgt_rec_module", [q, qd, g], [e["pose"], e["S"], e["c"]], ["q", "qd", "g"], ["pose", "S", "c"], opts
     )
-    return [kin, full]
+    taylor = ca.Function(
+        "vgt_rec_module_taylor", [q, g], module_taylor(q, g), ["q", "g"], ["d0", "d1", "d2", "d3"], opts
+    )
+    return [kin, full, taylor]

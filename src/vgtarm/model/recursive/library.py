@@ -29,11 +29,13 @@ from typing import Any
 import casadi as ca
 import cffi
 
-from .. import compiled
+from .. import compiled, interface
 from .joint import module_functions
 
 _HERE = Path(__file__).resolve().parent
 _CSRC = _HERE / "csrc"
+#: The compiled closed loop's drivers (``vgtarm.h``: the loop, the GA, batches), linked in too.
+_DRIVERS = _HERE.parent / "csrc"
 _HEADER = _CSRC / "vgt_rec.h"
 _CFLAGS = ("-O3", "-fPIC", "-shared", "-ffp-contract=off")
 _GENERATED = "vgt_rec_generated"
@@ -43,8 +45,9 @@ _LOCK = threading.Lock()
 def _sources() -> list[Path]:
     """What shapes the library: the module recipe, the model's symbolic definition it is generated
     from (``solve_module``...), this build recipe and the C loops (not the Python around them)."""
-    recipe = [_HERE / "joint.py", _HERE.parent / "symbolic.py", _HERE / "library.py"]
-    return recipe + sorted(p for p in _CSRC.iterdir() if p.suffix in (".c", ".h"))
+    recipe = [_HERE / "joint.py", _HERE.parent / "symbolic.py", _HERE / "library.py", _HERE.parent / "interface.py"]
+    drivers = sorted(p for p in _DRIVERS.iterdir() if p.suffix in (".c", ".h"))
+    return recipe + sorted(p for p in _CSRC.iterdir() if p.suffix in (".c", ".h")) + drivers
 
 
 def cache_key(compiler: str) -> str:
@@ -72,13 +75,18 @@ def _compile(compiler: str, workdir: Path) -> Path:
     for f in module_functions():
         generator.add(f)
     generator.generate(str(workdir) + os.sep)
+    (workdir / "layout.c").write_text(interface.layout_source())
     library = workdir / "library.so"
-    command = [compiler, *_CFLAGS, "-I", str(_CSRC), "-I", str(workdir), "-o", str(library)]
-    command += [str(workdir / f"{_GENERATED}.c"), str(_CSRC / "vgt_rec.c"), "-lm"]
-    compiled._run_compiler(compiler, command)
-    if not library.is_file():
-        raise compiled._Unavailable(f"the C compiler {compiler} wrote no library")
-    return library
+    command = [compiler, *_CFLAGS, "-I", str(_CSRC), "-I", str(_DRIVERS), "-I", str(workdir), "-o", str(library)]
+    command += [str(workdir / f"{_GENERATED}.c"), str(_CSRC / "vgt_rec.c"), str(_CSRC / "vgt_rec_loop.c")]
+    command += [str(workdir / "layout.c"), *(str(p) for p in sorted(_DRIVERS.glob("*.c"))), "-lm"]
+    failure = ""
+    for attempt in (command[:1] + ["-fopenmp"] + command[1:], command):  # the GA's threads, when OpenMP is there
+        done = compiled._run(compiler, attempt)
+        if done.returncode == 0 and library.is_file():
+            return library
+        failure = compiled._compiler_failure(compiler, done)
+    raise compiled._Unavailable(failure)
 
 
 def _metadata_ok(meta: Path, library: Path, key: str) -> bool:
@@ -131,4 +139,24 @@ def load_library() -> tuple[Any, Any]:
         except compiled._Unavailable as exc:
             raise compiled.BackendError(f"cannot build the recursive model: {exc}") from None
         ffi = _ffi()
+        _PATH.append(library.resolve())
         return ffi, ffi.dlopen(str(library.resolve()))
+
+
+_PATH: list[Path] = []
+
+
+@cache
+def loop_library() -> Any:
+    """The same library opened with the compiled loop's interface (``vgtarm.h``): its drivers
+    (``vgt_simulate_slice``, the GA) run on the recursive model through the adapters of
+    ``csrc/vgt_rec_loop.c``. Refused with one line when its structure layout is not cffi's."""
+    load_library()
+    library = interface.open_library(_PATH[-1])
+    out = interface.ffi().new("long[]", len(interface.layout_fields()))
+    library.vgt_layout(out)
+    if list(out) != interface.python_layout():
+        raise compiled.BackendError(
+            "the recursive model's loop library lays out the interface's structures unlike cffi"
+        )
+    return library

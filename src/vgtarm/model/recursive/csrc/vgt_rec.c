@@ -28,9 +28,21 @@ typedef struct {
     casadi_real **res;
     casadi_int *iw;
     casadi_real *w;
+    int owned; /* 1: the memory at body was allocated for this call */
 } work_t;
 
-static int work_open(work_t *k, const vgt_rec_arm *arm) {
+/* The scratch of one call: the bodies and the generated functions' work arrays (with those of the
+ * module's derivatives up to order 3 when taylor is set: they are large). The common case reuses a
+ * buffer of the calling thread (zeroed, as calloc would give it), so a closed-loop step allocates
+ * nothing; the large one is allocated per call. */
+typedef struct {
+    void *memory;
+    size_t size;
+} scratch_t;
+
+static _Thread_local scratch_t thread_scratch = {NULL, 0};
+
+static int work_open_sized(work_t *k, const vgt_rec_arm *arm, int taylor) {
     casadi_int sz_arg = 0, sz_res = 0, sz_iw = 0, sz_w = 0, a, r, i, w;
     vgt_rec_module_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
     vgt_rec_module_kin_work(&a, &r, &i, &w);
@@ -38,20 +50,44 @@ static int work_open(work_t *k, const vgt_rec_arm *arm) {
     if (r > sz_res) sz_res = r;
     if (i > sz_iw) sz_iw = i;
     if (w > sz_w) sz_w = w;
-    k->body = (body_t *)calloc((size_t)(arm->nb > 0 ? arm->nb : 1), sizeof(body_t));
-    k->arg = (const casadi_real **)calloc((size_t)sz_arg + 1, sizeof(casadi_real *));
-    k->res = (casadi_real **)calloc((size_t)sz_res + 1, sizeof(casadi_real *));
-    k->iw = (casadi_int *)calloc((size_t)sz_iw + 1, sizeof(casadi_int));
-    k->w = (casadi_real *)calloc((size_t)sz_w + 1, sizeof(casadi_real));
-    if (!k->body || !k->arg || !k->res || !k->iw || !k->w) {
-        free(k->body), free((void *)k->arg), free(k->res), free(k->iw), free(k->w);
-        return -1;
+    if (taylor) {
+        vgt_rec_module_taylor_work(&a, &r, &i, &w);
+        if (a > sz_arg) sz_arg = a;
+        if (r > sz_res) sz_res = r;
+        if (i > sz_iw) sz_iw = i;
+        if (w > sz_w) sz_w = w;
     }
+    size_t nb = (size_t)(arm->nb > 0 ? arm->nb : 1);
+    size_t bodies = nb * sizeof(body_t), args = ((size_t)sz_arg + 1) * sizeof(casadi_real *);
+    size_t ress = ((size_t)sz_res + 1) * sizeof(casadi_real *), iws = ((size_t)sz_iw + 1) * sizeof(casadi_int);
+    size_t ws = ((size_t)sz_w + 1) * sizeof(casadi_real);
+    size_t total = bodies + args + ress + iws + ws + 64;
+    char *memory;
+    if (taylor) {
+        memory = (char *)calloc(total, 1);
+        if (!memory) return -1;
+    } else {
+        if (thread_scratch.size < total) {
+            void *grown = realloc(thread_scratch.memory, total);
+            if (!grown) return -1;
+            thread_scratch.memory = grown, thread_scratch.size = total;
+        }
+        memory = (char *)thread_scratch.memory;
+        memset(memory, 0, total);
+    }
+    k->body = (body_t *)memory;
+    k->arg = (const casadi_real **)(memory + bodies);
+    k->res = (casadi_real **)(memory + bodies + args);
+    k->iw = (casadi_int *)(memory + bodies + args + ress);
+    k->w = (casadi_real *)(memory + bodies + args + ress + iws);
+    k->owned = taylor;
     return 0;
 }
 
+static int work_open(work_t *k, const vgt_rec_arm *arm) { return work_open_sized(k, arm, 0); }
+
 static void work_close(work_t *k) {
-    free(k->body), free((void *)k->arg), free(k->res), free(k->iw), free(k->w);
+    if (k->owned) free(k->body);
 }
 
 /* ---- small 3-vector and spatial helpers ------------------------------------------------------ */
@@ -536,6 +572,292 @@ int vgt_rec_forward(const vgt_rec_arm *arm, long n, const double *q, const doubl
             }
         }
     }
+    work_close(&k);
+    return 0;
+}
+
+int vgt_rec_taylor(const vgt_rec_arm *arm, long n, const double *q, double *out) {
+    work_t k;
+    if (work_open_sized(&k, arm, 1)) return -1;
+    for (long s = 0; s < n; ++s) {
+        int module = 0;
+        for (int i = 0; i < arm->nb; ++i) {
+            if (arm->type[i] != 3) continue;
+            double *o = out + 480 * (s * arm->nm + module);
+            k.arg[0] = q + s * arm->nq + arm->qi[i], k.arg[1] = arm->geom + 4 * i;
+            k.res[0] = o, k.res[1] = o + 12, k.res[2] = o + 48, k.res[3] = o + 156;
+            vgt_rec_module_taylor(k.arg, k.res, k.iw, k.w, 0);
+            ++module;
+        }
+    }
+    work_close(&k);
+    return 0;
+}
+
+int vgt_rec_tip_state(const vgt_rec_arm *arm, long n, const double *q, const double *qd, double *tip, double *vel) {
+    work_t k;
+    if (work_open(&k, arm)) return -1;
+    int nb = arm->nb, nq = arm->nq;
+    for (long s = 0; s < n; ++s) {
+        joints(arm, &k, q + s * nq, NULL, NULL);
+        const body_t *last = k.body + nb - 1;
+        double t[3];
+        mul3(last->R0, arm->tip, t);
+        for (int r = 0; r < 3; ++r) tip[3 * s + r] = last->p0[r] + t[r];
+        if (vel) { /* the last body's velocity at the tip point, in base components */
+            velocities(arm, &k, qd + s * nq);
+            double w[3], u[3];
+            cross3(last->v, arm->tip, w);
+            for (int r = 0; r < 3; ++r) u[r] = last->v[3 + r] + w[r];
+            mul3(last->R0, u, vel + 3 * s);
+        }
+    }
+    work_close(&k);
+    return 0;
+}
+
+/* ---- exact second- and third-order tip terms for the inverse kinematics ------------------------
+ * (the algebra of second_order.py, per sample in C): P = T_1 ... T_b p with 4x4 homogeneous T_a of
+ * each joint; a partial derivative in a coordinate of joint a falls on T_a alone. Jets in t of
+ * P(q + t qd) hold derivatives of orders 0, 1, 2 (not Taylor coefficients). */
+
+static void mm4(const double *A, const double *B, double *out) { /* out = A B (4x4), out may not alias */
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j)
+            out[4 * i + j] = A[4 * i] * B[j] + A[4 * i + 1] * B[4 + j] + A[4 * i + 2] * B[8 + j] + A[4 * i + 3] * B[12 + j];
+}
+
+static void mv4(const double *A, const double *x, double *out) {
+    for (int i = 0; i < 4; ++i) out[i] = A[4 * i] * x[0] + A[4 * i + 1] * x[1] + A[4 * i + 2] * x[2] + A[4 * i + 3] * x[3];
+}
+
+/* the homogeneous matrix (bottom row one = 1 for a value, 0 for a derivative) of 12 values E, r */
+static void homogeneous(const double *v, double tz, int value, double *out) {
+    for (int i = 0; i < 3; ++i) {
+        out[4 * i] = v[3 * i], out[4 * i + 1] = v[3 * i + 1], out[4 * i + 2] = v[3 * i + 2];
+        out[4 * i + 3] = v[9 + i];
+    }
+    out[12] = out[13] = out[14] = 0.0;
+    out[15] = value ? 1.0 : 0.0;
+    if (value) out[11] += tz;
+}
+
+/* derivative k (0..3) of Trans(0, 0, tz) Rz(theta) in theta */
+static void twist_derivative(double theta, double tz, int k, double *out) {
+    const double quarter = 1.57079632679489661923; /* pi / 2 */
+    double c = cos(theta + k * quarter), s = sin(theta + k * quarter);
+    memset(out, 0, 16 * sizeof(double));
+    out[0] = c, out[1] = -s, out[4] = s, out[5] = c;
+    if (k == 0) out[10] = out[15] = 1.0, out[11] = tz;
+}
+
+/* jets of L D R (L: 3 matrices, D: 3 matrices, R: 3 vectors; order 1 or 3), first three rows */
+static void triple_jet(int order, const double *L, const double *D, const double *R, double *out) {
+    double t[4], u[4], x[4];
+    /* order 0 */
+    mv4(D, R, t);
+    mv4(L, t, x);
+    out[0] = x[0], out[1] = x[1], out[2] = x[2];
+    if (order < 3) return;
+    /* order 1: L1 D0 R0 + L0 D1 R0 + L0 D0 R1 */
+    double y[4] = {0, 0, 0, 0};
+    mv4(L + 16, t, x);
+    for (int i = 0; i < 4; ++i) y[i] += x[i];
+    mv4(D + 16, R, u);
+    mv4(L, u, x);
+    for (int i = 0; i < 4; ++i) y[i] += x[i];
+    double w[4];
+    mv4(D, R + 4, w);
+    mv4(L, w, x);
+    for (int i = 0; i < 4; ++i) y[i] += x[i];
+    out[3] = y[0], out[4] = y[1], out[5] = y[2];
+    /* order 2: L2 D0 R0 + L0 D2 R0 + L0 D0 R2 + 2 (L1 D1 R0 + L1 D0 R1 + L0 D1 R1) */
+    double z[4] = {0, 0, 0, 0}, a[4], b[4];
+    mv4(L + 32, t, x);
+    for (int i = 0; i < 4; ++i) z[i] += x[i];
+    mv4(D + 32, R, a);
+    mv4(L, a, x);
+    for (int i = 0; i < 4; ++i) z[i] += x[i];
+    mv4(D, R + 8, a);
+    mv4(L, a, x);
+    for (int i = 0; i < 4; ++i) z[i] += x[i];
+    mv4(L + 16, u, x); /* L1 D1 R0 */
+    for (int i = 0; i < 4; ++i) z[i] += 2 * x[i];
+    mv4(L + 16, w, x); /* L1 D0 R1 */
+    for (int i = 0; i < 4; ++i) z[i] += 2 * x[i];
+    mv4(D + 16, R + 4, b); /* L0 D1 R1 */
+    mv4(L, b, x);
+    for (int i = 0; i < 4; ++i) z[i] += 2 * x[i];
+    out[6] = z[0], out[7] = z[1], out[8] = z[2];
+}
+
+int vgt_rec_ik_terms(const vgt_rec_arm *arm, long n, const double *q, const double *lam, const double *qd,
+                     const double *lam_d, double *c, double *J, double *H, double *d2) {
+    work_t k;
+    if (work_open_sized(&k, arm, 1)) return -1;
+    int nb = arm->nb, nq = arm->nq, order = qd ? 3 : 1;
+    /* per body: T (3 jets), the partials D (3 coordinates x 3 jets), the second partials (3 x 3) */
+    double *T = (double *)malloc(sizeof(double) * (size_t)nb * 48);
+    double *D = (double *)malloc(sizeof(double) * (size_t)nb * 144);
+    double *D2 = (double *)malloc(sizeof(double) * (size_t)nb * 144);
+    double *L = (double *)malloc(sizeof(double) * (size_t)(nb + 1) * 48);
+    double *R = (double *)malloc(sizeof(double) * (size_t)nb * 12);
+    double *omega = (double *)malloc(sizeof(double) * (size_t)nq * 3);
+    double *y = (double *)malloc(sizeof(double) * (size_t)nq * 3);
+    double *cols = (double *)malloc(sizeof(double) * (size_t)nq * 9);
+    int *joint = (int *)malloc(sizeof(int) * (size_t)nq);
+    double *taylor = (double *)malloc(sizeof(double) * 480);
+    if (!T || !D || !D2 || !L || !R || !omega || !y || !cols || !joint || !taylor) {
+        free(T), free(D), free(D2), free(L), free(R), free(omega), free(y), free(cols), free(joint), free(taylor);
+        work_close(&k);
+        return -1;
+    }
+    for (int a = 0; a < nb; ++a)
+        for (int j = 0; j < dofs(arm, a); ++j) joint[arm->qi[a] + j] = a;
+    for (long s = 0; s < n; ++s) {
+        const double *x = q + s * nq, *v = qd ? qd + s * nq : NULL, *l = lam + 3 * s;
+        memset(T, 0, sizeof(double) * (size_t)nb * 48);
+        memset(D, 0, sizeof(double) * (size_t)nb * 144);
+        for (int a = 0; a < nb; ++a) {
+            int nd = dofs(arm, a), qa = arm->qi[a];
+            double tz = arm->tz[a];
+            double d0[16], d1[3][16], dd[3][3][16], d3[3][3][3][16];
+            if (arm->type[a] == 3) {
+                k.arg[0] = x + qa, k.arg[1] = arm->geom + 4 * a;
+                k.res[0] = taylor, k.res[1] = taylor + 12, k.res[2] = taylor + 48, k.res[3] = taylor + 156;
+                vgt_rec_module_taylor(k.arg, k.res, k.iw, k.w, 0);
+                homogeneous(taylor, tz, 1, d0);
+                for (int i = 0; i < 3; ++i) {
+                    homogeneous(taylor + 12 + 12 * i, 0.0, 0, d1[i]);
+                    for (int j = 0; j < 3; ++j) {
+                        homogeneous(taylor + 48 + 12 * (3 * i + j), 0.0, 0, dd[i][j]);
+                        if (order == 3)
+                            for (int m = 0; m < 3; ++m) homogeneous(taylor + 156 + 12 * (9 * i + 3 * j + m), 0.0, 0, d3[i][j][m]);
+                    }
+                }
+            } else {
+                twist_derivative(x[qa], tz, 0, d0);
+                twist_derivative(x[qa], tz, 1, d1[0]);
+                twist_derivative(x[qa], tz, 2, dd[0][0]);
+                twist_derivative(x[qa], tz, 3, d3[0][0][0]);
+            }
+            double *Ta = T + 48 * a, *Da = D + 144 * a, *D2a = D2 + 144 * a;
+            memcpy(Ta, d0, sizeof d0);
+            for (int i = 0; i < nd; ++i) {
+                memcpy(Da + 48 * i, d1[i], sizeof d0);
+                for (int j = 0; j < nd; ++j) memcpy(D2a + 48 * i + 16 * j, dd[i][j], sizeof d0);
+            }
+            if (order == 3) {
+                const double *va = v + qa;
+                for (int e = 0; e < 16; ++e) {
+                    double t1 = 0.0, t2 = 0.0;
+                    for (int i = 0; i < nd; ++i) {
+                        t1 += va[i] * d1[i][e];
+                        for (int j = 0; j < nd; ++j) t2 += va[i] * va[j] * dd[i][j][e];
+                    }
+                    Ta[16 + e] = t1, Ta[32 + e] = t2;
+                    for (int i = 0; i < nd; ++i) {
+                        double p1 = 0.0, p2 = 0.0;
+                        for (int j = 0; j < nd; ++j) {
+                            p1 += va[j] * dd[i][j][e];
+                            for (int m = 0; m < nd; ++m) p2 += va[j] * va[m] * d3[i][j][m][e];
+                        }
+                        Da[48 * i + 16 + e] = p1, Da[48 * i + 32 + e] = p2;
+                    }
+                }
+            }
+        }
+        /* prefix jets L[a] = T_1 ... T_(a-1) */
+        memset(L, 0, sizeof(double) * 48);
+        L[0] = L[5] = L[10] = L[15] = 1.0;
+        for (int a = 0; a < nb; ++a) {
+            const double *P = L + 48 * a, *Ta = T + 48 * a;
+            double *N = L + 48 * (a + 1), tmp[16];
+            mm4(P, Ta, N);
+            if (order == 3) {
+                mm4(P + 16, Ta, N + 16);
+                mm4(P, Ta + 16, tmp);
+                for (int e = 0; e < 16; ++e) N[16 + e] += tmp[e];
+                mm4(P + 32, Ta, N + 32);
+                mm4(P + 16, Ta + 16, tmp);
+                for (int e = 0; e < 16; ++e) N[32 + e] += 2 * tmp[e];
+                mm4(P, Ta + 32, tmp);
+                for (int e = 0; e < 16; ++e) N[32 + e] += tmp[e];
+            }
+        }
+        /* suffix jets R[a] = T_(a+1) ... T_b p */
+        double *Rl = R + 12 * (nb - 1);
+        memset(Rl, 0, sizeof(double) * 12);
+        Rl[0] = arm->tip[0], Rl[1] = arm->tip[1], Rl[2] = arm->tip[2], Rl[3] = 1.0;
+        for (int a = nb - 1; a > 0; --a) {
+            const double *Ta = T + 48 * a, *X = R + 12 * a;
+            double *Y = R + 12 * (a - 1), t[4];
+            mv4(Ta, X, Y);
+            if (order == 3) {
+                mv4(Ta + 16, X, Y + 4);
+                mv4(Ta, X + 4, t);
+                for (int e = 0; e < 4; ++e) Y[4 + e] += t[e];
+                mv4(Ta + 32, X, Y + 8);
+                mv4(Ta + 16, X + 4, t);
+                for (int e = 0; e < 4; ++e) Y[8 + e] += 2 * t[e];
+                mv4(Ta, X + 8, t);
+                for (int e = 0; e < 4; ++e) Y[8 + e] += t[e];
+            }
+        }
+        /* the columns: dP/dq_i and its jets; omega_i; the diagonal blocks of H */
+        double *Hs = H + (size_t)s * nq * nq;
+        memset(Hs, 0, sizeof(double) * (size_t)nq * nq);
+        for (int a = 0; a < nb; ++a) {
+            int nd = dofs(arm, a), qa = arm->qi[a];
+            const double *La = L + 48 * a, *Ra = R + 12 * a, *Ta = T + 48 * a;
+            for (int i = 0; i < nd; ++i) {
+                const double *Di = D + 144 * a + 48 * i;
+                triple_jet(order, La, Di, Ra, cols + 9 * (qa + i));
+                /* omega_i = R_L vee(dR R^T) */
+                double W[9], loc[3];
+                for (int r = 0; r < 3; ++r)
+                    for (int cc = 0; cc < 3; ++cc)
+                        W[3 * r + cc] = Di[4 * r] * Ta[4 * cc] + Di[4 * r + 1] * Ta[4 * cc + 1] + Di[4 * r + 2] * Ta[4 * cc + 2];
+                loc[0] = W[7], loc[1] = W[2], loc[2] = W[3];
+                for (int r = 0; r < 3; ++r)
+                    omega[3 * (qa + i) + r] = La[4 * r] * loc[0] + La[4 * r + 1] * loc[1] + La[4 * r + 2] * loc[2];
+                for (int j = 0; j < nd; ++j) {
+                    double t[4], u[4];
+                    mv4(D2 + 144 * a + 48 * i + 16 * j, Ra, t);
+                    mv4(La, t, u);
+                    Hs[(size_t)(qa + i) * nq + qa + j] = l[0] * u[0] + l[1] * u[1] + l[2] * u[2];
+                }
+            }
+        }
+        /* blocks off the diagonal: lam . (omega_i x u_j) = omega_i . (u_j x lam), joint(i) < joint(j) */
+        for (int j = 0; j < nq; ++j) cross3(cols + 9 * j, l, y + 3 * j);
+        for (int i = 0; i < nq; ++i) {
+            const double *w = omega + 3 * i;
+            for (int j = i + 1; j < nq; ++j) {
+                if (joint[j] == joint[i]) continue;
+                double h = w[0] * y[3 * j] + w[1] * y[3 * j + 1] + w[2] * y[3 * j + 2];
+                Hs[(size_t)i * nq + j] = h, Hs[(size_t)j * nq + i] = h;
+            }
+        }
+        const double *Lb = L + 48 * nb, *pt = R + 12 * (nb - 1);
+        double tip[4];
+        mv4(Lb, pt, tip);
+        memcpy(c + 3 * s, tip, 3 * sizeof(double));
+        double *Js = J + (size_t)s * 3 * nq;
+        for (int i = 0; i < nq; ++i)
+            for (int r = 0; r < 3; ++r) Js[r * nq + i] = cols[9 * i + r];
+        if (order == 3 && d2) {
+            const double *ld = lam_d + 3 * s;
+            double *o = d2 + (size_t)s * (nq + 3);
+            for (int i = 0; i < nq; ++i) {
+                const double *col = cols + 9 * i;
+                o[i] = l[0] * col[6] + l[1] * col[7] + l[2] * col[8] + 2 * (ld[0] * col[3] + ld[1] * col[4] + ld[2] * col[5]);
+            }
+            mv4(Lb + 32, pt, tip);
+            o[nq] = tip[0], o[nq + 1] = tip[1], o[nq + 2] = tip[2];
+        }
+    }
+    free(T), free(D), free(D2), free(L), free(R), free(omega), free(y), free(cols), free(joint), free(taylor);
     work_close(&k);
     return 0;
 }

@@ -35,3 +35,28 @@ int vgt_rec_inverse(const vgt_rec_arm *arm, long n, const double *q, const doubl
                     const double *fext, double *tau);
 int vgt_rec_forward(const vgt_rec_arm *arm, long n, const double *q, const double *qd, const double *tau,
                     const double *fext, double *qdd);
+/* The pose of every module joint (E row-major, r; without the offset tz) and its partial derivatives
+ * of orders 1 to 3 in the module's three legs: 12 + 36 + 108 + 324 = 480 values per module, modules in
+ * order, per sample (the generated vgt_rec_module_taylor). */
+int vgt_rec_taylor(const vgt_rec_arm *arm, long n, const double *q, double *out);
+/* The tip point and (vel not NULL) its velocity J_P qd, both in base components. */
+int vgt_rec_tip_state(const vgt_rec_arm *arm, long n, const double *q, const double *qd, double *tip, double *vel);
+
+/* ---- The closed loop on the recursive model (vgt_rec_loop.c) ------------------------------------
+ * The drivers of vgtarm.h call generated functions of the signature vgt_fn, whose last argument is
+ * the parameter vector p. These adapters give the same functions from the recursive loops: the arm
+ * of a parameter vector is found by its address, registered beforehand (vgt_rec_bind; slot < 64). */
+int vgt_rec_bind(int slot, const double *p, const vgt_rec_arm *arm);
+int vgt_rec_fn_cfc(const double **arg, double **res, long long *iw, double *w, int mem);
+int vgt_rec_fn_fd(const double **arg, double **res, long long *iw, double *w, int mem);
+int vgt_rec_fn_tip_state(const double **arg, double **res, long long *iw, double *w, int mem);
+int vgt_rec_fn_tip(const double **arg, double **res, long long *iw, double *w, int mem);
+int vgt_rec_fn_id(const double **arg, double **res, long long *iw, double *w, int mem);
+int vgt_rec_fn_jac(const double **arg, double **res, long long *iw, double *w, int mem);
+int vgt_rec_fn_tip_hessian(const double **arg, double **res, long long *iw, double *w, int mem);
+int vgt_rec_fn_unavailable(const double **arg, double **res, long long *iw, double *w, int mem);
+/* The inverse kinematics' position terms, exact: the tip c (3), its Jacobian J (3 x nq, row-major),
+ * H = d^2 (lam . P) / dq^2 (nq x nq) at multipliers lam (3); with qd and lam_d (else NULL) also d2
+ * (nq + 3): the second derivative of [J^T lam; P] along (qd, lam_d). */
+int vgt_rec_ik_terms(const vgt_rec_arm *arm, long n, const double *q, const double *lam, const double *qd,
+                     const double *lam_d, double *c, double *J, double *H, double *d2);

@@ -1,0 +1,142 @@
+/* The functions the compiled closed loop (vgtarm.h, closed_loop.c, ga.c) calls, on the recursive
+ * model. Each has the signature of a generated function (vgt_fn): inputs as the symbolic library's
+ * cfc, fd, tip_state, tip, id and jac (codegen/control.py, codegen/model.py), the parameter vector
+ * p last. The arm of p is the one registered for that address (vgt_rec_bind, from Python: the
+ * recursive backend binds every parameter vector a run or a GA hands the drivers); an address not
+ * registered makes the function fail (the drivers then stop with VGT_FUNCTION_FAILED). */
+
+#include <stdlib.h>
+#include <string.h>
+
+#include "vgt_rec.h"
+
+#define SLOTS 64
+
+static const double *bound_p[SLOTS];
+static const vgt_rec_arm *bound_arm[SLOTS];
+
+int vgt_rec_bind(int slot, const double *p, const vgt_rec_arm *arm) {
+    if (slot < 0 || slot >= SLOTS) return -1;
+    bound_p[slot] = p, bound_arm[slot] = arm;
+    return 0;
+}
+
+static const vgt_rec_arm *arm_of(const double *p) {
+    for (int i = 0; i < SLOTS; ++i)
+        if (bound_p[i] == p && bound_arm[i]) return bound_arm[i];
+    return NULL;
+}
+
+/* cfc: q, qd, q_d, qd_d, qdd_d, Kp, Kv, p -> F = M (qdd_d + Kp e + Kv e_dot) + C: inverse dynamics
+ * of the commanded acceleration (recursive Newton-Euler). */
+int vgt_rec_fn_cfc(const double **arg, double **res, long long *iw, double *w, int mem) {
+    (void)iw, (void)w, (void)mem;
+    const vgt_rec_arm *arm = arm_of(arg[7]);
+    if (!arm) return 1;
+    int n = arm->nq;
+    double *a = (double *)malloc(sizeof(double) * (size_t)(2 * n));
+    if (!a) return 1;
+    double *e = a + n;
+    const double *q = arg[0], *qd = arg[1], *q_d = arg[2], *qd_d = arg[3], *qdd_d = arg[4], *Kp = arg[5], *Kv = arg[6];
+    for (int j = 0; j < n; ++j) e[j] = qd_d[j] - qd[j];
+    for (int i = 0; i < n; ++i) {
+        double s = 0.0, t = 0.0;
+        for (int j = 0; j < n; ++j) s += Kp[n * i + j] * (q_d[j] - q[j]);
+        for (int j = 0; j < n; ++j) t += Kv[n * i + j] * e[j];
+        a[i] = qdd_d[i] + s + t;
+    }
+    int status = vgt_rec_inverse(arm, 1, q, qd, a, NULL, res[0]);
+    free(a);
+    return status ? 1 : 0;
+}
+
+static void wrench_of(const double *f, double *out) {
+    out[0] = f[0], out[1] = f[1], out[2] = f[2], out[3] = out[4] = out[5] = 0.0;
+}
+
+/* fd: q, qd, F, f, p -> qdd */
+int vgt_rec_fn_fd(const double **arg, double **res, long long *iw, double *w, int mem) {
+    (void)iw, (void)w, (void)mem;
+    const vgt_rec_arm *arm = arm_of(arg[4]);
+    if (!arm) return 1;
+    double fext[6];
+    wrench_of(arg[3], fext);
+    return vgt_rec_forward(arm, 1, arg[0], arg[1], arg[2], fext, res[0]) ? 1 : 0;
+}
+
+/* id: q, qd, qdd, f, p -> F */
+int vgt_rec_fn_id(const double **arg, double **res, long long *iw, double *w, int mem) {
+    (void)iw, (void)w, (void)mem;
+    const vgt_rec_arm *arm = arm_of(arg[4]);
+    if (!arm) return 1;
+    double fext[6];
+    wrench_of(arg[3], fext);
+    return vgt_rec_inverse(arm, 1, arg[0], arg[1], arg[2], fext, res[0]) ? 1 : 0;
+}
+
+/* tip_state: q, qd, p -> tip, velocity */
+int vgt_rec_fn_tip_state(const double **arg, double **res, long long *iw, double *w, int mem) {
+    (void)iw, (void)w, (void)mem;
+    const vgt_rec_arm *arm = arm_of(arg[2]);
+    if (!arm) return 1;
+    double tip[3], vel[3];
+    if (vgt_rec_tip_state(arm, 1, arg[0], arg[1], tip, vel)) return 1;
+    if (res[0]) memcpy(res[0], tip, sizeof tip);
+    if (res[1]) memcpy(res[1], vel, sizeof vel);
+    return 0;
+}
+
+/* tip: q, p -> tip */
+int vgt_rec_fn_tip(const double **arg, double **res, long long *iw, double *w, int mem) {
+    (void)iw, (void)w, (void)mem;
+    const vgt_rec_arm *arm = arm_of(arg[1]);
+    if (!arm) return 1;
+    double tip[3];
+    if (vgt_rec_tip_state(arm, 1, arg[0], NULL, tip, NULL)) return 1;
+    if (res[0]) memcpy(res[0], tip, sizeof tip);
+    return 0;
+}
+
+/* jac: q, p -> J_P, J_W (3 x n each, row-major) */
+int vgt_rec_fn_jac(const double **arg, double **res, long long *iw, double *w, int mem) {
+    (void)iw, (void)w, (void)mem;
+    const vgt_rec_arm *arm = arm_of(arg[1]);
+    if (!arm) return 1;
+    int n = arm->nq;
+    double *scratch = (double *)malloc(sizeof(double) * (size_t)(6 * n));
+    if (!scratch) return 1;
+    int status = vgt_rec_jacobian(arm, 1, arg[0], scratch, scratch + 3 * n);
+    if (!status) {
+        if (res[0]) memcpy(res[0], scratch, sizeof(double) * (size_t)(3 * n));
+        if (res[1]) memcpy(res[1], scratch + 3 * n, sizeof(double) * (size_t)(3 * n));
+    }
+    free(scratch);
+    return status ? 1 : 0;
+}
+
+/* A function the recursive model does not provide in the loop (the tip Hessian of the GA's quadratic
+ * prediction): it fails, and the driver stops with VGT_FUNCTION_FAILED. */
+int vgt_rec_fn_unavailable(const double **arg, double **res, long long *iw, double *w, int mem) {
+    (void)arg, (void)res, (void)iw, (void)w, (void)mem;
+    return 1;
+}
+
+/* tip_hessian: q, p -> H (3, nq, nq), row-major: d^2 P_k / dq dq, k = 0, 1, 2 (the IK's terms at
+ * the multipliers e_k) */
+int vgt_rec_fn_tip_hessian(const double **arg, double **res, long long *iw, double *w, int mem) {
+    (void)iw, (void)w, (void)mem;
+    const vgt_rec_arm *arm = arm_of(arg[1]);
+    if (!arm) return 1;
+    int n = arm->nq;
+    double *J = (double *)malloc(sizeof(double) * (size_t)(3 * n));
+    if (!J) return 1;
+    double c[3];
+    int status = 0;
+    for (int k = 0; k < 3 && !status; ++k) {
+        double lam[3] = {0.0, 0.0, 0.0};
+        lam[k] = 1.0;
+        status = vgt_rec_ik_terms(arm, 1, arg[0], lam, NULL, NULL, c, J, res[0] + (size_t)k * n * n, NULL);
+    }
+    free(J);
+    return status ? 1 : 0;
+}
