@@ -181,13 +181,4 @@ def test_every_example_robot_runs_every_command(example: Robot, command: str, ca
             f"{example.config.name}: {example.robot.n_modules} modules; the IK of a whole case path takes minutes "
             "(docs/benchmarks.md), run it by hand: vgtarm simulate --config FILE --case 1"
         )
-    if example.long and command == "ik":
-        # known: on the 30-module arm the fast solver's Newton does not converge on the first 27 of
-        # case 2's 81 samples (stationarity up to 6e-3), nor the reference solver after it; the
-        # same test passes on the 6-module arm. Run, as a strict xfail: it fails once that is fixed
-        try:
-            COMMANDS[command](example, capsys)
-        except AssertionError:
-            pytest.xfail(f"{example.config.name}: the IK of case 2 does not converge on its first samples (open)")
-        pytest.fail(f"{example.config.name}: the IK of case 2 now verifies: drop its xfail")
     COMMANDS[command](example, capsys)

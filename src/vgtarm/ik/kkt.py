@@ -297,10 +297,12 @@ def _curvature_lapack(
     """:func:`reduced_curvature`'s second and third stages, per sample with LAPACK (:data:`LAPACK_FROM`)."""
     nj = problem.n
     for i in need.tolist():
-        pivot = _smallest_pivot(W[i])
-        if pivot > 0:
-            certificate[i] = pivot / scale
+        factor, info = scipy.linalg.lapack.dpotrf(W[i], lower=0, clean=0)
+        if info == 0:  # W positive definite: its smallest pivot is the certificate
+            certificate[i] = float(np.diagonal(factor).min() ** 2) / scale
             continue
+        # W is not positive definite: its pivots (an O(n^3) loop in NumPy) would only say so; go to
+        # the reduced Hessian at once
         rows = np.concatenate([J[i], problem.A[active[i]]])
         basis, r, _ = scipy.linalg.qr(rows.T, mode="economic", pivoting=True)
         rank = int((np.abs(np.diagonal(r)) > 1e-12 * max(1.0, float(np.abs(r).max()))).sum())

@@ -243,6 +243,18 @@ class Task:
         reduced task, whose rates :func:`vgtarm.ik.rates.exact` computes from the same conditions)."""
         return self.directions is None
 
+    @property
+    def rates_at_the_end(self) -> bool:
+        """Whether the rates are cheaper computed once a sample has converged than in every evaluation.
+
+        The recursive model (a long stack) solves the rate systems with dense LAPACK solves of size
+        ``n + 3`` in its ``ik_position_rates``: the Newton iteration then evaluates without rates and
+        asks for them only at the samples that stop (the same call on them: the same values). The
+        compiled libraries give the rates in the same generated call, nearly free.
+        """
+        backend = getattr(self.model, "backend", None)
+        return getattr(backend, "kind", "") == "recursive"
+
     def _lift(self, lam: Array) -> Array:
         """Multipliers of the tip's three rows, ``E^T lam`` ``(n, 3)``, for a reduced task's ``lam`` ``(n, r)``."""
         assert self.directions is not None
