@@ -188,7 +188,7 @@ def iterate(
     Samples with positive curvature take the same steps as without it.
     """
     compiled_rates = with_rates and task.compiled_rates
-    late_rates = task.rates_at_the_end
+    in_call = compiled_rates and not task.rates_at_the_end  # else asked for where samples stop
     nj = problem.n
     working = np.asarray(idx, dtype=np.intp)
     state.converged[working] = False
@@ -197,8 +197,6 @@ def iterate(
         if working.size == 0:
             break
         q, lam, mu, active = state.q[working], state.lam[working], state.mu[working], state.active[working]
-        # the first evaluation of a level (interpolated guesses) stops most samples: rates in the call
-        in_call = compiled_rates and not (late_rates and step > 0)
         if in_call:
             residual, J, H, g, rates = task.evaluate_with_rates(working, q, lam, problem.weight)
         else:

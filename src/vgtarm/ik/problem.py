@@ -506,7 +506,9 @@ class BatchState:
             active=np.zeros((n, n_inequalities), dtype=bool),
             residual=np.full((n, m), np.nan),
             J=np.full((n, m, nj), np.nan),
-            H=np.full((n, nj, nj), np.nan),
+            # zeros, not NaN: a long arm's H is gigabytes, and np.zeros leaves the pages to be written
+            # once by the model (an unevaluated sample is refused by its NaN residual and J)
+            H=np.zeros((n, nj, nj)),
             iterations=np.zeros(n, dtype=np.int64),
             converged=np.zeros(n, dtype=bool),
             method=np.full(n, "", dtype="<U24"),

@@ -28,7 +28,7 @@ from ..paths import MAX_COORDINATE, Path
 from . import fast, kkt, reference
 from . import rates as rate_modes
 from .effort import EffortTerms, effort_terms
-from .options import IKOptions
+from .options import IKOptions, default_coarse_step
 from .pose import HOLD, OrientationTarget, angle_error, orientation_target
 from .problem import BatchState, IKProblem, Task
 from .records import IKResult, IKSamples
@@ -216,6 +216,9 @@ def _inverse_kinematics(robot: Robot, path: Path, *, solver: str, rates: str, po
     if rates not in rate_modes.RATE_MODES:
         raise InputError(f"unknown rates mode {rates!r}; valid modes are {', '.join(rate_modes.RATE_MODES)}")
     settings = IKOptions.from_keywords(options, robot.n_joints)
+    if settings.coarse_step is None:
+        reach = float(np.linalg.norm(robot.tip_position(robot.parameters.home)))
+        settings = replace(settings, coarse_step=default_coarse_step(reach))
     effort = settings.criterion == "effort"
     if effort and pose is not None:
         raise InputError("criterion='effort' supports the tip-position task only (pose=None), got a pose")
