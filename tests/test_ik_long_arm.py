@@ -129,3 +129,19 @@ def test_curvature_step_leaves_a_saddle() -> None:
     np.testing.assert_allclose(x[0, :3], [0.0, 0.3, 0.0], atol=1e-15)
     # the new multiplier makes the Lagrangian stationary along the task row (q3): zero here
     assert abs(x[0, 3]) < 1e-15
+
+
+def test_coarse_step_scales_with_the_reach_only_beyond_the_papers() -> None:
+    """The default coarse step: exactly 0.02 m up to the paper robot's reach, in proportion beyond it;
+    the paper's robot's IK of case 1 with the default equals the one with 0.02 m given, bit for bit."""
+    from vgtarm import paths
+    from vgtarm.ik.options import COARSE_STEP, PAPER_REACH, default_coarse_step
+
+    assert default_coarse_step(PAPER_REACH) == COARSE_STEP == 0.02
+    assert default_coarse_step(0.3) == COARSE_STEP
+    assert default_coarse_step(PAPER_REACH + 1e-12) == COARSE_STEP
+    assert default_coarse_step(23.5 * PAPER_REACH) == pytest.approx(23.5 * COARSE_STEP, rel=1e-15)
+    robot = vgtarm.load_robot()
+    path = paths.case1(dt=4e-3)
+    default, given = robot.inverse_kinematics(path), robot.inverse_kinematics(path, coarse_step=0.02)
+    assert default.success and np.array_equal(default.q, given.q) and np.array_equal(default.qdd, given.qdd)
