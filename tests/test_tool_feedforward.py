@@ -136,3 +136,27 @@ def test_command_line_tool_feedforward(capsys, tmp_path):
     assert main(["simulate", "--case", "2", "--duration", "0.05", "--quiet", "--tool-feedforward"]) == 1
     _, err = capsys.readouterr()
     assert "without the cutting force" in err and err.count("\n") == 1
+
+
+def test_the_low_force_preset_feeds_the_cutting_force_forward_only_with_the_tool_force():
+    import argparse
+
+    from vgtarm.app.cli import presets as cli_presets
+    from vgtarm.app.presets import PRESETS, preset_options
+
+    assert PRESETS["low-force"]["tool_feedforward"] is True
+    _, with_force = preset_options("low-force", tool_force=20.0)
+    _, without = preset_options("low-force", tool_force=0.0)
+    assert with_force["tool_force_feedforward"] is True and "tool_force_feedforward" not in without
+    for external_force in (True, False):
+        args = argparse.Namespace(
+            preset="low-force",
+            external_force=external_force,
+            tool_feedforward=False,
+            tool_force_speed=None,
+            estimator="difference",
+            estimator_bandwidth=None,
+        )
+        cli_presets.apply_preset(args)
+        options = cli_presets.simulate_options(args)
+        assert options.get("tool_force_feedforward", False) is external_force

@@ -16,7 +16,7 @@ from typing import Any
 
 from ...simulation.external import DEFAULT_FEEDFORWARD_SPEED
 from ...simulation.sensing import DEFAULT_ESTIMATOR_BANDWIDTH_HZ, ESTIMATORS
-from ..presets import PRESETS
+from ..presets import PRESETS, WITH_TOOL_FORCE
 
 __all__ = ["PRESETS", "add_simulate_options", "apply_preset", "simulate_options"]
 
@@ -64,6 +64,8 @@ def add_simulate_options(parser: argparse.ArgumentParser) -> None:
 def apply_preset(args: argparse.Namespace) -> None:
     """Set the arguments of ``args.preset`` (none: nothing changes)."""
     for key, value in PRESETS.get(getattr(args, "preset", None) or "", {}).items():
+        if key in WITH_TOOL_FORCE and not getattr(args, "external_force", False):
+            continue  # as preset_options: the feedforward of the cutting force only with the tool force
         setattr(args, key, value)
 
 
