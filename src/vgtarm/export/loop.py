@@ -189,6 +189,8 @@ def _check_agrees(settings: Mapping[str, Any], run: Any, plant: Robot) -> None:
             f"velocity_noise = {sensing.velocity_noise!r}: the exported controller is closed without simulated "
             "velocity noise (expected 0)"
         )
+    if run.scenario.tool_force_feedforward:
+        raise InputError("tool_force_feedforward = True: the exported controller has no tool-force feedforward")
     if run.scenario.plant_engine != MODEL_ENGINE:
         raise InputError(f"plant_engine = {run.scenario.plant_engine!r}: expected {MODEL_ENGINE!r}")
 

@@ -76,6 +76,7 @@ class LoopSettings:
     estimator: str = "difference"
     kalman_gain: tuple[float, float, float] = (0.0, 0.0, 0.0)
     threshold_measured: bool = False
+    tool_feedforward: bool = False
 
     def struct(self, n_joints: int, n_margins: int) -> Any:
         """The C structure of these settings for a robot of ``n_joints`` joints."""
@@ -99,6 +100,7 @@ class LoopSettings:
                 "estimator": ESTIMATOR_CODES[self.estimator],
                 "kalman_gain": list(self.kalman_gain),
                 "threshold_measured": int(self.threshold_measured),
+                "tool_feedforward": int(self.tool_feedforward),
             },
         )
 
@@ -124,6 +126,7 @@ class LoopArrays:
         qd0: Array,
         resolution: Array | None = None,
         velocity_noise: Array | None = None,
+        tool_force_expected: Array | None = None,
     ) -> None:
         n, n_joints = np.shape(q_d)
         self.n = n
@@ -145,6 +148,7 @@ class LoopArrays:
                 q_max=q_max,
                 resolution=np.zeros(n_joints) if resolution is None else resolution,
                 velocity_noise=np.zeros((n, n_joints)) if velocity_noise is None else velocity_noise,
+                tool_force_expected=np.zeros((n, 3)) if tool_force_expected is None else tool_force_expected,
             ).items()
         }
         self.q = np.full((n, n_joints), np.nan)

@@ -153,7 +153,11 @@ def simulate(
             - ``estimator``: ``"difference"`` (differenced, filtered encoder counts) or ``"kalman"``
               (a Kalman filter on the encoder positions with the controller model as its process
               model, tuned by ``estimator_bandwidth_hz``, default 60 Hz; needs encoders);
-            - ``transient_s``: length of the start transient excluded from the "after transient" figures.
+            - ``transient_s``: length of the start transient excluded from the "after transient" figures;
+            - ``tool_force_feedforward``: feed the expected cutting force (its model along the
+              reference's tip velocity, smoothed over ``tool_force_speed`` m/s) forward through
+              ``J_P^T``; the observer and the Kalman estimator take it as known and estimate the rest
+              (needs the cutting force; exclusive with ``force_sensor``).
         metadata: extra entries for the summary (case name, ...).
         progress: called as ``progress(samples_done, samples_total)`` now and then.
 
@@ -333,6 +337,9 @@ def prepare(
         if sensing.velocity_noise > 0
         else None
     )
+    expected = None
+    if scenario.tool_force_feedforward:  # along the desired tip velocity J_P(q_d) qd_d of the controller's model
+        expected = external.expected(model.tip_velocity(ref.q, ref.qd)[0], scenario.feedforward_speed)
     arrays = loop_arrays(
         plant,
         model,
@@ -342,6 +349,7 @@ def prepare(
         tip_d=tip_d,
         resolution=sensing.resolution,
         velocity_noise=noise,
+        tool_force_expected=expected,
     )
     settings = LoopSettings(
         dt=dt,
@@ -359,6 +367,7 @@ def prepare(
         estimator=sensing.estimator,
         kalman_gain=sensing.kalman_gain,
         threshold_measured=isinstance(controller, SwitchingControl) and controller.measured_switching,
+        tool_feedforward=bool(scenario.tool_force_feedforward),
     )
     job = Job(
         settings=settings,
@@ -430,12 +439,14 @@ def loop_arrays(
     tip_d: np.ndarray | None = None,
     resolution: np.ndarray | None = None,
     velocity_noise: np.ndarray | None = None,
+    tool_force_expected: np.ndarray | None = None,
 ) -> LoopArrays:
     """The arrays of one closed-loop run of ``plant`` under a controller with model ``model``.
 
     ``disturbance`` ``(N, 3)`` defaults to none, the initial state to rest at ``q_d(0)``,
     ``tip_d`` to the plant's tip along the reference; ``resolution`` and ``velocity_noise`` are
-    the sensing arrays (none by default).
+    the sensing arrays (none by default); ``tool_force_expected`` ``(N, 3)`` the expected tool force
+    the controller feeds forward (zeros by default; used with ``LoopSettings.tool_feedforward``).
     """
     n, n_joints = reference.q.shape
     q0, qd0 = initial_state if initial_state is not None else (reference.q[0], np.zeros(n_joints))
@@ -456,6 +467,7 @@ def loop_arrays(
         qd0=qd0,
         resolution=resolution,
         velocity_noise=velocity_noise,
+        tool_force_expected=tool_force_expected,
     )
 
 
