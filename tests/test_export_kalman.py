@@ -9,6 +9,7 @@ efforts, and runs clean under the sanitizers; bad options are one line."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import shutil
 import subprocess
@@ -156,3 +157,20 @@ def test_the_command_exports_the_estimator(tmp_path, capsys):  # type: ignore[no
     settings = json.loads((tmp_path / "ctl" / "export.json").read_text())
     assert settings["estimator_bandwidth_hz"] == 120.0
     assert settings["kalman_gain"] == list(kalman_gains(1e-3, 120.0))
+
+
+def test_switching_control_on_the_kalman_estimate_equals_simulate(robot, model, tmp_path):  # type: ignore[no-untyped-def]
+    """The safe variant predicts from the readings the next step would use (``vgtc_readings``),
+    which with the Kalman filter is its estimate: with a threshold low enough to activate the GA
+    often, the run through the export equals simulate's bit for bit."""
+    scm = dataclasses.replace(CASE.controller("scm", variant="safe"), threshold=2e-5)
+    reference = joint_reference(robot, 2, duration=0.4)
+    folder = export_controller(
+        robot, tmp_path / "switching", kp=CASE.kp, kv=CASE.kv, controller_model=model, switching=scm, **OPTIONS
+    ).folder
+    options = {"external_force": CASE.external_force, "controller_model": model, **OPTIONS}
+    theirs = simulate(robot, reference, scm, **options)
+    mine = simulate_exported(CompiledExport(folder), robot, reference, controller=scm, **options)
+    assert len(theirs.activations) > 10
+    assert [a.sample for a in mine.activations] == [a.sample for a in theirs.activations]
+    np.testing.assert_array_equal(mine.effort, theirs.effort)
