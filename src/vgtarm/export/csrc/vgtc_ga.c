@@ -472,23 +472,25 @@ static void kernel(vgtc_ga *x, int count, double *sum, long *n_far)
         const float *r = x->r + j * nj, *s = x->s + j * nj;
         const float *J = x->jac_f + (j + 1) * 3 * nj, *off = x->off_f + (j + 1) * 3;
         float norm2[LANES], t[3][LANES], square[LANES];
-        for (i = 0; i < nj; ++i) {
+        for (i = 0; i < nj; ++i) { /* a = Kp E + Kv Ed: each lane's sums in one loop body (in registers) */
             const int ip = i * nj, iv = nn + i * nj;
-            float p0[LANES], v0[LANES];
-            if (nj == 1) {
-                lanes_mul(p0, x->K[ip], E[0]);
-                lanes_mul(v0, x->K[iv], Ed[0]);
-            } else { /* the first product is fused with the second (GCC contracts a*b + c*d so) */
-                lanes_mul(p0, x->K[ip + 1], E[1]);
-                lanes_fma(p0, x->K[ip], E[0]);
-                lanes_mul(v0, x->K[iv + 1], Ed[1]);
-                lanes_fma(v0, x->K[iv], Ed[0]);
+            for (c = 0; c < LANES; ++c) {
+                float p0, v0;
+                if (nj == 1) {
+                    p0 = x->K[ip][c] * E[0][c];
+                    v0 = x->K[iv][c] * Ed[0][c];
+                } else { /* the first product is fused with the second (GCC contracts a*b + c*d so) */
+                    p0 = x->K[ip + 1][c] * E[1][c];
+                    p0 = FMA(x->K[ip][c], E[0][c], p0);
+                    v0 = x->K[iv + 1][c] * Ed[1][c];
+                    v0 = FMA(x->K[iv][c], Ed[0][c], v0);
+                }
+                for (l = 2; l < nj; ++l) {
+                    p0 = FMA(x->K[ip + l][c], E[l][c], p0);
+                    v0 = FMA(x->K[iv + l][c], Ed[l][c], v0);
+                }
+                a[i][c] = p0 + v0;
             }
-            for (l = 2; l < nj; ++l) {
-                lanes_fma(p0, x->K[ip + l], E[l]);
-                lanes_fma(v0, x->K[iv + l], Ed[l]);
-            }
-            for (c = 0; c < LANES; ++c) a[i][c] = p0[c] + v0[c];
         }
         for (c = 0; c < LANES; ++c) norm2[c] = 0.0f;
         for (i = 0; i < nj; ++i) {
