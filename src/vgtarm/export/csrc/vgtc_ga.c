@@ -160,15 +160,18 @@ static double pairwise_sum(const double *a, long n)
 
 static double clean_cost(double c) { return isfinite(c) ? c : INFINITY; }
 
-/* Indices in ascending cost, ties in index order (any stable sort's order): by counting ranks. */
+/* Indices in ascending cost, ties in index order (any stable sort's order): by counting ranks
+ * (n <= VGTC_GA_POPULATION; the costs cleaned once, not at every comparison). */
 static void stable_order(long n, const double *cost, long *order)
 {
+    double clean[VGTC_GA_POPULATION];
     long i, j;
+    for (i = 0; i < n; ++i) clean[i] = clean_cost(cost[i]);
     for (i = 0; i < n; ++i) {
-        const double ci = clean_cost(cost[i]);
+        const double ci = clean[i];
         long rank = 0;
-        for (j = 0; j < i; ++j) rank += clean_cost(cost[j]) <= ci;
-        for (j = i + 1; j < n; ++j) rank += clean_cost(cost[j]) < ci;
+        for (j = 0; j < i; ++j) rank += clean[j] <= ci;
+        for (j = i + 1; j < n; ++j) rank += clean[j] < ci;
         order[rank] = i;
     }
 }
