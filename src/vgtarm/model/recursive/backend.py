@@ -115,6 +115,16 @@ LOOP_FUNCTIONS = {
     "jac": "vgt_rec_fn_jac",
     "tip_hessian": "vgt_rec_fn_tip_hessian",
 }
+#: The same on the loop step's shared kinematics (``vgt_rec_step_*``): the joints of a step's state
+#: computed once for the plant's tip state, the CFC law and the plant's forward dynamics.
+FUSED_LOOP_FUNCTIONS = {
+    **LOOP_FUNCTIONS,
+    "cfc": "vgt_rec_fn_cfc_fused",
+    "fd": "vgt_rec_fn_fd_fused",
+    "tip_state": "vgt_rec_fn_tip_state_fused",
+    "tip": "vgt_rec_fn_tip_fused",
+    "id": "vgt_rec_fn_id_fused",
+}
 #: Slots of the C registry of bound parameter vectors (``vgt_rec_bind``), shared by every backend
 #: of the process: each holds the array (so its address stays its own) and its model.
 _SLOTS = 64
@@ -142,8 +152,11 @@ class RecursiveBackend:
 
     kind = "recursive"
 
-    def __init__(self, stack: Stack) -> None:
+    def __init__(self, stack: Stack, *, fused: bool = True) -> None:
         self.stack = stack
+        #: The closed loop's functions share a step's kinematics (:data:`FUSED_LOOP_FUNCTIONS`);
+        #: ``False``: the separate adapters (:data:`LOOP_FUNCTIONS`), the same results bit for bit.
+        self.fused = fused
         self.n = stack.n_joints
         found = shapes(StackDefinition.of(stack))
         self._signatures = {
@@ -173,7 +186,8 @@ class RecursiveBackend:
     def call(self, name: str) -> Any:
         """A ``vgt_call`` of the closed loop's function ``name`` (its adapter on the recursive model)."""
         ffi, lib = load_library()
-        address = int(ffi.cast("intptr_t", getattr(lib, LOOP_FUNCTIONS[name])))
+        functions = FUSED_LOOP_FUNCTIONS if self.fused else LOOP_FUNCTIONS
+        address = int(ffi.cast("intptr_t", getattr(lib, functions[name])))
         loop_ffi = interface.ffi()
         return loop_ffi.new("vgt_call *", [loop_ffi.cast("vgt_fn", address), 8, 2, 0, 0])[0]
 
@@ -194,7 +208,7 @@ class RecursiveBackend:
                 for old, entry in list(_bound.items()):
                     if entry[0] == slot:
                         del _bound[old]
-            model = RecursiveModel(stack_from_vector(self.stack, p))
+            model = self._model(p)  # equal vectors (plant, exact controller model): one arm
             _bound[address] = (slot, p, model)
             lib.vgt_rec_bind(slot, ffi.cast("double *", address), model._arm)
 

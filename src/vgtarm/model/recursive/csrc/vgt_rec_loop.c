@@ -18,6 +18,7 @@ static const vgt_rec_arm *bound_arm[SLOTS];
 int vgt_rec_bind(int slot, const double *p, const vgt_rec_arm *arm) {
     if (slot < 0 || slot >= SLOTS) return -1;
     bound_p[slot] = p, bound_arm[slot] = arm;
+    vgt_rec_step_forget(); /* the arm a slot held may be freed, and its memory reused by another */
     return 0;
 }
 
@@ -139,4 +140,101 @@ int vgt_rec_fn_tip_hessian(const double **arg, double **res, long long *iw, doub
     }
     free(J);
     return status ? 1 : 0;
+}
+
+/* ---- The same functions on the step's shared kinematics (vgt_rec_step_*, vgt_rec.c) -------------
+ * A loop step evaluates the plant's tip state, the CFC law and the plant's forward dynamics at the
+ * same state (and the CFC law on the plant's arm when the controller's parameter vector equals the
+ * plant's: the backend binds equal vectors to one arm): the joints are computed once. */
+
+/* Per thread: the commanded acceleration and the errors of cfc (grown, never freed). */
+static _Thread_local double *cfc_scratch = NULL;
+static _Thread_local int cfc_capacity = 0;
+
+/* a = qdd_d + Kp (q_d - q) + Kv (qd_d - qd): each entry summed in the order of vgt_rec_fn_cfc, four
+ * rows at a time (independent sums, the same values). */
+static void commanded(int n, const double *q, const double *qd, const double *q_d, const double *qd_d,
+                      const double *qdd_d, const double *Kp, const double *Kv, double *e, double *ed, double *a) {
+    for (int j = 0; j < n; ++j) e[j] = q_d[j] - q[j], ed[j] = qd_d[j] - qd[j];
+    int i = 0;
+    for (; i + 4 <= n; i += 4) {
+        const double *p0 = Kp + (size_t)n * i, *p1 = p0 + n, *p2 = p1 + n, *p3 = p2 + n;
+        const double *v0 = Kv + (size_t)n * i, *v1 = v0 + n, *v2 = v1 + n, *v3 = v2 + n;
+        double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0, t0 = 0.0, t1 = 0.0, t2 = 0.0, t3 = 0.0;
+        for (int j = 0; j < n; ++j) {
+            const double x = e[j];
+            s0 += p0[j] * x, s1 += p1[j] * x, s2 += p2[j] * x, s3 += p3[j] * x;
+        }
+        for (int j = 0; j < n; ++j) {
+            const double x = ed[j];
+            t0 += v0[j] * x, t1 += v1[j] * x, t2 += v2[j] * x, t3 += v3[j] * x;
+        }
+        a[i] = qdd_d[i] + s0 + t0, a[i + 1] = qdd_d[i + 1] + s1 + t1;
+        a[i + 2] = qdd_d[i + 2] + s2 + t2, a[i + 3] = qdd_d[i + 3] + s3 + t3;
+    }
+    for (; i < n; ++i) {
+        double s = 0.0, t = 0.0;
+        for (int j = 0; j < n; ++j) s += Kp[(size_t)n * i + j] * e[j];
+        for (int j = 0; j < n; ++j) t += Kv[(size_t)n * i + j] * ed[j];
+        a[i] = qdd_d[i] + s + t;
+    }
+}
+
+/* cfc: q, qd, q_d, qd_d, qdd_d, Kp, Kv, p -> F */
+int vgt_rec_fn_cfc_fused(const double **arg, double **res, long long *iw, double *w, int mem) {
+    (void)iw, (void)w, (void)mem;
+    const vgt_rec_arm *arm = arm_of(arg[7]);
+    if (!arm) return 1;
+    int n = arm->nq;
+    if (cfc_capacity < n) {
+        double *grown = (double *)realloc(cfc_scratch, sizeof(double) * (size_t)(3 * n));
+        if (!grown) return 1;
+        cfc_scratch = grown, cfc_capacity = n;
+    }
+    double *a = cfc_scratch, *e = a + n, *ed = e + n;
+    commanded(n, arg[0], arg[1], arg[2], arg[3], arg[4], arg[5], arg[6], e, ed, a);
+    return vgt_rec_step_inverse(arm, arg[0], arg[1], a, NULL, res[0]) ? 1 : 0;
+}
+
+/* fd: q, qd, F, f, p -> qdd */
+int vgt_rec_fn_fd_fused(const double **arg, double **res, long long *iw, double *w, int mem) {
+    (void)iw, (void)w, (void)mem;
+    const vgt_rec_arm *arm = arm_of(arg[4]);
+    if (!arm) return 1;
+    double fext[6];
+    wrench_of(arg[3], fext);
+    return vgt_rec_step_forward(arm, arg[0], arg[1], arg[2], fext, res[0]) ? 1 : 0;
+}
+
+/* id: q, qd, qdd, f, p -> F */
+int vgt_rec_fn_id_fused(const double **arg, double **res, long long *iw, double *w, int mem) {
+    (void)iw, (void)w, (void)mem;
+    const vgt_rec_arm *arm = arm_of(arg[4]);
+    if (!arm) return 1;
+    double fext[6];
+    wrench_of(arg[3], fext);
+    return vgt_rec_step_inverse(arm, arg[0], arg[1], arg[2], fext, res[0]) ? 1 : 0;
+}
+
+/* tip_state: q, qd, p -> tip, velocity */
+int vgt_rec_fn_tip_state_fused(const double **arg, double **res, long long *iw, double *w, int mem) {
+    (void)iw, (void)w, (void)mem;
+    const vgt_rec_arm *arm = arm_of(arg[2]);
+    if (!arm) return 1;
+    double tip[3], vel[3];
+    if (vgt_rec_step_tip_state(arm, arg[0], arg[1], tip, vel)) return 1;
+    if (res[0]) memcpy(res[0], tip, sizeof tip);
+    if (res[1]) memcpy(res[1], vel, sizeof vel);
+    return 0;
+}
+
+/* tip: q, p -> tip */
+int vgt_rec_fn_tip_fused(const double **arg, double **res, long long *iw, double *w, int mem) {
+    (void)iw, (void)w, (void)mem;
+    const vgt_rec_arm *arm = arm_of(arg[1]);
+    if (!arm) return 1;
+    double tip[3];
+    if (vgt_rec_step_tip(arm, arg[0], tip)) return 1;
+    if (res[0]) memcpy(res[0], tip, sizeof tip);
+    return 0;
 }
