@@ -236,10 +236,10 @@ class RecursiveBackend:
         if n == 0:
             return [np.empty((0, size)) for size in sig.nnz_out]
         q = rows[0]
-        if name in ("fk", "tip"):
+        if name == "tip":
+            return [model.tip_position(q)]
+        if name == "fk":
             fk = model.forward_kinematics(q)
-            if name == "tip":
-                return [fk["tip"]]
             return [
                 fk["passive"].reshape(n, -1),
                 fk["platform_position"].reshape(n, -1),

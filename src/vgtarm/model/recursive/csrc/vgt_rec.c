@@ -617,6 +617,51 @@ int vgt_rec_taylor(const vgt_rec_arm *arm, long n, const double *q, double *out)
     return 0;
 }
 
+/* The tip point alone: each joint's pose (vgt_rec_module_pose: no motion subspace) chained from
+ * the tip back to the base (the same products as the poses in the base frame of joints()). */
+int vgt_rec_tip(const vgt_rec_arm *arm, long n, const double *q, double *tip) {
+    casadi_int sz_arg, sz_res, sz_iw, sz_w;
+    vgt_rec_module_pose_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+    const casadi_real *arg[8];
+    casadi_real *res[8];
+    casadi_int iw[64];
+    casadi_real w[512];
+    if (sz_arg > 8 || sz_res > 8 || sz_iw > 64 || sz_w > 512) return vgt_rec_tip_state(arm, n, q, NULL, tip, NULL);
+    int nb = arm->nb;
+    for (long s = 0; s < n; ++s) {
+        const double *x = q + s * arm->nq;
+        double R0[9], p0[3];
+        for (int i = 0; i < nb; ++i) {
+            const double *qi = x + arm->qi[i];
+            double R[9], r[3], pose[12];
+            if (arm->type[i] == 3) {
+                arg[0] = qi, arg[1] = arm->geom + 4 * i, res[0] = pose;
+                vgt_rec_module_pose(arg, res, iw, w, 0);
+                memcpy(R, pose, 9 * sizeof(double));
+                r[0] = pose[9], r[1] = pose[10], r[2] = pose[11] + arm->tz[i];
+            } else {
+                double c = cos(qi[0]), sn = sin(qi[0]);
+                double Rz[9] = {c, -sn, 0.0, sn, c, 0.0, 0.0, 0.0, 1.0};
+                memcpy(R, Rz, sizeof Rz);
+                r[0] = 0.0, r[1] = 0.0, r[2] = arm->tz[i];
+            }
+            if (i == 0) {
+                memcpy(R0, R, sizeof R);
+                memcpy(p0, r, sizeof r);
+            } else {
+                double t[3];
+                mul3(R0, r, t);
+                matmul3(R0, R, R0);
+                p0[0] += t[0], p0[1] += t[1], p0[2] += t[2];
+            }
+        }
+        double t[3];
+        mul3(R0, arm->tip, t);
+        for (int r = 0; r < 3; ++r) tip[3 * s + r] = p0[r] + t[r];
+    }
+    return 0;
+}
+
 int vgt_rec_tip_state(const vgt_rec_arm *arm, long n, const double *q, const double *qd, double *tip, double *vel) {
     work_t k;
     if (work_open(&k, arm)) return -1;
@@ -984,5 +1029,5 @@ int vgt_rec_step_tip(const vgt_rec_arm *arm, const double *q, double *tip) {
         for (int r = 0; r < 3; ++r) tip[r] = last->p0[r] + t[r];
         return 0;
     }
-    return vgt_rec_tip_state(arm, 1, q, NULL, tip, NULL);
+    return vgt_rec_tip(arm, 1, q, tip);
 }

@@ -39,6 +39,8 @@ int vgt_rec_forward(const vgt_rec_arm *arm, long n, const double *q, const doubl
  * of orders 1 to 3 in the module's three legs: 12 + 36 + 108 + 324 = 480 values per module, modules in
  * order, per sample (the generated vgt_rec_module_taylor). */
 int vgt_rec_taylor(const vgt_rec_arm *arm, long n, const double *q, double *out);
+/* The tip point alone (base components), from the joints' poses only. */
+int vgt_rec_tip(const vgt_rec_arm *arm, long n, const double *q, double *tip);
 /* The tip point and (vel not NULL) its velocity J_P qd, both in base components. */
 int vgt_rec_tip_state(const vgt_rec_arm *arm, long n, const double *q, const double *qd, double *tip, double *vel);
 
