@@ -1,0 +1,149 @@
+"""The closed loop's fused step on the recursive model (issue 24): the same results as the separate adapters.
+
+- whole runs of computed force control (``run_case``) with the fused step (the default backend) and
+  with the separate adapters of the previous implementation (``RecursiveBackend(stack, fused=False)``)
+  are the same bit for bit: Euler and RK4, the momentum observer under the tool force with sensing
+  (the controller's state then differs from the plant's, so the CFC law computes its own joints),
+  the Kalman estimator, a controller model with other masses (another arm);
+- the step functions (``vgt_rec_step_*``), called in an order that hits and misses what a thread
+  keeps (states repeated, changed, two arms alternating, a binding in between), equal the batch
+  functions bit for bit;
+- the tip alone (``vgt_rec_tip``, from the joints' poses) equals forward kinematics' tip bit for bit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+import pytest
+
+from tests.test_recursive import configurations, varied_stack
+from vgtarm.model.recursive import RecursiveModel
+from vgtarm.model.recursive.backend import RecursiveBackend
+from vgtarm.model.robot import Robot
+from vgtarm.model.stack import Stack
+from vgtarm.simulation.reference import JointReference
+
+FIELDS = ("q", "qd", "effort", "tip", "tip_error", "f_ext", "effort_estimate", "tip_error_measured")
+
+
+def long_stack(k: int) -> Stack:
+    """``k`` modules: those of :func:`varied_stack` (6) repeated."""
+    short = varied_stack(6)
+    modules = tuple(short.modules[i % short.n_modules] for i in range(k))
+    return replace(short, name=f"long {k}", modules=modules)
+
+
+def sinusoids(robot: Robot, stack: Stack, samples: int = 400) -> JointReference:
+    """Every joint along a sinusoid of 5 % of its span about home (as ``benchmarks recursive-control``)."""
+    t = np.arange(samples, dtype=np.float64) * 1e-3
+    span = (stack.upper - stack.lower) * 0.05
+    phase = np.linspace(0.0, np.pi, stack.n_joints)
+    w = 2 * np.pi / 0.4
+    q = stack.home + span * np.sin(w * t[:, None] + phase)
+    qd = span * w * np.cos(w * t[:, None] + phase)
+    qdd = -span * w * w * np.sin(w * t[:, None] + phase)
+    return JointReference(t=t, q=q, qd=qd, qdd=qdd, rates="exact", name="sinusoids", tip=robot.tip_position(q))
+
+
+def _same(a: Any, b: Any) -> None:
+    for field in FIELDS:
+        x, y = getattr(a, field), getattr(b, field)
+        if x is None or y is None:
+            assert x is None and y is None, field
+            continue
+        assert np.array_equal(np.asarray(x), np.asarray(y), equal_nan=True), field
+
+
+@pytest.mark.parametrize("k", [3, 12])
+def test_fused_step_equals_the_separate_adapters(k: int) -> None:
+    from vgtarm.app.cases import run_case
+
+    stack = varied_stack(k) if k <= 6 else long_stack(k)
+    fused, separate = Robot(stack, RecursiveBackend(stack)), Robot(stack, RecursiveBackend(stack, fused=False))
+    assert fused.backend.fused and not separate.backend.fused
+    reference = sinusoids(fused, stack)
+    heavier = replace(
+        stack,
+        modules=tuple(replace(m, platform=replace(m.platform, mass=1.1 * m.platform.mass)) for m in stack.modules),
+    )
+    runs: list[dict[str, Any]] = [
+        {},
+        {"integrator": "rk4", "substeps": 2},
+        {"observer": "momentum", "external_force": True, "encoder_resolution": 1e-6, "velocity_noise": 1e-4},
+        {"observer": "momentum", "encoder_resolution": 1e-6, "estimator": "kalman"},
+        {"controller_model": heavier, "external_force": True},
+    ]
+    for options in runs:
+        a = run_case(separate, 1, reference=reference, **options)
+        b = run_case(fused, 1, reference=reference, **options)
+        assert a.success and b.success, options
+        assert np.isfinite(b.effort).all() and np.abs(b.effort).max() > 0.0
+        _same(a, b)
+
+
+def test_step_functions_equal_the_batch_functions() -> None:
+    stacks = [varied_stack(5), long_stack(9)]
+    models = [RecursiveModel(s) for s in stacks]
+    # the same structure, other masses: another arm of the same size
+    heavier = replace(stacks[0], end_effector=replace(stacks[0].end_effector, mass=2.0))
+    models.append(RecursiveModel(heavier))
+    ffi, lib = models[0]._ffi, models[0]._lib
+    rng = np.random.default_rng(3)
+    data = []
+    for m in models:
+        n = m.n
+        q = configurations(m.stack, 4, seed=n)
+        qd, x = rng.normal(scale=0.5, size=(4, n)), rng.normal(scale=5.0, size=(4, n))
+        wrench = rng.normal(size=(4, 6))
+        data.append((m, q, qd, x, wrench))
+
+    def ptr(a: np.ndarray) -> Any:
+        return ffi.cast("double *", ffi.from_buffer(a))
+
+    def expected(m: RecursiveModel, q: np.ndarray, qd: np.ndarray, x: np.ndarray, w: np.ndarray) -> list[np.ndarray]:
+        return [
+            m.inverse_dynamics(q, qd, x, w[:3], w[3:]),
+            m.forward_dynamics(q, qd, x, w[:3], w[3:]),
+            *(np.asarray(v) for v in _tip_state(m, q, qd)),
+        ]
+
+    order = [(0, 0), (0, 0), (0, 1), (1, 0), (0, 1), (2, 1), (0, 1), (1, 3), (1, 3), (2, 2), (0, 2)]
+    for step, (which, sample) in enumerate(order):
+        m, q, qd, x, w = data[which]
+        qs, qds, xs, ws = (np.ascontiguousarray(a[sample]) for a in (q, qd, x, w))
+        want = expected(m, qs, qds, xs, ws)
+        tau, acc, tip, vel, alone = (np.empty(n) for n in (m.n, m.n, 3, 3, 3))
+        # in an order that reuses what the thread keeps: tip state, inverse, forward, tip
+        assert lib.vgt_rec_step_tip_state(m._arm, ptr(qs), ptr(qds), ptr(tip), ptr(vel)) == 0
+        assert lib.vgt_rec_step_inverse(m._arm, ptr(qs), ptr(qds), ptr(xs), ptr(ws), ptr(tau)) == 0
+        assert lib.vgt_rec_step_forward(m._arm, ptr(qs), ptr(qds), ptr(xs), ptr(ws), ptr(acc)) == 0
+        assert lib.vgt_rec_step_tip(m._arm, ptr(qs), ptr(alone)) == 0
+        for got, ref in zip((tau, acc, tip, vel, alone), (*want, want[2]), strict=True):
+            assert np.array_equal(got, ref), step
+        if step == 5:
+            lib.vgt_rec_step_forget()
+        # a copy of the state at another address, and a state differing in one velocity's last bit
+        other = qds.copy()
+        other[-1] = np.nextafter(other[-1], np.inf)
+        assert lib.vgt_rec_step_inverse(m._arm, ptr(qs.copy()), ptr(other), ptr(xs), ptr(ws), ptr(tau)) == 0
+        assert np.array_equal(tau, m.inverse_dynamics(qs, other, xs, ws[:3], ws[3:]))
+
+
+def _tip_state(m: RecursiveModel, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    tip, vel = np.empty((1, 3)), np.empty((1, 3))
+    m._call("vgt_rec_tip_state", 1, np.ascontiguousarray(q[None]), np.ascontiguousarray(qd[None]), tip, vel)
+    return tip[0], vel[0]
+
+
+@pytest.mark.parametrize("k", [1, 2, 5, 6, 30])
+def test_tip_alone_equals_forward_kinematics(k: int) -> None:
+    stack = varied_stack(k) if k <= 6 else long_stack(k)
+    model = RecursiveModel(stack)
+    q = configurations(stack, 300, seed=k)
+    assert np.array_equal(model.tip_position(q), model.forward_kinematics(q)["tip"])
+    assert np.array_equal(model.tip_position(q[0]), model.forward_kinematics(q[0])["tip"])
+    fused, separate = Robot(stack, RecursiveBackend(stack)), Robot(stack, RecursiveBackend(stack, fused=False))
+    assert np.array_equal(fused.tip_position(q), separate.tip_position(q))
