@@ -147,3 +147,49 @@ def test_tip_alone_equals_forward_kinematics(k: int) -> None:
     assert np.array_equal(model.tip_position(q[0]), model.forward_kinematics(q[0])["tip"])
     fused, separate = Robot(stack, RecursiveBackend(stack)), Robot(stack, RecursiveBackend(stack, fused=False))
     assert np.array_equal(fused.tip_position(q), separate.tip_position(q))
+
+
+def test_cfc_law_with_bound_gains_equals_the_separate_adapter() -> None:
+    """The fused CFC law over the nonzero entries of bound gains (a third of them zero, signs mixed)
+    and over every entry of gains not bound equals the separate adapter bit for bit."""
+    stack = varied_stack(5)
+    backend = RecursiveBackend(stack)
+    p = np.ascontiguousarray(stack.vector())
+    backend.bind_parameters(p)
+    ffi, lib = backend._models[p.tobytes()]._ffi, backend._models[p.tobytes()]._lib
+    n = stack.n_joints
+    rng = np.random.default_rng(11)
+
+    def ptr(a: np.ndarray) -> Any:
+        return ffi.cast("double *", ffi.from_buffer(a))
+
+    Kp = rng.normal(scale=50.0, size=(n, n)) * (rng.uniform(size=(n, n)) > 0.33)
+    Kv = rng.normal(scale=5.0, size=(n, n)) * (rng.uniform(size=(n, n)) > 0.33)
+    Kp[0, :] = -0.0  # a row of zeros (negative)
+    q = configurations(stack, 3, seed=4)
+    for bound in (True, False):
+        backend.bind_gains(Kp, Kv) if bound else backend.bind_gains(None, None)
+        for s in range(3):
+            qd, q_d, qd_d, qdd_d = (rng.normal(size=n) for _ in range(4))
+            inputs = [q[s], qd, q[s] + 0.01 * q_d, qd_d, qdd_d]
+            args = ffi.new(
+                "const double *[8]", [*(ptr(np.ascontiguousarray(a)) for a in inputs), ptr(Kp), ptr(Kv), ptr(p)]
+            )
+            fused, separate = np.empty(n), np.empty(n)
+            assert lib.vgt_rec_fn_cfc_fused(args, ffi.new("double *[1]", [ptr(fused)]), ffi.NULL, ffi.NULL, 0) == 0
+            assert lib.vgt_rec_fn_cfc(args, ffi.new("double *[1]", [ptr(separate)]), ffi.NULL, ffi.NULL, 0) == 0
+            assert np.array_equal(fused, separate), (bound, s)
+    backend.bind_gains(None, None)
+
+
+def test_switching_control_on_the_fused_step_equals_the_separate_adapters() -> None:
+    from vgtarm.app.cases import run_case
+
+    stack = varied_stack(3)
+    fused, separate = Robot(stack, RecursiveBackend(stack)), Robot(stack, RecursiveBackend(stack, fused=False))
+    reference = sinusoids(fused, stack, samples=60)
+    start = (reference.q[0] + 0.004, np.zeros(stack.n_joints))
+    a = run_case(separate, 2, reference=reference, controller="scm", initial_state=start)
+    b = run_case(fused, 2, reference=reference, controller="scm", initial_state=start)
+    assert a.success and b.success and len(a.activations) == len(b.activations) > 0
+    _same(a, b)

@@ -214,6 +214,20 @@ class RecursiveBackend:
             _bound[address] = (slot, p, model)
             lib.vgt_rec_bind(slot, ffi.cast("double *", address), model._arm)
 
+    def bind_gains(self, Kp: Array | None, Kv: Array | None) -> None:
+        """Tell the fused CFC law the gain matrices (C-contiguous float64, ``n x n``) the next driver
+        call passes, in this thread, so it sums over their nonzero entries only (the same values);
+        ``None`` unbinds. The arrays must not change until unbound (the driver unbinds after its call)."""
+        ffi, lib = load_library()
+        if Kp is None or Kv is None:
+            lib.vgt_rec_bind_gains(ffi.NULL, ffi.NULL, 0)
+            return
+        for K in (Kp, Kv):
+            if K.dtype != np.float64 or not K.flags.c_contiguous or K.shape != (self.n, self.n):
+                raise ValueError("bind_gains: expected n x n C-contiguous float64 gain matrices")
+        if lib.vgt_rec_bind_gains(ffi.cast("double *", Kp.ctypes.data), ffi.cast("double *", Kv.ctypes.data), self.n):
+            raise MemoryError("bind_gains: could not allocate the gains' index")
+
     def signature(self, name: str) -> Signature:
         if name not in self._signatures:
             raise KeyError(f"{name!r} is not on the recursive model (it has {', '.join(FUNCTIONS)})")

@@ -72,6 +72,10 @@ int vgt_rec_fn_tip_hessian(const double **arg, double **res, long long *iw, doub
 int vgt_rec_fn_unavailable(const double **arg, double **res, long long *iw, double *w, int mem);
 /* The same functions on the step's shared kinematics (vgt_rec_step_*): cfc, fd, id, tip_state and tip
  * (jac and tip_hessian are the adapters above). */
+/* The gains Kp, Kv (n x n, row-major) the next driver calls pass (by address; their contents must not
+ * change until unbound): cfc_fused then sums over their nonzero entries only, the same values.
+ * NULL unbinds. */
+int vgt_rec_bind_gains(const double *Kp, const double *Kv, int n);
 int vgt_rec_fn_cfc_fused(const double **arg, double **res, long long *iw, double *w, int mem);
 int vgt_rec_fn_fd_fused(const double **arg, double **res, long long *iw, double *w, int mem);
 int vgt_rec_fn_id_fused(const double **arg, double **res, long long *iw, double *w, int mem);

@@ -22,9 +22,16 @@ int vgt_rec_bind(int slot, const double *p, const vgt_rec_arm *arm) {
     return 0;
 }
 
+static _Thread_local int last_slot = 0; /* the slot found last: a loop step asks for the same ones */
+
 static const vgt_rec_arm *arm_of(const double *p) {
+    int last = last_slot;
+    if (bound_p[last] == p && bound_arm[last]) return bound_arm[last];
     for (int i = 0; i < SLOTS; ++i)
-        if (bound_p[i] == p && bound_arm[i]) return bound_arm[i];
+        if (bound_p[i] == p && bound_arm[i]) {
+            last_slot = i;
+            return bound_arm[i];
+        }
     return NULL;
 }
 
@@ -180,6 +187,53 @@ static void commanded(int n, const double *q, const double *qd, const double *q_
     }
 }
 
+/* The gain matrices of a run, bound by the driver's caller for the run's call (vgt_rec_bind_gains),
+ * in the calling thread (the one the driver runs in): the columns of each row's nonzero entries,
+ * Kp's rows then Kv's. */
+static _Thread_local const double *gains_kp = NULL, *gains_kv = NULL;
+static _Thread_local int gains_n = 0;
+static _Thread_local int *gains_start = NULL, *gains_col = NULL; /* (2 n + 1), (nonzeros) */
+
+int vgt_rec_bind_gains(const double *Kp, const double *Kv, int n) {
+    gains_kp = gains_kv = NULL, gains_n = 0;
+    free(gains_start), free(gains_col);
+    gains_start = gains_col = NULL;
+    if (!Kp || !Kv || n <= 0) return 0;
+    size_t count = 0, nn = (size_t)n * (size_t)n;
+    for (size_t e = 0; e < nn; ++e) count += (Kp[e] != 0.0) + (Kv[e] != 0.0);
+    gains_start = (int *)malloc(sizeof(int) * (size_t)(2 * n + 1));
+    gains_col = (int *)malloc(sizeof(int) * (count > 0 ? count : 1));
+    if (!gains_start || !gains_col) {
+        free(gains_start), free(gains_col);
+        gains_start = gains_col = NULL;
+        return -1;
+    }
+    int k = 0;
+    for (int r = 0; r < 2 * n; ++r) {
+        const double *row = (r < n ? Kp : Kv) + (size_t)n * (size_t)(r % n);
+        gains_start[r] = k;
+        for (int j = 0; j < n; ++j)
+            if (row[j] != 0.0) gains_col[k++] = j;
+    }
+    gains_start[2 * n] = k;
+    gains_kp = Kp, gains_kv = Kv, gains_n = n;
+    return 0;
+}
+
+/* commanded() over the nonzero entries of bound gains: the same sums (a zero entry adds a zero
+ * product, which leaves a sum unchanged; the errors are finite: the loop checks its states). */
+static void commanded_sparse(int n, const double *q, const double *qd, const double *q_d, const double *qd_d,
+                             const double *qdd_d, const double *Kp, const double *Kv, double *e, double *ed, double *a) {
+    for (int j = 0; j < n; ++j) e[j] = q_d[j] - q[j], ed[j] = qd_d[j] - qd[j];
+    for (int i = 0; i < n; ++i) {
+        const double *p = Kp + (size_t)n * i, *v = Kv + (size_t)n * i;
+        double s = 0.0, t = 0.0;
+        for (int k = gains_start[i]; k < gains_start[i + 1]; ++k) s += p[gains_col[k]] * e[gains_col[k]];
+        for (int k = gains_start[n + i]; k < gains_start[n + i + 1]; ++k) t += v[gains_col[k]] * ed[gains_col[k]];
+        a[i] = qdd_d[i] + s + t;
+    }
+}
+
 /* cfc: q, qd, q_d, qd_d, qdd_d, Kp, Kv, p -> F */
 int vgt_rec_fn_cfc_fused(const double **arg, double **res, long long *iw, double *w, int mem) {
     (void)iw, (void)w, (void)mem;
@@ -192,7 +246,10 @@ int vgt_rec_fn_cfc_fused(const double **arg, double **res, long long *iw, double
         cfc_scratch = grown, cfc_capacity = n;
     }
     double *a = cfc_scratch, *e = a + n, *ed = e + n;
-    commanded(n, arg[0], arg[1], arg[2], arg[3], arg[4], arg[5], arg[6], e, ed, a);
+    if (arg[5] == gains_kp && arg[6] == gains_kv && n == gains_n)
+        commanded_sparse(n, arg[0], arg[1], arg[2], arg[3], arg[4], arg[5], arg[6], e, ed, a);
+    else
+        commanded(n, arg[0], arg[1], arg[2], arg[3], arg[4], arg[5], arg[6], e, ed, a);
     return vgt_rec_step_inverse(arm, arg[0], arg[1], a, NULL, res[0]) ? 1 : 0;
 }
 
