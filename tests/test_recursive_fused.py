@@ -168,7 +168,7 @@ def test_cfc_law_with_bound_gains_equals_the_separate_adapter() -> None:
     Kp[0, :] = -0.0  # a row of zeros (negative)
     q = configurations(stack, 3, seed=4)
     for bound in (True, False):
-        backend.bind_gains(Kp, Kv) if bound else backend.bind_gains(None, None)
+        backend.bind_run(Kp, Kv) if bound else backend.bind_run(None, None)
         for s in range(3):
             qd, q_d, qd_d, qdd_d = (rng.normal(size=n) for _ in range(4))
             inputs = [q[s], qd, q[s] + 0.01 * q_d, qd_d, qdd_d]
@@ -179,7 +179,7 @@ def test_cfc_law_with_bound_gains_equals_the_separate_adapter() -> None:
             assert lib.vgt_rec_fn_cfc_fused(args, ffi.new("double *[1]", [ptr(fused)]), ffi.NULL, ffi.NULL, 0) == 0
             assert lib.vgt_rec_fn_cfc(args, ffi.new("double *[1]", [ptr(separate)]), ffi.NULL, ffi.NULL, 0) == 0
             assert np.array_equal(fused, separate), (bound, s)
-    backend.bind_gains(None, None)
+    backend.bind_run(None, None)
 
 
 def test_switching_control_on_the_fused_step_equals_the_separate_adapters() -> None:
@@ -193,3 +193,58 @@ def test_switching_control_on_the_fused_step_equals_the_separate_adapters() -> N
     b = run_case(fused, 2, reference=reference, controller="scm", initial_state=start)
     assert a.success and b.success and len(a.activations) == len(b.activations) > 0
     _same(a, b)
+
+
+def test_runs_that_fail_stop_alike() -> None:
+    """Runs driven out of the limits and out of the assembled set (the driver's assembly check over
+    the bound margin rows' nonzero entries) stop at the same sample, with the same status and samples."""
+    from vgtarm.app.cases import run_case
+    from vgtarm.errors import SimulationError
+
+    stack = varied_stack(3)
+    fused, separate = Robot(stack, RecursiveBackend(stack)), Robot(stack, RecursiveBackend(stack, fused=False))
+    reference = sinusoids(fused, stack, samples=100)
+    start = (reference.q[0] + 0.01, np.zeros(stack.n_joints))
+    for kp, why in ((1e6, "far outside its limits"), (1e7, "can no longer be assembled")):
+        failures = []
+        for robot in (separate, fused):
+            with pytest.raises(SimulationError, match=why) as caught:
+                run_case(robot, 1, reference=reference, kp=kp, kv=10.0, initial_state=start)
+            failures.append(caught.value)
+        assert str(failures[0]) == str(failures[1])
+        _same(failures[0].result, failures[1].result)
+
+
+def test_margin_rows_bound_and_not_bound_agree() -> None:
+    """The driver's margin rows (``vgt_rec_margin``) over the nonzero entries of bound rows and over
+    every entry: the same sign of every margin, and the same value but for the sign of a zero."""
+    stack = varied_stack(4)
+    backend = RecursiveBackend(stack)
+    ffi, lib = RecursiveModel(stack)._ffi, RecursiveModel(stack)._lib
+    robot = Robot(stack, backend)
+    G, h = (np.ascontiguousarray(a, dtype=float) for a in robot.margin_form())
+    n = stack.n_joints
+    assert (G == 0.0).mean() > 0.5  # three legs a row
+    Kp = np.ascontiguousarray(np.eye(n))
+    rng = np.random.default_rng(2)
+    q = np.concatenate([configurations(stack, 50, seed=1), rng.uniform(-1.0, 1.0, size=(50, n))])
+    G_ptr = ffi.cast("double *", ffi.from_buffer(G))
+    for bound in (False, True):
+        backend.bind_run(Kp, Kp, G) if bound else backend.bind_run(None, None)
+        values = np.array(
+            [
+                [
+                    lib.vgt_rec_margin(
+                        G_ptr, n, row, h[row], ffi.cast("double *", ffi.from_buffer(np.ascontiguousarray(x)))
+                    )
+                    for row in range(len(h))
+                ]
+                for x in q
+            ]
+        )
+        if not bound:
+            dense = values
+    backend.bind_run(None, None)
+    assert np.array_equal(values, dense) and np.array_equal(values > 0.0, dense > 0.0)
+    assert (dense <= 0.0).any() and (dense > 0.0).any()
+    assert np.allclose(dense, q @ G.T + h, rtol=0.0, atol=1e-14)

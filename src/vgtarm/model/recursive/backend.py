@@ -214,19 +214,26 @@ class RecursiveBackend:
             _bound[address] = (slot, p, model)
             lib.vgt_rec_bind(slot, ffi.cast("double *", address), model._arm)
 
-    def bind_gains(self, Kp: Array | None, Kv: Array | None) -> None:
-        """Tell the fused CFC law the gain matrices (C-contiguous float64, ``n x n``) the next driver
-        call passes, in this thread, so it sums over their nonzero entries only (the same values);
-        ``None`` unbinds. The arrays must not change until unbound (the driver unbinds after its call)."""
+    def bind_run(self, Kp: Array | None, Kv: Array | None, G: Array | None = None) -> None:
+        """Tell the fused step, in this thread, the gain matrices ``Kp``, ``Kv`` (``n x n``) and the
+        margin rows ``G`` (``rows x n``) the next driver call passes (C-contiguous float64): the CFC
+        law sums the gains' products and the driver's assembly check the margins' over their nonzero
+        entries only (the same values). ``None`` unbinds. The arrays must not change until unbound
+        (the driver unbinds after its call)."""
         ffi, lib = load_library()
-        if Kp is None or Kv is None:
-            lib.vgt_rec_bind_gains(ffi.NULL, ffi.NULL, 0)
+        if Kp is None or Kv is None or not self.fused:  # the previous implementation binds nothing
+            lib.vgt_rec_bind_run(ffi.NULL, ffi.NULL, 0, ffi.NULL, 0)
             return
-        for K in (Kp, Kv):
-            if K.dtype != np.float64 or not K.flags.c_contiguous or K.shape != (self.n, self.n):
-                raise ValueError("bind_gains: expected n x n C-contiguous float64 gain matrices")
-        if lib.vgt_rec_bind_gains(ffi.cast("double *", Kp.ctypes.data), ffi.cast("double *", Kv.ctypes.data), self.n):
-            raise MemoryError("bind_gains: could not allocate the gains' index")
+        arrays = [(Kp, (self.n, self.n)), (Kv, (self.n, self.n))]
+        if G is not None:
+            arrays.append((G, (G.shape[0] if G.ndim == 2 else -1, self.n)))
+        for A, shape in arrays:
+            if A.dtype != np.float64 or not A.flags.c_contiguous or A.shape != shape:
+                raise ValueError("bind_run: expected C-contiguous float64 gains (n x n) and margin rows (rows x n)")
+        rows = 0 if G is None else G.shape[0]
+        pointers = [ffi.NULL if A is None else ffi.cast("double *", A.ctypes.data) for A in (Kp, Kv, G)]
+        if lib.vgt_rec_bind_run(pointers[0], pointers[1], self.n, pointers[2], rows):
+            raise MemoryError("bind_run: could not allocate the index of the gains and margins")
 
     def signature(self, name: str) -> Signature:
         if name not in self._signatures:

@@ -72,10 +72,12 @@ int vgt_rec_fn_tip_hessian(const double **arg, double **res, long long *iw, doub
 int vgt_rec_fn_unavailable(const double **arg, double **res, long long *iw, double *w, int mem);
 /* The same functions on the step's shared kinematics (vgt_rec_step_*): cfc, fd, id, tip_state and tip
  * (jac and tip_hessian are the adapters above). */
-/* The gains Kp, Kv (n x n, row-major) the next driver calls pass (by address; their contents must not
- * change until unbound): cfc_fused then sums over their nonzero entries only, the same values.
- * NULL unbinds. */
-int vgt_rec_bind_gains(const double *Kp, const double *Kv, int n);
+/* The gains Kp, Kv (n x n, row-major) and the margin rows G (n_margins x n) the next driver calls pass
+ * (by address; their contents must not change until unbound), in the calling thread: cfc_fused sums
+ * over the gains' nonzero entries only, and the driver's assembly check over G's (the same values).
+ * n = 0 unbinds; a NULL array is not bound. */
+int vgt_rec_bind_run(const double *Kp, const double *Kv, int n, const double *G, int n_margins);
+double vgt_rec_margin(const double *G, int nj, int row, double margin, const double *q);
 int vgt_rec_fn_cfc_fused(const double **arg, double **res, long long *iw, double *w, int mem);
 int vgt_rec_fn_fd_fused(const double **arg, double **res, long long *iw, double *w, int mem);
 int vgt_rec_fn_id_fused(const double **arg, double **res, long long *iw, double *w, int mem);

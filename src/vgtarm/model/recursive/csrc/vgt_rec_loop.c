@@ -187,37 +187,88 @@ static void commanded(int n, const double *q, const double *qd, const double *q_
     }
 }
 
-/* The gain matrices of a run, bound by the driver's caller for the run's call (vgt_rec_bind_gains),
+/* The gain matrices of a run, bound by the driver's caller for the run's call (vgt_rec_bind_run),
  * in the calling thread (the one the driver runs in): the columns of each row's nonzero entries,
  * Kp's rows then Kv's. */
 static _Thread_local const double *gains_kp = NULL, *gains_kv = NULL;
 static _Thread_local int gains_n = 0;
 static _Thread_local int *gains_start = NULL, *gains_col = NULL; /* (2 n + 1), (nonzeros) */
 
-int vgt_rec_bind_gains(const double *Kp, const double *Kv, int n) {
+/* The nonzero columns of each row of an n_rows x n matrix (row-major): start (n_rows + 1), col. */
+static int nonzero_index(const double *A, int n_rows, int n, int **start, int **col) {
+    size_t count = 0, all = (size_t)n_rows * (size_t)n;
+    for (size_t e = 0; e < all; ++e) count += A[e] != 0.0;
+    *start = (int *)malloc(sizeof(int) * (size_t)(n_rows + 1));
+    *col = (int *)malloc(sizeof(int) * (count > 0 ? count : 1));
+    if (!*start || !*col) return -1;
+    int k = 0;
+    for (int r = 0; r < n_rows; ++r) {
+        (*start)[r] = k;
+        for (int j = 0; j < n; ++j)
+            if (A[(size_t)n * r + j] != 0.0) (*col)[k++] = j;
+    }
+    (*start)[n_rows] = k;
+    return 0;
+}
+
+/* The margin rows G (n_margins x n) of the run bound with its gains (vgt_rec_bind_run). */
+static _Thread_local const double *margins_G = NULL;
+static _Thread_local int margins_n = 0, margins_rows = 0;
+static _Thread_local int *margins_start = NULL, *margins_col = NULL;
+
+static void unbind_run(void) {
     gains_kp = gains_kv = NULL, gains_n = 0;
     free(gains_start), free(gains_col);
     gains_start = gains_col = NULL;
-    if (!Kp || !Kv || n <= 0) return 0;
-    size_t count = 0, nn = (size_t)n * (size_t)n;
-    for (size_t e = 0; e < nn; ++e) count += (Kp[e] != 0.0) + (Kv[e] != 0.0);
-    gains_start = (int *)malloc(sizeof(int) * (size_t)(2 * n + 1));
-    gains_col = (int *)malloc(sizeof(int) * (count > 0 ? count : 1));
-    if (!gains_start || !gains_col) {
-        free(gains_start), free(gains_col);
-        gains_start = gains_col = NULL;
-        return -1;
+    margins_G = NULL, margins_n = margins_rows = 0;
+    free(margins_start), free(margins_col);
+    margins_start = margins_col = NULL;
+}
+
+int vgt_rec_bind_run(const double *Kp, const double *Kv, int n, const double *G, int n_margins) {
+    unbind_run();
+    if (n <= 0) return 0;
+    if (Kp && Kv) {
+        int *start = NULL, *col = NULL, *start_v = NULL, *col_v = NULL;
+        int failed = nonzero_index(Kp, n, n, &start, &col) || nonzero_index(Kv, n, n, &start_v, &col_v);
+        int *merged_start = failed ? NULL : (int *)malloc(sizeof(int) * (size_t)(2 * n + 1));
+        int total = failed ? 0 : start[n] + start_v[n];
+        int *merged_col = failed ? NULL : (int *)malloc(sizeof(int) * (size_t)(total > 0 ? total : 1));
+        if (!failed && merged_start && merged_col) {
+            for (int r = 0; r <= n; ++r) merged_start[r] = start[r];
+            for (int r = 1; r <= n; ++r) merged_start[n + r] = start[n] + start_v[r];
+            memcpy(merged_col, col, sizeof(int) * (size_t)start[n]);
+            memcpy(merged_col + start[n], col_v, sizeof(int) * (size_t)start_v[n]);
+            gains_start = merged_start, gains_col = merged_col;
+            gains_kp = Kp, gains_kv = Kv, gains_n = n;
+        } else {
+            free(merged_start), free(merged_col);
+            failed = 1;
+        }
+        free(start), free(col), free(start_v), free(col_v);
+        if (failed) return -1;
     }
-    int k = 0;
-    for (int r = 0; r < 2 * n; ++r) {
-        const double *row = (r < n ? Kp : Kv) + (size_t)n * (size_t)(r % n);
-        gains_start[r] = k;
-        for (int j = 0; j < n; ++j)
-            if (row[j] != 0.0) gains_col[k++] = j;
+    if (G && n_margins > 0) {
+        if (nonzero_index(G, n_margins, n, &margins_start, &margins_col)) {
+            free(margins_start), free(margins_col);
+            margins_start = margins_col = NULL;
+            return -1;
+        }
+        margins_G = G, margins_n = n, margins_rows = n_margins;
     }
-    gains_start[2 * n] = k;
-    gains_kp = Kp, gains_kv = Kv, gains_n = n;
     return 0;
+}
+
+/* The driver's margin row `row` of G (closed_loop.c's check_state, in this library's copy):
+ * margin + G[row] . q over the nonzero entries of bound rows, else over every entry. */
+double vgt_rec_margin(const double *G, int nj, int row, double margin, const double *q) {
+    const double *g = G + (size_t)nj * row;
+    if (G == margins_G && nj == margins_n && row < margins_rows) {
+        for (int k = margins_start[row]; k < margins_start[row + 1]; ++k) margin += g[margins_col[k]] * q[margins_col[k]];
+        return margin;
+    }
+    for (int i = 0; i < nj; ++i) margin += g[i] * q[i];
+    return margin;
 }
 
 /* commanded() over the nonzero entries of bound gains: the same sums (a zero entry adds a zero
