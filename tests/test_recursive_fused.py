@@ -248,3 +248,12 @@ def test_margin_rows_bound_and_not_bound_agree() -> None:
     assert np.array_equal(values, dense) and np.array_equal(values > 0.0, dense > 0.0)
     assert (dense <= 0.0).any() and (dense > 0.0).any()
     assert np.allclose(dense, q @ G.T + h, rtol=0.0, atol=1e-14)
+
+
+def test_the_driver_copy_applies() -> None:
+    """The recursive library's copy of ``closed_loop.c`` replaces its assembly check's line (were the
+    line changed, the file itself would be compiled: the dense check, slower, the same results)."""
+    from vgtarm.model.recursive import library
+
+    text = (library._DRIVERS / "closed_loop.c").read_text()
+    assert library.driver_adaptable(text)
