@@ -23,7 +23,10 @@ the last). Figures, all in this process and run:
   and scaled to the arm, :func:`vgtarm.app.cases.case_path`; the fast solver with exact rates) and
   computed force control of it in the compiled closed loop, on the recursive model at 6, 10 and 50
   modules, beside the symbolic library at 6 modules where the cache holds it; the loop's speed as
-  simulated time over wall time (real-time factor).
+  simulated time over wall time (real-time factor). On the recursive model each run is timed
+  with the fused step and with the previous implementation (``RecursiveBackend(stack,
+  fused=False)``), alternating, the best of :data:`CFC_REPEATS` each, and their results compared
+  bit for bit.
 
 Times are CPU time of this process (``time.process_time``): on a machine shared with other work,
 wall time counts the waits for a busy core; both are printed for the recursive model.
