@@ -3,7 +3,10 @@
 Exports CFC with the momentum observer for the paper's robot (case 2's gains), builds it with
 make (the compiler of ``$CC``, default cc, -O2), and runs ``rt_loop --steps N`` (steps back to back)
 and ``rt_loop --seconds S`` (the 1 kHz loop on clock_nanosleep TIMER_ABSTIME, SCHED_FIFO where
-permitted). Baseline of the same run: the control period (1 ms), the budget of one step.
+permitted). Baseline of the same run: the control period (1 ms), the budget of one step. Then the
+same with the Kalman state estimate (1 um encoders, a controller model 10 % heavy, CFC + observer +
+Kalman filter: one more generated function a step, the forward dynamics), back to back against
+the first export's steps measured in the same run.
 ``VGTARM_BENCH_EXPORT_STEPS`` and ``VGTARM_BENCH_EXPORT_SECONDS`` shorten it (default 10^6, 10 s).
 """
 
@@ -35,9 +38,9 @@ def run() -> dict[str, dict[str, float]]:
     steps = int(os.environ.get("VGTARM_BENCH_EXPORT_STEPS", "1000000"))
     seconds = float(os.environ.get("VGTARM_BENCH_EXPORT_SECONDS", "10"))
     robot = vgtarm.load_robot()
+    compiler = os.environ.get("CC", "cc")
     with tempfile.TemporaryDirectory(prefix="vgtc-bench-") as scratch:
         folder = export_controller(robot, Path(scratch) / "controller", observer="momentum").folder
-        compiler = os.environ.get("CC", "cc")
         subprocess.run(["make", "-s", f"CC={compiler}", "rt_loop"], cwd=folder, check=True, capture_output=True)
         back_to_back = subprocess.run(
             [str(folder / "rt_loop"), "--steps", str(steps)], check=True, capture_output=True, text=True
@@ -45,6 +48,8 @@ def run() -> dict[str, dict[str, float]]:
         loop = subprocess.run(
             [str(folder / "rt_loop"), "--seconds", str(seconds)], check=True, capture_output=True, text=True
         ).stdout
+        kalman = _kalman(robot, Path(scratch), compiler, steps, seconds, folder)
+        kalman["baseline loop"] = _percentiles(loop)["step time"]
     scheduling = next((line for line in loop.splitlines() if line.startswith("scheduling")), "")
     timed = _percentiles(back_to_back)["step time"]
     periodic = _percentiles(loop)
@@ -60,4 +65,51 @@ def run() -> dict[str, dict[str, float]]:
     for name, figures, target in rows:
         cells = " | ".join(f"{figures[k]:.2f} us" for k in ("p50", "p99", "p99.9", "p99.99", "max"))
         print(f"| {name} | {cells} | period 1000 us: p99.9 at {figures['p99.9'] / 10:.2f} % of it | {target} |")
-    return {"steps": timed, **periodic}
+    _print_kalman(kalman, steps, seconds, compiler)
+    return {"steps": timed, **periodic, **kalman}
+
+
+def _kalman(
+    robot: vgtarm.Robot, scratch: Path, compiler: str, steps: int, seconds: float, baseline: Path
+) -> dict[str, dict[str, float]]:
+    """The export with the Kalman state estimate, its steps back to back alternating with the
+    baseline export's (the same run, so the same load), and in the 1 kHz loop."""
+    folder = export_controller(
+        robot,
+        scratch / "kalman",
+        observer="momentum",
+        encoder_resolution=1e-6,
+        estimator="kalman",
+        controller_model=robot.parameters.scaled(mass=1.1),
+    ).folder
+    subprocess.run(["make", "-s", f"CC={compiler}", "rt_loop"], cwd=folder, check=True, capture_output=True)
+    figures: dict[str, dict[str, float]] = {}
+    for name, where in (("kalman steps", folder), ("baseline steps", baseline), ("kalman steps 2", folder)):
+        output = subprocess.run(
+            [str(where / "rt_loop"), "--steps", str(steps)], check=True, capture_output=True, text=True
+        ).stdout
+        figures[name] = _percentiles(output)["step time"]
+    loop = subprocess.run(
+        [str(folder / "rt_loop"), "--seconds", str(seconds)], check=True, capture_output=True, text=True
+    ).stdout
+    figures["kalman loop"] = _percentiles(loop)["step time"]
+    return figures
+
+
+def _print_kalman(figures: dict[str, dict[str, float]], steps: int, seconds: float, compiler: str) -> None:
+    print(
+        f"\n### Exported controller with the Kalman state estimate (CFC + observer + Kalman filter, 1 um"
+        f" encoders, model mass 1.1, {compiler} -O2)\n"
+    )
+    print("| figure | p50 | p99 | p99.9 | p99.99 | max | baseline (same run) |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for name, label, base in (
+        ("kalman steps", f"step time, {steps:,} steps back to back", "baseline steps"),
+        ("kalman steps 2", "the same, again after the baseline", "baseline steps"),
+        ("baseline steps", "baseline: CFC + observer (differences), back to back", "baseline steps"),
+        ("kalman loop", f"step time inside the 1 kHz loop ({seconds:g} s)", "baseline loop"),
+        ("baseline loop", "baseline: CFC + observer in the 1 kHz loop (above)", "baseline loop"),
+    ):
+        cells = " | ".join(f"{figures[name][k]:.2f} us" for k in ("p50", "p99", "p99.9", "p99.99", "max"))
+        ratio = figures[name]["p50"] / figures[base]["p50"]
+        print(f"| {label} | {cells} | p50 {ratio:.2f}x the baseline's |")

@@ -23,7 +23,10 @@ the last). Figures, all in this process and run:
   and scaled to the arm, :func:`vgtarm.app.cases.case_path`; the fast solver with exact rates) and
   computed force control of it in the compiled closed loop, on the recursive model at 6, 10 and 50
   modules, beside the symbolic library at 6 modules where the cache holds it; the loop's speed as
-  simulated time over wall time (real-time factor).
+  simulated time over wall time (real-time factor). On the recursive model each run is timed
+  with the fused step and with the previous implementation (``RecursiveBackend(stack,
+  fused=False)``), alternating, the best of :data:`CFC_REPEATS` each, and their results compared
+  bit for bit.
 
 Times are CPU time of this process (``time.process_time``): on a machine shared with other work,
 wall time counts the waits for a busy core; both are printed for the recursive model.
@@ -214,55 +217,114 @@ LOOP_ONLY = (50,)
 TARGETS.update(cfc10=100.0, cfc50=1.0, ik50=30.0)
 
 
-def _control_row(k: int, model: str) -> dict[str, float]:
-    """IK of case 1 and CFC of it on ``family(k)`` with ``model``: wall and CPU seconds, real-time factor."""
-    import vgtarm
-    from vgtarm.app.cases import case_path, run_case
-    from vgtarm.model.robot import Robot, recursive_robot
-    from vgtarm.simulation.reference import JointReference
+#: Runs of CFC timed per implementation (the best of them is reported; the two alternate).
+CFC_REPEATS = 3
 
-    stack = family(k)
-    if model == "symbolic" and not library_cached(StackDefinition.of(stack)):
-        return {"k": k, "n": stack.n_joints, "ik": math.nan, "cfc": math.nan}
-    robot = recursive_robot(stack) if model == "recursive" else Robot(stack)
-    path = case_path(robot, 1)
-    wall, cpu = time.perf_counter(), time.process_time()
-    ik = robot.inverse_kinematics(path)
-    ik_wall, ik_cpu = time.perf_counter() - wall, time.process_time() - cpu
-    reference = JointReference.of(ik, name="case 1")
-    wall, cpu = time.perf_counter(), time.process_time()
-    result = run_case(robot, 1, reference=reference)
-    cfc, cfc_cpu = time.perf_counter() - wall, time.process_time() - cpu
+
+def _cfc_times(robots: dict[str, Any], reference: Any) -> dict[str, Any]:
+    """CFC of ``reference`` (case 1's gains) on each robot, alternating, :data:`CFC_REPEATS` times:
+    the best wall and CPU seconds of each and its last result."""
+    from vgtarm.app.cases import run_case
+
+    best: dict[str, Any] = {name: [math.inf, math.inf, None] for name in robots}
+    for _ in range(CFC_REPEATS):
+        for name, robot in robots.items():
+            wall, cpu = time.perf_counter(), time.process_time()
+            result = run_case(robot, 1, reference=reference)
+            wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+            entry = best[name]
+            entry[0], entry[1], entry[2] = min(entry[0], wall), min(entry[1], cpu), result
+    return best
+
+
+def _robots(stack: Stack, model: str) -> dict[str, Any]:
+    """The robots whose loops are timed: the symbolic library's, or the recursive model's fused step
+    and the previous implementation (its separate adapters) beside it."""
+    from vgtarm.model.recursive.backend import RecursiveBackend
+    from vgtarm.model.robot import Robot
+
+    if model == "symbolic":
+        return {"symbolic": Robot(stack)}
+    return {
+        "fused": Robot(stack, RecursiveBackend(stack)),
+        "previous": Robot(stack, RecursiveBackend(stack, fused=False)),
+    }
+
+
+def _timed_row(k: int, n: int, robots: dict[str, Any], reference: Any, ik: tuple[float, float]) -> dict[str, float]:
+    from vgtarm.simulation.result import SimulationResult
+
+    times = _cfc_times(robots, reference)
+    name = next(iter(robots))
+    cfc, cfc_cpu, result = times[name]
+    assert isinstance(result, SimulationResult)
     simulated = float(result.t[-1] - result.t[0])
-    assert isinstance(robot, vgtarm.Robot)
     row = {
         "k": k,
-        "n": stack.n_joints,
-        "ik": ik_wall,
-        "ik_cpu": ik_cpu,
-        "ik_ok": float(bool(getattr(ik, "success", True))),
+        "n": n,
+        "ik": ik[0],
+        "ik_cpu": ik[1],
         "cfc": cfc,
         "cfc_cpu": cfc_cpu,
         "rtf": simulated / cfc,
         "rtf_cpu": simulated / cfc_cpu,
         "error": float(result.tip_error.max()),
     }
+    if "previous" in times:
+        before, before_cpu, old = times["previous"]
+        same = all(
+            np.array_equal(getattr(old, f), getattr(result, f), equal_nan=True) for f in ("q", "qd", "effort", "tip")
+        )
+        row.update(
+            before=before,
+            before_cpu=before_cpu,
+            rtf_before_cpu=simulated / before_cpu,
+            speedup_cpu=before_cpu / cfc_cpu,
+            speedup=before / cfc,
+            same=float(same),
+        )
     print(
-        f"  {model} {k} modules: IK {ik_wall:.2f} s wall ({ik_cpu:.2f} s CPU), CFC {cfc:.2f} s for "
-        f"{simulated:.2f} s simulated ({row['rtf']:.0f}x real time), max tip error {row['error']:.2e} m",
+        f"  {name} {k} modules: CFC {cfc:.3f} s wall ({cfc_cpu:.3f} s CPU) for {simulated:.2f} s simulated "
+        f"({row['rtf']:.0f}x real time wall, {row['rtf_cpu']:.0f}x CPU), max tip error {row['error']:.2e} m"
+        + (
+            f"; previous implementation {row['before']:.3f} s wall ({row['before_cpu']:.3f} s CPU): "
+            f"{row['speedup_cpu']:.2f}x by CPU, {row['speedup']:.2f}x wall, results bit for bit: {bool(row['same'])}"
+            if "before" in row
+            else ""
+        ),
         flush=True,
     )
     return row
 
 
-def _loop_row(k: int) -> dict[str, float]:
-    """CFC in the compiled loop on ``family(k)`` (recursive) along sinusoids about home: loop speed only."""
-    from vgtarm.app.cases import run_case
-    from vgtarm.model.robot import recursive_robot
+def _control_row(k: int, model: str) -> dict[str, float]:
+    """IK of case 1 and CFC of it on ``family(k)`` with ``model``: wall and CPU seconds, real-time factor."""
+    from vgtarm.app.cases import case_path
     from vgtarm.simulation.reference import JointReference
 
     stack = family(k)
-    robot = recursive_robot(stack)
+    if model == "symbolic" and not library_cached(StackDefinition.of(stack)):
+        return {"k": k, "n": stack.n_joints, "ik": math.nan, "cfc": math.nan}
+    robots = _robots(stack, model)
+    robot = next(iter(robots.values()))
+    path = case_path(robot, 1)
+    wall, cpu = time.perf_counter(), time.process_time()
+    ik = robot.inverse_kinematics(path)
+    ik_wall, ik_cpu = time.perf_counter() - wall, time.process_time() - cpu
+    print(f"  {model} {k} modules: IK {ik_wall:.2f} s wall ({ik_cpu:.2f} s CPU)", flush=True)
+    reference = JointReference.of(ik, name="case 1")
+    row = _timed_row(k, stack.n_joints, robots, reference, (ik_wall, ik_cpu))
+    row["ik_ok"] = float(bool(ik.success))
+    return row
+
+
+def _loop_row(k: int) -> dict[str, float]:
+    """CFC in the compiled loop on ``family(k)`` (recursive) along sinusoids about home: loop speed only."""
+    from vgtarm.simulation.reference import JointReference
+
+    stack = family(k)
+    robots = _robots(stack, "recursive")
+    robot = robots["fused"]
     t = np.arange(6284, dtype=np.float64) * 1e-3
     span = (stack.upper - stack.lower) * 0.05
     phase = np.linspace(0.0, np.pi, stack.n_joints)
@@ -271,27 +333,7 @@ def _loop_row(k: int) -> dict[str, float]:
     qd = span * w * np.cos(w * t[:, None] + phase)
     qdd = -span * w * w * np.sin(w * t[:, None] + phase)
     reference = JointReference(t=t, q=q, qd=qd, qdd=qdd, rates="exact", name="sinusoids", tip=robot.tip_position(q))
-    wall = time.perf_counter()
-    cpu = time.process_time()
-    result = run_case(robot, 1, reference=reference)
-    cfc, cfc_cpu = time.perf_counter() - wall, time.process_time() - cpu
-    simulated = float(result.t[-1] - result.t[0])
-    row = {
-        "k": k,
-        "n": stack.n_joints,
-        "ik": math.nan,
-        "ik_cpu": math.nan,
-        "cfc": cfc,
-        "cfc_cpu": cfc_cpu,
-        "rtf": simulated / cfc,
-        "rtf_cpu": simulated / cfc_cpu,
-        "error": float(result.tip_error.max()),
-    }
-    print(
-        f"  recursive {k} modules, loop only: CFC {cfc:.2f} s wall ({cfc_cpu:.2f} s CPU) for {simulated:.2f} s",
-        flush=True,
-    )
-    return row
+    return _timed_row(k, stack.n_joints, robots, reference, (math.nan, math.nan))
 
 
 def _paper_ik() -> tuple[float, float]:
@@ -318,15 +360,16 @@ def control_figures() -> list[dict[str, Any]]:
     rows: list[dict[str, Any]] = [dict(_control_row(6, "symbolic"), model="symbolic")]
     rows += [dict(_control_row(k, "recursive"), model="recursive") for k in CONTROL_COUNTS]
     rows += [dict(_loop_row(k), model="recursive") for k in LOOP_ONLY]
-    print("\n### Inverse kinematics and computed force control of case 1 (wall time, same run)\n")
+    print("\n### Inverse kinematics and computed force control of case 1 (same run)\n")
     print(
         "| model | modules | joints | IK of the whole path (wall) | IK CPU | CFC of the path (wall) | CFC CPU "
-        "| real time / wall | real time / CPU | max tip error | IK CPU / paper robot's |"
+        "| real time / wall | real time / CPU | previous implementation CPU (its real time) | speed-up CPU, wall "
+        "| max tip error | IK CPU / paper robot's |"
     )
-    print("|" + " --- |" * 11)
+    print("|" + " --- |" * 13)
     for r in rows:
         if not math.isfinite(r["cfc"]):
-            print(f"| {r['model']} | {r['k']:.0f} | {r['n']:.0f} | not in the cache | | | | | | | |")
+            print(f"| {r['model']} | {r['k']:.0f} | {r['n']:.0f} | not in the cache | | | | | | | | | |")
             continue
         ik = (
             f"{r['ik']:.2f} s | {r['ik_cpu']:.2f} s"
@@ -334,9 +377,14 @@ def control_figures() -> list[dict[str, Any]]:
             else "(loop only: sinusoids about home) | -"
         )
         ratio = f"{r['ik_cpu'] / paper_cpu:.0f}x" if math.isfinite(r["ik"]) else "-"
+        before = (
+            f"{r['before_cpu']:.3f} s ({r['rtf_before_cpu']:.0f}x) | {r['speedup_cpu']:.2f}x, {r['speedup']:.2f}x"
+            if "before" in r
+            else "- | -"
+        )
         print(
-            f"| {r['model']} | {r['k']:.0f} | {r['n']:.0f} | {ik} | {r['cfc']:.2f} s | {r['cfc_cpu']:.2f} s | "
-            f"{r['rtf']:.0f}x | {r['rtf_cpu']:.0f}x | {r['error']:.2e} m | {ratio} |"
+            f"| {r['model']} | {r['k']:.0f} | {r['n']:.0f} | {ik} | {r['cfc']:.3f} s | {r['cfc_cpu']:.3f} s | "
+            f"{r['rtf']:.0f}x | {r['rtf_cpu']:.0f}x | {before} | {r['error']:.2e} m | {ratio} |"
         )
     print(f"\nBaseline (same run): the paper's robot's IK of case 1, {paper_cpu:.3f} s CPU, {paper_wall:.3f} s wall.")
     verified = all(r.get("ik_ok", 1.0) == 1.0 for r in rows if math.isfinite(r.get("ik", math.nan)))

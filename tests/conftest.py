@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import pty
+import subprocess
+
 from vgtarm._entry import single_threaded_blas
 
 single_threaded_blas()  # as the vgtarm command does, before NumPy is imported
@@ -50,3 +54,27 @@ def central_difference(f, x: np.ndarray, h: float = FD_STEP) -> np.ndarray:
 def assert_close(actual, desired, *, rtol: float = 1e-7, atol: float = 1e-9, what: str = "") -> None:
     """One tolerance helper for the suite: relative to the larger magnitude, plus an absolute floor."""
     np.testing.assert_allclose(actual, desired, rtol=rtol, atol=atol, err_msg=what)
+
+
+def run_on_terminal(argv: list[str], env: dict[str, str]) -> tuple[int, bytes, bytes]:
+    """Run ``argv`` with its standard error on a pseudo-terminal.
+
+    Returns its exit status, its standard output and all the terminal showed until it closed.
+    """
+    leader, follower = pty.openpty()
+    try:
+        process = subprocess.Popen(argv, env=env, stdout=subprocess.PIPE, stderr=follower)
+        os.close(follower)
+        shown = b""
+        while True:
+            try:
+                chunk = os.read(leader, 4096)
+            except OSError:  # the terminal's other end closed
+                break
+            if not chunk:
+                break
+            shown += chunk
+        out, _ = process.communicate(timeout=600)
+    finally:
+        os.close(leader)
+    return process.returncode, out, shown

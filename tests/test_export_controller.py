@@ -20,7 +20,7 @@ from vgtarm.app.cases import case_study, joint_reference
 from vgtarm.errors import ConfigError, InputError
 from vgtarm.export import CompiledExport, ExportError, command, export_controller, simulate_exported
 from vgtarm.export.controller import STRICT_FLAGS
-from vgtarm.simulation import SimulationResult, simulate
+from vgtarm.simulation import ExternalForce, SimulationResult, simulate
 
 CASE = case_study(2)
 #: The runs compared: the observer with perfect and with realistic sensing, the force sensor.
@@ -104,6 +104,15 @@ def test_closed_through_the_export_equals_simulate(name, robot, reference, expor
 def test_a_run_with_other_options_than_the_export_is_refused(robot, reference, exports):  # type: ignore[no-untyped-def]
     with pytest.raises(InputError, match="observer_gain_per_s"):
         simulate_exported(exports["observer"], robot, reference, observer="momentum", observer_gain=300.0)
+    with pytest.raises(InputError, match="the exported controller has no tool-force feedforward"):
+        simulate_exported(
+            exports["observer"],
+            robot,
+            reference,
+            observer="momentum",
+            external_force=ExternalForce(),
+            tool_force_feedforward=True,
+        )
 
 
 def _compilers() -> list:  # type: ignore[type-arg]

@@ -26,4 +26,5 @@ def test_the_preset_sets_its_arguments_and_the_default_adds_no_option():
     low = parser.parse_args(["--preset", "low-force"])
     apply_preset(low)
     assert low.criterion == "effort" and low.observer_gain == PRESETS["low-force"]["observer_gain"]
-    assert simulate_options(low) == {"estimator": "kalman", "estimator_bandwidth_hz": 120.0}
+    bandwidth = PRESETS["low-force"]["estimator_bandwidth"]
+    assert simulate_options(low) == {"estimator": "kalman", "estimator_bandwidth_hz": bandwidth}  # no tool force

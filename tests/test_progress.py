@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import io
 import os
-import pty
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -25,6 +23,8 @@ from vgtarm.app.cli import bars
 from vgtarm.app.cli.command import build_parser, main
 from vgtarm.model import compiled
 from vgtarm.model.stack import load_stack
+
+from .conftest import run_on_terminal
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 SCRIPT = Path(sys.executable).parent / "vgtarm"
@@ -195,24 +195,7 @@ def test_quiet_silences_a_model_build_on_a_terminal(tmp_path: Path) -> None:
     home = [repr(float(v)) for v in load_stack(config).home]
     env = {k: v for k, v in os.environ.items() if not k.startswith("VGTARM_")}
     env["VGTARM_CACHE_DIR"] = str(cache)
-    leader, follower = pty.openpty()
-    try:
-        process = subprocess.Popen(
-            [str(SCRIPT), "fk", "-q", "--config", str(config), *home], env=env, stdout=subprocess.PIPE, stderr=follower
-        )
-        os.close(follower)
-        shown = b""
-        while True:
-            try:
-                chunk = os.read(leader, 4096)
-            except OSError:  # the terminal's other end closed
-                break
-            if not chunk:
-                break
-            shown += chunk
-        out, _ = process.communicate(timeout=600)
-    finally:
-        os.close(leader)
-    assert process.returncode == 0 and b"tip" in out
+    status, out, shown = run_on_terminal([str(SCRIPT), "fk", "-q", "--config", str(config), *home], env)
+    assert status == 0 and b"tip" in out
     assert shown == b""
     assert any(p.suffix == ".so" for p in cache.iterdir()), "a model was built"

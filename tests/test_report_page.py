@@ -194,7 +194,7 @@ def test_converter_reads_the_reports_blocks():
             "![a figure](fig.png)",
         ]
     )
-    out = to_html(text, first_table_id="t")
+    out = re.sub(r">\n<", "><", to_html(text, first_table_id="t"))  # the blocks' own line breaks aside
     assert '<h1 id="title-code">Title <code>code</code></h1>' in out
     assert "<p>A <em>first</em> paragraph\non two lines with <strong>bold</strong>.</p>" in out
     assert '<table id="t"><thead><tr><th>a</th><th>b</th></tr></thead>' in out

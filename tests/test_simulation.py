@@ -272,3 +272,21 @@ def test_results_are_saved_atomically_with_the_summary_keys(robot, tmp_path):
     assert table.shape == (len(ref.t), len(header))
     names = ["ga_activations.csv", "summary.json", "timeseries.csv"]
     assert sorted(p.name for p in out.iterdir()) == [".vgtarm-output", *names]  # the list of what it holds
+
+
+def test_a_run_holds_blas_to_one_thread_and_gives_it_back() -> None:
+    """The run's wrapper limits every loaded BLAS to one thread while it runs, and restores the limit
+    after, with the libraries looked up once per process."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from vgtarm.simulation.simulator import _blas_on_one_thread, _thread_pools
+
+    def blas_threads() -> list[int]:
+        return [pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"]
+
+    with threadpool_limits(limits=2, user_api="blas"):
+        before = blas_threads()
+        inside = _blas_on_one_thread(blas_threads)()
+        assert inside and all(n == 1 for n in inside)
+        assert blas_threads() == before
+    assert _thread_pools() is _thread_pools()

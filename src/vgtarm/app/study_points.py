@@ -281,8 +281,13 @@ _OPTIONAL_FLAGS = {
     "joint_limit_weight": "--joint-limit-weight",
     "estimator": "--estimator",
     "estimator_bandwidth_hz": "--estimator-bandwidth",
+    "tool_force_speed": "--tool-force-speed",
 }
-_SWITCHES = {"external_force": "--external-force", "force_sensor": "--force-sensor"}
+_SWITCHES = {
+    "external_force": "--external-force",
+    "force_sensor": "--force-sensor",
+    "tool_force_feedforward": "--tool-feedforward",
+}
 _STUDY_ONLY = {"kp": None, "kv": None, "threshold": None, "kp_max": None, "kv_max": None, "path": None, "dt": 1e-3}
 
 

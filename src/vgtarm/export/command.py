@@ -13,6 +13,7 @@ from pathlib import Path
 from ..errors import escape
 from ..fileio import check_output_folder
 from ..model.robot import load_robot
+from ..simulation.sensing import DEFAULT_ESTIMATOR_BANDWIDTH_HZ
 from .controller import export_controller
 
 
@@ -42,6 +43,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--twist-resolution", type=float, default=None, metavar="RAD", help="twist encoder step (rad)")
     parser.add_argument("--velocity-filter-hz", type=float, default=100.0, metavar="HZ", help="velocity filter cut-off")
     parser.add_argument(
+        "--estimator",
+        choices=("difference", "kalman"),
+        default="difference",
+        help="with encoders: velocities from differences through the filter (default), or the Kalman filter "
+        "with the controller model (gains computed at export)",
+    )
+    parser.add_argument(
+        "--estimator-bandwidth",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help=f"--estimator kalman: its bandwidth (default {DEFAULT_ESTIMATOR_BANDWIDTH_HZ:g} Hz, at most 1/(4 dt))",
+    )
+    parser.add_argument(
         "--model-config", type=Path, default=None, metavar="ROBOT", help="the controller's model (default: the robot)"
     )
 
@@ -64,13 +79,16 @@ def run(args: argparse.Namespace) -> int:
         encoder_resolution=args.encoder_resolution,
         twist_resolution=args.twist_resolution,
         velocity_filter_hz=args.velocity_filter_hz,
+        estimator=args.estimator,
+        estimator_bandwidth_hz=args.estimator_bandwidth,
         switching=args.switching,
     )
     settings = done.settings
     print(
         f"wrote {escape(str(done.folder))}: controller of {escape(str(settings['robot']))} ({done.n_joints} joints,"
         f" observer "
-        f"{settings['observer']}, velocities {settings['velocity']}, dt = {settings['dt_s']:g} s"
+        f"{settings['observer']}, velocities {settings['velocity']}"
+        f"{' by the Kalman filter' if settings['estimator'] == 'kalman' else ''}, dt = {settings['dt_s']:g} s"
         f"{', switching control ' + settings['switching']['variant'] if settings['switching'] else ''}); "
         f"checked with {done.compiler or 'no compiler'}; build it with make or cmake (README.md)"
     )

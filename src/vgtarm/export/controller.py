@@ -39,7 +39,7 @@ from ..model.compiled import find_compiler
 from ..model.parameters import RobotParameters
 from ..model.robot import Robot
 from ..model.stack import Stack
-from ..simulation.sensing import DEFAULT_VELOCITY_FILTER_HZ, sensing_settings
+from ..simulation.sensing import DEFAULT_VELOCITY_FILTER_HZ, ESTIMATORS, sensing_settings
 from .switching import GAExport, ga_export, simulator_fuses, switching_controller, switching_readme
 
 #: The hand-written files copied into every export (``csrc/`` of this package).
@@ -50,6 +50,8 @@ SHARED_HEADER = Path(__file__).resolve().parent.parent / "model" / "csrc" / "vgt
 COPIED = ("vgtarm_controller.h", "vgtarm_controller.c", "replay.c", "rt_loop.c", "Makefile", "CMakeLists.txt")
 #: The generated model functions, by the name of the compiled library's builder.
 MODEL_FUNCTIONS = ("cfc", "tip", "id", "jac")
+#: The one the Kalman estimator adds: the controller model's forward dynamics.
+KALMAN_FUNCTIONS = ("fd",)
 #: Flags the export is held to: its C must compile clean with them on gcc and clang.
 STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", "-ffp-contract=off")
 #: Values of ``observer`` (the force sensor is ``force_sensor=True``, as in simulate).
@@ -107,6 +109,8 @@ def export_controller(
     encoder_resolution: float = 0.0,
     twist_resolution: float | None = None,
     velocity_filter_hz: float = DEFAULT_VELOCITY_FILTER_HZ,
+    estimator: str = "difference",
+    estimator_bandwidth_hz: float | None = None,
     limit_tolerance: float = 0.05,
     effort_max: ArrayLike | None = None,
     switching: str | SwitchingControl | None = None,
@@ -132,6 +136,11 @@ def export_controller(
             the controller rounds the readings and differences them for velocities.
         twist_resolution: the twist encoder's resolution, as in simulate.
         velocity_filter_hz: the cut-off of the velocity filter, as in simulate.
+        estimator: how the velocities are estimated from the encoders, as in simulate:
+            ``"difference"`` (differences through the filter) or ``"kalman"`` (the steady-state
+            Kalman filter with the controller model's forward dynamics; needs encoders).
+        estimator_bandwidth_hz: the Kalman filter's bandwidth, as in simulate (default 60 Hz); its
+            gains are computed here (discrete Riccati equation) and exported as numbers.
         limit_tolerance: how far (m, rad) a reading may lie beyond a joint limit before the
             controller refuses the step.
         effort_max: a clip of each effort (a number or n values; default none).
@@ -164,6 +173,8 @@ def export_controller(
         raise InputError(f"dt = {shown(dt)}: expected a control period in (0, 1] s")
     if not isinstance(check_build, bool):
         raise InputError(f"check_build = {shown(check_build)}: expected True or False")
+    if estimator not in ESTIMATORS:
+        raise InputError(f"estimator = {shown(estimator)}: expected one of {list(ESTIMATORS)}")
     n = robot.n_joints
     gains = Gains.of(kp, kv, n)
     sensing = sensing_settings(
@@ -176,6 +187,8 @@ def export_controller(
         twist_resolution,
         0.0,
         velocity_filter_hz,
+        estimator,
+        estimator_bandwidth_hz,
     )
     model = robot if controller_model is None else _controller_model(robot, controller_model)
     tolerance = float(limit_tolerance) if _is_number(limit_tolerance) else math.nan
@@ -215,6 +228,9 @@ def export_controller(
         "resolution": sensing.resolution.tolist(),
         "velocity_filter_hz": sensing.velocity_filter_hz,
         "velocity_filter": sensing.velocity_filter,
+        "estimator": sensing.estimator,
+        "estimator_bandwidth_hz": sensing.estimator_bandwidth_hz,
+        "kalman_gain": list(sensing.kalman_gain),
         "limit_tolerance": tolerance,
         "effort_max": [None if math.isinf(v) else v for v in clip.tolist()],
         "switching": ga.settings if ga is not None else None,
@@ -299,7 +315,9 @@ def _write(
 ) -> None:
     n = robot.n_joints
     p = model.parameter_vector
-    sizes = _generate_model(folder, robot, MODEL_FUNCTIONS + (("tip_hessian",) if ga else ()))
+    kalman = settings["estimator"] == "kalman"
+    names = MODEL_FUNCTIONS + (KALMAN_FUNCTIONS if kalman else ()) + (("tip_hessian",) if ga else ())
+    sizes = _generate_model(folder, robot, names)
     for name in COPIED + (GA_FILES if ga else ()):
         shutil.copyfile(TEMPLATE_DIR / name, folder / name)
     if ga:  # the library's sources gain the GA
@@ -333,6 +351,7 @@ def _write(
         f"#define VGTC_NJ {n}                /* joints */",
         f"#define VGTC_NP {len(p)}               /* parameters of the model */",
         *(f"#define VGTC_{key} {value}" for key, value in sizes.items()),
+        f"#define VGTC_KALMAN {int(kalman)}            /* the forward dynamics of the Kalman estimator */",
         f'#define VGTC_ROBOT "{_c_string(settings["robot"])}"',
         f'#define VGTC_DESCRIPTION "{_c_string(description)}"',
         f'#define VGTC_JOINT_NAMES "{_c_string(", ".join(robot.joint_names))}"',
@@ -381,6 +400,12 @@ def _write(
         + ("VGTC_VELOCITY_DIFFERENCED;" if settings["velocity"] == "differenced" else "VGTC_VELOCITY_MEASURED;"),
         "    memcpy(params->resolution, resolution, sizeof resolution);",
         f"    params->velocity_filter = {_c_number(settings['velocity_filter'])};",
+        "    params->estimator = " + ("VGTC_ESTIMATOR_KALMAN;" if kalman else "VGTC_ESTIMATOR_DIFFERENCE;"),
+        *(
+            f"    params->kalman_gain[{i}] = {_c_number(gain)};"
+            for i, gain in enumerate(settings["kalman_gain"])
+            if kalman
+        ),
         "    memcpy(params->q_min, q_min, sizeof q_min);",
         "    memcpy(params->q_max, q_max, sizeof q_max);",
         f"    params->limit_tolerance = {_c_number(settings['limit_tolerance'])};",
@@ -409,7 +434,9 @@ def _description(settings: dict[str, Any]) -> str:
         "momentum": f"CFC with the momentum observer (K_O = {settings['observer_gain_per_s']:g} 1/s)",
         "force": "CFC with the tool force sensor fed forward",
     }[observer]
-    if settings["velocity"] == "differenced":
+    if settings["velocity"] == "differenced" and settings.get("estimator") == "kalman":
+        text += f", velocities from encoders by the Kalman filter ({settings['estimator_bandwidth_hz']:g} Hz)"
+    elif settings["velocity"] == "differenced":
         text += f", velocities differenced from encoders (filter {settings['velocity_filter_hz']:g} Hz)"
     return text
 
@@ -442,6 +469,13 @@ def _write_readme(folder: Path, robot: Robot, settings: dict[str, Any], descript
             n_params=n_params,
             context_bytes="sizeof(vgtc_context)",
             velocity_text=settings["velocity"],
+            estimator_text=(
+                f"This export: the Kalman filter, {settings['estimator_bandwidth_hz']:g} Hz."
+                if settings.get("estimator") == "kalman"
+                else "This export: the differences."
+                if settings["velocity"] == "differenced"
+                else ""
+            ),
             ref_columns=1 + 3 * n,
             meas_columns=1 + 2 * n + 3,
             switching_text=switching_readme(settings["switching"]),

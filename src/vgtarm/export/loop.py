@@ -177,11 +177,16 @@ def _check_agrees(settings: Mapping[str, Any], run: Any, plant: Robot) -> None:
         "n_joints": plant.n_joints,
     }
     if sensing.active:
-        wanted["velocity_filter"] = sensing.velocity_filter
+        wanted["estimator"] = sensing.estimator
+        if sensing.estimator == "kalman":
+            wanted["kalman_gain"] = list(sensing.kalman_gain)
+        else:
+            wanted["velocity_filter"] = sensing.velocity_filter
     for key, value in wanted.items():
-        if settings.get(key) != value:
+        exported = settings.get(key, "difference" if key == "estimator" else None)  # (exports before the option)
+        if exported != value:
             raise InputError(
-                f"the exported controller has {key} = {shown(settings.get(key))}, the run {shown(value)}: "
+                f"the exported controller has {key} = {shown(exported)}, the run {shown(value)}: "
                 "export it with the run's options"
             )
     if sensing.velocity_noise > 0:
@@ -189,6 +194,8 @@ def _check_agrees(settings: Mapping[str, Any], run: Any, plant: Robot) -> None:
             f"velocity_noise = {sensing.velocity_noise!r}: the exported controller is closed without simulated "
             "velocity noise (expected 0)"
         )
+    if run.scenario.tool_force_feedforward:
+        raise InputError("tool_force_feedforward = True: the exported controller has no tool-force feedforward")
     if run.scenario.plant_engine != MODEL_ENGINE:
         raise InputError(f"plant_engine = {run.scenario.plant_engine!r}: expected {MODEL_ENGINE!r}")
 

@@ -76,6 +76,7 @@ class LoopSettings:
     estimator: str = "difference"
     kalman_gain: tuple[float, float, float] = (0.0, 0.0, 0.0)
     threshold_measured: bool = False
+    tool_feedforward: bool = False
 
     def struct(self, n_joints: int, n_margins: int) -> Any:
         """The C structure of these settings for a robot of ``n_joints`` joints."""
@@ -99,6 +100,7 @@ class LoopSettings:
                 "estimator": ESTIMATOR_CODES[self.estimator],
                 "kalman_gain": list(self.kalman_gain),
                 "threshold_measured": int(self.threshold_measured),
+                "tool_feedforward": int(self.tool_feedforward),
             },
         )
 
@@ -124,6 +126,7 @@ class LoopArrays:
         qd0: Array,
         resolution: Array | None = None,
         velocity_noise: Array | None = None,
+        tool_force_expected: Array | None = None,
     ) -> None:
         n, n_joints = np.shape(q_d)
         self.n = n
@@ -145,6 +148,7 @@ class LoopArrays:
                 q_max=q_max,
                 resolution=np.zeros(n_joints) if resolution is None else resolution,
                 velocity_noise=np.zeros((n, n_joints)) if velocity_noise is None else velocity_noise,
+                tool_force_expected=np.zeros((n, 3)) if tool_force_expected is None else tool_force_expected,
             ).items()
         }
         self.q = np.full((n, n_joints), np.nan)
@@ -208,6 +212,9 @@ class ClosedLoopDriver:
         # a backend whose loop functions find their model by the parameter vector's address (the
         # recursive model's adapters) is told every vector before a driver sees it
         self._bind = getattr(backend, "bind_parameters", None)
+        # a backend whose loop can use a run's gain matrices and margin rows beforehand (the recursive
+        # model's fused step: their nonzero entries) is told them for each call, and untold after it
+        self._run_arrays = getattr(backend, "bind_run", None)
         self._lib = backend.library
         self._settings: dict[tuple[LoopSettings, int, int], Any] = {}
         self.slice_budget = slice_budget
@@ -239,25 +246,35 @@ class ClosedLoopDriver:
         piece, _state = self._slice(arrays.n_joints)
         piece.substep = 0
         k = k0
-        while True:
-            budget = self.slice_budget or self._budget
-            piece.budget = budget
-            started = time.perf_counter()
-            status = self._lib.vgt_simulate_slice(self._model, s, arrays.struct, _ptr(kp), _ptr(kv), k, k1, stop, piece)
-            elapsed = time.perf_counter() - started
-            self.slices += 1
-            if status == PAUSED or elapsed > 0.1 * SLICE_SECONDS:  # long enough to time
-                rate = piece.used / max(elapsed, 1e-9)
-                low, high = SLICE_BUDGET_RANGE
-                self._budget = int(min(max(rate * SLICE_SECONDS, low), high))
-            if status != PAUSED:
-                return int(status), int(stop[0])
-            k = int(stop[0])  # Ctrl-C raises KeyboardInterrupt here, between two slices
+        self._bind_run(kp, kv, arrays.inputs["G"])
+        try:
+            while True:
+                budget = self.slice_budget or self._budget
+                piece.budget = budget
+                started = time.perf_counter()
+                status = self._lib.vgt_simulate_slice(
+                    self._model, s, arrays.struct, _ptr(kp), _ptr(kv), k, k1, stop, piece
+                )
+                elapsed = time.perf_counter() - started
+                self.slices += 1
+                if status == PAUSED or elapsed > 0.1 * SLICE_SECONDS:  # long enough to time
+                    rate = piece.used / max(elapsed, 1e-9)
+                    low, high = SLICE_BUDGET_RANGE
+                    self._budget = int(min(max(rate * SLICE_SECONDS, low), high))
+                if status != PAUSED:
+                    return int(status), int(stop[0])
+                k = int(stop[0])  # Ctrl-C raises KeyboardInterrupt here, between two slices
+        finally:
+            self._bind_run(None, None)
 
     def bind(self, *vectors: Array) -> None:
         """Tell the backend the parameter vectors the drivers are about to receive (if it asks)."""
         if self._bind is not None:
             self._bind(*vectors)
+
+    def _bind_run(self, kp: Array | None, kv: Array | None, G: Array | None = None) -> None:
+        if self._run_arrays is not None:
+            self._run_arrays(kp, kv, G)
 
     def _slice(self, n_joints: int) -> tuple[Any, Array]:
         """The ``vgt_slice`` of runs of ``n_joints`` joints and the plant state it points at."""
@@ -300,23 +317,27 @@ class ClosedLoopDriver:
         k = k0
         # in calls of about SLICE_SECONDS each (samples, and sub-steps within a sample, with the
         # loop's budget), so Ctrl-C is handled between two of them
-        while True:
-            k_end = min(k1, k + self._switching_samples)
-            piece.budget = self.slice_budget or self._budget
-            started = time.perf_counter()
-            status = self._lib.vgt_simulate_switching(
-                self._model, structs[0], structs[1], arrays.struct, _ptr(kp), _ptr(kv), ga.switching, k, k_end, stop
-            )
-            elapsed = time.perf_counter() - started
-            self.slices += 1
-            if status == PAUSED:
-                k = int(stop[0])
-                continue
-            if status != DONE or k_end == k1:
-                return int(status), int(stop[0])
-            rate = (k_end - k) / max(elapsed, 1e-9)
-            self._switching_samples = int(min(max(rate * SLICE_SECONDS, 1), 4 * self._switching_samples))
-            k = k_end
+        self._bind_run(kp, kv, arrays.inputs["G"])
+        try:
+            while True:
+                k_end = min(k1, k + self._switching_samples)
+                piece.budget = self.slice_budget or self._budget
+                started = time.perf_counter()
+                status = self._lib.vgt_simulate_switching(
+                    self._model, structs[0], structs[1], arrays.struct, _ptr(kp), _ptr(kv), ga.switching, k, k_end, stop
+                )
+                elapsed = time.perf_counter() - started
+                self.slices += 1
+                if status == PAUSED:
+                    k = int(stop[0])
+                    continue
+                if status != DONE or k_end == k1:
+                    return int(status), int(stop[0])
+                rate = (k_end - k) / max(elapsed, 1e-9)
+                self._switching_samples = int(min(max(rate * SLICE_SECONDS, 1), 4 * self._switching_samples))
+                k = k_end
+        finally:
+            self._bind_run(None, None)
 
     def ga_predictor(
         self, p_ctrl: Array, dt: float, q0: Array, qd0: Array, q_d: Array, qd_d: Array, qdd_d: Array, tip_d: Array

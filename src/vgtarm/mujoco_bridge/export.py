@@ -63,7 +63,7 @@ MAX_TIMESTEP = 1.0
 #: Significant digits of every number the export writes: the fewest at which ``vgtarm check
 #: mujoco`` on the written model still agrees with our dynamics to 1e-9 on every example
 #: (measured for 6 to 17 digits in docs/mujoco.md). ``MAX_DIGITS`` writes every number as it is.
-DIGITS = 11
+DIGITS = 13
 MIN_DIGITS = 6
 MAX_DIGITS = 17
 

@@ -11,6 +11,10 @@ from ..errors import InputError
 
 Array = NDArray[np.float64]
 
+#: Default smoothing speed (m/s) of the expected cutting force fed forward (``tool_force_speed``):
+#: measured choice in docs/control.md ("Feeding the expected tool force forward").
+DEFAULT_FEEDFORWARD_SPEED = 0.005
+
 
 @dataclass(frozen=True)
 class ExternalForce:
@@ -50,6 +54,18 @@ class ExternalForce:
     def active(self) -> bool:
         """Whether any part acts."""
         return self.cutting or (self.disturbance and any(e > 0 for e in self.eta))
+
+    def expected(self, velocity: Array, speed: float) -> Array:
+        """The expected tool force ``(..., 3)`` along desired tip velocities ``velocity`` ``(..., 3)``:
+        the cutting force's model with the disturbance's mean (zero), ``-F0 v / sqrt(|v|^2 + v_s^2)``,
+        smoothed over the speed ``v_s = speed`` (m/s) where the tool starts, turns or stops (the
+        effort criterion's expected tool force, :mod:`vgtarm.ik.effort`); zeros without the cutting
+        force."""
+        v = np.asarray(velocity, dtype=float)
+        if not self.cutting:
+            return np.zeros(v.shape)
+        norm = np.sqrt(np.sum(v * v, axis=-1, keepdims=True) + speed * speed)
+        return -self.cutting_force * v / norm
 
     def disturbance_samples(self, n: int, rng: np.random.Generator) -> Array:
         """The disturbance at ``n`` control periods, ``(n, 3)`` (zeros when off)."""

@@ -109,7 +109,7 @@ class PythonLoop:
             x[0], x[1], x[2], x[3] = z, arrays.qd[0], 0.0, 0.0
         else:
             q0, v0, d0 = arrays.x_hat[k - 1, 0], arrays.x_hat[k - 1, 1], arrays.x_hat[k - 1, 2]
-            a = self.model.forward_dynamics(q0, v0, arrays.F[k - 1], np.zeros(3))
+            a = self.model.forward_dynamics(q0, v0, arrays.F[k - 1], self._expected(s, arrays, k - 1))
             acc = a + d0
             qp = q0 + s.dt * v0 + 0.5 * s.dt * s.dt * acc
             vp = v0 + s.dt * acc
@@ -118,6 +118,13 @@ class PythonLoop:
             x[0], x[1], x[2], x[3] = qp + L[0] * innovation, vp + L[1] * innovation, d0 + L[2] * innovation, a
         arrays.qd_meas[k] = x[1]
 
+    @staticmethod
+    def _expected(s: LoopSettings, arrays: LoopArrays, j: int) -> Array:
+        """The expected tool force of sample ``j`` the controller takes as known (zero without the feedforward)."""
+        if not s.tool_feedforward:
+            return np.zeros(3)
+        return np.asarray(arrays.inputs["tool_force_expected"][j])
+
     def _differenced(self, s: LoopSettings, arrays: LoopArrays, j: int) -> Array:
         """Velocity of sample ``j`` differenced from the encoders, unfiltered (as ``differenced``)."""
         if j == 0:
@@ -125,7 +132,8 @@ class PythonLoop:
         return (arrays.q_meas[j] - arrays.q_meas[j - 1]) / s.dt + arrays.inputs["velocity_noise"][j]
 
     def _observe(self, s: LoopSettings, arrays: LoopArrays, k: int) -> None:
-        """Estimated external joint efforts at sample ``k`` (as ``observe`` in ``closed_loop.c``)."""
+        """Estimated external joint efforts at sample ``k`` (as ``observe`` in ``closed_loop.c``); with
+        the tool-force feedforward, the rest beyond the expected tool force."""
         if s.observer == "none" or k == 0 or (s.observer == "momentum" and s.sensing and k < 2):
             arrays.tau_hat[k] = 0.0
             return
@@ -135,17 +143,20 @@ class PythonLoop:
             return
         if s.sensing and s.estimator == "kalman":  # the model's acceleration plus the disturbance
             x0, x = arrays.x_hat[k - 1], arrays.x_hat[k]
-            raw = self.model.inverse_dynamics(x0[0], x0[1], x[3] + x[2]) - arrays.F[k - 1]
+            f1 = self._expected(s, arrays, k - 1)
+            raw = self.model.inverse_dynamics(x0[0], x0[1], x[3] + x[2], f1) - arrays.F[k - 1]
             keep = math.exp(-s.observer_gain * s.dt)
             arrays.tau_hat[k] = keep * arrays.tau_hat[k - 1] + (1.0 - keep) * raw
             return
         if s.sensing:  # differenced velocities: the change spans the two last periods
             va, vb = self._differenced(s, arrays, k - 1), self._differenced(s, arrays, k)
             qa, applied = arrays.q_meas[k - 2], 0.5 * (arrays.F[k - 2] + arrays.F[k - 1])
+            f = 0.5 * (self._expected(s, arrays, k - 2) + self._expected(s, arrays, k - 1))
         else:
             va, vb = arrays.qd_meas[k - 1], arrays.qd_meas[k]
             qa, applied = arrays.q_meas[k - 1], arrays.F[k - 1]
-        raw = self.model.inverse_dynamics(qa, va, (vb - va) / s.dt) - applied
+            f = self._expected(s, arrays, k - 1)
+        raw = self.model.inverse_dynamics(qa, va, (vb - va) / s.dt, f) - applied
         keep = math.exp(-s.observer_gain * s.dt)
         arrays.tau_hat[k] = keep * arrays.tau_hat[k - 1] + (1.0 - keep) * raw
 
@@ -187,6 +198,12 @@ class PythonLoop:
             except InputError:  # a diverging run's measured state beyond any the model accepts
                 return NOT_FINITE, k
             arrays.F[k] = computed_force(M, C, inp["qdd_d"][k], e, e_dot, Kp, Kv, arrays.tau_hat[k])
+            if settings.tool_feedforward:  # the expected tool force through J_P^T at what the controller sees
+                try:
+                    J = self.model.tip_jacobian(qm)
+                except (AssemblyError, InputError):
+                    return NOT_FINITE, k
+                arrays.F[k] = arrays.F[k] - J.T @ inp["tool_force_expected"][k]
             dist = inp["disturbance"][k]
             arrays.f_ext[k] = self._tool_force(settings, velocity, dist)
             if k + 1 >= arrays.n:

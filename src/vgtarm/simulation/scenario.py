@@ -26,7 +26,7 @@ from ..errors import InputError, shown
 from ..model.parameters import RobotParameters
 from ..model.robot import Robot
 from ..model.stack import Stack
-from .external import ExternalForce
+from .external import DEFAULT_FEEDFORWARD_SPEED, ExternalForce
 from .sensing import DEFAULT_VELOCITY_FILTER_HZ, ESTIMATORS, OBSERVERS
 
 #: Integrators by name.
@@ -59,6 +59,10 @@ class Scenario:
             estimated with encoders: ``"difference"`` (default) or ``"kalman"`` (docs/control.md).
         plant_engine: ``"model"`` or a registered engine (``"mujoco"``).
         transient_s: start transient excluded from the "after transient" figures (s).
+        tool_force_feedforward: feed the expected cutting force (``ExternalForce.expected`` along
+            the reference's tip velocity, smoothed over ``tool_force_speed`` m/s, default
+            :data:`~.external.DEFAULT_FEEDFORWARD_SPEED`) forward through ``J_P^T``; the observer and
+            the Kalman estimator then estimate only the rest (docs/control.md).
     """
 
     external_force: ExternalForce = field(default_factory=ExternalForce.none)
@@ -79,6 +83,8 @@ class Scenario:
     transient_s: float = 0.2
     estimator: str = "difference"
     estimator_bandwidth_hz: float | None = None
+    tool_force_feedforward: bool = False
+    tool_force_speed: float | None = None
 
     def __post_init__(self) -> None:
         if self.external_force is None:  # the keyword form's default
@@ -106,6 +112,7 @@ class Scenario:
             raise InputError(f"observer = {self.observer!r}: expected one of {list(OBSERVERS)}")
         if not isinstance(self.estimator, str) or self.estimator not in ESTIMATORS:
             raise InputError(f"estimator = {shown(self.estimator)}: expected one of {list(ESTIMATORS)}")
+        self._check_feedforward()
         transient = self.transient_s
         if (
             isinstance(transient, bool)
@@ -113,6 +120,40 @@ class Scenario:
             or not (math.isfinite(transient) and transient >= 0)
         ):
             raise InputError(f"transient_s = {shown(transient)}: expected a duration >= 0 (s)")
+
+    def _check_feedforward(self) -> None:
+        feedforward, speed = self.tool_force_feedforward, self.tool_force_speed
+        if not isinstance(feedforward, bool | np.bool_):
+            raise InputError(f"tool_force_feedforward = {shown(feedforward)}: expected True or False")
+        if speed is not None:
+            if not feedforward:
+                raise InputError(
+                    f"tool_force_speed = {shown(speed)} without tool_force_feedforward: "
+                    "it smooths the force fed forward"
+                )
+            if (
+                isinstance(speed, bool)
+                or not isinstance(speed, int | float | np.integer | np.floating)
+                or not (math.isfinite(speed) and speed > 0)
+            ):
+                raise InputError(f"tool_force_speed = {shown(speed)}: expected a speed > 0 (m/s)")
+        if not feedforward:
+            return
+        if not self.external_force.cutting:
+            raise InputError(
+                "tool_force_feedforward = True without the cutting force: it feeds the expected cutting force "
+                "forward (external_force with cutting=True)"
+            )
+        if self.force_sensor:
+            raise InputError(
+                "tool_force_feedforward = True with force_sensor = True: the sensor feeds the whole measured "
+                "tool force forward already; choose one"
+            )
+
+    @property
+    def feedforward_speed(self) -> float:
+        """The smoothing speed of the expected tool force fed forward (m/s): given or the default."""
+        return DEFAULT_FEEDFORWARD_SPEED if self.tool_force_speed is None else float(self.tool_force_speed)
 
     @classmethod
     def of(cls, scenario: Scenario | None, options: Mapping[str, Any]) -> Scenario:

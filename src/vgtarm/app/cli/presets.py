@@ -1,8 +1,10 @@
-"""The state estimator's options and the named low-force preset of ``vgtarm simulate`` (issue 22).
+"""The state estimator's and the tool-force feedforward's options and the named low-force preset of
+``vgtarm simulate`` (issue 22).
 
 Kept apart from the command-line module: :func:`add_simulate_options` adds ``--estimator``,
-``--estimator-bandwidth`` and ``--preset`` to a parser, :func:`apply_preset` fills a preset's
-settings into the parsed arguments, and :func:`simulate_options` gives the scenario's options.
+``--estimator-bandwidth``, ``--tool-feedforward``, ``--tool-force-speed`` and ``--preset`` to a
+parser, :func:`apply_preset` fills a preset's settings into the parsed arguments, and
+:func:`simulate_options` gives the scenario's options.
 The presets themselves are defined once, in :mod:`vgtarm.app.presets` (``vgtarm reproduce`` runs
 them too); their choice and the measured front are in ``docs/control.md``.
 """
@@ -12,14 +14,15 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from ...simulation.external import DEFAULT_FEEDFORWARD_SPEED
 from ...simulation.sensing import DEFAULT_ESTIMATOR_BANDWIDTH_HZ, ESTIMATORS
-from ..presets import PRESETS
+from ..presets import PRESETS, WITH_TOOL_FORCE
 
 __all__ = ["PRESETS", "add_simulate_options", "apply_preset", "simulate_options"]
 
 
 def add_simulate_options(parser: argparse.ArgumentParser) -> None:
-    """``--estimator``, ``--estimator-bandwidth`` and ``--preset`` on ``parser``."""
+    """``--estimator``, ``--estimator-bandwidth``, the feedforward's options and ``--preset`` on ``parser``."""
 
     parser.add_argument(
         "--estimator",
@@ -36,6 +39,20 @@ def add_simulate_options(parser: argparse.ArgumentParser) -> None:
         help=f"--estimator kalman: its bandwidth (default {DEFAULT_ESTIMATOR_BANDWIDTH_HZ:g} Hz, at most 1/(4 dt))",
     )
     parser.add_argument(
+        "--tool-feedforward",
+        action="store_true",
+        help="with --external-force: feed the expected cutting force (its model along the reference's tip "
+        "velocity) forward through J_P^T; the observer and the Kalman estimator estimate the rest",
+    )
+    parser.add_argument(
+        "--tool-force-speed",
+        type=float,
+        default=None,
+        metavar="V",
+        help=f"--tool-feedforward: speed in m/s over which the expected force is smoothed where the tool starts, "
+        f"turns or stops (default {DEFAULT_FEEDFORWARD_SPEED:g})",
+    )
+    parser.add_argument(
         "--preset",
         choices=sorted(PRESETS),
         default=None,
@@ -47,11 +64,17 @@ def add_simulate_options(parser: argparse.ArgumentParser) -> None:
 def apply_preset(args: argparse.Namespace) -> None:
     """Set the arguments of ``args.preset`` (none: nothing changes)."""
     for key, value in PRESETS.get(getattr(args, "preset", None) or "", {}).items():
+        if key in WITH_TOOL_FORCE and not getattr(args, "external_force", False):
+            continue  # as preset_options: the feedforward of the cutting force only with the tool force
         setattr(args, key, value)
 
 
 def simulate_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The scenario options of the estimator arguments (none with the default: the runs of before)."""
-    if args.estimator == "difference" and args.estimator_bandwidth is None:
-        return {}
-    return {"estimator": args.estimator, "estimator_bandwidth_hz": args.estimator_bandwidth}
+    """The scenario options of the estimator and feedforward arguments (none with the defaults: the
+    runs of before)."""
+    options: dict[str, Any] = {}
+    if not (args.estimator == "difference" and args.estimator_bandwidth is None):
+        options.update(estimator=args.estimator, estimator_bandwidth_hz=args.estimator_bandwidth)
+    if getattr(args, "tool_feedforward", False) or getattr(args, "tool_force_speed", None) is not None:
+        options.update(tool_force_feedforward=bool(args.tool_feedforward), tool_force_speed=args.tool_force_speed)
+    return options

@@ -14,7 +14,17 @@ from collections.abc import Sequence
 from pathlib import Path
 
 #: The run's inputs shown beside the figures.
-SETTINGS = ("criterion", "joint_limit_weight", "estimator", "estimator_bandwidth_hz", "observer_gain", "kp", "kv")
+SETTINGS = (
+    "criterion",
+    "joint_limit_weight",
+    "estimator",
+    "estimator_bandwidth_hz",
+    "observer_gain",
+    "tool_force_feedforward",
+    "kp",
+    "kv",
+    "seed",
+)
 
 
 def pareto(points: Sequence[tuple[float, float]]) -> list[bool]:

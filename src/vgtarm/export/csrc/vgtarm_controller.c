@@ -46,6 +46,10 @@ int vgtc_check_params(const vgtc_params *p, const char **field)
         bad = "observer_gain";
     else if (p->velocity != VGTC_VELOCITY_MEASURED && p->velocity != VGTC_VELOCITY_DIFFERENCED) bad = "velocity";
     else if (!(p->velocity_filter >= 0.0 && p->velocity_filter < 1.0)) bad = "velocity_filter";
+    else if (p->estimator != VGTC_ESTIMATOR_DIFFERENCE
+             && !(VGTC_KALMAN && p->estimator == VGTC_ESTIMATOR_KALMAN && p->velocity == VGTC_VELOCITY_DIFFERENCED))
+        bad = "estimator"; /* the Kalman filter needs the readings, and the forward dynamics (VGTC_KALMAN) */
+    else if (p->estimator == VGTC_ESTIMATOR_KALMAN && !finite_all(3, p->kalman_gain)) bad = "kalman_gain";
     else if (!(isfinite(p->limit_tolerance) && p->limit_tolerance >= 0.0)) bad = "limit_tolerance";
     else {
         for (int i = 0; i < n && !bad; ++i) {
@@ -70,9 +74,10 @@ int vgtc_init(vgtc_context *ctx, const vgtc_params *params)
 }
 
 /* The estimate of the external efforts at period k into tau (observe in closed_loop.c): qm, vd are
- * this period's reading and differenced velocity, vm the controller's velocity. */
+ * this period's reading and differenced velocity, vm the controller's velocity, x the Kalman
+ * estimate of this period (VGTC_ESTIMATOR_KALMAN). */
 static int observe(vgtc_context *c, long k, const double *qm, const double *vm, const double *vd,
-                   const double *f_meas, double *tau)
+                   const double *x, const double *f_meas, double *tau)
 {
     const int n = VGTC_NJ;
     const vgtc_params *p = &c->p;
@@ -92,6 +97,16 @@ static int observe(vgtc_context *c, long k, const double *qm, const double *vm, 
     }
     double acc[VGTC_NJ], raw[VGTC_NJ], applied[VGTC_NJ];
     const double *va, *vb, *qa;
+    if (sensing && p->estimator == VGTC_ESTIMATOR_KALMAN) {
+        /* the Kalman estimate of the last period: the model's acceleration plus the disturbance, at
+         * the estimate of period k-1, under F_{k-1}; raw = M^ d^ (to round-off) */
+        for (int i = 0; i < n; ++i) acc[i] = x[3 * n + i] + x[2 * n + i];
+        const double *in_k[5] = {c->x1, c->x1 + n, acc, c->zero, p->model};
+        double *out_k[1] = {raw};
+        if (call(c, vgt_id, 5, in_k, 1, out_k)) return VGTC_FUNCTION_FAILED;
+        vgt_observer_filter(n, c->keep, c->tau, raw, c->F1, tau);
+        return VGTC_OK;
+    }
     if (sensing) {
         va = c->vd1;
         vb = vd;
@@ -118,10 +133,38 @@ static int fail(double *efforts, int status)
     return status;
 }
 
-/* The readings the controller sees at its next period (measure in closed_loop.c): joints rounded
- * to the encoder steps (qm), its velocity (vm) and the unfiltered differenced one (vd). */
-static void measure(const vgtc_context *ctx, const double *q_meas, const double *qd_meas, double *qm, double *vm,
-                    double *vd)
+/* The Kalman estimate x (q^, v^, d^ and the model's acceleration a, VGTC_NJ each) of this period
+ * (estimate in closed_loop.c): from the last period's, predicted by the controller model's forward
+ * dynamics under the effort applied, F_{k-1} (no tool force: that is in the disturbance), then
+ * corrected by the reading qm with the steady-state gains. The first period starts from a known
+ * state: the reading, the velocity `start`, no disturbance. Uses the context's work arrays only. */
+static int kalman(vgtc_context *c, const double *qm, const double *start, double *x)
+{
+    const int n = VGTC_NJ;
+    double *q = x, *v = x + n, *d = x + 2 * n, *a = x + 3 * n;
+    if (c->k == 0) {
+        memcpy(q, qm, sizeof(double) * VGTC_NJ);
+        memcpy(v, start, sizeof(double) * VGTC_NJ);
+        for (int i = 0; i < n; ++i) d[i] = a[i] = 0.0;
+        return VGTC_OK;
+    }
+#if VGTC_KALMAN
+    const double *x0 = c->x1;
+    const double *in_fd[5] = {x0, x0 + n, c->F1, c->zero, c->p.model};
+    double *out_fd[1] = {a};
+    if (call(c, vgt_fd, 5, in_fd, 1, out_fd)) return VGTC_FUNCTION_FAILED;
+    vgt_kalman_step(n, c->p.dt, c->p.kalman_gain, x0, x0 + n, x0 + 2 * n, a, qm, q, v, d);
+    return VGTC_OK;
+#else /* exported without the forward dynamics: vgtc_check_params refuses the estimator */
+    return VGTC_FUNCTION_FAILED;
+#endif
+}
+
+/* The readings the controller sees at its next period (measure and estimate in closed_loop.c):
+ * joints rounded to the encoder steps (qm), its velocity (vm), the unfiltered differenced one (vd)
+ * and, with the Kalman filter, its estimate x (4 VGTC_NJ). Uses the context's work arrays only. */
+static int measure(vgtc_context *ctx, const double *q_meas, const double *qd_meas, double *qm, double *vm,
+                   double *vd, double *x)
 {
     const int n = VGTC_NJ;
     const vgtc_params *p = &ctx->p;
@@ -130,6 +173,11 @@ static void measure(const vgtc_context *ctx, const double *q_meas, const double 
     if (p->velocity != VGTC_VELOCITY_DIFFERENCED) {
         memcpy(vm, qd_meas, sizeof(double) * VGTC_NJ);
         memcpy(vd, qd_meas, sizeof(double) * VGTC_NJ);
+    } else if (p->estimator == VGTC_ESTIMATOR_KALMAN) {
+        if (kalman(ctx, qm, start, x)) return VGTC_FUNCTION_FAILED;
+        memcpy(vm, x + n, sizeof(double) * VGTC_NJ);
+        if (ctx->k == 0) memcpy(vd, start, sizeof(double) * VGTC_NJ);
+        else vgt_differenced_velocity(n, p->dt, qm, ctx->qm1, ctx->zero, vd);
     } else if (ctx->k == 0) {
         memcpy(vm, start, sizeof(double) * VGTC_NJ);
         memcpy(vd, start, sizeof(double) * VGTC_NJ);
@@ -137,15 +185,15 @@ static void measure(const vgtc_context *ctx, const double *q_meas, const double 
         vgt_filtered_velocity(n, p->velocity_filter, p->dt, qm, ctx->qm1, ctx->vm1, ctx->zero, vm);
         vgt_differenced_velocity(n, p->dt, qm, ctx->qm1, ctx->zero, vd);
     }
+    return VGTC_OK;
 }
 
-int vgtc_readings(const vgtc_context *ctx, const double *q_meas, const double *qd_meas, double *qm, double *vm)
+int vgtc_readings(vgtc_context *ctx, const double *q_meas, const double *qd_meas, double *qm, double *vm)
 {
-    double vd[VGTC_NJ];
+    double vd[VGTC_NJ], x[4 * VGTC_NJ];
     if (!ctx || !ctx->ready || !q_meas || !qm || !vm) return VGTC_BAD_ARGUMENT;
     if (ctx->p.velocity != VGTC_VELOCITY_DIFFERENCED && !qd_meas) return VGTC_BAD_ARGUMENT;
-    measure(ctx, q_meas, qd_meas, qm, vm, vd);
-    return VGTC_OK;
+    return measure(ctx, q_meas, qd_meas, qm, vm, vd, x);
 }
 
 int vgtc_step(vgtc_context *ctx, double t, const double *q_meas, const double *qd_meas, const double *ref_row,
@@ -173,14 +221,14 @@ int vgtc_step_gains(vgtc_context *ctx, double t, const double *q_meas, const dou
     if (k > 0 && t < ctx->t_last) return fail(efforts, VGTC_BAD_TIME);
 
     /* 1. what the controller sees (measure in closed_loop.c) */
-    double qm[VGTC_NJ], vm[VGTC_NJ], vd[VGTC_NJ], tau[VGTC_NJ], F[VGTC_NJ];
-    measure(ctx, q_meas, qd_meas, qm, vm, vd);
+    double qm[VGTC_NJ], vm[VGTC_NJ], vd[VGTC_NJ], tau[VGTC_NJ], F[VGTC_NJ], x[4 * VGTC_NJ];
+    if (measure(ctx, q_meas, qd_meas, qm, vm, vd, x)) return fail(efforts, VGTC_FUNCTION_FAILED);
     for (int i = 0; i < n; ++i)
         if (qm[i] < p->q_min[i] - p->limit_tolerance || qm[i] > p->q_max[i] + p->limit_tolerance)
             return fail(efforts, VGTC_OUTSIDE_LIMITS);
 
     /* 2. the estimate of the external efforts */
-    if (observe(ctx, k, qm, vm, vd, f_meas, tau)) return fail(efforts, VGTC_FUNCTION_FAILED);
+    if (observe(ctx, k, qm, vm, vd, x, f_meas, tau)) return fail(efforts, VGTC_FUNCTION_FAILED);
 
     /* 3. computed force control minus the estimate */
     const double *q_d = ref_row, *qd_d = ref_row + n, *qdd_d = ref_row + 2 * n;
@@ -215,6 +263,7 @@ int vgtc_step_gains(vgtc_context *ctx, double t, const double *q_meas, const dou
     memcpy(ctx->F2, ctx->F1, sizeof F);
     memcpy(ctx->F1, F, sizeof F);
     memcpy(ctx->tau, tau, sizeof tau);
+    if (p->estimator == VGTC_ESTIMATOR_KALMAN) memcpy(ctx->x1, x, sizeof x);
     ctx->tip_error = sqrt(e0 * e0 + e1 * e1 + e2 * e2);
     ctx->t_last = t;
     ctx->k = k + 1;

@@ -8,10 +8,14 @@
  *
  * Per period k (the simulation's controller side, in the same order of operations):
  *   1. the readings: joints rounded to the encoder steps; velocities measured, or differenced from
- *      the readings of the last period and filtered (first order);
+ *      the readings of the last period and filtered (first order), or estimated by the Kalman
+ *      filter (VGTC_ESTIMATOR_KALMAN: each joint's position, velocity and acceleration disturbance,
+ *      predicted by the controller model's forward dynamics under the effort applied, corrected by
+ *      the encoder reading with steady-state gains);
  *   2. the estimate tau of the external joint efforts: the generalised-momentum observer (from the
- *      controller's model, the velocities and the efforts it applied), or the measured tool force
- *      fed forward through J_P^T, or none;
+ *      controller's model, the velocities and the efforts it applied; with the Kalman filter, from
+ *      its estimate of the last period and of the acceleration), or the measured tool force fed
+ *      forward through J_P^T, or none;
  *   3. computed force control, paper eq. 20, minus the estimate:
  *      F = M^(q) (qdd_d + Kp (q_d - q) + Kv (qd_d - qd)) + C^(q, qd) - tau;
  *   4. the efforts clipped to their limits (none by default).
@@ -56,6 +60,12 @@ enum vgtc_velocity {
                                    /* is read only at the first step (the known start; NULL: rest) */
 };
 
+/* How the velocities are estimated from the joint readings (VGTC_VELOCITY_DIFFERENCED only). */
+enum vgtc_estimator {
+    VGTC_ESTIMATOR_DIFFERENCE = 0, /* differences of the readings through the first-order filter    */
+    VGTC_ESTIMATOR_KALMAN = 1      /* steady-state Kalman filter of each joint (q, v, disturbance d) */
+};
+
 /* Everything vgtc_init needs; vgtc_default_params fills it with the exported values. */
 typedef struct {
     double dt;                            /* control period (s)                                  */
@@ -68,6 +78,10 @@ typedef struct {
     double resolution[VGTC_NJ];           /* encoder step each joint reading is rounded to (0: none) */
     double velocity_filter;               /* differenced velocities: weight of the previous      */
                                           /* estimate, exp(-2 pi f_c dt), in [0, 1)               */
+    int estimator;                        /* an enum vgtc_estimator (KALMAN: exported with it,     */
+                                          /* VGTC_KALMAN 1 in vgtc_config.h)                       */
+    double kalman_gain[3];                /* VGTC_ESTIMATOR_KALMAN: the steady-state gains of      */
+                                          /* position (1), velocity (1/s), disturbance (1/s^2)     */
     double q_min[VGTC_NJ], q_max[VGTC_NJ];/* joint limits (m, rad)                                 */
     double limit_tolerance;               /* a reading farther outside a limit stops the controller */
     double effort_max[VGTC_NJ];           /* |F_i| is clipped to it (INFINITY: no limit)           */
@@ -85,6 +99,8 @@ typedef struct {
     double vd1[VGTC_NJ];                  /* the unfiltered differenced velocity of the last period */
     double F1[VGTC_NJ], F2[VGTC_NJ];      /* efforts of the last two periods                       */
     double tau[VGTC_NJ];                  /* estimate of the external efforts of the last period   */
+    double x1[4 * VGTC_NJ];               /* Kalman estimate of the last period: q^, v^, d^ and the */
+                                          /* model's acceleration it was predicted with            */
     double zero[VGTC_NJ];                 /* zeros: no velocity noise, no tool force               */
     double tip_error;                     /* |P^(q_d) - P^(q_meas)| of the last period (m)         */
     const double *arg[VGTC_SZ_ARG];       /* work of the generated functions                       */
@@ -120,8 +136,9 @@ int vgtc_step_gains(vgtc_context *ctx, double t, const double *q_meas, const dou
                     const double *f_meas, const double *Kp, const double *Kv, double *efforts);
 
 /* The joint readings qm and velocities vm (VGTC_NJ each) the next vgtc_step would use for these
- * measurements, without changing the context (what switching control predicts from). */
-int vgtc_readings(const vgtc_context *ctx, const double *q_meas, const double *qd_meas, double *qm, double *vm);
+ * measurements (what switching control predicts from). The context's state is left as it was; only
+ * its work arrays are used (the Kalman filter evaluates the model's forward dynamics). */
+int vgtc_readings(vgtc_context *ctx, const double *q_meas, const double *qd_meas, double *qm, double *vm);
 
 /* After a step: the estimate of the external joint efforts that was subtracted (VGTC_NJ values). */
 const double *vgtc_effort_estimate(const vgtc_context *ctx);

@@ -160,15 +160,18 @@ static double pairwise_sum(const double *a, long n)
 
 static double clean_cost(double c) { return isfinite(c) ? c : INFINITY; }
 
-/* Indices in ascending cost, ties in index order (any stable sort's order): by counting ranks. */
+/* Indices in ascending cost, ties in index order (any stable sort's order): by counting ranks
+ * (n <= VGTC_GA_POPULATION; the costs cleaned once, not at every comparison). */
 static void stable_order(long n, const double *cost, long *order)
 {
+    double clean[VGTC_GA_POPULATION];
     long i, j;
+    for (i = 0; i < n; ++i) clean[i] = clean_cost(cost[i]);
     for (i = 0; i < n; ++i) {
-        const double ci = clean_cost(cost[i]);
+        const double ci = clean[i];
         long rank = 0;
-        for (j = 0; j < i; ++j) rank += clean_cost(cost[j]) <= ci;
-        for (j = i + 1; j < n; ++j) rank += clean_cost(cost[j]) < ci;
+        for (j = 0; j < i; ++j) rank += clean[j] <= ci;
+        for (j = i + 1; j < n; ++j) rank += clean[j] < ci;
         order[rank] = i;
     }
 }
@@ -289,6 +292,142 @@ static void gains_from_bytes(vgtc_ga *x, int count, const uint64_t *const *rows)
         }
 }
 
+/* ---- the safe variant on a block of candidates (ga.c: safe_repair) -------------------------- */
+
+/* positive_definite on the LANES matrices A (VGTC_NJ x VGTC_NJ, one lane each) at once: ok[c]
+ * stays 1 only if every pivot of lane c is positive. A lane's numbers are positive_definite's on
+ * it, in the same order (so the same test, bit for bit); a lane that failed goes on with pivot 1
+ * (its numbers are no longer used, and nothing divides by zero). Stops when no lane is left. */
+static void lanes_cholesky(double (*A)[LANES], int *ok)
+{
+    const int nj = VGTC_NJ;
+    int i, j, k, c, any;
+    for (j = 0; j < nj; ++j) {
+        double d[LANES];
+        for (c = 0; c < LANES; ++c) d[c] = A[j * nj + j][c];
+        for (k = 0; k < j; ++k)
+            for (c = 0; c < LANES; ++c) d[c] -= A[j * nj + k][c] * A[j * nj + k][c];
+        any = 0;
+        for (c = 0; c < LANES; ++c) {
+            ok[c] &= d[c] > 0.0;
+            d[c] = sqrt(ok[c] ? d[c] : 1.0);
+            A[j * nj + j][c] = d[c];
+            any |= ok[c];
+        }
+        if (!any) return;
+        for (i = j + 1; i < nj; ++i) {
+            double v[LANES];
+            for (c = 0; c < LANES; ++c) v[c] = A[i * nj + j][c];
+            for (k = 0; k < j; ++k)
+                for (c = 0; c < LANES; ++c) v[c] -= A[i * nj + k][c] * A[j * nj + k][c];
+            for (c = 0; c < LANES; ++c) A[i * nj + j][c] = v[c] / d[c];
+        }
+    }
+}
+
+/* How far inside Gershgorin's bound a shifted matrix must be, relative to its largest diagonal
+ * entry, for its factorisation to be skipped: its smallest eigenvalue relative to the largest
+ * diagonal entry is then above 1e-8, and a Cholesky factorisation in double precision runs to the
+ * end (its pivots stay positive) once that ratio exceeds n gamma_{n+1} / (1 - n gamma_{n+1}),
+ * about n^2 1.1e-16 (Higham, Accuracy and Stability of Numerical Algorithms, 2nd ed., Thm 10.7):
+ * below 1e-8 for every n up to several thousand joints, with room for the rounding of the bound
+ * itself. So the skip gives positive_definite's answer exactly. */
+#define GERSHGORIN_MARGIN 1e-8
+
+/* safe_admit on every lane of the block's gains x->K, the repaired gains written back (so the
+ * prediction is that of the gains that would be applied), penalty[c] set. The same arithmetic as
+ * safe_admit lane by lane (fmin and fmax of the Gershgorin bounds as comparisons: the running
+ * bound is never NaN, and a NaN value leaves it, as fmin does), and the same answers with less
+ * work: a shifted matrix with a diagonal entry <= 0 is not positive definite (its factorisation
+ * fails at that pivot at the latest: a pivot is the entry minus squares), one well inside
+ * Gershgorin's bound is (GERSHGORIN_MARGIN); only the lanes left between are factorised, side by
+ * side, and a factorisation runs only while a lane needs it. */
+static void safe_repair(vgtc_ga *x, double *penalty)
+{
+    const vgtc_ga_params *g = &x->p;
+    const int nj = VGTC_NJ, nn = VGTC_NJ * VGTC_NJ;
+    double kv0[LANES], lo[LANES], hi[LANES], gmin[LANES], gmax[LANES], radius[LANES];
+    double below_min[LANES], below_max[LANES], above_min[LANES], above_max[LANES];
+    int ok[LANES], diagonal[LANES], need[LANES], any, i, l, c;
+    for (c = 0; c < LANES; ++c) {
+        kv0[c] = g->safe_kv;
+        lo[c] = g->safe_lo;
+        hi[c] = g->safe_hi;
+        gmin[c] = below_min[c] = above_min[c] = INFINITY;
+        gmax[c] = below_max[c] = above_max[c] = -INFINITY;
+        diagonal[c] = 1;
+    }
+    if (g->safe_nkv > 0)
+        for (c = 0; c < LANES; ++c) {
+            double mean = 0.0;
+            long j;
+            for (i = 0; i < nj; ++i) mean += (double)x->K[nn + i * nj + i][c];
+            j = lround(mean / nj / g->safe_kv_step);
+            j = j < 0 ? 0 : (j >= g->safe_nkv ? g->safe_nkv - 1 : j);
+            kv0[c] = (double)j * g->safe_kv_step;
+            lo[c] = g->safe_lo_tab[j];
+            hi[c] = g->safe_hi_tab[j];
+        }
+    for (i = 0; i < nj; ++i)
+        for (l = i; l < nj; ++l)
+            for (c = 0; c < LANES; ++c) {
+                const double v = 0.5 * ((double)x->K[i * nj + l][c] + (double)x->K[l * nj + i][c]);
+                x->sym[i * nj + l][c] = v;
+                x->sym[l * nj + i][c] = v;
+            }
+    for (i = 0; i < nj; ++i) {
+        for (c = 0; c < LANES; ++c) radius[c] = 0.0;
+        for (l = 0; l < nj; ++l) {
+            for (c = 0; c < LANES; ++c) {
+                x->K[i * nj + l][c] = (float)x->sym[i * nj + l][c];
+                x->K[nn + i * nj + l][c] = (float)(i == l ? kv0[c] : 0.0);
+                x->shifted[i * nj + l][c] = x->sym[i * nj + l][c] - (i == l ? lo[c] : 0.0);
+            }
+            if (l != i)
+                for (c = 0; c < LANES; ++c) radius[c] += fabs(x->sym[i * nj + l][c]);
+        }
+        for (c = 0; c < LANES; ++c) {
+            const double low = x->sym[i * nj + i][c] - radius[c], high = x->sym[i * nj + i][c] + radius[c];
+            const double below = x->sym[i * nj + i][c] - lo[c], above = hi[c] - x->sym[i * nj + i][c];
+            gmin[c] = low < gmin[c] ? low : gmin[c];
+            gmax[c] = high > gmax[c] ? high : gmax[c];
+            diagonal[c] &= below > 0.0 && above > 0.0;
+            below_min[c] = below - radius[c] < below_min[c] ? below - radius[c] : below_min[c];
+            below_max[c] = below > below_max[c] ? below : below_max[c];
+            above_min[c] = above - radius[c] < above_min[c] ? above - radius[c] : above_min[c];
+            above_max[c] = above > above_max[c] ? above : above_max[c];
+        }
+    }
+    for (c = any = 0; c < LANES; ++c) { /* sym(Kp) - lo I */
+        ok[c] = lo[c] < hi[c] && diagonal[c];
+        need[c] = ok[c] && !(below_min[c] > GERSHGORIN_MARGIN * below_max[c]);
+        any |= need[c];
+    }
+    if (any) {
+        lanes_cholesky(x->shifted, need);
+        for (c = 0; c < LANES; ++c) ok[c] &= (below_min[c] > GERSHGORIN_MARGIN * below_max[c]) || need[c];
+    }
+    for (c = any = 0; c < LANES; ++c) { /* hi I - sym(Kp) */
+        need[c] = ok[c] && !(above_min[c] > GERSHGORIN_MARGIN * above_max[c]);
+        any |= need[c];
+    }
+    if (any) {
+        for (i = 0; i < nj; ++i)
+            for (l = 0; l < nj; ++l)
+                for (c = 0; c < LANES; ++c) x->shifted[i * nj + l][c] = (i == l ? hi[c] : 0.0) - x->sym[i * nj + l][c];
+        lanes_cholesky(x->shifted, need);
+        for (c = 0; c < LANES; ++c) ok[c] &= (above_min[c] > GERSHGORIN_MARGIN * above_max[c]) || need[c];
+    }
+    for (c = 0; c < LANES; ++c) {
+        const double scale = hi[c] - lo[c];
+        if (!(lo[c] < hi[c])) penalty[c] = 3.0;
+        else if (ok[c]) penalty[c] = 0.0;
+        else
+            penalty[c] = 1.0 + fmin(1.0, fmax(0.0, lo[c] - gmin[c]) / scale)
+                         + fmin(1.0, fmax(0.0, gmax[c] - hi[c]) / scale) + 1e-9;
+    }
+}
+
 /* Operations on the LANES values of a block, one loop each (the compiler vectorises them). */
 static void lanes_mul(float *restrict r, const float *restrict a, const float *restrict b)
 {
@@ -336,23 +475,25 @@ static void kernel(vgtc_ga *x, int count, double *sum, long *n_far)
         const float *r = x->r + j * nj, *s = x->s + j * nj;
         const float *J = x->jac_f + (j + 1) * 3 * nj, *off = x->off_f + (j + 1) * 3;
         float norm2[LANES], t[3][LANES], square[LANES];
-        for (i = 0; i < nj; ++i) {
+        for (i = 0; i < nj; ++i) { /* a = Kp E + Kv Ed: each lane's sums in one loop body (in registers) */
             const int ip = i * nj, iv = nn + i * nj;
-            float p0[LANES], v0[LANES];
-            if (nj == 1) {
-                lanes_mul(p0, x->K[ip], E[0]);
-                lanes_mul(v0, x->K[iv], Ed[0]);
-            } else { /* the first product is fused with the second (GCC contracts a*b + c*d so) */
-                lanes_mul(p0, x->K[ip + 1], E[1]);
-                lanes_fma(p0, x->K[ip], E[0]);
-                lanes_mul(v0, x->K[iv + 1], Ed[1]);
-                lanes_fma(v0, x->K[iv], Ed[0]);
+            for (c = 0; c < LANES; ++c) {
+                float p0, v0;
+                if (nj == 1) {
+                    p0 = x->K[ip][c] * E[0][c];
+                    v0 = x->K[iv][c] * Ed[0][c];
+                } else { /* the first product is fused with the second (GCC contracts a*b + c*d so) */
+                    p0 = x->K[ip + 1][c] * E[1][c];
+                    p0 = FMA(x->K[ip][c], E[0][c], p0);
+                    v0 = x->K[iv + 1][c] * Ed[1][c];
+                    v0 = FMA(x->K[iv][c], Ed[0][c], v0);
+                }
+                for (l = 2; l < nj; ++l) {
+                    p0 = FMA(x->K[ip + l][c], E[l][c], p0);
+                    v0 = FMA(x->K[iv + l][c], Ed[l][c], v0);
+                }
+                a[i][c] = p0 + v0;
             }
-            for (l = 2; l < nj; ++l) {
-                lanes_fma(p0, x->K[ip + l], E[l]);
-                lanes_fma(v0, x->K[iv + l], Ed[l]);
-            }
-            for (c = 0; c < LANES; ++c) a[i][c] = p0[c] + v0[c];
         }
         for (c = 0; c < LANES; ++c) norm2[c] = 0.0f;
         for (i = 0; i < nj; ++i) {
@@ -403,25 +544,13 @@ static void kernel(vgtc_ga *x, int count, double *sum, long *n_far)
 /* The predicted tip errors of candidates rows[0 .. count), count <= LANES (predict_one_block). */
 static int predict_block(vgtc_ga *x, int count, const uint64_t *const *rows, double *cost)
 {
-    const int nj = VGTC_NJ, nn = VGTC_NJ * VGTC_NJ;
+    const int nj = VGTC_NJ;
     double penalty[LANES], sum[LANES];
     long n_far, f;
     int i, c;
     gains_from_bytes(x, count, rows);
     for (c = 0; c < LANES; ++c) penalty[c] = 0.0;
-    if (x->p.safe) /* safe_repair */
-        for (c = 0; c < count; ++c) {
-            double kp[VGTC_NJ * VGTC_NJ], kv[VGTC_NJ * VGTC_NJ];
-            for (i = 0; i < nn; ++i) {
-                kp[i] = (double)x->K[i][c];
-                kv[i] = (double)x->K[nn + i][c];
-            }
-            penalty[c] = safe_admit(&x->p, kp, kv);
-            for (i = 0; i < nn; ++i) {
-                x->K[i][c] = (float)kp[i];
-                x->K[nn + i][c] = (float)kv[i];
-            }
-        }
+    if (x->p.safe) safe_repair(x, penalty); /* every lane (those past count are not read) */
     kernel(x, count, sum, &n_far);
     for (f = 0; f < n_far; ++f) { /* the exact forward kinematics of the predicted joints */
         const long lane = x->far_at[f] / x->horizon, j = x->far_at[f] % x->horizon;

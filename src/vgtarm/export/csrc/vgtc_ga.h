@@ -106,6 +106,8 @@ typedef struct {
     long order[VGTC_GA_POPULATION], pool[VGTC_GA_POPULATION], fresh[VGTC_GA_POPULATION];
     long flips[VGTC_GA_MAX_FLIPS + 1];
     float K[VGTC_GA_GENES][VGTC_GA_LANES];                /* a block's gains, one lane each      */
+    double sym[VGTC_NJ * VGTC_NJ][VGTC_GA_LANES];         /* safe variant: sym(Kp) of each lane,  */
+    double shifted[VGTC_NJ * VGTC_NJ][VGTC_GA_LANES];     /* shifted by an edge and factorised   */
     float far[VGTC_GA_LANES * (VGTC_GA_HORIZON + 1) * VGTC_NJ]; /* joint errors outside the region */
     long far_at[VGTC_GA_LANES * (VGTC_GA_HORIZON + 1)];  /* their lane * horizon + step          */
     const uint64_t *rows[VGTC_GA_POPULATION];             /* the candidates of a prediction      */

@@ -176,7 +176,8 @@ static void measure(const vgt_settings *s, const vgt_run *r, long k)
 /* The Kalman estimator at sample k (VGT_ESTIMATOR_KALMAN, with sensing; after measure): each joint's
  * position, velocity and acceleration disturbance from the encoder reading q_meas_k, predicted over
  * the last period by the controller model's forward dynamics at the estimate of sample k-1 under
- * the effort applied, F_{k-1} (no tool force: that is in the disturbance), then corrected with the
+ * the effort applied, F_{k-1} (no tool force: that is in the disturbance; with tool_feedforward the
+ * expected tool force f_exp_{k-1}, so the disturbance is the rest), then corrected with the
  * steady-state gains. The controller sees the encoder reading and the estimated velocity. The run
  * starts from a known state (the encoder reading, the true velocity, no disturbance). */
 static int estimate(const vgt_model *m, const vgt_settings *s, const vgt_run *r, vgt_work *wk, long k)
@@ -191,7 +192,8 @@ static int estimate(const vgt_model *m, const vgt_settings *s, const vgt_run *r,
         for (int i = 0; i < nj; ++i) d[i] = a[i] = 0.0;
     } else {
         const double *x0 = x - 4 * nj, zero[3] = {0.0, 0.0, 0.0};
-        const double *in_fd[5] = {x0, x0 + nj, r->F + nj * (k - 1), zero, r->p_ctrl};
+        const double *f = s->tool_feedforward ? r->tool_force_expected + 3 * (k - 1) : zero;
+        const double *in_fd[5] = {x0, x0 + nj, r->F + nj * (k - 1), f, r->p_ctrl};
         double *out_fd[1] = {a};
         if (call(&m->fd, wk, 5, in_fd, 1, out_fd)) return VGT_FUNCTION_FAILED;
         vgt_kalman_step(nj, s->dt, s->kalman_gain, x0, x0 + nj, x0 + 2 * nj, a, z, q, v, d);
@@ -222,8 +224,10 @@ static void differenced(const vgt_settings *s, const vgt_run *r, long j, double 
  * the last period: (q_{k-1}, v_{k-1}) -> v_k under F_{k-1}. With velocities differenced from
  * encoders, v_j is the mean velocity over period j-1, so the change v_k - v_{k-1} spans the two
  * last periods: M^ and C^ at q_{k-2} and v_{k-1}, the mean of F_{k-2} and F_{k-1}, unfiltered
- * differences (the estimate starts at k = 2). The force sensor feeds the tool force of the
- * previous period forward through J_P^T. */
+ * differences (the estimate starts at k = 2). With tool_feedforward the inverse dynamics take the
+ * expected tool force of the window (f_exp_{k-1}; with differences the mean of f_exp_{k-2} and
+ * f_exp_{k-1}) as known, so the observer estimates only the rest of the external efforts. The force
+ * sensor feeds the tool force of the previous period forward through J_P^T. */
 static int observe(const vgt_model *m, const vgt_settings *s, const vgt_run *r, vgt_work *wk, long k)
 {
     const int nj = s->n_joints;
@@ -241,14 +245,16 @@ static int observe(const vgt_model *m, const vgt_settings *s, const vgt_run *r, 
         vgt_force_feedforward(nj, J, f, tau);
         return VGT_DONE;
     }
-    double acc[nj], raw[nj], applied[nj], va[nj], vb[nj], zero[3] = {0.0, 0.0, 0.0};
+    double acc[nj], raw[nj], applied[nj], va[nj], vb[nj], zero[3] = {0.0, 0.0, 0.0}, f[3] = {0.0, 0.0, 0.0};
     const double *qa, *F1 = r->F + nj * (k - 1);
+    const double *f1 = s->tool_feedforward ? r->tool_force_expected + 3 * (k - 1) : zero;
     if (s->sensing && s->estimator == VGT_ESTIMATOR_KALMAN) {
         /* the Kalman estimate of the last period: the model's acceleration plus the disturbance,
-         * at the estimate of sample k-1, under F_{k-1}; raw = M^ d^ (to round-off) */
+         * at the estimate of sample k-1, under F_{k-1} (and the expected tool force f_exp_{k-1}
+         * with tool_feedforward); raw = M^ d^ (to round-off) */
         const double *x0 = r->x_hat + 4 * nj * (k - 1), *x = x0 + 4 * nj;
         for (int i = 0; i < nj; ++i) acc[i] = x[3 * nj + i] + x[2 * nj + i];
-        const double *in_k[5] = {x0, x0 + nj, acc, zero, r->p_ctrl};
+        const double *in_k[5] = {x0, x0 + nj, acc, f1, r->p_ctrl};
         double *out_k[1] = {raw};
         if (call(&m->id, wk, 5, in_k, 1, out_k)) return VGT_FUNCTION_FAILED;
         const double keep = exp(-s->observer_gain * s->dt), *tau0 = tau - nj;
@@ -261,14 +267,16 @@ static int observe(const vgt_model *m, const vgt_settings *s, const vgt_run *r, 
         differenced(s, r, k, vb);
         qa = r->q_meas + nj * (k - 2);
         vgt_mean_effort(nj, F2, F1, applied);
+        if (s->tool_feedforward) vgt_mean_effort(3, f1 - 3, f1, f);
     } else {
         memcpy(va, r->qd_meas + nj * (k - 1), sizeof(double) * (size_t)nj);
         memcpy(vb, r->qd_meas + nj * k, sizeof(double) * (size_t)nj);
         qa = r->q_meas + nj * (k - 1);
         memcpy(applied, F1, sizeof(double) * (size_t)nj);
+        memcpy(f, f1, sizeof f);
     }
     vgt_window_acceleration(nj, s->dt, va, vb, acc);
-    const double *in_id[5] = {qa, va, acc, zero, r->p_ctrl};
+    const double *in_id[5] = {qa, va, acc, f, r->p_ctrl};
     double *out_id[1] = {raw};
     if (call(&m->id, wk, 5, in_id, 1, out_id)) return VGT_FUNCTION_FAILED;
     const double keep = exp(-s->observer_gain * s->dt), *tau0 = tau - nj;
@@ -276,11 +284,25 @@ static int observe(const vgt_model *m, const vgt_settings *s, const vgt_run *r, 
     return VGT_DONE;
 }
 
+/* The expected tool force of sample k fed forward (tool_feedforward): F -= J_P(q_meas_k)^T f_exp_k,
+ * the controller model's tip Jacobian at what the controller sees. */
+static int feed_forward(const vgt_model *m, const vgt_settings *s, const vgt_run *r, vgt_work *wk, long k, double *F)
+{
+    const int nj = s->n_joints;
+    double J[3 * nj], Jw[3 * nj], tau[nj];
+    const double *in_j[2] = {r->q_meas + nj * k, r->p_ctrl};
+    double *out_j[2] = {J, Jw};
+    if (call(&m->jac, wk, 2, in_j, 2, out_j)) return VGT_FUNCTION_FAILED;
+    vgt_force_feedforward(nj, J, r->tool_force_expected + 3 * k, tau);
+    vgt_subtract_estimate(nj, tau, F);
+    return VGT_DONE;
+}
+
 /* Run samples k0 .. k1-1 with the gains Kp, Kv (row-major nj x nj). Sample k: measure the tip and
  * its error and what the controller sees, stop if the error exceeds the threshold (*stop = k,
  * before any control), estimate the external efforts, compute the effort (computed force control
- * minus the estimate) and the tool force, and integrate to sample k+1 (unless k is the last).
- * On any other stop, *stop is the sample whose state failed. */
+ * minus the estimate and, with tool_feedforward, minus the expected tool force through J_P^T) and
+ * the tool force, and integrate to sample k+1 (unless k is the last). On any other stop, *stop is the sample whose state failed. */
 int vgt_simulate(const vgt_model *m, const vgt_settings *s, const vgt_run *r,
                  const double *Kp, const double *Kv, long k0, long k1, long *stop)
 {
@@ -342,6 +364,9 @@ int vgt_simulate_slice(const vgt_model *m, const vgt_settings *s, const vgt_run 
             double *out_c[1] = {F};
             if (call(&m->cfc, &wk, 8, in_c, 1, out_c)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
             vgt_subtract_estimate(nj, tau, F);
+            if (s->tool_feedforward && feed_forward(m, s, r, &wk, k, F)) {
+                status = VGT_FUNCTION_FAILED; *stop = k; break;
+            }
             tool_force(s, V, dist, r->f_ext + 3 * k);
             ++used;
             if (k + 1 >= r->n) continue;

@@ -423,6 +423,8 @@ typedef struct {
 /* What one thread of the prediction writes. */
 typedef struct scratch {
     vf *K;               /* (2 nj^2) gains of the block, one lane per candidate                     */
+    double (*sym)[BLOCK];     /* (nj^2) the safe variant: sym(Kp) of each lane (safe_repair)          */
+    double (*shifted)[BLOCK]; /* (nj^2) it shifted by an edge of the admitted interval, factorised   */
     float *far;          /* (BLOCK H, nj) predicted joint errors of the steps outside the region     */
     long *far_at;        /* (BLOCK H) their lane * H + step                                         */
     const double **arg;  /* work arrays of the generated tip function                               */
@@ -692,24 +694,142 @@ static double safe_admit(int nj, const vgt_ga_settings *g, double *kp, double *k
     return 1.0 + fmin(1.0, fmax(0.0, lo - gmin) / scale) + fmin(1.0, fmax(0.0, gmax - hi) / scale) + 1e-9;
 }
 
-/* safe_admit on the BLOCK lanes of K (gene-major, one float per lane): the repaired gains are
- * written back (so the prediction is that of the gains that would be applied), penalty[c] set. */
-static void safe_repair(const predictor *x, int count, vf *K, double *penalty)
+/* positive_definite on the BLOCK matrices A (nj x nj, one lane each) at once: ok[c] stays 1 only
+ * if every pivot of lane c is positive. A lane's numbers are positive_definite's on it, in the
+ * same order (so the same test, bit for bit: no contraction, a correctly rounded sqrt and
+ * division); a lane that failed goes on with pivot 1 (its numbers are no longer used, and nothing
+ * divides by zero). Stops when no lane is left. */
+static inline __attribute__((always_inline)) void lanes_cholesky(int nj, double (*restrict A)[BLOCK], int *ok)
 {
+    for (int j = 0; j < nj; ++j) {
+        double d[BLOCK];
+        for (int c = 0; c < BLOCK; ++c) d[c] = A[j * nj + j][c];
+        for (int k = 0; k < j; ++k)
+            for (int c = 0; c < BLOCK; ++c) d[c] -= A[j * nj + k][c] * A[j * nj + k][c];
+        int any = 0;
+        for (int c = 0; c < BLOCK; ++c) {
+            ok[c] &= d[c] > 0.0;
+            d[c] = sqrt(ok[c] ? d[c] : 1.0);
+            A[j * nj + j][c] = d[c];
+            any |= ok[c];
+        }
+        if (!any) return;
+        for (int i = j + 1; i < nj; ++i) {
+            double v[BLOCK];
+            for (int c = 0; c < BLOCK; ++c) v[c] = A[i * nj + j][c];
+            for (int k = 0; k < j; ++k)
+                for (int c = 0; c < BLOCK; ++c) v[c] -= A[i * nj + k][c] * A[j * nj + k][c];
+            for (int c = 0; c < BLOCK; ++c) A[i * nj + j][c] = v[c] / d[c];
+        }
+    }
+}
+
+/* How far inside Gershgorin's bound a shifted matrix must be, relative to its largest diagonal
+ * entry, for its factorisation to be skipped: its smallest eigenvalue relative to the largest
+ * diagonal entry is then above 1e-8, and a Cholesky factorisation in double precision runs to the
+ * end (its pivots stay positive) once that ratio exceeds n gamma_{n+1} / (1 - n gamma_{n+1}),
+ * about n^2 1.1e-16 (Higham, Accuracy and Stability of Numerical Algorithms, 2nd ed., Thm 10.7):
+ * below 1e-8 for every n up to several thousand joints, with room for the rounding of the bound
+ * itself. So the skip gives positive_definite's answer exactly. */
+#define GERSHGORIN_MARGIN 1e-8
+
+/* safe_admit on the BLOCK lanes of K (gene-major, one float per lane): the repaired gains are
+ * written back (so the prediction is that of the gains that would be applied), penalty[c] set
+ * (lanes past count too: they are not read). The same arithmetic as safe_admit lane by lane (fmin
+ * and fmax of the Gershgorin bounds as comparisons: the running bound is never NaN, and a NaN
+ * value leaves it, as fmin does), and the same answers with less work: a shifted matrix with a
+ * diagonal entry <= 0 is not positive definite (its factorisation fails at that pivot at the
+ * latest: a pivot is the entry minus squares), one well inside Gershgorin's bound is
+ * (GERSHGORIN_MARGIN); only the lanes left between are factorised, side by side, and a
+ * factorisation runs only while a lane needs it. The loops run over the lanes (vectorised; no
+ * errno for sqrt, so that it vectorises, and no contraction, so that each lane rounds as
+ * positive_definite does). */
+__attribute__((target_clones("arch=x86-64-v3", "default"), optimize("no-math-errno", "fp-contract=off"))) static void
+safe_repair(const predictor *x, scratch *sc, vf *K, double *penalty)
+{
+    const vgt_ga_settings *g = x->g;
     const int nj = x->nj, nn = nj * nj;
-    double kp[nn], kv[nn];
+    double (*restrict sym)[BLOCK] = sc->sym, (*restrict shifted)[BLOCK] = sc->shifted;
+    double kv0[BLOCK], lo[BLOCK], hi[BLOCK], gmin[BLOCK], gmax[BLOCK], radius[BLOCK];
+    double below_min[BLOCK], below_max[BLOCK], above_min[BLOCK], above_max[BLOCK];
+    int ok[BLOCK], diagonal[BLOCK], need[BLOCK], any;
     for (int c = 0; c < BLOCK; ++c) {
-        penalty[c] = 0.0;
-        if (c >= count) continue;
-        for (int gi = 0; gi < nn; ++gi) {
-            kp[gi] = (double)K[gi][c];
-            kv[gi] = (double)K[nn + gi][c];
+        kv0[c] = g->safe_kv;
+        lo[c] = g->safe_lo;
+        hi[c] = g->safe_hi;
+        gmin[c] = below_min[c] = above_min[c] = INFINITY;
+        gmax[c] = below_max[c] = above_max[c] = -INFINITY;
+        diagonal[c] = 1;
+    }
+    if (g->safe_nkv > 0)
+        for (int c = 0; c < BLOCK; ++c) {
+            double mean = 0.0;
+            for (int i = 0; i < nj; ++i) mean += (double)K[nn + i * nj + i][c];
+            long j = lround(mean / nj / g->safe_kv_step);
+            j = j < 0 ? 0 : (j >= g->safe_nkv ? g->safe_nkv - 1 : j);
+            kv0[c] = (double)j * g->safe_kv_step;
+            lo[c] = g->safe_lo_tab[j];
+            hi[c] = g->safe_hi_tab[j];
         }
-        penalty[c] = safe_admit(nj, x->g, kp, kv);
-        for (int gi = 0; gi < nn; ++gi) {
-            K[gi][c] = (float)kp[gi];
-            K[nn + gi][c] = (float)kv[gi];
+    for (int i = 0; i < nj; ++i)
+        for (int l = i; l < nj; ++l)
+            for (int c = 0; c < BLOCK; ++c) {
+                const double v = 0.5 * ((double)K[i * nj + l][c] + (double)K[l * nj + i][c]);
+                sym[i * nj + l][c] = v;
+                sym[l * nj + i][c] = v;
+            }
+    for (int i = 0; i < nj; ++i) {
+        for (int c = 0; c < BLOCK; ++c) radius[c] = 0.0;
+        for (int l = 0; l < nj; ++l) {
+            for (int c = 0; c < BLOCK; ++c) {
+                K[i * nj + l][c] = (float)sym[i * nj + l][c];
+                K[nn + i * nj + l][c] = (float)(i == l ? kv0[c] : 0.0);
+                shifted[i * nj + l][c] = sym[i * nj + l][c] - (i == l ? lo[c] : 0.0);
+            }
+            if (l != i)
+                for (int c = 0; c < BLOCK; ++c) radius[c] += fabs(sym[i * nj + l][c]);
         }
+        for (int c = 0; c < BLOCK; ++c) {
+            const double low = sym[i * nj + i][c] - radius[c], high = sym[i * nj + i][c] + radius[c];
+            const double below = sym[i * nj + i][c] - lo[c], above = hi[c] - sym[i * nj + i][c];
+            gmin[c] = low < gmin[c] ? low : gmin[c];
+            gmax[c] = high > gmax[c] ? high : gmax[c];
+            diagonal[c] &= below > 0.0 && above > 0.0;
+            below_min[c] = below - radius[c] < below_min[c] ? below - radius[c] : below_min[c];
+            below_max[c] = below > below_max[c] ? below : below_max[c];
+            above_min[c] = above - radius[c] < above_min[c] ? above - radius[c] : above_min[c];
+            above_max[c] = above > above_max[c] ? above : above_max[c];
+        }
+    }
+    any = 0;
+    for (int c = 0; c < BLOCK; ++c) { /* sym(Kp) - lo I */
+        ok[c] = lo[c] < hi[c] && diagonal[c];
+        need[c] = ok[c] && !(below_min[c] > GERSHGORIN_MARGIN * below_max[c]);
+        any |= need[c];
+    }
+    if (any) {
+        lanes_cholesky(nj, shifted, need);
+        for (int c = 0; c < BLOCK; ++c) ok[c] &= (below_min[c] > GERSHGORIN_MARGIN * below_max[c]) || need[c];
+    }
+    any = 0;
+    for (int c = 0; c < BLOCK; ++c) { /* hi I - sym(Kp) */
+        need[c] = ok[c] && !(above_min[c] > GERSHGORIN_MARGIN * above_max[c]);
+        any |= need[c];
+    }
+    if (any) {
+        for (int i = 0; i < nj; ++i)
+            for (int l = 0; l < nj; ++l)
+                for (int c = 0; c < BLOCK; ++c) shifted[i * nj + l][c] = (i == l ? hi[c] : 0.0) - sym[i * nj + l][c];
+        lanes_cholesky(nj, shifted, need);
+        for (int c = 0; c < BLOCK; ++c) ok[c] &= (above_min[c] > GERSHGORIN_MARGIN * above_max[c]) || need[c];
+    }
+    for (int c = 0; c < BLOCK; ++c) {
+        const double scale = hi[c] - lo[c];
+        if (!(lo[c] < hi[c])) penalty[c] = 3.0;
+        else if (ok[c]) penalty[c] = 0.0;
+        else
+            penalty[c] = 1.0 + fmin(1.0, fmax(0.0, lo[c] - gmin[c]) / scale)
+                         + fmin(1.0, fmax(0.0, gmax[c] - hi[c]) / scale) + 1e-9;
     }
 }
 
@@ -753,7 +873,7 @@ static int predict_one_block(const vgt_ga_settings *g, const vgt_model *m, const
     else
         gains_from_bytes(x, g->n_genes, count, rows + c, sc->K);
     double penalty[BLOCK];
-    if (x->safe) safe_repair(x, count, sc->K, penalty);
+    if (x->safe) safe_repair(x, sc, sc->K, penalty);
     predict_block(x, count, sc->K, sum, sc->far, sc->far_at, &n_far);
     /* the steps outside the trust region: the exact forward kinematics of the predicted joints */
     for (long f = 0; f < n_far; ++f) {
@@ -888,6 +1008,11 @@ static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *
     for (int t = 0; t < x->n_scratch; ++t) {
         scratch *sc = x->sc + t;
         sc->K = aligned_alloc(sizeof(vf), sizeof(vf) * (size_t)(2 * nj * nj));
+        if (g->safe) {
+            sc->sym = malloc(sizeof(double[BLOCK]) * (size_t)(nj * nj));
+            sc->shifted = malloc(sizeof(double[BLOCK]) * (size_t)(nj * nj));
+            if (!sc->sym || !sc->shifted) return VGT_NO_MEMORY;
+        }
         sc->far = malloc(sizeof(float) * (size_t)(BLOCK * (g->horizon + 1) * nj));
         sc->far_at = malloc(sizeof(long) * (size_t)(BLOCK * (g->horizon + 1)));
         sc->arg = malloc(sizeof(double *) * (size_t)(m->tip.sz_arg > 2 ? m->tip.sz_arg : 2));
@@ -942,6 +1067,8 @@ static void predictor_free(predictor *x)
     for (int t = 0; x->sc && t < x->n_scratch; ++t) {
         scratch *sc = x->sc + t;
         free(sc->K);
+        free(sc->sym);
+        free(sc->shifted);
         free(sc->far);
         free(sc->far_at);
         free(sc->arg);

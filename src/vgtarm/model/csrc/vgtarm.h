@@ -82,6 +82,9 @@ typedef struct {
                             /* disturbance on the position innovation (per joint, the same) */
     int threshold_measured; /* 1: the threshold is on the tip error the controller sees: the  */
                             /* model's tip at q_meas against tip_d; 0: the true tip error     */
+    int tool_feedforward;   /* 1: the expected tool force (vgt_run.tool_force_expected) is fed */
+                            /* forward, F -= J_P(q_meas)^T f_exp_k, and the observer and the   */
+                            /* Kalman process model take it as known (they estimate the rest)  */
 } vgt_settings;
 
 /* One run: n samples of an n_joints robot (nj below). */
@@ -103,6 +106,8 @@ typedef struct {
                                             /* model's acceleration over the period before   */
     double *seen;                           /* (n) the tip error the threshold was tested on, */
                                             /* at each sample where it was (NULL: not kept)  */
+    const double *tool_force_expected;      /* (n, 3) expected tool force on the tip (N), fed */
+                                            /* forward with settings.tool_feedforward        */
 } vgt_run;
 
 /* Evaluate one generated function over n samples (batch.c). */

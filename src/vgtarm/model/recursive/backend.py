@@ -115,6 +115,16 @@ LOOP_FUNCTIONS = {
     "jac": "vgt_rec_fn_jac",
     "tip_hessian": "vgt_rec_fn_tip_hessian",
 }
+#: The same on the loop step's shared kinematics (``vgt_rec_step_*``): the joints of a step's state
+#: computed once for the plant's tip state, the CFC law and the plant's forward dynamics.
+FUSED_LOOP_FUNCTIONS = {
+    **LOOP_FUNCTIONS,
+    "cfc": "vgt_rec_fn_cfc_fused",
+    "fd": "vgt_rec_fn_fd_fused",
+    "tip_state": "vgt_rec_fn_tip_state_fused",
+    "tip": "vgt_rec_fn_tip_fused",
+    "id": "vgt_rec_fn_id_fused",
+}
 #: Slots of the C registry of bound parameter vectors (``vgt_rec_bind``), shared by every backend
 #: of the process: each holds the array (so its address stays its own) and its model.
 _SLOTS = 64
@@ -142,8 +152,13 @@ class RecursiveBackend:
 
     kind = "recursive"
 
-    def __init__(self, stack: Stack) -> None:
+    def __init__(self, stack: Stack, *, fused: bool = True) -> None:
         self.stack = stack
+        #: The closed loop's functions share a step's kinematics (:data:`FUSED_LOOP_FUNCTIONS`) and
+        #: ``tip`` is computed from the poses alone; ``False``: the previous implementation (the
+        #: separate adapters of :data:`LOOP_FUNCTIONS`, ``tip`` from the whole forward kinematics),
+        #: kept as the benchmarks' baseline: the same results bit for bit.
+        self.fused = fused
         self.n = stack.n_joints
         found = shapes(StackDefinition.of(stack))
         self._signatures = {
@@ -173,7 +188,8 @@ class RecursiveBackend:
     def call(self, name: str) -> Any:
         """A ``vgt_call`` of the closed loop's function ``name`` (its adapter on the recursive model)."""
         ffi, lib = load_library()
-        address = int(ffi.cast("intptr_t", getattr(lib, LOOP_FUNCTIONS[name])))
+        functions = FUSED_LOOP_FUNCTIONS if self.fused else LOOP_FUNCTIONS
+        address = int(ffi.cast("intptr_t", getattr(lib, functions[name])))
         loop_ffi = interface.ffi()
         return loop_ffi.new("vgt_call *", [loop_ffi.cast("vgt_fn", address), 8, 2, 0, 0])[0]
 
@@ -194,9 +210,30 @@ class RecursiveBackend:
                 for old, entry in list(_bound.items()):
                     if entry[0] == slot:
                         del _bound[old]
-            model = RecursiveModel(stack_from_vector(self.stack, p))
+            model = self._model(p)  # equal vectors (plant, exact controller model): one arm
             _bound[address] = (slot, p, model)
             lib.vgt_rec_bind(slot, ffi.cast("double *", address), model._arm)
+
+    def bind_run(self, Kp: Array | None, Kv: Array | None, G: Array | None = None) -> None:
+        """Tell the fused step, in this thread, the gain matrices ``Kp``, ``Kv`` (``n x n``) and the
+        margin rows ``G`` (``rows x n``) the next driver call passes (C-contiguous float64): the CFC
+        law sums the gains' products and the driver's assembly check the margins' over their nonzero
+        entries only (the same values). ``None`` unbinds. The arrays must not change until unbound
+        (the driver unbinds after its call)."""
+        ffi, lib = load_library()
+        if Kp is None or Kv is None or not self.fused:  # the previous implementation binds nothing
+            lib.vgt_rec_bind_run(ffi.NULL, ffi.NULL, 0, ffi.NULL, 0)
+            return
+        arrays = [(Kp, (self.n, self.n)), (Kv, (self.n, self.n))]
+        if G is not None:
+            arrays.append((G, (G.shape[0] if G.ndim == 2 else -1, self.n)))
+        for A, shape in arrays:
+            if A.dtype != np.float64 or not A.flags.c_contiguous or A.shape != shape:
+                raise ValueError("bind_run: expected C-contiguous float64 gains (n x n) and margin rows (rows x n)")
+        rows = 0 if G is None else G.shape[0]
+        pointers = [ffi.NULL if A is None else ffi.cast("double *", A.ctypes.data) for A in (Kp, Kv, G)]
+        if lib.vgt_rec_bind_run(pointers[0], pointers[1], self.n, pointers[2], rows):
+            raise MemoryError("bind_run: could not allocate the index of the gains and margins")
 
     def signature(self, name: str) -> Signature:
         if name not in self._signatures:
@@ -222,10 +259,12 @@ class RecursiveBackend:
         if n == 0:
             return [np.empty((0, size)) for size in sig.nnz_out]
         q = rows[0]
-        if name in ("fk", "tip"):
+        if name == "tip" and self.fused:
+            return [model.tip_position(q)]
+        if name == "tip":  # the previous implementation's (the benchmarks' baseline): the same values
+            return [model.forward_kinematics(q)["tip"]]
+        if name == "fk":
             fk = model.forward_kinematics(q)
-            if name == "tip":
-                return [fk["tip"]]
             return [
                 fk["passive"].reshape(n, -1),
                 fk["platform_position"].reshape(n, -1),

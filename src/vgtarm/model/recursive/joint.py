@@ -76,7 +76,8 @@ def module_taylor(q: SX, g: SX) -> list[SX]:
 
 def module_functions() -> list[ca.Function]:
     """The generated functions: ``vgt_rec_module_kin(q, g) -> (pose, S, passive)``,
-    ``vgt_rec_module(q, qd, g) -> (pose, S, c)`` and ``vgt_rec_module_taylor(q, g) -> (d0, d1, d2, d3)``."""
+    ``vgt_rec_module(q, qd, g) -> (pose, S, c)``, ``vgt_rec_module_taylor(q, g) -> (d0, d1, d2, d3)``
+    and ``vgt_rec_module_pose(q, g) -> pose`` (the tip alone: the same expressions)."""
     q, qd, g = SX.sym("q", 3), SX.sym("qd", 3), SX.sym("g", len(GEOMETRY))
     e = module_expressions(q, qd, g)
     opts = {"cse": True}
@@ -89,4 +90,5 @@ def module_functions() -> list[ca.Function]:
     taylor = ca.Function(
         "vgt_rec_module_taylor", [q, g], module_taylor(q, g), ["q", "g"], ["d0", "d1", "d2", "d3"], opts
     )
-    return [kin, full, taylor]
+    pose = ca.Function("vgt_rec_module_pose", [q, g], [e["pose"]], ["q", "g"], ["pose"], opts)
+    return [kin, full, taylor, pose]

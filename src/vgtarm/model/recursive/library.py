@@ -70,6 +70,40 @@ def _ffi() -> cffi.FFI:
     return ffi
 
 
+#: The one line of the driver's assembly check (``closed_loop.c``, ``check_state``) that the
+#: recursive library's copy of the driver replaces, and its replacement: the margin rows summed over
+#: their nonzero entries when the run bound them (``vgt_rec_bind_run``), else as the line does.
+_MARGIN_LINE = "        for (int i = 0; i < nj; ++i) margin += r->G[nj * row + i] * q[i];\n"
+_MARGIN_CALL = "        margin = vgt_rec_margin(r->G, nj, row, margin, q);\n"
+_MARGIN_DECLARATION = "double vgt_rec_margin(const double *G, int nj, int row, double margin, const double *q);\n"
+
+
+_INCLUDE = '#include "vgt_control.h"'
+
+
+def driver_adaptable(text: str) -> bool:
+    """Whether ``closed_loop.c``'s text has the one line :func:`_driver_copy` replaces (a test holds it)."""
+    return text.count(_MARGIN_LINE) == 1 and text.count(_INCLUDE) == 1
+
+
+def _driver_copy(workdir: Path) -> Path:
+    """``closed_loop.c`` with its assembly check's margin rows summed by ``vgt_rec_margin``
+    (``csrc/vgt_rec_loop.c``). The symbolic libraries compile the file itself (their cache keys
+    hash it), so the copy leaves them as they are; each margin's sign is the same (a zero entry
+    adds a zero product, and the check comes after the state is found finite). Should the line
+    change, the file itself is compiled (the dense check, the same results; the test fails)."""
+    original = _DRIVERS / "closed_loop.c"
+    text = original.read_text()
+    if not driver_adaptable(text):
+        return original
+    include = _INCLUDE
+    text = text.replace(_MARGIN_LINE, _MARGIN_CALL)
+    text = text.replace(include, include + "\n" + _MARGIN_DECLARATION.rstrip("\n"), 1)
+    copy = workdir / "closed_loop_rec.c"
+    copy.write_text(text)
+    return copy
+
+
 def _compile(compiler: str, workdir: Path) -> Path:
     generator = ca.CodeGenerator(f"{_GENERATED}.c", {"with_header": True})
     for f in module_functions():
@@ -79,7 +113,8 @@ def _compile(compiler: str, workdir: Path) -> Path:
     library = workdir / "library.so"
     command = [compiler, *_CFLAGS, "-I", str(_CSRC), "-I", str(_DRIVERS), "-I", str(workdir), "-o", str(library)]
     command += [str(workdir / f"{_GENERATED}.c"), str(_CSRC / "vgt_rec.c"), str(_CSRC / "vgt_rec_loop.c")]
-    command += [str(workdir / "layout.c"), *(str(p) for p in sorted(_DRIVERS.glob("*.c"))), "-lm"]
+    drivers = [_driver_copy(workdir) if p.name == "closed_loop.c" else p for p in sorted(_DRIVERS.glob("*.c"))]
+    command += [str(workdir / "layout.c"), *(str(p) for p in drivers), "-lm"]
     failure = ""
     for attempt in (command[:1] + ["-fopenmp"] + command[1:], command):  # the GA's threads, when OpenMP is there
         done = compiled._run(compiler, attempt)

@@ -177,6 +177,14 @@ class RecursiveModel:
 
     # -- kinematics ------------------------------------------------------------------------
 
+    def tip_position(self, q: ArrayLike) -> Array:
+        """The tip ``(..., 3)`` alone (the joints' poses only: the same values as
+        :meth:`forward_kinematics`' ``tip``, without the frames of every body)."""
+        qa = self._q(q)
+        tip = np.empty((len(qa), 3))
+        self._call("vgt_rec_tip", len(qa), qa, tip)
+        return self._shaped(q, tip)
+
     def forward_kinematics(self, q: ArrayLike) -> dict[str, Array]:
         """``tip`` ``(..., 3)``, ``rotation`` ``(..., 3, 3)`` of the end-effector, the platform frames
         ``platform_position`` ``(..., m, 3)`` and ``platform_rotation`` ``(..., m, 3, 3)``, and the

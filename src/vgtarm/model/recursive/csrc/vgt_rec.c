@@ -18,7 +18,7 @@ typedef struct {
     double R[9], r[3];    /* pose in the parent frame */
     double R0[9], p0[3];  /* pose in the base frame */
     double S[18], cj[6];  /* motion subspace (6 x 3, row-major) and its bias */
-    double v[6], a[6], f[6], c[6];
+    double v[6], a[6], f[6], c[6], vf[6]; /* vf = v x* (I v) */
     double IA[36], pA[6], U[18], Dinv[9], u[3];
 } body_t;
 
@@ -416,48 +416,64 @@ int vgt_rec_mass(const vgt_rec_arm *arm, long n, const double *q, double *m) {
     return 0;
 }
 
+/* The velocity-product forces v x* (I v) of every body (after velocities). */
+static void velocity_forces(const vgt_rec_arm *arm, body_t *body) {
+    for (int i = 0; i < arm->nb; ++i) {
+        body_t *b = body + i;
+        double Iv[6];
+        mul6(arm->inertia + 36 * i, b->v, Iv);
+        cross_force(b->v, Iv, b->vf);
+    }
+}
+
+/* Recursive Newton-Euler of one sample on bodies whose joints, velocities and velocity-product
+ * forces are computed: the efforts T at accelerations xdd under the tip wrench fext (or NULL).
+ * Writes the bodies' a and f only. */
+static void rnea_pass(const vgt_rec_arm *arm, body_t *body, const double *xd, const double *xdd,
+                      const double *fext, double *T) {
+    int nb = arm->nb;
+    double a0[6] = {0.0, 0.0, 0.0, -arm->gravity[0], -arm->gravity[1], -arm->gravity[2]};
+    for (int i = 0; i < nb; ++i) {
+        body_t *b = body + i;
+        double t[6];
+        motion_in(b, i == 0 ? a0 : body[i - 1].a, t);
+        joint_velocity(arm, b, i, xdd, b->a);
+        for (int r = 0; r < 6; ++r) b->a[r] += t[r] + b->c[r];
+        mul6(arm->inertia + 36 * i, b->a, b->f);
+        for (int r = 0; r < 6; ++r) b->f[r] += b->vf[r];
+    }
+    if (fext) {
+        double fb[6];
+        tip_force(arm, body + nb - 1, fext, fb);
+        for (int r = 0; r < 6; ++r) body[nb - 1].f[r] -= fb[r];
+    }
+    for (int i = nb - 1; i >= 0; --i) {
+        body_t *b = body + i;
+        for (int j = 0; j < dofs(arm, i); ++j) {
+            double sum = 0.0;
+            for (int e = 0; e < 6; ++e) sum += b->S[3 * e + j] * b->f[e];
+            int c = arm->qi[i] + j;
+            T[c] = sum + arm->viscous[c] * xd[c];
+        }
+        if (i > 0) {
+            double g[6];
+            force_out(b, b->f, g);
+            for (int r = 0; r < 6; ++r) body[i - 1].f[r] += g[r];
+        }
+    }
+}
+
 int vgt_rec_inverse(const vgt_rec_arm *arm, long n, const double *q, const double *qd, const double *qdd,
                     const double *fext, double *tau) {
     work_t k;
     if (work_open(&k, arm)) return -1;
-    int nb = arm->nb, nq = arm->nq;
+    int nq = arm->nq;
     for (long s = 0; s < n; ++s) {
         const double *x = q + s * nq, *xd = qd + s * nq, *xdd = qdd + s * nq;
         joints(arm, &k, x, xd, NULL);
         velocities(arm, &k, xd);
-        double a0[6] = {0.0, 0.0, 0.0, -arm->gravity[0], -arm->gravity[1], -arm->gravity[2]};
-        for (int i = 0; i < nb; ++i) {
-            body_t *b = k.body + i;
-            double t[6], Iv[6], vf[6];
-            motion_in(b, i == 0 ? a0 : k.body[i - 1].a, t);
-            joint_velocity(arm, b, i, xdd, b->a);
-            for (int r = 0; r < 6; ++r) b->a[r] += t[r] + b->c[r];
-            const double *I = arm->inertia + 36 * i;
-            mul6(I, b->a, b->f);
-            mul6(I, b->v, Iv);
-            cross_force(b->v, Iv, vf);
-            for (int r = 0; r < 6; ++r) b->f[r] += vf[r];
-        }
-        if (fext) {
-            double fb[6];
-            tip_force(arm, k.body + nb - 1, fext + 6 * s, fb);
-            for (int r = 0; r < 6; ++r) k.body[nb - 1].f[r] -= fb[r];
-        }
-        double *T = tau + s * nq;
-        for (int i = nb - 1; i >= 0; --i) {
-            body_t *b = k.body + i;
-            for (int j = 0; j < dofs(arm, i); ++j) {
-                double sum = 0.0;
-                for (int e = 0; e < 6; ++e) sum += b->S[3 * e + j] * b->f[e];
-                int c = arm->qi[i] + j;
-                T[c] = sum + arm->viscous[c] * xd[c];
-            }
-            if (i > 0) {
-                double g[6];
-                force_out(b, b->f, g);
-                for (int r = 0; r < 6; ++r) k.body[i - 1].f[r] += g[r];
-            }
-        }
+        velocity_forces(arm, k.body);
+        rnea_pass(arm, k.body, xd, xdd, fext ? fext + 6 * s : NULL, tau + s * nq);
     }
     work_close(&k);
     return 0;
@@ -477,100 +493,107 @@ static void inverse_spd(const double *D, int nd, double *out) {
     out[6] = C * inv, out[7] = (b * c - a * e) * inv, out[8] = (a * d - b * b) * inv;
 }
 
+/* The articulated-body algorithm of one sample on bodies whose joints, velocities and
+ * velocity-product forces are computed: the accelerations A under the efforts F and the tip wrench
+ * fext (or NULL). Writes the bodies' IA, pA, U, Dinv, u and a only. */
+static void aba_pass(const vgt_rec_arm *arm, body_t *body, const double *xd, const double *F, const double *fext,
+                     double *A) {
+    int nb = arm->nb;
+    for (int i = 0; i < nb; ++i) {
+        body_t *b = body + i;
+        memcpy(b->IA, arm->inertia + 36 * i, 36 * sizeof(double));
+        memcpy(b->pA, b->vf, sizeof b->pA);
+    }
+    if (fext) {
+        double fb[6];
+        tip_force(arm, body + nb - 1, fext, fb);
+        for (int r = 0; r < 6; ++r) body[nb - 1].pA[r] -= fb[r];
+    }
+    for (int i = nb - 1; i >= 0; --i) {
+        body_t *b = body + i;
+        int nd = dofs(arm, i);
+        double D[9];
+        for (int j = 0; j < nd; ++j) { /* U = IA S */
+            double col[6], u[6];
+            column(b, j, col);
+            mul6(b->IA, col, u);
+            for (int r = 0; r < 6; ++r) b->U[3 * r + j] = u[r];
+        }
+        for (int r = 0; r < nd; ++r) {
+            int c = arm->qi[i] + r;
+            double sum = 0.0;
+            for (int e = 0; e < 6; ++e) sum += b->S[3 * e + r] * b->pA[e];
+            b->u[r] = F[c] - arm->viscous[c] * xd[c] - sum;
+            for (int j = 0; j < nd; ++j) {
+                double d = 0.0;
+                for (int e = 0; e < 6; ++e) d += b->S[3 * e + r] * b->U[3 * e + j];
+                D[3 * r + j] = d;
+            }
+        }
+        inverse_spd(D, nd, b->Dinv);
+        if (i == 0) continue;
+        double Ia[36], pa[6], UD[18], du[3];
+        for (int r = 0; r < 6; ++r) /* UD = U Dinv */
+            for (int j = 0; j < nd; ++j) {
+                double sum = 0.0;
+                for (int e = 0; e < nd; ++e) sum += b->U[3 * r + e] * b->Dinv[3 * e + j];
+                UD[3 * r + j] = sum;
+            }
+        for (int r = 0; r < 6; ++r)
+            for (int c = 0; c < 6; ++c) {
+                double sum = 0.0;
+                for (int e = 0; e < nd; ++e) sum += UD[3 * r + e] * b->U[3 * c + e];
+                Ia[6 * r + c] = b->IA[6 * r + c] - sum;
+            }
+        for (int e = 0; e < nd; ++e) du[e] = b->u[e];
+        mul6(Ia, b->c, pa);
+        for (int r = 0; r < 6; ++r) {
+            double sum = 0.0;
+            for (int e = 0; e < nd; ++e) sum += UD[3 * r + e] * du[e];
+            pa[r] += b->pA[r] + sum;
+        }
+        body_t *p = b - 1;
+        inertia_out(b, Ia, p->IA);
+        double g[6];
+        force_out(b, pa, g);
+        for (int r = 0; r < 6; ++r) p->pA[r] += g[r];
+    }
+    double a0[6] = {0.0, 0.0, 0.0, -arm->gravity[0], -arm->gravity[1], -arm->gravity[2]};
+    for (int i = 0; i < nb; ++i) {
+        body_t *b = body + i;
+        int nd = dofs(arm, i);
+        double ap[6], t[3];
+        motion_in(b, i == 0 ? a0 : body[i - 1].a, ap);
+        for (int r = 0; r < 6; ++r) ap[r] += b->c[r];
+        for (int r = 0; r < nd; ++r) {
+            double sum = 0.0;
+            for (int e = 0; e < 6; ++e) sum += b->U[3 * e + r] * ap[e];
+            t[r] = b->u[r] - sum;
+        }
+        for (int r = 0; r < nd; ++r) {
+            double sum = 0.0;
+            for (int e = 0; e < nd; ++e) sum += b->Dinv[3 * r + e] * t[e];
+            A[arm->qi[i] + r] = sum;
+        }
+        for (int r = 0; r < 6; ++r) {
+            double sum = ap[r];
+            for (int e = 0; e < nd; ++e) sum += b->S[3 * r + e] * A[arm->qi[i] + e];
+            b->a[r] = sum;
+        }
+    }
+}
+
 int vgt_rec_forward(const vgt_rec_arm *arm, long n, const double *q, const double *qd, const double *tau,
                     const double *fext, double *qdd) {
     work_t k;
     if (work_open(&k, arm)) return -1;
-    int nb = arm->nb, nq = arm->nq;
+    int nq = arm->nq;
     for (long s = 0; s < n; ++s) {
-        const double *x = q + s * nq, *xd = qd + s * nq, *F = tau + s * nq;
-        double *A = qdd + s * nq;
+        const double *x = q + s * nq, *xd = qd + s * nq;
         joints(arm, &k, x, xd, NULL);
         velocities(arm, &k, xd);
-        for (int i = 0; i < nb; ++i) {
-            body_t *b = k.body + i;
-            double Iv[6];
-            memcpy(b->IA, arm->inertia + 36 * i, 36 * sizeof(double));
-            mul6(b->IA, b->v, Iv);
-            cross_force(b->v, Iv, b->pA);
-        }
-        if (fext) {
-            double fb[6];
-            tip_force(arm, k.body + nb - 1, fext + 6 * s, fb);
-            for (int r = 0; r < 6; ++r) k.body[nb - 1].pA[r] -= fb[r];
-        }
-        for (int i = nb - 1; i >= 0; --i) {
-            body_t *b = k.body + i;
-            int nd = dofs(arm, i);
-            double D[9];
-            for (int j = 0; j < nd; ++j) { /* U = IA S */
-                double col[6], u[6];
-                column(b, j, col);
-                mul6(b->IA, col, u);
-                for (int r = 0; r < 6; ++r) b->U[3 * r + j] = u[r];
-            }
-            for (int r = 0; r < nd; ++r) {
-                int c = arm->qi[i] + r;
-                double sum = 0.0;
-                for (int e = 0; e < 6; ++e) sum += b->S[3 * e + r] * b->pA[e];
-                b->u[r] = F[c] - arm->viscous[c] * xd[c] - sum;
-                for (int j = 0; j < nd; ++j) {
-                    double d = 0.0;
-                    for (int e = 0; e < 6; ++e) d += b->S[3 * e + r] * b->U[3 * e + j];
-                    D[3 * r + j] = d;
-                }
-            }
-            inverse_spd(D, nd, b->Dinv);
-            if (i == 0) continue;
-            double Ia[36], pa[6], UD[18], du[3];
-            for (int r = 0; r < 6; ++r) /* UD = U Dinv */
-                for (int j = 0; j < nd; ++j) {
-                    double sum = 0.0;
-                    for (int e = 0; e < nd; ++e) sum += b->U[3 * r + e] * b->Dinv[3 * e + j];
-                    UD[3 * r + j] = sum;
-                }
-            for (int r = 0; r < 6; ++r)
-                for (int c = 0; c < 6; ++c) {
-                    double sum = 0.0;
-                    for (int e = 0; e < nd; ++e) sum += UD[3 * r + e] * b->U[3 * c + e];
-                    Ia[6 * r + c] = b->IA[6 * r + c] - sum;
-                }
-            for (int e = 0; e < nd; ++e) du[e] = b->u[e];
-            mul6(Ia, b->c, pa);
-            for (int r = 0; r < 6; ++r) {
-                double sum = 0.0;
-                for (int e = 0; e < nd; ++e) sum += UD[3 * r + e] * du[e];
-                pa[r] += b->pA[r] + sum;
-            }
-            body_t *p = b - 1;
-            inertia_out(b, Ia, p->IA);
-            double g[6];
-            force_out(b, pa, g);
-            for (int r = 0; r < 6; ++r) p->pA[r] += g[r];
-        }
-        double a0[6] = {0.0, 0.0, 0.0, -arm->gravity[0], -arm->gravity[1], -arm->gravity[2]};
-        for (int i = 0; i < nb; ++i) {
-            body_t *b = k.body + i;
-            int nd = dofs(arm, i);
-            double ap[6], t[3];
-            motion_in(b, i == 0 ? a0 : k.body[i - 1].a, ap);
-            for (int r = 0; r < 6; ++r) ap[r] += b->c[r];
-            for (int r = 0; r < nd; ++r) {
-                double sum = 0.0;
-                for (int e = 0; e < 6; ++e) sum += b->U[3 * e + r] * ap[e];
-                t[r] = b->u[r] - sum;
-            }
-            for (int r = 0; r < nd; ++r) {
-                double sum = 0.0;
-                for (int e = 0; e < nd; ++e) sum += b->Dinv[3 * r + e] * t[e];
-                A[arm->qi[i] + r] = sum;
-            }
-            for (int r = 0; r < 6; ++r) {
-                double sum = ap[r];
-                for (int e = 0; e < nd; ++e) sum += b->S[3 * r + e] * A[arm->qi[i] + e];
-                b->a[r] = sum;
-            }
-        }
+        velocity_forces(arm, k.body);
+        aba_pass(arm, k.body, xd, tau + s * nq, fext ? fext + 6 * s : NULL, qdd + s * nq);
     }
     work_close(&k);
     return 0;
@@ -591,6 +614,51 @@ int vgt_rec_taylor(const vgt_rec_arm *arm, long n, const double *q, double *out)
         }
     }
     work_close(&k);
+    return 0;
+}
+
+/* The tip point alone: each joint's pose (vgt_rec_module_pose: no motion subspace) chained from
+ * the tip back to the base (the same products as the poses in the base frame of joints()). */
+int vgt_rec_tip(const vgt_rec_arm *arm, long n, const double *q, double *tip) {
+    casadi_int sz_arg, sz_res, sz_iw, sz_w;
+    vgt_rec_module_pose_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+    const casadi_real *arg[8];
+    casadi_real *res[8];
+    casadi_int iw[64];
+    casadi_real w[512];
+    if (sz_arg > 8 || sz_res > 8 || sz_iw > 64 || sz_w > 512) return vgt_rec_tip_state(arm, n, q, NULL, tip, NULL);
+    int nb = arm->nb;
+    for (long s = 0; s < n; ++s) {
+        const double *x = q + s * arm->nq;
+        double R0[9], p0[3];
+        for (int i = 0; i < nb; ++i) {
+            const double *qi = x + arm->qi[i];
+            double R[9], r[3], pose[12];
+            if (arm->type[i] == 3) {
+                arg[0] = qi, arg[1] = arm->geom + 4 * i, res[0] = pose;
+                vgt_rec_module_pose(arg, res, iw, w, 0);
+                memcpy(R, pose, 9 * sizeof(double));
+                r[0] = pose[9], r[1] = pose[10], r[2] = pose[11] + arm->tz[i];
+            } else {
+                double c = cos(qi[0]), sn = sin(qi[0]);
+                double Rz[9] = {c, -sn, 0.0, sn, c, 0.0, 0.0, 0.0, 1.0};
+                memcpy(R, Rz, sizeof Rz);
+                r[0] = 0.0, r[1] = 0.0, r[2] = arm->tz[i];
+            }
+            if (i == 0) {
+                memcpy(R0, R, sizeof R);
+                memcpy(p0, r, sizeof r);
+            } else {
+                double t[3];
+                mul3(R0, r, t);
+                matmul3(R0, R, R0);
+                p0[0] += t[0], p0[1] += t[1], p0[2] += t[2];
+            }
+        }
+        double t[3];
+        mul3(R0, arm->tip, t);
+        for (int r = 0; r < 3; ++r) tip[3 * s + r] = p0[r] + t[r];
+    }
     return 0;
 }
 
@@ -860,4 +928,106 @@ int vgt_rec_ik_terms(const vgt_rec_arm *arm, long n, const double *q, const doub
     free(T), free(D), free(D2), free(L), free(R), free(omega), free(y), free(cols), free(joint), free(taylor);
     work_close(&k);
     return 0;
+}
+
+/* ---- the closed loop's step on shared kinematics ----------------------------------------------
+ * In one step of the compiled loop the plant's tip state, the CFC law (inverse dynamics of the
+ * commanded acceleration) and the plant's forward dynamics are evaluated at the same joints and
+ * velocities (without sensing; with it, the plant's two at least). Each calling thread keeps the
+ * joints' poses, motion subspaces and biases, the bodies' velocities and their velocity-product
+ * forces v x* (I v) of the last (arm, q, qd) it was given; a function given the same arm and
+ * bitwise the same q and qd reuses them and runs only its own pass. The arithmetic is that of
+ * the batch functions, so the results are the same bit for bit. vgt_rec_step_forget (called on
+ * every binding of a parameter vector: an arm's memory may be reused by another) drops them. */
+
+typedef struct {
+    const vgt_rec_arm *arm; /* the arm of the kept state (NULL: none) */
+    unsigned long epoch;
+    double *key;            /* q, qd (2 nq) */
+    work_t work;            /* bodies and the module function's work arrays */
+    void *memory;
+    size_t size;
+} shared_t;
+
+static _Thread_local shared_t shared = {NULL, 0, NULL, {NULL, NULL, NULL, NULL, NULL, 0}, NULL, 0};
+static volatile unsigned long shared_epoch = 1;
+
+void vgt_rec_step_forget(void) { ++shared_epoch; }
+
+/* The bodies of (arm, q, qd), kept or computed; NULL when memory fails. */
+static body_t *shared_state(const vgt_rec_arm *arm, const double *q, const double *qd) {
+    shared_t *c = &shared;
+    size_t nq = (size_t)arm->nq, bytes = nq * sizeof(double);
+    if (c->arm == arm && c->epoch == shared_epoch && !memcmp(c->key, q, bytes) && !memcmp(c->key + nq, qd, bytes))
+        return c->work.body;
+    c->arm = NULL;
+    casadi_int sz_arg, sz_res, sz_iw, sz_w;
+    vgt_rec_module_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+    size_t nb = (size_t)(arm->nb > 0 ? arm->nb : 1);
+    size_t bodies = nb * sizeof(body_t), key = 2 * bytes, args = ((size_t)sz_arg + 1) * sizeof(casadi_real *);
+    size_t ress = ((size_t)sz_res + 1) * sizeof(casadi_real *), iws = ((size_t)sz_iw + 1) * sizeof(casadi_int);
+    size_t ws = ((size_t)sz_w + 1) * sizeof(casadi_real);
+    size_t total = bodies + key + args + ress + iws + ws + 64;
+    if (c->size < total) {
+        void *grown = realloc(c->memory, total);
+        if (!grown) return NULL;
+        memset(grown, 0, total);
+        c->memory = grown, c->size = total;
+    }
+    char *memory = (char *)c->memory;
+    c->work.body = (body_t *)memory;
+    c->key = (double *)(memory + bodies);
+    c->work.arg = (const casadi_real **)(memory + bodies + key);
+    c->work.res = (casadi_real **)(memory + bodies + key + args);
+    c->work.iw = (casadi_int *)(memory + bodies + key + args + ress);
+    c->work.w = (casadi_real *)(memory + bodies + key + args + ress + iws);
+    c->work.owned = 0;
+    joints(arm, &c->work, q, qd, NULL);
+    velocities(arm, &c->work, qd);
+    velocity_forces(arm, c->work.body);
+    memcpy(c->key, q, bytes);
+    memcpy(c->key + nq, qd, bytes);
+    c->arm = arm, c->epoch = shared_epoch;
+    return c->work.body;
+}
+
+int vgt_rec_step_inverse(const vgt_rec_arm *arm, const double *q, const double *qd, const double *qdd,
+                         const double *fext, double *tau) {
+    body_t *body = shared_state(arm, q, qd);
+    if (!body) return -1;
+    rnea_pass(arm, body, qd, qdd, fext, tau);
+    return 0;
+}
+
+int vgt_rec_step_forward(const vgt_rec_arm *arm, const double *q, const double *qd, const double *tau,
+                         const double *fext, double *qdd) {
+    body_t *body = shared_state(arm, q, qd);
+    if (!body) return -1;
+    aba_pass(arm, body, qd, tau, fext, qdd);
+    return 0;
+}
+
+int vgt_rec_step_tip_state(const vgt_rec_arm *arm, const double *q, const double *qd, double *tip, double *vel) {
+    body_t *body = shared_state(arm, q, qd);
+    if (!body) return -1;
+    const body_t *last = body + arm->nb - 1;
+    double t[3], w[3], u[3];
+    mul3(last->R0, arm->tip, t);
+    for (int r = 0; r < 3; ++r) tip[r] = last->p0[r] + t[r];
+    cross3(last->v, arm->tip, w);
+    for (int r = 0; r < 3; ++r) u[r] = last->v[3 + r] + w[r];
+    mul3(last->R0, u, vel);
+    return 0;
+}
+
+int vgt_rec_step_tip(const vgt_rec_arm *arm, const double *q, double *tip) {
+    shared_t *c = &shared;
+    if (c->arm == arm && c->epoch == shared_epoch && !memcmp(c->key, q, (size_t)arm->nq * sizeof(double))) {
+        const body_t *last = c->work.body + arm->nb - 1;
+        double t[3];
+        mul3(last->R0, arm->tip, t);
+        for (int r = 0; r < 3; ++r) tip[r] = last->p0[r] + t[r];
+        return 0;
+    }
+    return vgt_rec_tip(arm, 1, q, tip);
 }

@@ -39,8 +39,23 @@ int vgt_rec_forward(const vgt_rec_arm *arm, long n, const double *q, const doubl
  * of orders 1 to 3 in the module's three legs: 12 + 36 + 108 + 324 = 480 values per module, modules in
  * order, per sample (the generated vgt_rec_module_taylor). */
 int vgt_rec_taylor(const vgt_rec_arm *arm, long n, const double *q, double *out);
+/* The tip point alone (base components), from the joints' poses only. */
+int vgt_rec_tip(const vgt_rec_arm *arm, long n, const double *q, double *tip);
 /* The tip point and (vel not NULL) its velocity J_P qd, both in base components. */
 int vgt_rec_tip_state(const vgt_rec_arm *arm, long n, const double *q, const double *qd, double *tip, double *vel);
+
+/* One sample of the closed loop's step on shared kinematics (vgt_rec.c): the calling thread keeps
+ * the joints, velocities and velocity-product forces of the last (arm, q, qd) it was given, and a
+ * call with the same arm and bitwise the same q, qd reuses them (the same results, bit for bit, as
+ * the batch functions); vgt_rec_step_tip reuses them when q is the same. vgt_rec_step_forget drops
+ * what every thread keeps (vgt_rec_bind calls it). */
+int vgt_rec_step_inverse(const vgt_rec_arm *arm, const double *q, const double *qd, const double *qdd,
+                         const double *fext, double *tau);
+int vgt_rec_step_forward(const vgt_rec_arm *arm, const double *q, const double *qd, const double *tau,
+                         const double *fext, double *qdd);
+int vgt_rec_step_tip_state(const vgt_rec_arm *arm, const double *q, const double *qd, double *tip, double *vel);
+int vgt_rec_step_tip(const vgt_rec_arm *arm, const double *q, double *tip);
+void vgt_rec_step_forget(void);
 
 /* ---- The closed loop on the recursive model (vgt_rec_loop.c) ------------------------------------
  * The drivers of vgtarm.h call generated functions of the signature vgt_fn, whose last argument is
@@ -55,6 +70,19 @@ int vgt_rec_fn_id(const double **arg, double **res, long long *iw, double *w, in
 int vgt_rec_fn_jac(const double **arg, double **res, long long *iw, double *w, int mem);
 int vgt_rec_fn_tip_hessian(const double **arg, double **res, long long *iw, double *w, int mem);
 int vgt_rec_fn_unavailable(const double **arg, double **res, long long *iw, double *w, int mem);
+/* The same functions on the step's shared kinematics (vgt_rec_step_*): cfc, fd, id, tip_state and tip
+ * (jac and tip_hessian are the adapters above). */
+/* The gains Kp, Kv (n x n, row-major) and the margin rows G (n_margins x n) the next driver calls pass
+ * (by address; their contents must not change until unbound), in the calling thread: cfc_fused sums
+ * over the gains' nonzero entries only, and the driver's assembly check over G's (the same values).
+ * n = 0 unbinds; a NULL array is not bound. */
+int vgt_rec_bind_run(const double *Kp, const double *Kv, int n, const double *G, int n_margins);
+double vgt_rec_margin(const double *G, int nj, int row, double margin, const double *q);
+int vgt_rec_fn_cfc_fused(const double **arg, double **res, long long *iw, double *w, int mem);
+int vgt_rec_fn_fd_fused(const double **arg, double **res, long long *iw, double *w, int mem);
+int vgt_rec_fn_id_fused(const double **arg, double **res, long long *iw, double *w, int mem);
+int vgt_rec_fn_tip_state_fused(const double **arg, double **res, long long *iw, double *w, int mem);
+int vgt_rec_fn_tip_fused(const double **arg, double **res, long long *iw, double *w, int mem);
 /* The inverse kinematics' position terms, exact: the tip c (3), its Jacobian J (3 x nq, row-major),
  * H = d^2 (lam . P) / dq^2 (nq x nq) at multipliers lam (3); with qd and lam_d (else NULL) also d2
  * (nq + 3): the second derivative of [J^T lam; P] along (qd, lam_d). */
