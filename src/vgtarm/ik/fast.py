@@ -163,13 +163,37 @@ def solve(problem: IKProblem, task: Task, state: BatchState, q_start: Array, set
         if new.size == 0:
             continue
         _start_level(problem, task, state, new)
-        converged = newton.iterate(problem, task, state, new, settings.newton, with_rates=True)
+        converged = _iterate_in_blocks(problem, task, state, new, settings)
         if not converged.all():
             _rescue(problem, task, state, new[~converged], settings)
         if stride != 1:
             _complete_rates(problem, task, state, level)
         progress.report(int(np.count_nonzero(state.converged)), n)
     state.method[state.converged & (state.method == "")] = METHOD
+
+
+#: Bytes of one KKT array (``(samples, s, s)`` doubles, ``s = n + m + k``) that a level's Newton
+#: iteration builds at once: a long arm's level is iterated in blocks of samples of this size. Each
+#: sample's iteration is independent of the others in the batch, so the blocks give the same values;
+#: what they save is the memory traffic of arrays of gigabytes (the 50-module arm's KKT matrices of
+#: 6,284 samples: 2.6 GB, allocated and filled at every step). The paper's robot's levels (a KKT
+#: matrix of 1.2 kB a sample) are never split.
+BLOCK_BYTES = 64 * 2**20
+
+
+def _iterate_in_blocks(
+    problem: IKProblem, task: Task, state: BatchState, idx: Index, settings: FastSettings
+) -> NDArray[np.bool_]:
+    """:func:`vgtarm.ik.newton.iterate` of the samples ``idx`` with exact rates, in blocks of :data:`BLOCK_BYTES`."""
+    size = problem.n + task.m + problem.n_triangle
+    block = max(1, BLOCK_BYTES // (8 * size * size))
+    if idx.size <= block:
+        return newton.iterate(problem, task, state, idx, settings.newton, with_rates=True)
+    parts = [
+        newton.iterate(problem, task, state, idx[start : start + block], settings.newton, with_rates=True)
+        for start in range(0, idx.size, block)
+    ]
+    return np.concatenate(parts)
 
 
 def _complete_rates(problem: IKProblem, task: Task, state: BatchState, idx: Index) -> None:

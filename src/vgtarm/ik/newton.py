@@ -52,6 +52,80 @@ def _step_length(problem: IKProblem, q: Array, dq: Array, max_step: float) -> Ar
     return np.minimum(alpha, limit.min(axis=1))
 
 
+#: Smallest eigenvalue of the reduced Hessian, over the mean cost weight, that counts as positive
+#: curvature (the verification's :attr:`~vgtarm.ik.options.Tolerances.curvature`).
+CURVATURE_TOLERANCE = 1e-10
+#: Smallest length of the step along a direction of negative curvature (times ``max_step``).
+ESCAPE_FRACTION = 0.1
+
+
+def negative_curvature(problem: IKProblem, W: Array, J: Array, active: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """Samples ``(n,)`` with no active inequality whose Hessian of the Lagrangian ``W`` has a direction of
+    negative (or zero) curvature on the null space of the task Jacobian ``J``: their KKT point is no minimum.
+
+    Gershgorin's bound of ``W`` clears most samples; the others get the eigenvalues of their reduced
+    Hessian ``Z^T W Z`` (``Z`` an orthonormal basis of the null space of ``J``, from a QR factorisation).
+    """
+    scale = float(problem.weight.mean())
+    out = np.zeros(W.shape[0], dtype=bool)
+    diagonal = np.diagonal(W, axis1=1, axis2=2)
+    bound = (diagonal - (np.abs(W).sum(axis=2) - np.abs(diagonal))).min(axis=1)
+    need = np.flatnonzero(~active.any(axis=1) & ~(bound > CURVATURE_TOLERANCE * scale))
+    if need.size:
+        Z = _null_basis(J[need])
+        reduced = Z.transpose(0, 2, 1) @ W[need] @ Z
+        smallest = np.linalg.eigvalsh(reduced)[:, 0]
+        out[need] = ~(smallest > CURVATURE_TOLERANCE * scale)
+    return out
+
+
+def _null_basis(J: Array) -> Array:
+    """Orthonormal bases ``(n, nj, nj - m)`` of the null spaces of ``J`` ``(n, m, nj)`` (full row rank)."""
+    m = J.shape[1]
+    Q, _ = np.linalg.qr(J.transpose(0, 2, 1), mode="complete")
+    return np.asarray(Q[:, :, m:])
+
+
+def curvature_step(
+    problem: IKProblem, q: Array, W: Array, J: Array, residual: Array, g: Array | None, max_step: float
+) -> Array:
+    """Steps ``x = (dq, lam, mu_g)`` ``(n, nj + m + k)`` for samples whose reduced Hessian is indefinite.
+
+    The step is the Newton step of the equality-constrained problem in null-space form with the
+    reduced Hessian's eigenvalues replaced by their absolute values (at least the smallest cost
+    weight): the range-space part restores the task, the null-space part descends the Lagrangian,
+    moving away from the KKT point along each direction of negative curvature (a saddle of the
+    cost on the task's manifold, such as the straight branch of a buckling arm) instead of towards
+    it. Along the most negative direction the step is at least ``ESCAPE_FRACTION * max_step`` long,
+    downhill (its sign chosen by the gradient; positive at an exact saddle), so an iterate that
+    sits on the saddle leaves it; the distance then grows at each step until the curvature turns
+    positive and the ordinary Newton step takes over. The new task multipliers are the least-squares
+    solution of stationarity after the step; inequality multipliers stay zero (no active row).
+    """
+    nj = problem.n
+    n, m = J.shape[0], J.shape[1]
+    Q, R = np.linalg.qr(J.transpose(0, 2, 1), mode="complete")
+    Q1, Z, R1 = Q[:, :, :m], Q[:, :, m:], R[:, :m, :]
+    gradient = kkt.cost_gradient(problem, q, g)
+    y = np.linalg.solve(R1.transpose(0, 2, 1), -residual[..., None])
+    dq_range = (Q1 @ y)[..., 0]
+    reduced_gradient = np.einsum("nji,nj->ni", Z, gradient + np.einsum("nij,nj->ni", W, dq_range))
+    values, vectors = np.linalg.eigh(Z.transpose(0, 2, 1) @ W @ Z)
+    floor = float(problem.weight.min())
+    along = np.einsum("nji,nj->ni", vectors, reduced_gradient)
+    p = -along / np.maximum(np.abs(values), floor)
+    kick = ESCAPE_FRACTION * max_step
+    first = p[:, 0]
+    direction = np.where(along[:, 0] > 0, -1.0, 1.0)
+    p[:, 0] = np.where((values[:, 0] < 0) & (np.abs(first) < kick), kick * direction, first)
+    dq = dq_range + np.einsum("nij,nj->ni", Z, np.einsum("nij,nj->ni", vectors, p))
+    stationary = gradient + np.einsum("nij,nj->ni", W, dq)
+    lam = -np.linalg.solve(R1, np.einsum("nji,nj->ni", Q1, stationary)[..., None])[..., 0]
+    x = np.zeros((n, nj + m + problem.n_triangle))
+    x[:, :nj], x[:, nj : nj + m] = dq, lam
+    return x
+
+
 def stopping_test(
     problem: IKProblem,
     q: Array,
@@ -97,6 +171,7 @@ def iterate(
     settings: NewtonSettings,
     *,
     with_rates: bool = False,
+    curvature: bool = False,
 ) -> NDArray[np.bool_]:
     """Run Newton on the samples ``idx`` from their current ``state``; returns which converged ``(len(idx),)``.
 
@@ -106,8 +181,14 @@ def iterate(
     inequality (``rates_ready``), whose KKT matrix is the one the compiled call assumes. A reduced
     task (a planar robot's, :attr:`Task.compiled_rates` False) gets the same rates from
     :func:`vgtarm.ik.rates.exact` on the same samples instead.
+
+    With ``curvature`` a sample with no active inequality whose reduced Hessian is not positive
+    definite (:func:`negative_curvature`: a saddle or a maximum of the cost on the task, not a
+    minimum) does not stop there, and takes the :func:`curvature_step` instead of the Newton step.
+    Samples with positive curvature take the same steps as without it.
     """
     compiled_rates = with_rates and task.compiled_rates
+    in_call = compiled_rates and not task.rates_at_the_end  # else asked for where samples stop
     nj = problem.n
     working = np.asarray(idx, dtype=np.intp)
     state.converged[working] = False
@@ -116,7 +197,7 @@ def iterate(
         if working.size == 0:
             break
         q, lam, mu, active = state.q[working], state.lam[working], state.mu[working], state.active[working]
-        if compiled_rates:
+        if in_call:
             residual, J, H, g, rates = task.evaluate_with_rates(working, q, lam, problem.weight)
         else:
             residual, J, H, g = task.evaluate_cost(working, q, lam)
@@ -124,8 +205,19 @@ def iterate(
         if g is not None and state.g is not None:
             state.g[working] = g
         done, predicted, finite = stopping_test(problem, q, lam, mu, active, (residual, J, H), settings, g)
+        saddle = np.zeros(working.size, dtype=bool)
+        if curvature:
+            check = finite & ~predicted.any(axis=1)
+            saddle[check] = negative_curvature(problem, kkt.hessian(problem, H[check]), J[check], predicted[check])
+            done &= ~saddle
         state.converged[working[done]] = True
-        if compiled_rates:
+        if compiled_rates and not in_call:
+            ready = done & ~active.any(axis=1)
+            if ready.any():
+                rows = working[ready]
+                *_, late = task.evaluate_with_rates(rows, q[ready], lam[ready], problem.weight)
+                _store_rates(state, rows, np.ones(rows.size, dtype=bool), late)
+        elif in_call:
             _store_rates(state, working, done & ~active.any(axis=1), rates)
         elif with_rates:
             rate_modes.exact(problem, task, state, working[done & ~active.any(axis=1)])
@@ -137,9 +229,21 @@ def iterate(
             break
         q, residual, J, H, active = q[keep], residual[keep], J[keep], H[keep], predicted[keep]
         g = None if g is None else g[keep]
+        saddle = saddle[keep]
         W = kkt.hessian(problem, H)
         K = kkt.kkt_matrix(problem, W, J, active)
         x, solvable = kkt.solve(K, kkt.newton_rhs(problem, q, residual, active, g))
+        if saddle.any():
+            x[saddle] = curvature_step(
+                problem,
+                q[saddle],
+                W[saddle],
+                J[saddle],
+                residual[saddle],
+                None if g is None else g[saddle],
+                settings.max_step,
+            )
+            solvable[saddle] = np.isfinite(x[saddle]).all(axis=1)
         solvable &= np.isfinite(x).all(axis=1)
         if not solvable.all():
             working, q, W, J, x, active = (a[solvable] for a in (working, q, W, J, x, active))  # type: ignore[assignment]
@@ -186,6 +290,7 @@ def solve_in_order(
     settings: NewtonSettings,
     *,
     with_rates: bool = False,
+    curvature: bool = True,
 ) -> None:
     """Solve samples ``order`` as the sequential chain from ``start`` would, into ``state``.
 
@@ -196,7 +301,7 @@ def solve_in_order(
     pending = np.asarray(order, dtype=np.intp)
     while pending.size:
         _start_all(state, pending, start)
-        iterate(problem, task, state, pending, settings, with_rates=with_rates)
+        iterate(problem, task, state, pending, settings, with_rates=with_rates, curvature=curvature)
         run_a = _take(state, pending)
         ok_a = state.converged[pending].copy()
         agree = ok_a.copy()
@@ -205,7 +310,7 @@ def solve_in_order(
             later = pending[1:]
             for name in _SOLUTION_FIELDS:
                 getattr(state, name)[later] = run_a[name][:-1]
-            iterate(problem, task, state, later, settings, with_rates=with_rates)
+            iterate(problem, task, state, later, settings, with_rates=with_rates, curvature=curvature)
             ok_b[1:] = state.converged[later]
             same = np.abs(state.q[later] - run_a["q"][1:]).max(axis=1) <= SAME_SOLUTION
             agree[1:] = ok_a[1:] & ok_b[1:] & same

@@ -14,6 +14,29 @@ from ..model.parameters import N_JOINTS
 from .effort import CRITERIA, DEFAULT_JOINT_LIMIT_WEIGHT, DEFAULT_TOOL_FORCE_SPEED
 from .problem import DEFAULT_MARGIN
 
+#: The fast solver's ``coarse_step`` on the paper's robot (m).
+COARSE_STEP = 0.02
+#: The paper robot's reach: the distance from the base to its tip at home (m). A robot that reaches
+#: farther gets the case paths scaled by its reach over this (:func:`vgtarm.app.cases.path_placement`)
+#: and a ``coarse_step`` scaled alike (:func:`default_coarse_step`).
+PAPER_REACH = 0.66
+#: Reaches within this of :data:`PAPER_REACH` (m) count as the paper robot's (the case paths' rule).
+SAME_REACH = 1e-9
+
+
+def default_coarse_step(reach: float) -> float:
+    """The fast solver's ``coarse_step`` (m) for a robot whose tip at home is ``reach`` (m) from the base.
+
+    The case paths are scaled with the reach (a circle of 0.1 m radius on the paper's robot is one of
+    2.35 m on a 50-module arm), so the coarse samples and the approach from the start pose are
+    spaced in proportion: ``COARSE_STEP * reach / PAPER_REACH``, the same number of coarse samples
+    on every robot. A robot that reaches no farther than the paper's keeps exactly ``COARSE_STEP``
+    (the paper's robot, bit for bit, and the small stacks).
+    """
+    if not reach > PAPER_REACH + SAME_REACH:
+        return COARSE_STEP
+    return COARSE_STEP * reach / PAPER_REACH
+
 
 @dataclass(frozen=True)
 class NewtonSettings:
@@ -47,7 +70,7 @@ class FastSettings:
     """
 
     newton: NewtonSettings = field(default_factory=NewtonSettings)
-    coarse_step: float = 0.02
+    coarse_step: float = COARSE_STEP
     top_count: int = 4
     retry_pieces: int = 8
 
@@ -74,7 +97,8 @@ class IKOptions:
         tol_stationarity: Newton stopping test on the Lagrangian gradient.
         max_iterations: Newton steps per sample before it counts as failed.
         max_step: Largest joint change in one Newton step (m, rad).
-        coarse_step: Tip travel between consecutive coarse samples of the fast solver (m).
+        coarse_step: Tip travel between consecutive coarse samples of the fast solver (m); by default
+            (None) :func:`default_coarse_step` of the robot's reach: 0.02 m on the paper's robot.
         fallback: Re-solve samples that the fast solver could not verify with the reference solver.
         reference_ftol: SLSQP's ``ftol`` (reference solver).
         reference_maxiter: SLSQP's and IPOPT's iteration limit per sample.
@@ -94,7 +118,7 @@ class IKOptions:
     tol_stationarity: float = 1e-10
     max_iterations: int = 30
     max_step: float = 0.02
-    coarse_step: float = 0.02
+    coarse_step: float | None = None
     fallback: bool = True
     reference_ftol: float = 1e-15
     reference_maxiter: int = 200
@@ -115,7 +139,7 @@ class IKOptions:
             raise InputError(f"unknown inverse-kinematics option {unknown[0]!r}; valid options are {', '.join(valid)}")
         values = dict(options)
         for name in ("margin", "tol_primal", "tol_stationarity", "max_step", "coarse_step", "reference_ftol"):
-            if name in values:
+            if name in values and not (name == "coarse_step" and values[name] is None):
                 values[name] = _positive(name, values[name])
         for name in ("accept_primal", "accept_stationarity", "joint_limit_weight", "tool_force_speed"):
             if name in values:
@@ -168,7 +192,8 @@ class IKOptions:
     @property
     def fast(self) -> FastSettings:
         """The fast solver's settings these options imply."""
-        return FastSettings(newton=self.newton, coarse_step=self.coarse_step)
+        step = COARSE_STEP if self.coarse_step is None else self.coarse_step
+        return FastSettings(newton=self.newton, coarse_step=step)
 
     @property
     def tolerances(self) -> Tolerances:

@@ -19,6 +19,7 @@ from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
+from threadpoolctl import threadpool_limits
 
 from ..errors import InputError, PathError, UnreachableError, shown
 from ..memory import check_memory
@@ -27,7 +28,7 @@ from ..paths import MAX_COORDINATE, Path
 from . import fast, kkt, reference
 from . import rates as rate_modes
 from .effort import EffortTerms, effort_terms
-from .options import IKOptions
+from .options import IKOptions, default_coarse_step
 from .pose import HOLD, OrientationTarget, angle_error, orientation_target
 from .problem import BatchState, IKProblem, Task
 from .records import IKResult, IKSamples
@@ -189,6 +190,16 @@ def inverse_kinematics(
         UnreachableError: A sample cannot be reached within the limits and the assembly margin;
             the message names its time, the target point and the smallest residual reached.
     """
+    # NumPy's BLAS on one thread, as in vgtarm.simulate: the batched solves of a long arm (matrices of
+    # a hundred-odd rows, one LAPACK call each) are too small for threads to pay, and OpenBLAS's
+    # threads then spin on the cores the work needs: the 50-module arm's case 1 took 421 s wall
+    # (235 s CPU) on the 2 shared cores with them, 45 s wall (30 s CPU) without them
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _inverse_kinematics(robot, path, solver=solver, rates=rates, pose=pose, **options)
+
+
+def _inverse_kinematics(robot: Robot, path: Path, *, solver: str, rates: str, pose: object, **options: Any) -> IKResult:
+    """:func:`inverse_kinematics` (its BLAS limited to one thread)."""
     started = time.perf_counter()
     if not isinstance(path, Path):
         raise PathError(f"path must be a vgtarm.paths.Path (see vgtarm.paths), got {type(path).__name__}")
@@ -205,6 +216,9 @@ def inverse_kinematics(
     if rates not in rate_modes.RATE_MODES:
         raise InputError(f"unknown rates mode {rates!r}; valid modes are {', '.join(rate_modes.RATE_MODES)}")
     settings = IKOptions.from_keywords(options, robot.n_joints)
+    if settings.coarse_step is None:
+        reach = float(np.linalg.norm(robot.tip_position(robot.parameters.home)))
+        settings = replace(settings, coarse_step=default_coarse_step(reach))
     effort = settings.criterion == "effort"
     if effort and pose is not None:
         raise InputError("criterion='effort' supports the tip-position task only (pose=None), got a pose")

@@ -625,6 +625,8 @@ def robot_parameters_from_dict(data: Mapping[str, Any], *, source: str = "<dict>
     return parameters_from_dict(data, source=source)
 
 
-def robot_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> Robot:
-    """A robot from a parsed robot file of either format (see :func:`load_robot`)."""
-    return Robot(robot_parameters_from_dict(data, source=source))
+def robot_from_dict(data: Mapping[str, Any], *, source: str = "<dict>", model: str | None = None) -> Robot:
+    """A robot from a parsed robot file of either format, on the model :func:`load_robot` would choose
+    for it (``model``, else ``$VGTARM_MODEL``, else :func:`default_model`: a long stack's is the
+    recursive one, whose symbolic library would take hours to build)."""
+    return _robot_of(robot_parameters_from_dict(data, source=source), model)

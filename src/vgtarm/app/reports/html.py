@@ -227,7 +227,10 @@ def _effort_figure(runs: Sequence[ReportRun], max_points: int) -> dict[str, Any]
     names = runs[0].result.joint_names  # every run has them (checked by page_figures)
     groups = joint_groups(names)
     # the panels' axes as Plotly's subplots lay them out (a figure without traces is cheap to build)
-    grid = make_subplots(rows=len(groups), cols=1, shared_xaxes=True, vertical_spacing=0.04)
+    # gaps of 4 % of the height, but never more than half of it in all (Plotly refuses gaps above
+    # 1 / (rows - 1): a 30-module arm has 31 panels)
+    spacing = min(0.04, 0.5 / max(1, len(groups) - 1))
+    grid = make_subplots(rows=len(groups), cols=1, shared_xaxes=True, vertical_spacing=spacing)
     for g, (title, joints) in enumerate(groups):
         unit = effort_unit(names[joints[0]])
         grid.update_yaxes(title_text=f"{plotly_text(title)} ({unit})", title_font={"size": 11}, row=g + 1, col=1)
