@@ -279,7 +279,8 @@ def test_a_run_holds_blas_to_one_thread_and_gives_it_back() -> None:
     after, with the libraries looked up once per process."""
     from threadpoolctl import threadpool_info, threadpool_limits
 
-    from vgtarm.simulation.simulator import _blas_on_one_thread, _thread_pools
+    from vgtarm.machine import _thread_pools
+    from vgtarm.simulation.simulator import _blas_on_one_thread
 
     def blas_threads() -> list[int]:
         return [pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"]

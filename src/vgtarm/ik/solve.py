@@ -11,7 +11,6 @@ solver never raises for a sample it could not solve: it leaves it unconverged, a
 
 from __future__ import annotations
 
-import functools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -20,9 +19,9 @@ from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
-from threadpoolctl import ThreadpoolController
 
 from ..errors import InputError, PathError, UnreachableError, shown
+from ..machine import blas_on_one_thread
 from ..memory import check_memory
 from ..model.robot import Robot
 from ..paths import MAX_COORDINATE, Path
@@ -148,13 +147,6 @@ def _hold_orientation(
     return np.asarray(rotation[0].reshape(3, 3))
 
 
-@functools.cache
-def _thread_pools() -> ThreadpoolController:
-    """The thread pools of the libraries loaded in this process, looked up once (as
-    :func:`vgtarm.simulation.simulator._thread_pools`: the look-up takes milliseconds)."""
-    return ThreadpoolController()
-
-
 def inverse_kinematics(
     robot: Robot,
     path: Path,
@@ -202,7 +194,7 @@ def inverse_kinematics(
     # a hundred-odd rows, one LAPACK call each) are too small for threads to pay, and OpenBLAS's
     # threads then spin on the cores the work needs: the 50-module arm's case 1 took 421 s wall
     # (235 s CPU) on the 2 shared cores with them, 45 s wall (30 s CPU) without them
-    with _thread_pools().limit(limits=1, user_api="blas"):
+    with blas_on_one_thread():
         return _inverse_kinematics(robot, path, solver=solver, rates=rates, pose=pose, **options)
 
 

@@ -29,11 +29,11 @@ from dataclasses import replace as dataclass_replace
 from typing import Any, ParamSpec, TypeVar
 
 import numpy as np
-from threadpoolctl import ThreadpoolController
 
 from ..control.cfc import ComputedForceControl
 from ..control.scm import SwitchingControl
 from ..errors import InputError, SimulationError
+from ..machine import blas_on_one_thread
 from ..memory import check_memory
 from ..model.closedloop import (
     ABOVE_THRESHOLD,
@@ -88,13 +88,6 @@ _P = ParamSpec("_P")
 _R = TypeVar("_R")
 
 
-@functools.cache
-def _thread_pools() -> ThreadpoolController:
-    """The thread pools of the libraries loaded in this process (NumPy's BLAS is loaded with NumPy,
-    before any run)."""
-    return ThreadpoolController()
-
-
 def _blas_on_one_thread(function: Callable[_P, _R]) -> Callable[_P, _R]:
     """Run ``function`` with NumPy's BLAS (OpenBLAS) limited to one thread (threadpoolctl).
 
@@ -105,13 +98,12 @@ def _blas_on_one_thread(function: Callable[_P, _R]) -> Callable[_P, _R]:
     Threads that a NumPy call woke before the run may still spin for a while; the ``vgtarm``
     command therefore also asks for one BLAS thread before NumPy loads
     (:func:`vgtarm._entry.single_threaded_blas`). The loaded libraries are looked up once per
-    process (:func:`_thread_pools`), not at every run: the look-up took 2 ms, 3 % of a 10-module arm's
-    CFC run of case 1.
+    process (:func:`vgtarm.machine.blas_on_one_thread`), not at every run.
     """
 
     @functools.wraps(function)
     def wrapper(*args: _P.args, **kwargs: _P.kwargs) -> _R:
-        with _thread_pools().limit(limits=1, user_api="blas"):
+        with blas_on_one_thread():
             return function(*args, **kwargs)
 
     return wrapper
