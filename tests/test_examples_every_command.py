@@ -7,13 +7,11 @@ gets one folder (a module-scoped fixture) in which its three short runs are made
 commands read them. Runs are short (``--duration``, a coarse ``--dt``, few states), so the whole
 file stays within about a minute or two on two cores once the models are in the cache.
 
-A long arm (``examples/tapered_thirty.toml``, 30 modules on the recursive model) runs every command
-but ``reproduce``, which is skipped for it with the reason. Each run solves the IK of a whole case
-path first (6,284 samples of case 1: about 9 s of CPU at 30 modules since the IK of long arms was
-made robust, ``docs/ik.md``, "Long arms"): its three runs (``simulate``, read by ``animate`` and
-``report``) cost about 26 s of CPU and ``study`` 16 s; ``reproduce`` (twelve runs, four IKs of whole
-paths, the GA of ``2 n^2`` genes) passes on it but takes 66 s more (2026-11-27, loaded 2-core
-machine), beyond the minute this file may add for one arm.
+The long arm (``examples/tapered_thirty.toml``, 30 modules on the recursive model) runs every
+command too. Each run solves the IK of a whole case path first (6,284 samples of case 1: about 9 s
+of CPU at 30 modules since the IK of long arms was made robust, ``docs/ik.md``, "Long arms"), so it
+is the file's longest robot: its three runs, ``study`` and ``reproduce`` (twelve runs, four IKs of
+whole paths, the GA of ``2 n^2`` genes) take about 90 s of the file's CPU on a quiet 2-core machine.
 """
 
 from __future__ import annotations
@@ -31,8 +29,6 @@ from vgtarm.simulation import SimulationResult
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 ROBOTS = sorted(EXAMPLES.glob("*.toml"))
-#: Arms of this many modules or more skip ``reproduce`` (module docstring).
-LONG_ARM = 20
 #: Seconds of each run: long enough for the loop, the GA's test and the observer to act.
 DURATION = "0.05"
 #: The simulate runs of every robot: (folder, extra options).
@@ -50,7 +46,6 @@ class Robot:
         self.config, self.folder = config, folder
         self.robot = vgtarm.load_robot(config)
         self.planar = self.robot.n_joints == 3
-        self.long = self.robot.n_modules >= LONG_ARM
 
     def run(self, argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
         """``vgtarm ARGV --config FILE`` in this process; its standard output (it must succeed)."""
@@ -172,17 +167,8 @@ COMMANDS: dict[str, Callable[[Robot, pytest.CaptureFixture[str]], None]] = {
 }
 
 
-#: The command that makes many runs of whole case paths of its own: skipped for a long arm.
-WHOLE_PATHS = ("reproduce",)
-
-
 @pytest.mark.parametrize("command", list(COMMANDS), ids=[c.replace(" ", "-") for c in COMMANDS])
 def test_every_example_robot_runs_every_command(example: Robot, command: str, capsys) -> None:
-    if example.long and command in WHOLE_PATHS:
-        pytest.skip(
-            f"{example.config.name}: {example.robot.n_modules} modules; {command} adds 66 s of whole-path runs, "
-            "beyond this file's time (module docstring); run it by hand"
-        )
     COMMANDS[command](example, capsys)
 
 
