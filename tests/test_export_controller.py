@@ -122,6 +122,17 @@ def _compilers() -> list:  # type: ignore[type-arg]
     ]
 
 
+def assert_imports_only_allowed(build: Path) -> None:
+    """The static library built in ``build`` imports nothing but :data:`ALLOWED_IMPORTS` (``nm``)."""
+    undefined = subprocess.run(["nm", "-u", str(build / "libvgtc.a")], capture_output=True, text=True, check=True)
+    defined = subprocess.run(
+        ["nm", "--defined-only", str(build / "libvgtc.a")], capture_output=True, text=True, check=True
+    )
+    names = {line.split()[-1] for line in undefined.stdout.splitlines() if line.strip() and not line.endswith(":")}
+    names -= {line.split()[-1] for line in defined.stdout.splitlines() if len(line.split()) == 3}
+    assert names <= ALLOWED_IMPORTS, sorted(names - ALLOWED_IMPORTS)
+
+
 def _make(folder: Path, where: Path, compiler: str, flags: str) -> Path:
     """A copy of the export built with make, CC=compiler and CFLAGS=flags."""
     build = where / f"build-{compiler}"
@@ -202,13 +213,7 @@ def test_clean_under_address_and_undefined_behaviour_sanitizers(exports, simulat
 def test_the_library_uses_only_libm_and_string_functions(exports, tmp_path):  # type: ignore[no-untyped-def]
     """No heap, no I/O, no other dependency: the controller's objects import nothing else."""
     build = _make(exports["observer"], tmp_path, "gcc", "-std=c99 -O2")
-    undefined = subprocess.run(["nm", "-u", str(build / "libvgtc.a")], capture_output=True, text=True, check=True)
-    defined = subprocess.run(
-        ["nm", "--defined-only", str(build / "libvgtc.a")], capture_output=True, text=True, check=True
-    )
-    names = {line.split()[-1] for line in undefined.stdout.splitlines() if line.strip() and not line.endswith(":")}
-    names -= {line.split()[-1] for line in defined.stdout.splitlines() if len(line.split()) == 3}
-    assert names <= ALLOWED_IMPORTS, sorted(names - ALLOWED_IMPORTS)
+    assert_imports_only_allowed(build)
 
 
 def _nothing_left(parent: Path, name: str) -> None:

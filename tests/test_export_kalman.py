@@ -26,7 +26,7 @@ from vgtarm.export.controller import STRICT_FLAGS
 from vgtarm.simulation import SimulationResult, simulate
 from vgtarm.simulation.sensing import kalman_gains
 
-from .test_export_controller import ALLOWED_IMPORTS, _compilers, _make, _replay
+from .test_export_controller import _compilers, _make, _replay, assert_imports_only_allowed
 
 CASE = case_study(2)
 #: The run: the observer and the Kalman estimator with realistic sensing.
@@ -109,13 +109,7 @@ def test_builds_strict_and_replay_equals_the_simulation(compiler, folder, simula
     np.testing.assert_array_equal(table[:, 1 : 1 + n], simulated.effort)
     np.testing.assert_array_equal(table[:, 1 + n : 1 + 2 * n], simulated.effort_estimate)
     assert (table[:, -1] == 0).all()
-    undefined = subprocess.run(["nm", "-u", str(build / "libvgtc.a")], capture_output=True, text=True, check=True)
-    defined = subprocess.run(
-        ["nm", "--defined-only", str(build / "libvgtc.a")], capture_output=True, text=True, check=True
-    )
-    names = {line.split()[-1] for line in undefined.stdout.splitlines() if line.strip() and not line.endswith(":")}
-    names -= {line.split()[-1] for line in defined.stdout.splitlines() if len(line.split()) == 3}
-    assert names <= ALLOWED_IMPORTS, sorted(names - ALLOWED_IMPORTS)
+    assert_imports_only_allowed(build)
 
 
 @pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc is not installed")
