@@ -3,6 +3,7 @@ a real headless Chromium (no JavaScript errors, every plot rendered, play moves 
 
 from __future__ import annotations
 
+import dataclasses
 import html
 import os
 import re
@@ -274,3 +275,19 @@ def test_page_in_a_real_browser(page, tmp_path):
         tab.screenshot(path=str(tmp_path / "report.png"), full_page=True)
     assert (tmp_path / "report.png").stat().st_size > 10_000
     assert not problems, problems
+
+
+def test_twelve_runs_of_a_figure_each_look_different(robot, runs):
+    """``vgtarm reproduce`` draws twelve runs, more than Plotly's ten colours: once the colours are used
+    up the next dash pattern is taken, so no two runs' lines look alike (tip error and 3-D paths);
+    the page still passes Plotly's validation."""
+    from vgtarm.app.reports.html import COLOURS, run_line
+
+    one = next(iter(runs_from_reproduction(runs)))
+    many = [dataclasses.replace(one, label=f"run {k}") for k in range(12)]
+    figures = {div: figure for div, _, figure in page_figures(robot, many, max_points=50, max_frames=2)}
+    for div in ("tip-error", "paths"):
+        lines = [(t["line"]["color"], t["line"]["dash"]) for t in figures[div]["data"] if t["name"].startswith("run ")]
+        assert len(lines) == 12 and len(set(lines)) == 12, div
+        assert figure_errors(figures[div]) == [], div
+    assert len({(run_line(i, 1)["color"], run_line(i, 1)["dash"]) for i in range(4 * len(COLOURS))}) == 4 * len(COLOURS)

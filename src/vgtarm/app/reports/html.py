@@ -63,6 +63,14 @@ MAX_POINTS = 1200
 MAX_FRAMES = 90
 #: Colours of the runs (Plotly's default sequence).
 COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf")
+#: Dash patterns taken in turn once the colours are used up, so no two runs of a figure look alike
+#: (``vgtarm reproduce`` draws twelve runs).
+DASHES = ("solid", "dash", "dot", "dashdot")
+
+
+def run_line(i: int, width: float) -> dict[str, Any]:
+    """The line of the ``i``-th run of a figure: a colour of :data:`COLOURS`, then the next dash."""
+    return {"color": COLOURS[i % len(COLOURS)], "dash": DASHES[(i // len(COLOURS)) % len(DASHES)], "width": width}
 #: Colour scale of the legs' closeness to a limit (as the Matplotlib drawing: green to red).
 CLOSENESS_SCALE = [[i / (len(CLOSENESS_COLOURS) - 1), c] for i, c in enumerate(CLOSENESS_COLOURS)]
 _COLOURBAR_TITLE = "legs: closeness<br>to a limit<br>(0 mid-range,<br>1 at a limit)"
@@ -196,7 +204,7 @@ def _error_figure(runs: Sequence[ReportRun], max_points: int) -> dict[str, Any]:
         label = plotly_text(run.label)
         data.append(
             {"type": "scatter", "x": typed_array(t), "y": typed_array(e), "name": label, "mode": "lines",
-             "line": {"color": COLOURS[i % len(COLOURS)], "width": 1.2}}
+             "line": run_line(i, 1.2)}
         )  # fmt: skip
     log = spans_decades([run.result.tip_error[: run.result.completed] for run in runs])
     yaxis: dict[str, Any] = {"title": {"text": "tip error (mm)" + (", log scale" if log else "")}}
@@ -303,7 +311,7 @@ def _path_figure(runs: Sequence[ReportRun], max_points: int) -> dict[str, Any]:
         a = (r.tip[index] * MM).astype(np.float32)
         data.append(
             {"type": "scatter3d", **_xyz(a), "name": plotly_text(run.label), "mode": "lines",
-             "line": {"color": COLOURS[i % len(COLOURS)], "width": 2}}
+             "line": run_line(i, 2)}
         )  # fmt: skip
     layout = _layout(
         {
