@@ -24,7 +24,7 @@ from vgtarm.control import SwitchingControl
 from vgtarm.errors import InputError
 from vgtarm.export import export_controller, simulate_exported
 from vgtarm.export.controller import STRICT_FLAGS
-from vgtarm.export.galoop import ExportedGA
+from vgtarm.export.galoop import FLAGS, ExportedGA
 from vgtarm.export.switching import simulator_fuses
 from vgtarm.ga import GAOptions
 from vgtarm.model.closedloop import ClosedLoopDriver
@@ -65,10 +65,21 @@ def _scm(variant: str, **options: int) -> SwitchingControl:
     return scm
 
 
+#: The GA's builds: portable -O2 (the vector code generic), the Makefile's -march=native (AVX2 and
+#: FMA here), and the plain C99 arrays that compilers without GCC's vector extensions build.
+BUILDS = {
+    "portable": FLAGS,
+    "native": (*FLAGS, "-march=native"),
+    "arrays": (*FLAGS, "-DVGTC_GA_NO_VECTORS"),
+}
+
+
+@pytest.mark.parametrize("build", BUILDS)
 @pytest.mark.parametrize("variant", VARIANTS)
-def test_activations_equal_the_simulations_ga(variant, robot, reference, exports):
+def test_activations_equal_the_simulations_ga(variant, build, robot, reference, exports):
     """The same windows, states and seeds: the exported GA returns the simulation's activation bit
-    for bit (its gains, its costs and its work), including windows cut short at the end."""
+    for bit (its gains, its costs and its work), including windows cut short at the end, built
+    with its vector code (portable and native) and with plain arrays."""
     scm = _scm(variant)
     arrays = loop_arrays(robot, robot, reference, initial_state=(reference.q[0], reference.qd[0]))
     theirs = compiled_ga(scm, ClosedLoopDriver(robot.backend), robot, arrays, reference.dt)
@@ -81,7 +92,7 @@ def test_activations_equal_the_simulations_ga(variant, robot, reference, exports
     horizons = [min(scm.horizon, n - 1 - k) for k in ks]
     inp = arrays.inputs
     rows = np.hstack([inp["q_d"], inp["qd_d"], inp["qdd_d"]])
-    mine = ExportedGA(exports[variant]).run(ks, horizons, q0, qd0, rows, inp["tip_d"], seeds)
+    mine = ExportedGA(exports[variant], flags=BUILDS[build]).run(ks, horizons, q0, qd0, rows, inp["tip_d"], seeds)
     exact = 0
     for i, k in enumerate(ks):
         r = theirs.activate(k, q0[i], qd0[i], int(seeds[i]))

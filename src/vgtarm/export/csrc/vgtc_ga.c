@@ -20,6 +20,18 @@
 #define FMA(a, b, c) ((a) * (b) + (c))
 #endif
 
+/* With GCC or Clang (and compilers that take their vector extensions), the block's lanes are one
+ * vector per quantity, as in ga.c, so that the recursion's values stay in registers: the arrays
+ * above are written to memory at every step (1.9 times ga.c's activation with gcc -O2). Each lane
+ * is computed with the very operations, in the same order, of the array code above (an FMA is
+ * written per lane, which both compilers turn into one vector instruction), so the two give the
+ * same bits (tested). Define VGTC_GA_NO_VECTORS to build the array code with these compilers. */
+#if defined(__GNUC__) && !defined(VGTC_GA_NO_VECTORS)
+#define VGTC_GA_VECTORS 1
+#else
+#define VGTC_GA_VECTORS 0
+#endif
+
 typedef int (*vgtc_ga_fn)(const double **arg, double **res, long long *iw, double *w, int mem);
 
 /* ---- generator (ga.c: splitmix64, rng_seed, rng_next, rng_uniform, rng_below) ---------------- */
@@ -278,6 +290,7 @@ static double safe_admit(const vgtc_ga_params *g, double *kp, double *kv)
 
 enum { LANES = VGTC_GA_LANES };
 
+#if !VGTC_GA_VECTORS
 /* The gains of candidates rows[0 .. count), one lane each, in single precision
  * (gains_from_bytes_scalar: lanes past count get code 0). */
 static void gains_from_bytes(vgtc_ga *x, int count, const uint64_t *const *rows)
@@ -291,6 +304,7 @@ static void gains_from_bytes(vgtc_ga *x, int count, const uint64_t *const *rows)
             x->K[gi][c] = code == 255u ? x->hi[gi] : value;
         }
 }
+#endif
 
 /* ---- the safe variant on a block of candidates (ga.c: safe_repair) -------------------------- */
 
@@ -428,6 +442,7 @@ static void safe_repair(vgtc_ga *x, double *penalty)
     }
 }
 
+#if !VGTC_GA_VECTORS
 /* Operations on the LANES values of a block, one loop each (the compiler vectorises them). */
 static void lanes_mul(float *restrict r, const float *restrict a, const float *restrict b)
 {
@@ -540,6 +555,144 @@ static void kernel(vgtc_ga *x, int count, double *sum, long *n_far)
     }
     for (c = 0; c < LANES; ++c) sum[c] = (double)total[c];
 }
+#else
+
+/* the loops over the joints unrolled, so that each joint's vector has a register (as in ga.c) */
+#define UNROLL _Pragma("GCC unroll 16")
+
+typedef float lanes_f __attribute__((vector_size(4 * VGTC_GA_LANES)));
+typedef int32_t lanes_i __attribute__((vector_size(4 * VGTC_GA_LANES)));
+typedef uint64_t lanes_u __attribute__((vector_size(8 * VGTC_GA_LANES)));
+
+/* Macros rather than functions: a vector passed to or returned from a function is an ABI question
+ * (GCC notes it in builds without AVX), and these are only arithmetic. */
+#define SPLAT(v) ((float)(v) - (lanes_f){0.0f}) /* every lane v (v - 0 is v, -0 and NaN included) */
+#define LOAD(dst, src) memcpy(&(dst), (src), sizeof(dst)) /* LANES floats, any alignment        */
+/* r = a b + r lane by lane, fused where ga.c's kernel fuses (FMA), which both compilers turn into
+ * one vector instruction when the target has one */
+#define FMA_TO(r, a, b)                                                                            \
+    do {                                                                                           \
+        const lanes_f a_ = (a), b_ = (b);                                                          \
+        lanes_f r_ = (r);                                                                          \
+        int c_;                                                                                    \
+        for (c_ = 0; c_ < LANES; ++c_) r_[c_] = FMA(a_[c_], b_[c_], r_[c_]);                       \
+        (r) = r_;                                                                                  \
+    } while (0)
+
+/* gains_from_bytes: a word of each candidate is loaded once, its bytes shifted out side by side */
+static void gains_from_bytes(vgtc_ga *x, int count, const uint64_t *const *rows)
+{
+    lanes_i top;
+    int w, g, c;
+    for (c = 0; c < LANES; ++c) top[c] = 255;
+    for (w = 0; w < VGTC_GA_WORDS; ++w) {
+        lanes_u word;
+        for (c = 0; c < LANES; ++c) word[c] = c < count ? rows[c][w] : 0u;
+        for (g = 0; g < 8 && 8 * w + g < VGTC_GA_GENES; ++g) {
+            const int gi = 8 * w + g;
+            const lanes_i code = __builtin_convertvector((word >> (uint64_t)(56 - 8 * g)) & 0xFFu, lanes_i);
+            const lanes_f hi = SPLAT(x->hi[gi]);
+            lanes_f value = SPLAT(x->lo[gi]) + __builtin_convertvector(code, lanes_f) * SPLAT(x->step[gi]);
+            lanes_i pick = value < hi; /* -1 where value < hi */
+            value = (lanes_f)(((lanes_i)value & pick) | ((lanes_i)hi & ~pick));
+            pick = code == top;
+            value = (lanes_f)(((lanes_i)hi & pick) | ((lanes_i)value & ~pick));
+            memcpy(x->K[gi], &value, sizeof value);
+        }
+    }
+}
+
+/* kernel, one vector per quantity */
+static void kernel(vgtc_ga *x, int count, double *sum, long *n_far)
+{
+    const int nj = VGTC_NJ, nn = VGTC_NJ * VGTC_NJ;
+    const float dt = (float)x->p.dt;
+    const float limit = x->p.exact_above > 0.0 ? (float)(x->p.exact_above * x->p.exact_above) : INFINITY;
+    const lanes_f zero = SPLAT(0.0f), limit2 = SPLAT(limit), step = SPLAT(dt), back = SPLAT(-dt);
+    lanes_f E[VGTC_NJ], Ed[VGTC_NJ], a[VGTC_NJ], total = zero;
+    long j;
+    int i, l, m, k, c;
+    UNROLL for (i = 0; i < nj; ++i) {
+        E[i] = SPLAT((float)(x->q_d[i] - x->q0[i]));
+        Ed[i] = SPLAT((float)(x->qd_d[i] - x->qd0[i]));
+    }
+    *n_far = 0;
+    for (j = 0; j < x->horizon; ++j) {
+        const float *r = x->r + j * nj, *s = x->s + j * nj;
+        const float *J = x->jac_f + (j + 1) * 3 * nj, *off = x->off_f + (j + 1) * 3;
+        lanes_f norm2 = zero, t[3], square;
+        lanes_i outside;
+        int any = 0;
+        UNROLL for (i = 0; i < nj; ++i) { /* a = Kp E + Kv Ed */
+            const int ip = i * nj, iv = nn + i * nj;
+            lanes_f p0, v0, kp, kv;
+            if (nj == 1) {
+                LOAD(kp, x->K[ip]);
+                LOAD(kv, x->K[iv]);
+                p0 = kp * E[0];
+                v0 = kv * Ed[0];
+            } else { /* the first product is fused with the second (GCC contracts a*b + c*d so) */
+                LOAD(kp, x->K[ip + 1]);
+                LOAD(kv, x->K[iv + 1]);
+                p0 = kp * E[1];
+                v0 = kv * Ed[1];
+                LOAD(kp, x->K[ip]);
+                LOAD(kv, x->K[iv]);
+                FMA_TO(p0, kp, E[0]);
+                FMA_TO(v0, kv, Ed[0]);
+            }
+            UNROLL for (l = 2; l < nj; ++l) {
+                LOAD(kp, x->K[ip + l]);
+                LOAD(kv, x->K[iv + l]);
+                FMA_TO(p0, kp, E[l]);
+                FMA_TO(v0, kv, Ed[l]);
+            }
+            a[i] = p0 + v0;
+        }
+        UNROLL for (i = 0; i < nj; ++i) {
+            FMA_TO(E[i], step, Ed[i]);
+            E[i] = E[i] + SPLAT(r[i]);
+            FMA_TO(Ed[i], back, a[i]);
+            Ed[i] = Ed[i] + SPLAT(s[i]);
+            norm2 = norm2 + (x->moves[i] ? E[i] * E[i] : zero);
+        }
+        UNROLL for (k = 0; k < 3; ++k) t[k] = SPLAT(off[k]);
+        UNROLL for (l = 0; l < nj; ++l)
+            UNROLL for (k = 0; k < 3; ++k) FMA_TO(t[k], SPLAT(J[k * nj + l]), E[l]);
+        if (x->p.quadratic) {
+            const float *coef = x->coef + j * 3 * nn;
+            UNROLL for (k = 0; k < 3; ++k)
+                UNROLL for (l = 0; l < nj; ++l) {
+                    const float *cf = coef + k * nn + l * nj;
+                    lanes_f u;
+                    if (!x->row_used[k * nj + l]) continue;
+                    if (l + 1 < nj) {
+                        u = SPLAT(cf[l + 1]) * E[l + 1];
+                        FMA_TO(u, SPLAT(cf[l]), E[l]);
+                    } else {
+                        u = SPLAT(cf[l]) * E[l];
+                    }
+                    UNROLL for (m = l + 2; m < nj; ++m) FMA_TO(u, SPLAT(cf[m]), E[m]);
+                    FMA_TO(t[k], u, E[l]);
+                }
+        }
+        square = t[1] * t[1];
+        FMA_TO(square, t[0], t[0]);
+        FMA_TO(square, t[2], t[2]);
+        outside = norm2 > limit2;
+        total = total + (lanes_f)((lanes_i)square & ~outside);
+        for (c = 0; c < LANES; ++c) any |= outside[c];
+        if (any)
+            for (c = 0; c < count; ++c)
+                if (outside[c]) {
+                    const long f = (*n_far)++;
+                    x->far_at[f] = (long)c * x->horizon + j;
+                    for (i = 0; i < nj; ++i) x->far[f * nj + i] = E[i][c];
+                }
+    }
+    for (c = 0; c < LANES; ++c) sum[c] = (double)total[c];
+}
+#endif
 
 /* The predicted tip errors of candidates rows[0 .. count), count <= LANES (predict_one_block). */
 static int predict_block(vgtc_ga *x, int count, const uint64_t *const *rows, double *cost)
