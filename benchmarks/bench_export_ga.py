@@ -1,8 +1,9 @@
 """Switching control's GA exported (issue 25): the time of an activation in the exported C.
 
 For each variant (``paper``, ``safe``) of case 2's switching control: the export's GA
-(``vgtc_ga.c``) compiled as its Makefile does by default (-O2 -march=native) and, for comparison,
-at the portable -O2 (fmaf a libm call, no vectorisation), run on the same activations as the
+(``vgtc_ga.c``) compiled as its Makefile does by default (-O2 -march=native), the same with clang
+when it is installed, and, for comparison, at the portable -O2 (SSE2 only: every fmaf a libm
+call), run on the same activations as the
 simulation's compiled GA (``ga.c``, one thread: the baseline of the same run): windows of case
 2's reference from states 0.3 mm / 3 mm/s off it, every ``k``-th sample, each with its own seed.
 Every activation's gains are checked equal between the two (bit for bit). The times are measured
@@ -13,6 +14,7 @@ in C around each call (``harness/ga_harness.c``) and in Python around the simula
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
 import time
 from pathlib import Path
@@ -78,8 +80,14 @@ def run() -> dict[str, dict[str, float]]:
         )
         with tempfile.TemporaryDirectory(prefix="vgtc-ga-bench-") as scratch:
             folder = export_controller(robot, Path(scratch) / variant, kp=case.kp, kv=case.kv, switching=scm).folder
-            for name, flags in (("-O2 -march=native (Makefile)", NATIVE), ("-O2 portable", FLAGS)):
-                done = ExportedGA(folder, flags=flags).run(ks, horizons, q0, qd0, rows, inp["tip_d"], seeds)
+            builds: list[tuple[str | None, str, tuple[str, ...]]] = [(None, "-O2 -march=native (Makefile)", NATIVE)]
+            if shutil.which("clang"):
+                builds.append(("clang", "clang -O2 -march=native", NATIVE))
+            builds.append((None, "-O2 portable", FLAGS))
+            for compiler, name, flags in builds:
+                done = ExportedGA(folder, compiler=compiler, flags=flags).run(
+                    ks, horizons, q0, qd0, rows, inp["tip_d"], seeds
+                )
                 equal = int(sum(np.array_equal(a, b) for a, b in zip(done.genes, genes, strict=True)))
                 ratio = np.median(done.seconds) / np.median(baseline)
                 print(
