@@ -227,12 +227,15 @@ at compile time (`vgtc_config.h`), no heap, no threads, no intrinsics; the same 
 activation from the same state, window and seed returns the simulation's gains bit for bit
 (tested, and the loop closed through this folder equals `vgtarm simulate`). The simulation's
 kernel fuses multiply-adds on this machine: `VGTC_GA_FMA` = {int(settings["fused_multiply_add"])}
-writes them as `fmaf`. For speed build with `-O2 -march=native` (the Makefile's default here):
-`fmaf` becomes an instruction and the loops over the eight candidates of a block vectorise; at a
-portable -O2 an activation is tens of times slower. An activation takes about 1 ms on a desktop
-x86-64 core (`./ga_timing 1000` measures it here): a period with an activation overruns a 1 ms
-period unless the GA runs on its own core a period ahead, or with fewer generations
-(`vgtc_ga_params.generations`)."""
+writes them as `fmaf`. With GCC or Clang the eight candidates of a block are one vector of the
+compilers' extensions per quantity, so the prediction's values stay in registers; other C99
+compilers (or `-DVGTC_GA_NO_VECTORS`) build the same arithmetic on plain arrays, the same bits.
+For speed build with `-O2 -march=native` (the Makefile's default here): `fmaf` becomes an
+instruction; at a portable -O2 (no FMA instruction) an activation is tens of times slower. An
+activation takes 0.6 to 0.9 ms on one core of the x86-64 server this was measured on (p99 under
+1 ms on case 2's windows; `./ga_timing 1000` measures it here), so a period with an activation
+fits a 1 ms period only just: give the GA its own core a period ahead, or fewer generations
+(`vgtc_ga_params.generations`), where the rest of the period is needed."""
 
 
 def _watch_from(controller: SwitchingControl) -> int:

@@ -2,8 +2,9 @@
  *
  * Every operation follows vgtarm/model/csrc/ga.c (the simulation's compiled GA) in the same order
  * with the same arithmetic; the comments name the function of ga.c each part mirrors. ga.c keeps
- * eight candidates in a vector of the GCC extensions; this file keeps them in arrays of
- * VGTC_GA_LANES floats with the loops over the lanes innermost (the compiler may vectorise them).
+ * eight candidates in a vector of the GCC extensions; so does this file's prediction with GCC or
+ * Clang (VGTC_GA_VECTORS), and with any other C99 compiler it keeps them in arrays of
+ * VGTC_GA_LANES values with the loops over the lanes innermost (the compiler may vectorise them).
  * The lanes never mix, so each candidate's numbers are those of its lane in ga.c. Build with
  * -ffp-contract=off (the Makefile and CMakeLists.txt do): the fused multiply-adds of ga.c's kernel
  * are written out as fmaf (VGTC_GA_FMA), and no other operation may be fused.
@@ -21,11 +22,12 @@
 #endif
 
 /* With GCC or Clang (and compilers that take their vector extensions), the block's lanes are one
- * vector per quantity, as in ga.c, so that the recursion's values stay in registers: the arrays
- * above are written to memory at every step (1.9 times ga.c's activation with gcc -O2). Each lane
- * is computed with the very operations, in the same order, of the array code above (an FMA is
- * written per lane, which both compilers turn into one vector instruction), so the two give the
- * same bits (tested). Define VGTC_GA_NO_VECTORS to build the array code with these compilers. */
+ * vector per quantity in the prediction, as in ga.c, so that the recursion's values stay in
+ * registers; gcc -O2 writes the plain code's arrays to memory at every step (its activation took
+ * 1.9 times ga.c's, against about 1 now). Each lane is computed with the very operations, in the
+ * same order, of the plain code (an FMA is written per lane, which both compilers turn into one
+ * vector instruction), so the two give the same bits (tested). Define VGTC_GA_NO_VECTORS to build
+ * the plain code with these compilers. */
 #if defined(__GNUC__) && !defined(VGTC_GA_NO_VECTORS)
 #define VGTC_GA_VECTORS 1
 #else
