@@ -20,7 +20,7 @@ from vgtarm.app.cases import case_study, joint_reference
 from vgtarm.errors import ConfigError, InputError
 from vgtarm.export import CompiledExport, ExportError, command, export_controller, simulate_exported
 from vgtarm.export.controller import STRICT_FLAGS
-from vgtarm.simulation import ExternalForce, SimulationResult, simulate
+from vgtarm.simulation import SimulationResult, simulate
 
 CASE = case_study(2)
 #: The runs compared: the observer with perfect and with realistic sensing, the force sensor.
@@ -104,15 +104,6 @@ def test_closed_through_the_export_equals_simulate(name, robot, reference, expor
 def test_a_run_with_other_options_than_the_export_is_refused(robot, reference, exports):  # type: ignore[no-untyped-def]
     with pytest.raises(InputError, match="observer_gain_per_s"):
         simulate_exported(exports["observer"], robot, reference, observer="momentum", observer_gain=300.0)
-    with pytest.raises(InputError, match="the exported controller has no tool-force feedforward"):
-        simulate_exported(
-            exports["observer"],
-            robot,
-            reference,
-            observer="momentum",
-            external_force=ExternalForce(),
-            tool_force_feedforward=True,
-        )
 
 
 def _compilers() -> list:  # type: ignore[type-arg]
@@ -148,15 +139,20 @@ def _write_csv(path: Path, header: list[str], rows: np.ndarray) -> None:
     path.write_text("\n".join(lines) + "\n")
 
 
-def _replay(build: Path, run: SimulationResult, reference, where: Path, force_sensor: bool) -> np.ndarray:  # type: ignore[no-untyped-def]
-    """Replay ``run``'s measurements through the built ``replay``; its output table."""
+def _replay(  # type: ignore[no-untyped-def]
+    build: Path, run: SimulationResult, reference, where: Path, force_sensor: bool, expected_force=None
+) -> np.ndarray:
+    """Replay ``run``'s measurements through the built ``replay``; its output table. With
+    ``expected_force`` ``(n, 3)``, the reference file carries it as three more columns."""
     n = run.q.shape[1]
     ref_rows = np.column_stack([reference.t, reference.q, reference.qd, reference.qdd])
+    if expected_force is not None:
+        ref_rows = np.column_stack([ref_rows, expected_force])
     previous_force = (
         np.vstack([np.full((1, 3), np.nan), run.f_ext[:-1]]) if force_sensor else np.full((len(run.t), 3), np.nan)
     )
     meas_rows = np.column_stack([run.t, run.q, run.qd, previous_force])
-    _write_csv(where / "reference.csv", ["t"] + [f"c{i}" for i in range(3 * n)], ref_rows)
+    _write_csv(where / "reference.csv", ["t"] + [f"c{i}" for i in range(ref_rows.shape[1] - 1)], ref_rows)
     _write_csv(where / "measurements.csv", ["t"] + [f"c{i}" for i in range(2 * n + 3)], meas_rows)
     done = subprocess.run(
         [

@@ -194,8 +194,6 @@ def _check_agrees(settings: Mapping[str, Any], run: Any, plant: Robot) -> None:
             f"velocity_noise = {sensing.velocity_noise!r}: the exported controller is closed without simulated "
             "velocity noise (expected 0)"
         )
-    if run.scenario.tool_force_feedforward:
-        raise InputError("tool_force_feedforward = True: the exported controller has no tool-force feedforward")
     if run.scenario.plant_engine != MODEL_ENGINE:
         raise InputError(f"plant_engine = {run.scenario.plant_engine!r}: expected {MODEL_ENGINE!r}")
 
@@ -325,7 +323,9 @@ def simulate_exported(
 
     The plant is stepped by ``closed_loop.c`` itself; each period, ``vgtc_step`` gets the true
     joints (it rounds them to its encoder steps), the true velocity (with differenced velocities,
-    only at the start) and the tool force of the previous period (force sensor). The run's options
+    only at the start), the tool force of the previous period (force sensor) and, with the
+    scenario's ``tool_force_feedforward``, the expected tool force of the period
+    (``vgtc_step_feedforward``). The run's options
     must be those the controller was exported with (dt, observer and gain, sensing, controller
     model; refused in one line otherwise); simulated velocity noise is not supported.
 
@@ -356,6 +356,11 @@ def simulate_exported(
     run = prepare(plant, reference, law, scenario, metadata)
     _check_agrees(s, run, plant)
     if switching:
+        if run.scenario.tool_force_feedforward:
+            raise InputError(
+                "tool_force_feedforward = True with switching control: the exported switching step has no "
+                "tool-force feedforward (vgtc_step_feedforward feeds it forward under computed force control)"
+            )
         return _simulate_switching(compiled, plant, run, metadata)
     arrays = run.job.arrays
     driver = ClosedLoopDriver(plant.backend)

@@ -2,8 +2,10 @@
  *
  *   replay REFERENCE.csv MEASUREMENTS.csv EFFORTS.csv
  *
- * Row k of REFERENCE.csv is period k's reference (t, q_d, qd_d, qdd_d); row k of MEASUREMENTS.csv
- * what was measured then (t, q, qd, f). Every period is one vgtc_step; EFFORTS.csv gets t, the
+ * Row k of REFERENCE.csv is period k's reference (t, q_d, qd_d, qdd_d, and optionally the tool
+ * force the path's cutting model expects, f_exp_x, f_exp_y, f_exp_z, fed forward: the header says
+ * which); row k of MEASUREMENTS.csv what was measured then (t, q, qd, f). Every period is one
+ * vgtc_step_feedforward (f_exp NULL without those columns); EFFORTS.csv gets t, the
  * efforts, the estimate of the external efforts and the status, numbers written with 17
  * significant digits (they read back exactly). Exit status 0, or 1 with one line on stderr.
  */
@@ -52,6 +54,14 @@ static int read_row(FILE *in, int columns, double *values, char *line, const cha
 
 static int skip_header(FILE *in, char *line) { return fgets(line, MAX_LINE, in) != NULL; }
 
+/* The fields of a header line (commas + 1). */
+static int header_fields(const char *line)
+{
+    int fields = 1;
+    for (; *line; ++line) fields += *line == ',';
+    return fields;
+}
+
 int main(int argc, char **argv)
 {
     static char line[MAX_LINE];
@@ -66,8 +76,18 @@ int main(int argc, char **argv)
         fprintf(stderr, "replay: cannot read %s\n", !ref ? argv[1] : argv[2]);
         return 1;
     }
-    if (!skip_header(ref, line) || !skip_header(meas, line)) {
+    if (!skip_header(ref, line)) {
         fprintf(stderr, "replay: %s is empty; expected a header line and rows\n", argv[1]);
+        return 1;
+    }
+    const int ref_columns = header_fields(line), expected = ref_columns == REF_COLUMNS + 3;
+    if (ref_columns != REF_COLUMNS && !expected) {
+        fprintf(stderr, "replay: %s has %d columns in its header; expected %d (t, q_d, qd_d, qdd_d) or %d (and the "
+                "expected tool force f_exp_x, f_exp_y, f_exp_z)\n", argv[1], ref_columns, REF_COLUMNS, REF_COLUMNS + 3);
+        return 1;
+    }
+    if (!skip_header(meas, line)) {
+        fprintf(stderr, "replay: %s is empty; expected a header line and rows\n", argv[2]);
         return 1;
     }
     FILE *out = fopen(argv[3], "w");
@@ -85,13 +105,13 @@ int main(int argc, char **argv)
     for (int i = 0; i < VGTC_NJ; ++i) fprintf(out, ",F_%d", i + 1);
     for (int i = 0; i < VGTC_NJ; ++i) fprintf(out, ",tau_hat_%d", i + 1);
     fprintf(out, ",status\n");
-    double r[REF_COLUMNS], m[MEAS_COLUMNS], F[VGTC_NJ];
+    double r[REF_COLUMNS + 3], m[MEAS_COLUMNS], F[VGTC_NJ];
     long row = 0;
     for (;;) {
         const char *why = NULL;
-        int got_ref = read_row(ref, REF_COLUMNS, r, line, &why);
+        int got_ref = read_row(ref, ref_columns, r, line, &why);
         if (got_ref < 0) {
-            fprintf(stderr, "replay: %s row %ld: %s (expected %d numbers)\n", argv[1], row + 1, why, REF_COLUMNS);
+            fprintf(stderr, "replay: %s row %ld: %s (expected %d numbers)\n", argv[1], row + 1, why, ref_columns);
             return 1;
         }
         int got_meas = read_row(meas, MEAS_COLUMNS, m, line, &why);
@@ -108,7 +128,8 @@ int main(int argc, char **argv)
         }
         const double *q = m + 1, *qd = m + 1 + VGTC_NJ, *f = m + 1 + 2 * VGTC_NJ;
         const int have_qd = !isnan(qd[0]), have_f = !isnan(f[0]);
-        status = vgtc_step(&ctx, m[0], q, have_qd ? qd : NULL, r + 1, have_f ? f : NULL, F);
+        status = vgtc_step_feedforward(&ctx, m[0], q, have_qd ? qd : NULL, r + 1, have_f ? f : NULL,
+                                       expected ? r + REF_COLUMNS : NULL, NULL, NULL, F);
         if (status < 0) {
             fprintf(stderr, "replay: row %ld (t = %.17g s): %s\n", row + 1, m[0], vgtc_status_text(status));
             return 1;

@@ -95,13 +95,14 @@ static int observe(vgtc_context *c, long k, const double *qm, const double *vm, 
         vgt_force_feedforward(n, J, f_meas, tau);
         return VGTC_OK;
     }
-    double acc[VGTC_NJ], raw[VGTC_NJ], applied[VGTC_NJ];
+    double acc[VGTC_NJ], raw[VGTC_NJ], applied[VGTC_NJ], f[3];
     const double *va, *vb, *qa;
     if (sensing && p->estimator == VGTC_ESTIMATOR_KALMAN) {
         /* the Kalman estimate of the last period: the model's acceleration plus the disturbance, at
-         * the estimate of period k-1, under F_{k-1}; raw = M^ d^ (to round-off) */
+         * the estimate of period k-1, under F_{k-1} (and the expected tool force of period k-1);
+         * raw = M^ d^ (to round-off) */
         for (int i = 0; i < n; ++i) acc[i] = x[3 * n + i] + x[2 * n + i];
-        const double *in_k[5] = {c->x1, c->x1 + n, acc, c->zero, p->model};
+        const double *in_k[5] = {c->x1, c->x1 + n, acc, c->fe1, p->model};
         double *out_k[1] = {raw};
         if (call(c, vgt_id, 5, in_k, 1, out_k)) return VGTC_FUNCTION_FAILED;
         vgt_observer_filter(n, c->keep, c->tau, raw, c->F1, tau);
@@ -112,14 +113,16 @@ static int observe(vgtc_context *c, long k, const double *qm, const double *vm, 
         vb = vd;
         qa = c->qm2;
         vgt_mean_effort(n, c->F2, c->F1, applied);
+        vgt_mean_effort(3, c->fe2, c->fe1, f); /* the expected tool force over the same window */
     } else {
         va = c->vm1;
         vb = vm;
         qa = c->qm1;
         memcpy(applied, c->F1, sizeof applied);
+        memcpy(f, c->fe1, sizeof f);
     }
     vgt_window_acceleration(n, p->dt, va, vb, acc);
-    const double *in_id[5] = {qa, va, acc, c->zero, p->model};
+    const double *in_id[5] = {qa, va, acc, f, p->model};
     double *out_id[1] = {raw};
     if (call(c, vgt_id, 5, in_id, 1, out_id)) return VGTC_FUNCTION_FAILED;
     vgt_observer_filter(n, c->keep, c->tau, raw, applied, tau);
@@ -135,7 +138,8 @@ static int fail(double *efforts, int status)
 
 /* The Kalman estimate x (q^, v^, d^ and the model's acceleration a, VGTC_NJ each) of this period
  * (estimate in closed_loop.c): from the last period's, predicted by the controller model's forward
- * dynamics under the effort applied, F_{k-1} (no tool force: that is in the disturbance), then
+ * dynamics under the effort applied, F_{k-1} (and the expected tool force of period k-1, zero
+ * without the feedforward: the rest of the tool force is in the disturbance), then
  * corrected by the reading qm with the steady-state gains. The first period starts from a known
  * state: the reading, the velocity `start`, no disturbance. Uses the context's work arrays only. */
 static int kalman(vgtc_context *c, const double *qm, const double *start, double *x)
@@ -150,7 +154,7 @@ static int kalman(vgtc_context *c, const double *qm, const double *start, double
     }
 #if VGTC_KALMAN
     const double *x0 = c->x1;
-    const double *in_fd[5] = {x0, x0 + n, c->F1, c->zero, c->p.model};
+    const double *in_fd[5] = {x0, x0 + n, c->F1, c->fe1, c->p.model};
     double *out_fd[1] = {a};
     if (call(c, vgt_fd, 5, in_fd, 1, out_fd)) return VGTC_FUNCTION_FAILED;
     vgt_kalman_step(n, c->p.dt, c->p.kalman_gain, x0, x0 + n, x0 + 2 * n, a, qm, q, v, d);
@@ -206,16 +210,27 @@ int vgtc_step(vgtc_context *ctx, double t, const double *q_meas, const double *q
 int vgtc_step_gains(vgtc_context *ctx, double t, const double *q_meas, const double *qd_meas, const double *ref_row,
                     const double *f_meas, const double *Kp, const double *Kv, double *efforts)
 {
+    if (!Kp || !Kv) return fail(efforts, VGTC_BAD_ARGUMENT);
+    return vgtc_step_feedforward(ctx, t, q_meas, qd_meas, ref_row, f_meas, NULL, Kp, Kv, efforts);
+}
+
+int vgtc_step_feedforward(vgtc_context *ctx, double t, const double *q_meas, const double *qd_meas,
+                          const double *ref_row, const double *f_meas, const double *f_exp, const double *Kp,
+                          const double *Kv, double *efforts)
+{
     const int n = VGTC_NJ;
-    if (!ctx || !ctx->ready || !q_meas || !ref_row || !efforts || !Kp || !Kv) return fail(efforts, VGTC_BAD_ARGUMENT);
+    if (!ctx || !ctx->ready || !q_meas || !ref_row || !efforts) return fail(efforts, VGTC_BAD_ARGUMENT);
     const vgtc_params *p = &ctx->p;
+    if (!Kp) Kp = p->Kp;
+    if (!Kv) Kv = p->Kv;
     const int sensing = p->velocity == VGTC_VELOCITY_DIFFERENCED;
     const long k = ctx->k;
     const double *start = qd_meas ? qd_meas : ctx->zero; /* the known start of differenced velocities */
     if (!sensing && !qd_meas) return fail(efforts, VGTC_BAD_ARGUMENT);
     if (!isfinite(t) || !finite_all(n, q_meas) || !finite_all(3 * n, ref_row)
         || ((!sensing || k == 0) && !finite_all(n, start))
-        || (p->observer == VGTC_OBSERVER_FORCE && f_meas && !finite_all(3, f_meas)) || !finite_all(n * n, Kp)
+        || (p->observer == VGTC_OBSERVER_FORCE && f_meas && !finite_all(3, f_meas))
+        || (f_exp && !finite_all(3, f_exp)) || !finite_all(n * n, Kp)
         || !finite_all(n * n, Kv))
         return fail(efforts, VGTC_NOT_FINITE);
     if (k > 0 && t < ctx->t_last) return fail(efforts, VGTC_BAD_TIME);
@@ -236,6 +251,14 @@ int vgtc_step_gains(vgtc_context *ctx, double t, const double *q_meas, const dou
     double *out_c[1] = {F};
     if (call(ctx, vgt_cfc, 8, in_c, 1, out_c)) return fail(efforts, VGTC_FUNCTION_FAILED);
     vgt_subtract_estimate(n, tau, F);
+    if (f_exp) { /* the expected tool force through J_P(q_meas)^T (feed_forward in closed_loop.c) */
+        double J[3 * VGTC_NJ], Jw[3 * VGTC_NJ], fed[VGTC_NJ];
+        const double *in_j[2] = {qm, p->model};
+        double *out_j[2] = {J, Jw};
+        if (call(ctx, vgt_jac, 2, in_j, 2, out_j)) return fail(efforts, VGTC_FUNCTION_FAILED);
+        vgt_force_feedforward(n, J, f_exp, fed);
+        vgt_subtract_estimate(n, fed, F);
+    }
 
     /* the tip error the controller sees (for switching control and monitoring) */
     double tip_d[3], tip[3];
@@ -263,6 +286,9 @@ int vgtc_step_gains(vgtc_context *ctx, double t, const double *q_meas, const dou
     memcpy(ctx->F2, ctx->F1, sizeof F);
     memcpy(ctx->F1, F, sizeof F);
     memcpy(ctx->tau, tau, sizeof tau);
+    memcpy(ctx->fe2, ctx->fe1, sizeof ctx->fe1);
+    if (f_exp) memcpy(ctx->fe1, f_exp, sizeof ctx->fe1);
+    else ctx->fe1[0] = ctx->fe1[1] = ctx->fe1[2] = 0.0;
     if (p->estimator == VGTC_ESTIMATOR_KALMAN) memcpy(ctx->x1, x, sizeof x);
     ctx->tip_error = sqrt(e0 * e0 + e1 * e1 + e2 * e2);
     ctx->t_last = t;

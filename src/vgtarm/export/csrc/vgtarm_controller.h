@@ -101,6 +101,7 @@ typedef struct {
     double tau[VGTC_NJ];                  /* estimate of the external efforts of the last period   */
     double x1[4 * VGTC_NJ];               /* Kalman estimate of the last period: q^, v^, d^ and the */
                                           /* model's acceleration it was predicted with            */
+    double fe1[3], fe2[3];                /* expected tool forces of the last two periods (N)      */
     double zero[VGTC_NJ];                 /* zeros: no velocity noise, no tool force               */
     double tip_error;                     /* |P^(q_d) - P^(q_meas)| of the last period (m)         */
     const double *arg[VGTC_SZ_ARG];       /* work of the generated functions                       */
@@ -134,6 +135,16 @@ int vgtc_step(vgtc_context *ctx, double t, const double *q_meas, const double *q
  * parameters' (switching control's gains; see vgtc_switching.h when exported). */
 int vgtc_step_gains(vgtc_context *ctx, double t, const double *q_meas, const double *qd_meas, const double *ref_row,
                     const double *f_meas, const double *Kp, const double *Kv, double *efforts);
+
+/* vgtc_step_gains with the tool force the path's cutting model expects in this period fed forward
+ * (the simulation's tool_force_feedforward): f_exp (3, N, on the tool, in the base frame; NULL:
+ * none, as vgtc_step_gains). The efforts become F - J_P(q_meas)^T f_exp (the controller model's tip
+ * Jacobian at the reading), and the momentum observer and the Kalman filter take the expected
+ * forces of the previous periods as known, so that they estimate only the rest of the external
+ * efforts. Kp, Kv NULL: the parameters' gains. */
+int vgtc_step_feedforward(vgtc_context *ctx, double t, const double *q_meas, const double *qd_meas,
+                          const double *ref_row, const double *f_meas, const double *f_exp, const double *Kp,
+                          const double *Kv, double *efforts);
 
 /* The joint readings qm and velocities vm (VGTC_NJ each) the next vgtc_step would use for these
  * measurements (what switching control predicts from). The context's state is left as it was; only

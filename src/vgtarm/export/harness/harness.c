@@ -5,7 +5,8 @@
  * does what vgt_simulate_slice does, with the controller's part (measure, observe, computed force
  * control) replaced by one vgtc_step of the exported controller, handed the true joints (it rounds
  * them to its encoder steps), the true velocity (or, with differenced velocities, only at the
- * start) and the tool force of the previous period.
+ * start), the tool force of the previous period and, with tool_feedforward, the expected tool
+ * force of the period.
  */
 #include "closed_loop.c"
 #include "vgtarm_controller.h"
@@ -44,7 +45,8 @@ int vgtc_harness_run(const vgt_model *m, const vgt_settings *s, const vgt_run *r
         memcpy(ref + 2 * nj, r->qdd_d + nj * k, sizeof(double) * (size_t)nj);
         const double *velocity = s->sensing && k > 0 ? NULL : qd;
         const double *force = s->observer == VGT_OBSERVER_FORCE && k > 0 ? r->f_ext + 3 * (k - 1) : NULL;
-        int cs = vgtc_step(ctx, t[k], q, velocity, ref, force, F);
+        const double *expected = s->tool_feedforward ? r->tool_force_expected + 3 * k : NULL;
+        int cs = vgtc_step_feedforward(ctx, t[k], q, velocity, ref, force, expected, NULL, NULL, F);
         if (cs < 0) { *controller_status = cs; status = VGT_FUNCTION_FAILED; *stop = k; break; }
         memcpy(r->q_meas + nj * k, vgtc_joint_readings(ctx), sizeof(double) * (size_t)nj);
         memcpy(r->qd_meas + nj * k, vgtc_joint_velocities(ctx), sizeof(double) * (size_t)nj);
