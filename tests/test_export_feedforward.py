@@ -3,11 +3,12 @@ the tool force, the expected cutting force fed forward, closed through the expor
 ``simulate`` bit for bit with measured velocities, with 1 um encoders and differenced velocities,
 and with the low-force preset's estimate (momentum observer K_O 1000 and the Kalman filter at 100
 Hz, a controller model 10 % heavy); the feedforward acts; the replay of a reference with the
-expected force columns gives the simulation's efforts; switching control with it is refused in
-one line."""
+expected force columns gives the simulation's efforts; switching control with it (both variants)
+equals ``simulate`` too."""
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 from typing import Any
 
@@ -16,7 +17,6 @@ import pytest
 
 import vgtarm
 from vgtarm.app.cases import case_study, joint_reference
-from vgtarm.errors import InputError
 from vgtarm.export import CompiledExport, export_controller, simulate_exported
 from vgtarm.simulation import simulate
 from vgtarm.simulation.external import DEFAULT_FEEDFORWARD_SPEED
@@ -101,14 +101,25 @@ def test_replay_feeds_the_reference_files_expected_force_forward(robot, referenc
     assert np.abs(plain[:, 1 : 1 + n] - theirs.effort).max() > 0.5  # without the columns: no feedforward
 
 
-def test_switching_control_with_the_feedforward_is_refused_in_one_line(robot, reference, tmp_path):  # type: ignore[no-untyped-def]
-    scm = CASE.controller("scm", variant="safe")
-    folder = export_controller(robot, tmp_path / "x", kp=CASE.kp, kv=CASE.kv, switching=scm).folder
-    with pytest.raises(InputError, match="with switching control: the exported switching step has no") as caught:
-        simulate_exported(
-            folder, robot, reference, external_force=CASE.external_force, tool_force_feedforward=True, controller=scm
-        )
-    assert "\n" not in str(caught.value)
+@pytest.mark.parametrize(
+    ("variant", "options"),
+    [("paper", {}), ("safe", {"observer": "momentum", "encoder_resolution": 1e-6, "estimator": "kalman"})],
+    ids=["paper", "safe, encoders, Kalman"],
+)
+def test_switching_control_with_the_feedforward_equals_simulate(variant, options, robot, reference, tmp_path):  # type: ignore[no-untyped-def]
+    """vgtc_switching_step_feedforward: every period's effort, under the fixed gains or the GA's,
+    with the expected tool force fed forward, as simulate's switching control with it."""
+    # the feedforward holds the tip within case 2's threshold: a tenth of it, so that the GA runs
+    scm = dataclasses.replace(CASE, threshold=CASE.threshold / 10).controller("scm", variant=variant)
+    folder = export_controller(robot, tmp_path / "x", kp=CASE.kp, kv=CASE.kv, switching=scm, **options).folder
+    kwargs = {"external_force": CASE.external_force, "tool_force_feedforward": True, **options}
+    theirs = simulate(robot, reference, scm, **kwargs)
+    mine = simulate_exported(folder, robot, reference, controller=scm, **kwargs)
+    assert len(theirs.activations) >= 3  # the GA ran
+    np.testing.assert_array_equal(mine.effort, theirs.effort)
+    np.testing.assert_array_equal(mine.mode, theirs.mode)
+    without = simulate(robot, reference, scm, **{**kwargs, "tool_force_feedforward": False})
+    assert np.abs(without.effort - theirs.effort).max() > 0.5
 
 
 def test_a_non_finite_expected_force_is_refused_by_the_step(robot, tmp_path):  # type: ignore[no-untyped-def]

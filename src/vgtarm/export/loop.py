@@ -325,7 +325,7 @@ def simulate_exported(
     joints (it rounds them to its encoder steps), the true velocity (with differenced velocities,
     only at the start), the tool force of the previous period (force sensor) and, with the
     scenario's ``tool_force_feedforward``, the expected tool force of the period
-    (``vgtc_step_feedforward``). The run's options
+    (``vgtc_step_feedforward``, ``vgtc_switching_step_feedforward``). The run's options
     must be those the controller was exported with (dt, observer and gain, sensing, controller
     model; refused in one line otherwise); simulated velocity noise is not supported.
 
@@ -356,11 +356,6 @@ def simulate_exported(
     run = prepare(plant, reference, law, scenario, metadata)
     _check_agrees(s, run, plant)
     if switching:
-        if run.scenario.tool_force_feedforward:
-            raise InputError(
-                "tool_force_feedforward = True with switching control: the exported switching step has no "
-                "tool-force feedforward (vgtc_step_feedforward feeds it forward under computed force control)"
-            )
         return _simulate_switching(compiled, plant, run, metadata)
     arrays = run.job.arrays
     driver = ClosedLoopDriver(plant.backend)

@@ -221,6 +221,9 @@ int status = vgtc_switching_step(&sw, t, q_meas, qd_meas, ref_rows, rows, tip_d_
                                  NAN /* or the measured tip error */, f_meas, seed, efforts);
 ```
 
+`vgtc_switching_step_feedforward` takes the expected tool force of the period after `f_meas`
+(`vgtc_step_feedforward`'s `f_exp`), fed forward under the fixed gains and the GA's alike.
+
 `vgtc_ga.c` is the simulation's GA (`ga.c`) rewritten for a real-time target: every buffer sized
 at compile time (`vgtc_config.h`), no heap, no threads, no intrinsics; the same random stream
 (xoshiro256** seeded through splitmix64, one seed per activation) and the same arithmetic, so an

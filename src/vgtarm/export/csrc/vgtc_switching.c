@@ -26,6 +26,14 @@ int vgtc_switching_step(vgtc_switching *sw, double t, const double *q_meas, cons
                         long rows, const double *tip_d, double error, const double *f_meas, uint64_t seed,
                         double *efforts)
 {
+    return vgtc_switching_step_feedforward(sw, t, q_meas, qd_meas, ref, rows, tip_d, error, f_meas, NULL, seed,
+                                           efforts);
+}
+
+int vgtc_switching_step_feedforward(vgtc_switching *sw, double t, const double *q_meas, const double *qd_meas,
+                                    const double *ref, long rows, const double *tip_d, double error,
+                                    const double *f_meas, const double *f_exp, uint64_t seed, double *efforts)
+{
     const int nn = VGTC_NJ * VGTC_NJ;
     const double *Kp, *Kv;
     double qm[VGTC_NJ], vm[VGTC_NJ];
@@ -64,14 +72,14 @@ int vgtc_switching_step(vgtc_switching *sw, double t, const double *q_meas, cons
     if (sw->hold_left > 0) { /* an admitted set held over the periods it was certified for */
         if (sw->p.hold - sw->hold_left >= sw->p.watch_from && error > sw->hold_above) {
             /* its error rose: dropped, this period under the fixed gains (no GA) */
-            status = vgtc_step_gains(&sw->control, t, q_meas, qd_meas, ref, f_meas, Kp, Kv, efforts);
+            status = vgtc_step_feedforward(&sw->control, t, q_meas, qd_meas, ref, f_meas, f_exp, Kp, Kv, efforts);
             if (status >= 0) {
                 sw->hold_left = 0;
                 sw->dropped_hold = 1;
             }
             return status;
         }
-        status = vgtc_step_gains(&sw->control, t, q_meas, qd_meas, ref, f_meas, sw->gains, sw->gains + nn, efforts);
+        status = vgtc_step_feedforward(&sw->control, t, q_meas, qd_meas, ref, f_meas, f_exp, sw->gains, sw->gains + nn, efforts);
         if (status >= 0) {
             sw->hold_left -= 1;
             sw->held = 1;
@@ -94,7 +102,7 @@ int vgtc_switching_step(vgtc_switching *sw, double t, const double *q_meas, cons
             if (sw->p.hold > 1 && !sw->result.dropped) hold_left = sw->p.hold - 1;
         }
     }
-    status = vgtc_step_gains(&sw->control, t, q_meas, qd_meas, ref, f_meas, Kp, Kv, efforts);
+    status = vgtc_step_feedforward(&sw->control, t, q_meas, qd_meas, ref, f_meas, f_exp, Kp, Kv, efforts);
     if (status >= 0) {
         sw->hold_left = hold_left;
         sw->hold_above = error;

@@ -72,6 +72,12 @@ int vgtc_switching_step(vgtc_switching *sw, double t, const double *q_meas, cons
                         long rows, const double *tip_d, double error, const double *f_meas, uint64_t seed,
                         double *efforts);
 
+/* vgtc_switching_step with the expected tool force of this period fed forward (f_exp, 3, N; NULL:
+ * none): every period's effort, under the fixed gains or the GA's, is vgtc_step_feedforward's. */
+int vgtc_switching_step_feedforward(vgtc_switching *sw, double t, const double *q_meas, const double *qd_meas,
+                                    const double *ref, long rows, const double *tip_d, double error,
+                                    const double *f_meas, const double *f_exp, uint64_t seed, double *efforts);
+
 #ifdef __cplusplus
 }
 #endif

@@ -119,8 +119,10 @@ int vgtc_harness_run_switching(const vgt_model *m, const vgt_settings *s, const 
         const double *force = s->observer == VGT_OBSERVER_FORCE && k > 0 ? r->f_ext + 3 * (k - 1) : NULL;
         struct timespec w0, w1;
         clock_gettime(CLOCK_MONOTONIC, &w0);
-        int cs = vgtc_switching_step(sw, t[k], q, velocity, ref + 3L * nj * k, r->n - k, td,
-                                     true_error ? r->error[k] : NAN, force, seeds[seeds_used], F);
+        const double *expected = s->tool_feedforward ? r->tool_force_expected + 3 * k : NULL;
+        int cs = vgtc_switching_step_feedforward(sw, t[k], q, velocity, ref + 3L * nj * k, r->n - k, td,
+                                                 true_error ? r->error[k] : NAN, force, expected,
+                                                 seeds[seeds_used], F);
         clock_gettime(CLOCK_MONOTONIC, &w1);
         if (cs < 0) { *controller_status = cs; status = VGT_FUNCTION_FAILED; *stop = k; break; }
         mode[k] = (signed char)(sw->dropped_hold ? 2 : sw->activated || sw->held);
