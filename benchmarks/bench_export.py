@@ -64,6 +64,12 @@ def run() -> dict[str, dict[str, float]]:
         again = subprocess.run(
             [str(folder / "rt_loop"), "--steps", str(steps)], check=True, capture_output=True, text=True
         ).stdout
+        fed = subprocess.run(
+            [str(folder / "rt_loop"), "--steps", str(steps), "--feedforward"],
+            check=True,
+            capture_output=True,
+            text=True,
+        ).stdout
         loop = subprocess.run(
             [str(folder / "rt_loop"), "--seconds", str(seconds)], check=True, capture_output=True, text=True
         ).stdout
@@ -80,6 +86,7 @@ def run() -> dict[str, dict[str, float]]:
         (f"step time, {steps:,} steps back to back", timed, "p99.9 <= 10 us, max <= 50 us"),
         ("the machine alone: a fixed chain of operations, its median matched, timed the same way", noise, ""),
         ("step time, back to back again (after the machine's)", _percentiles(again)["step time"], ""),
+        ("with the tool-force feedforward (vgtc_step_feedforward), back to back", _percentiles(fed)["step time"], ""),
         (f"step time inside the 1 kHz loop ({seconds:g} s)", periodic["step time"], ""),
         (f"wake-up jitter of the 1 kHz loop ({seconds:g} s)", periodic["jitter"], "measured"),
     ]
@@ -87,7 +94,7 @@ def run() -> dict[str, dict[str, float]]:
         cells = " | ".join(f"{figures[k]:.2f} us" for k in ("p50", "p99", "p99.9", "p99.99", "max"))
         print(f"| {name} | {cells} | period 1000 us: p99.9 at {figures['p99.9'] / 10:.2f} % of it | {target} |")
     _print_kalman(kalman, steps, seconds, compiler)
-    return {"steps": timed, "machine": noise, **periodic, **kalman}
+    return {"steps": timed, "machine": noise, "feedforward": _percentiles(fed)["step time"], **periodic, **kalman}
 
 
 def _kalman(

@@ -201,9 +201,11 @@ def test_clean_under_address_and_undefined_behaviour_sanitizers(exports, simulat
     assert done.returncode == 0, done.stderr
     table = _replay(build, simulated["observer, encoders"], reference, tmp_path, force_sensor=False)
     assert len(table) == len(reference.t)
-    timing = subprocess.run([str(build / "rt_loop"), "--steps", "2000"], capture_output=True, text=True)
-    assert timing.returncode == 0, timing.stderr
-    assert "runtime error" not in timing.stderr
+    for extra in ([], ["--feedforward"]):  # the step with the expected tool force too
+        timing = subprocess.run([str(build / "rt_loop"), "--steps", "2000", *extra], capture_output=True, text=True)
+        assert timing.returncode == 0, timing.stderr
+        assert "runtime error" not in timing.stderr
+        assert "step time" in timing.stdout
 
 
 def test_the_library_uses_only_libm_and_string_functions(exports, tmp_path):  # type: ignore[no-untyped-def]

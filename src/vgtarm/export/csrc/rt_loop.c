@@ -4,6 +4,8 @@
  *                           wakes on clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME), runs one
  *                           vgtc_step per period; prints the wake-up jitter (how late each period
  *                           started) and the step times as percentiles.
+ *   rt_loop ... --feedforward   each step feeds an expected tool force of 20 N forward
+ *                           (vgtc_step_feedforward: one more model function, the tip Jacobian).
  *   rt_loop --steps N       N steps back to back: the distribution of the step time. Every
  *                           REST_EVERY steps it rests REST_NS (outside any step's time): a
  *                           SCHED_FIFO thread that never sleeps exceeds the kernel's real-time
@@ -76,11 +78,14 @@ int main(int argc, char **argv)
     vgtc_params params;
     double seconds = 10.0;
     long steps = 0;
+    int feedforward = 0;
+    const double f_exp[3] = {0.0, 0.0, -20.0}; /* --feedforward: a 20 N cutting force expected */
     for (int a = 1; a < argc; ++a) {
         if (!strcmp(argv[a], "--seconds") && a + 1 < argc) seconds = atof(argv[++a]);
         else if (!strcmp(argv[a], "--steps") && a + 1 < argc) steps = atol(argv[++a]);
+        else if (!strcmp(argv[a], "--feedforward")) feedforward = 1;
         else {
-            fprintf(stderr, "usage: rt_loop [--seconds S | --steps N]\n");
+            fprintf(stderr, "usage: rt_loop [--seconds S | --steps N] [--feedforward]\n");
             return 1;
         }
     }
@@ -128,7 +133,7 @@ int main(int argc, char **argv)
             while (clock_nanosleep(CLOCK_MONOTONIC, 0, &rest, NULL) == EINTR) {}
         }
         clock_gettime(CLOCK_MONOTONIC, &woke);
-        status = vgtc_step(&ctx, (double)k * dt, q, qd, ref, NULL, F);
+        status = vgtc_step_feedforward(&ctx, (double)k * dt, q, qd, ref, NULL, feedforward ? f_exp : NULL, NULL, NULL, F);
         clock_gettime(CLOCK_MONOTONIC, &done);
         if (status < 0) {
             fprintf(stderr, "rt_loop: step %ld: %s\n", k, vgtc_status_text(status));
