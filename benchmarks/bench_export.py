@@ -57,26 +57,18 @@ def run() -> dict[str, dict[str, float]]:
     with tempfile.TemporaryDirectory(prefix="vgtc-bench-") as scratch:
         folder = export_controller(robot, Path(scratch) / "controller", observer="momentum").folder
         subprocess.run(["make", "-s", f"CC={compiler}", "rt_loop"], cwd=folder, check=True, capture_output=True)
-        back_to_back = subprocess.run(
-            [str(folder / "rt_loop"), "--steps", str(steps)], check=True, capture_output=True, text=True
-        ).stdout
-        noise = _machine_noise(Path(scratch), compiler, _percentiles(back_to_back)["step time"]["p50"], steps)
-        again = subprocess.run(
-            [str(folder / "rt_loop"), "--steps", str(steps)], check=True, capture_output=True, text=True
-        ).stdout
-        fed = subprocess.run(
-            [str(folder / "rt_loop"), "--steps", str(steps), "--feedforward"],
-            check=True,
-            capture_output=True,
-            text=True,
-        ).stdout
-        loop = subprocess.run(
-            [str(folder / "rt_loop"), "--seconds", str(seconds)], check=True, capture_output=True, text=True
-        ).stdout
+
+        def rt_loop(*args: str) -> str:
+            return subprocess.run([str(folder / "rt_loop"), *args], check=True, capture_output=True, text=True).stdout
+
+        timed = _percentiles(rt_loop("--steps", str(steps)))["step time"]
+        noise = _machine_noise(Path(scratch), compiler, timed["p50"], steps)
+        again = _percentiles(rt_loop("--steps", str(steps)))["step time"]
+        fed = _percentiles(rt_loop("--steps", str(steps), "--feedforward"))["step time"]
+        loop = rt_loop("--seconds", str(seconds))
         kalman = _kalman(robot, Path(scratch), compiler, steps, seconds, folder)
         kalman["baseline loop"] = _percentiles(loop)["step time"]
     scheduling = next((line for line in loop.splitlines() if line.startswith("scheduling")), "")
-    timed = _percentiles(back_to_back)["step time"]
     periodic = _percentiles(loop)
     print(f"\n### Exported controller (CFC + momentum observer, 7 joints, {compiler} -O2)\n")
     print(f"{scheduling}\n")
@@ -85,8 +77,8 @@ def run() -> dict[str, dict[str, float]]:
     rows = [
         (f"step time, {steps:,} steps back to back", timed, "p99.9 <= 10 us, max <= 50 us"),
         ("the machine alone: a fixed chain of operations, its median matched, timed the same way", noise, ""),
-        ("step time, back to back again (after the machine's)", _percentiles(again)["step time"], ""),
-        ("with the tool-force feedforward (vgtc_step_feedforward), back to back", _percentiles(fed)["step time"], ""),
+        ("step time, back to back again (after the machine's)", again, ""),
+        ("with the tool-force feedforward (vgtc_step_feedforward), back to back", fed, ""),
         (f"step time inside the 1 kHz loop ({seconds:g} s)", periodic["step time"], ""),
         (f"wake-up jitter of the 1 kHz loop ({seconds:g} s)", periodic["jitter"], "measured"),
     ]
@@ -94,7 +86,7 @@ def run() -> dict[str, dict[str, float]]:
         cells = " | ".join(f"{figures[k]:.2f} us" for k in ("p50", "p99", "p99.9", "p99.99", "max"))
         print(f"| {name} | {cells} | period 1000 us: p99.9 at {figures['p99.9'] / 10:.2f} % of it | {target} |")
     _print_kalman(kalman, steps, seconds, compiler)
-    return {"steps": timed, "machine": noise, "feedforward": _percentiles(fed)["step time"], **periodic, **kalman}
+    return {"steps": timed, "machine": noise, "feedforward": fed, **periodic, **kalman}
 
 
 def _kalman(
