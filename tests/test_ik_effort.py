@@ -46,8 +46,27 @@ def test_expected_tool_force_derivatives():
     np.testing.assert_allclose(fd[1:-1][inside], num_fd[inside], rtol=0, atol=1e-5)
     np.testing.assert_allclose(fdd[1:-1][inside], num_fdd[inside], rtol=0, atol=1e-2)
     speed = np.linalg.norm(path.velocity, axis=1)
-    fast = speed > 0.05
-    np.testing.assert_allclose(np.linalg.norm(f[fast], axis=1), F0 * speed[fast] / np.hypot(speed[fast], 0.01))
+    moving = speed > 1e-4
+    sigma = speed[moving] / np.hypot(speed[moving], 0.01)
+    np.testing.assert_allclose(np.linalg.norm(f[moving], axis=1), F0 * sigma**3, rtol=1e-12)
+    unit = path.velocity[moving] / speed[moving, None]
+    np.testing.assert_allclose(f[moving] / np.linalg.norm(f[moving], axis=1)[:, None], -unit, rtol=0, atol=1e-12)
+
+
+def test_the_expected_force_and_the_reference_start_at_rest(robot):
+    """From rest the expected force grows with the cube of the speed (zero slope and curvature), so the
+    effort optimum does not move while the path rests: the reference's joint velocity at t = 0 is zero,
+    as the robot's; the force model of before (``-F0 v / sqrt(|v|^2 + v_s^2)``, slope ``-F0 a / v_s``)
+    moved it at up to 45 mm/s there."""
+    path = paths.case2()
+    f, fd, fdd = expected_tool_force(path, F0, 0.03)
+    assert np.abs(f[0]).max() == 0.0 and np.abs(fd[0]).max() == 0.0 and np.abs(fdd[0]).max() == 0.0
+    size = np.linalg.norm(f, axis=1)  # from rest the tip speed grows as a t: |f| as t^3
+    np.testing.assert_allclose(size[2:8:2] / size[1:4], 8.0, rtol=1e-2)  # the model of before: 2
+    effort = robot.inverse_kinematics(path, criterion="effort", tool_force=F0)
+    assert effort.success
+    assert np.abs(effort.qd[0]).max() < 1e-12
+    assert np.abs(effort.qd[50]).max() > 1e-4  # and then it moves
 
 
 @pytest.fixture(scope="module")
@@ -96,8 +115,8 @@ def test_static_forces_drop_on_case2(robot):
     assert effort.success
     before, after = leg_forces(robot, path, plain.q), leg_forces(robot, path, effort.q)
     rms_before, rms_after = np.sqrt(np.mean(before**2)), np.sqrt(np.mean(after**2))
-    assert rms_after < 0.9 * rms_before  # measured: 23.75 N -> 20.91 N (-12.0 %)
-    assert np.abs(after).max() < 0.85 * np.abs(before).max()  # measured: 61.6 N -> 50.3 N
+    assert rms_after < 0.9 * rms_before  # measured: 23.47 N -> 20.60 N (-12.2 %)
+    assert np.abs(after).max() < 0.85 * np.abs(before).max()  # measured: 60.1 N -> 49.3 N
 
 
 @pytest.mark.parametrize("case", [1, 2])
@@ -116,10 +135,12 @@ def test_exact_rates(robot, case):
     q = ref.q
     num_qd = (q[2:] - q[:-2]) / (2 * dt)
     num_qdd = (q[2:] - 2 * q[1:-1] + q[:-2]) / dt**2
-    # case 2: away from the corners, where the expected tool force turns within a few ms
+    # case 2: away from the corners, where the expected tool force turns within a few ms (below its
+    # smoothing speed, 3 cm/s; there the differences' own dt^2 error is larger: measured, it falls
+    # 4x per halving of dt, 1.6e-5 -> 4.0e-6 -> 1.0e-6 relative above 2 cm/s)
     keep = np.ones(len(path) - 2, dtype=bool)
     if case == 2:
-        keep &= np.linalg.norm(path.velocity[1:-1], axis=1) > 0.02
+        keep &= np.linalg.norm(path.velocity[1:-1], axis=1) > 0.03
     scale_qd, scale_qdd = np.abs(ref.qd).max(), np.abs(ref.qdd).max()
     assert np.abs(num_qd - ref.qd[1:-1])[keep].max() <= 1e-5 * scale_qd
     assert np.abs(num_qdd - ref.qdd[1:-1])[keep].max() <= 1e-3 * scale_qdd

@@ -18,12 +18,15 @@ force exert no torque about the twist axis of the paper's robot, so without the 
 twist angle would be free and the optimum not unique.
 
 **The expected tool force** is the path's cutting-force model (paper eq. 16) with the disturbance's
-mean, zero: ``f = -F0 v / sqrt(|v|^2 + v_s^2)`` along the desired tip velocity ``v``. The cutting
+mean, zero: ``f = -F0 v |v|^2 / (|v|^2 + v_s^2)^(3/2)`` along the desired tip velocity ``v``
+(:func:`vgtarm.simulation.external.expected_cutting_force`, the feed-forward's formula). The cutting
 force the plant applies switches on at a small speed (``ExternalForce.cutting_speed``); the expected
-force is smoothed over ``v_s`` (option ``tool_force_speed``, 5 cm/s by default) so that the
-optimum, and with it the reference, moves smoothly at the rest-to-rest corners of a path. Its first
-and second time derivatives (for the exact rates) follow from the path's acceleration and jerk by
-automatic differentiation.
+force is smoothed over ``v_s`` (option ``tool_force_speed``, 3 cm/s by default) so that the
+optimum, and with it the reference, moves smoothly at the rest-to-rest corners of a path, and it
+grows with the cube of the speed from rest, so the optimum's rate is zero where the path rests: the
+reference starts at rest with the path (``docs/control.md``, "A reference that starts at rest").
+Its first and second time derivatives (for the exact rates) follow from the path's acceleration and
+jerk by automatic differentiation.
 """
 
 from __future__ import annotations
@@ -48,7 +51,7 @@ STANDARD_GRAVITY = 9.81
 #: Default weight of the joint-limit cost in the effort criterion.
 DEFAULT_JOINT_LIMIT_WEIGHT = 0.5
 #: Default smoothing speed of the expected tool force (m/s).
-DEFAULT_TOOL_FORCE_SPEED = 0.05
+DEFAULT_TOOL_FORCE_SPEED = 0.03
 
 
 @dataclass(frozen=True, eq=False)
@@ -89,7 +92,8 @@ def _force_model() -> ca.Function:
     v, a, j = ca.SX.sym("v", 3), ca.SX.sym("a", 3), ca.SX.sym("j", 3)
     f0, speed, t = ca.SX.sym("F0"), ca.SX.sym("v_s"), ca.SX.sym("t")
     moving = v + a * t + j * (t**2 / 2)
-    f = -f0 * moving / ca.sqrt(ca.sumsqr(moving) + speed**2)
+    squared = ca.sumsqr(moving)
+    f = -f0 * moving * squared / (squared + speed**2) ** 1.5  # expected_cutting_force
     fd = ca.jacobian(f, t)
     fdd = ca.jacobian(fd, t)
     outputs = [ca.substitute(e, t, 0) for e in (f, fd, fdd)]

@@ -13,7 +13,24 @@ Array = NDArray[np.float64]
 
 #: Default smoothing speed (m/s) of the expected cutting force fed forward (``tool_force_speed``):
 #: measured choice in docs/control.md ("Feeding the expected tool force forward").
-DEFAULT_FEEDFORWARD_SPEED = 0.005
+DEFAULT_FEEDFORWARD_SPEED = 0.003
+
+
+def expected_cutting_force(velocity: Array, force: float, speed: float) -> Array:
+    """The cutting force's model along tip velocities ``velocity`` ``(..., 3)``, smoothed where the
+    tool starts, turns or stops: ``-F0 (v/|v|) sigma^3``, ``sigma = |v| / sqrt(|v|^2 + v_s^2)``, i.e.
+    ``-F0 v |v|^2 / (|v|^2 + v_s^2)^(3/2)`` with ``F0 = force`` (N) and ``v_s = speed`` (m/s).
+
+    Far above ``v_s`` it is the cutting force ``-F0 v/|v|`` of eq. 16; from rest it grows with the
+    cube of the speed, so its first and second time derivatives are zero where the tool rests: a
+    reference or a feed-forward built on it starts at rest when the path does (the issue-22 model of
+    before, ``-F0 v / sqrt(|v|^2 + v_s^2)``, had the slope ``-F0 a / v_s`` there). The one formula of
+    the effort criterion's expected tool force (:mod:`vgtarm.ik.effort`, the same expression in
+    CasADi) and of the feed-forward (:meth:`ExternalForce.expected`)."""
+    v = np.asarray(velocity, dtype=float)
+    squared = np.sum(v * v, axis=-1, keepdims=True)
+    return -force * v * squared / (squared + speed * speed) ** 1.5
+
 
 
 @dataclass(frozen=True)
@@ -57,15 +74,14 @@ class ExternalForce:
 
     def expected(self, velocity: Array, speed: float) -> Array:
         """The expected tool force ``(..., 3)`` along desired tip velocities ``velocity`` ``(..., 3)``:
-        the cutting force's model with the disturbance's mean (zero), ``-F0 v / sqrt(|v|^2 + v_s^2)``,
+        the cutting force's model with the disturbance's mean (zero), :func:`expected_cutting_force`
         smoothed over the speed ``v_s = speed`` (m/s) where the tool starts, turns or stops (the
         effort criterion's expected tool force, :mod:`vgtarm.ik.effort`); zeros without the cutting
         force."""
         v = np.asarray(velocity, dtype=float)
         if not self.cutting:
             return np.zeros(v.shape)
-        norm = np.sqrt(np.sum(v * v, axis=-1, keepdims=True) + speed * speed)
-        return -self.cutting_force * v / norm
+        return expected_cutting_force(v, self.cutting_force, speed)
 
     def disturbance_samples(self, n: int, rng: np.random.Generator) -> Array:
         """The disturbance at ``n`` control periods, ``(n, 3)`` (zeros when off)."""
