@@ -28,3 +28,19 @@ def test_the_preset_sets_its_arguments_and_the_default_adds_no_option():
     assert low.criterion == "effort" and low.observer_gain == PRESETS["low-force"]["observer_gain"]
     bandwidth = PRESETS["low-force"]["estimator_bandwidth"]
     assert simulate_options(low) == {"estimator": "kalman", "estimator_bandwidth_hz": bandwidth}  # no tool force
+
+
+def test_an_option_given_beside_the_preset_keeps_its_value():
+    """``vgtarm simulate``'s parser: the preset fills the options the user did not give; its gains
+    apply with the tool force only."""
+    from vgtarm.app.cli.command import build_parser
+
+    parser = build_parser()
+    low = PRESETS["low-force"]
+    given = parser.parse_args(["simulate", "--case", "2", "--external-force", "--preset", "low-force", "--kp", "1e4"])
+    apply_preset(given)
+    assert given.kp == "1e4" and given.kv == repr(low["kv"]) and given.observer_gain == low["observer_gain"]
+    given = parser.parse_args(["simulate", "--case", "2", "--preset", "low-force", "--observer-gain", "250"])
+    apply_preset(given)
+    assert given.observer_gain == 250.0 and given.estimator == "kalman"
+    assert given.kp is None and given.kv is None and not given.tool_feedforward  # no tool force: the case's gains

@@ -15,30 +15,37 @@ from typing import Any
 from ..errors import InputError
 
 #: Named settings: the parsed arguments of ``vgtarm simulate`` they set. ``low-force``: the effort
-#: criterion, the Kalman estimator and the momentum observer, with the expected cutting force fed
-#: forward when the tool force acts (``tool_feedforward``; without it, left off): the point of the
-#: measured front with the least tip error under 4 N of chatter.
+#: criterion, the Kalman estimator and the momentum observer; with the tool force
+#: (``--external-force``) also the expected cutting force fed forward (``tool_feedforward``) and the
+#: gains chosen with it on case 2's measured front (``kp``, ``kv``; without the tool force the case's
+#: gains). The choice: the point of the front whose worst tip error over seeds 0 to 4 is the least
+#: among those with a peak leg force under 80 N and under 4 N of chatter on seed 0.
 PRESETS: dict[str, dict[str, Any]] = {
     "low-force": {
         "criterion": "effort",
         "observer": "momentum",
-        "observer_gain": 1000.0,
+        "observer_gain": 400.0,
         "estimator": "kalman",
-        "estimator_bandwidth": 100.0,
+        "estimator_bandwidth": 120.0,
         "tool_feedforward": True,
+        "kp": 20000.0,
+        "kv": 450.0,
     },
 }
 
 #: Preset arguments that apply only with the tool force (``--external-force``).
-WITH_TOOL_FORCE = frozenset({"tool_feedforward"})
+WITH_TOOL_FORCE = frozenset({"tool_feedforward", "kp", "kv"})
 
-#: The simulation's keyword of each preset argument that is a simulation option.
+#: The simulation's (:func:`vgtarm.app.cases.run_case`'s) keyword of each preset argument that is one
+#: of its options.
 _SIMULATION = {
     "observer": "observer",
     "observer_gain": "observer_gain",
     "estimator": "estimator",
     "estimator_bandwidth": "estimator_bandwidth_hz",
     "tool_feedforward": "tool_force_feedforward",
+    "kp": "kp",
+    "kv": "kv",
 }
 
 
@@ -46,8 +53,8 @@ def preset_options(name: str, *, tool_force: float) -> tuple[dict[str, Any], dic
     """``(ik_options, simulation_options)`` of the preset ``name``, as ``vgtarm simulate --preset`` uses
     them: ``ik_options`` for the inverse kinematics of the reference (a criterion other than eq. 12
     with the expected cutting force ``tool_force``, N: the case's with the tool force, else 0),
-    ``simulation_options`` for :func:`vgtarm.app.cases.run_case` (the feedforward only with a tool
-    force)."""
+    ``simulation_options`` for :func:`vgtarm.app.cases.run_case` (the feedforward and the gains only
+    with a tool force)."""
     if name not in PRESETS:
         raise InputError(f"preset = {name!r}: expected one of {sorted(PRESETS)}")
     ik: dict[str, Any] = {}
@@ -57,7 +64,24 @@ def preset_options(name: str, *, tool_force: float) -> tuple[dict[str, Any], dic
             if value != "joint_limits":
                 ik = {"criterion": value, "tool_force": float(tool_force)}
         elif key in WITH_TOOL_FORCE and not tool_force:
-            continue  # the feedforward of the expected cutting force: nothing to feed without it
+            continue  # chosen with the feedforward of the expected cutting force: not without it
         else:
             simulation[_SIMULATION[key]] = value
     return ik, simulation
+
+
+def preset_text(name: str) -> str:
+    """The settings of preset ``name`` in the command line's words, those that need the tool force apart."""
+    settings = PRESETS[name]
+
+    def text(keys: list[str]) -> str:
+        return ", ".join(
+            f"{key.replace('_', '-')} {settings[key]:g}"
+            if isinstance(settings[key], float)
+            else f"{key.replace('_', '-')} {settings[key]}"
+            for key in keys
+        )
+
+    always = [key for key in settings if key not in WITH_TOOL_FORCE]
+    tool = [key for key in settings if key in WITH_TOOL_FORCE]
+    return text(always) + (f"; with --external-force also {text(tool)}" if tool else "")

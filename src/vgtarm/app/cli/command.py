@@ -734,6 +734,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_run_options(simulate)
     add_config(simulate)
+    presets.record_defaults(simulate)  # every option added: the preset fills only those not given
     simulate.set_defaults(run=cmd_simulate)
 
     again = sub.add_parser("reproduce", help="run every case the paper reports and write report.md")

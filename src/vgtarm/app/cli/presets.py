@@ -3,7 +3,8 @@
 
 Kept apart from the command-line module: :func:`add_simulate_options` adds ``--estimator``,
 ``--estimator-bandwidth``, ``--tool-feedforward``, ``--tool-force-speed`` and ``--preset`` to a
-parser, :func:`apply_preset` fills a preset's settings into the parsed arguments, and
+parser, :func:`apply_preset` fills a preset's settings into the parsed arguments (those the user did not give,
+known from :func:`record_defaults`), and
 :func:`simulate_options` gives the scenario's options.
 The presets themselves are defined once, in :mod:`vgtarm.app.presets` (``vgtarm reproduce`` runs
 them too); their choice and the measured front are in ``docs/control.md``.
@@ -16,9 +17,12 @@ from typing import Any
 
 from ...simulation.external import DEFAULT_FEEDFORWARD_SPEED
 from ...simulation.sensing import DEFAULT_ESTIMATOR_BANDWIDTH_HZ, ESTIMATORS
-from ..presets import PRESETS, WITH_TOOL_FORCE
+from ..presets import PRESETS, WITH_TOOL_FORCE, preset_text
 
-__all__ = ["PRESETS", "add_simulate_options", "apply_preset", "simulate_options"]
+#: Preset arguments that the command line takes as text (a gain for every joint or one per joint).
+GAIN_TEXT = frozenset({"kp", "kv"})
+
+__all__ = ["PRESETS", "add_simulate_options", "apply_preset", "record_defaults", "simulate_options"]
 
 
 def add_simulate_options(parser: argparse.ArgumentParser) -> None:
@@ -56,17 +60,29 @@ def add_simulate_options(parser: argparse.ArgumentParser) -> None:
         "--preset",
         choices=sorted(PRESETS),
         default=None,
-        help="named settings; low-force: "
-        + ", ".join(f"{key.replace('_', '-')} {value}" for key, value in PRESETS["low-force"].items()),
+        help="named settings (an option you give keeps your value); low-force: " + preset_text("low-force"),
     )
 
 
+def record_defaults(parser: argparse.ArgumentParser) -> None:
+    """Keep on ``parser``'s parsed arguments the defaults of every option a preset sets (call it once
+    all of them are added), so that :func:`apply_preset` can tell the options the user gave."""
+    keys = sorted({key for preset in PRESETS.values() for key in preset})
+    parser.set_defaults(preset_defaults={key: parser.get_default(key) for key in keys})
+
+
 def apply_preset(args: argparse.Namespace) -> None:
-    """Set the arguments of ``args.preset`` (none: nothing changes)."""
+    """Set the arguments of ``args.preset`` (none: nothing changes). An option the user gave keeps the
+    user's value (``--preset low-force --kp 10000``: the preset's other settings with that gain): an
+    argument differing from its default recorded by :func:`record_defaults` (without them, every
+    argument of the preset is set)."""
+    defaults = getattr(args, "preset_defaults", None) or {}
     for key, value in PRESETS.get(getattr(args, "preset", None) or "", {}).items():
         if key in WITH_TOOL_FORCE and not getattr(args, "external_force", False):
-            continue  # as preset_options: the feedforward of the cutting force only with the tool force
-        setattr(args, key, value)
+            continue  # as preset_options: the feedforward and its gains only with the tool force
+        if key in defaults and getattr(args, key, None) != defaults[key]:
+            continue  # given by the user
+        setattr(args, key, repr(value) if key in GAIN_TEXT else value)
 
 
 def simulate_options(args: argparse.Namespace) -> dict[str, Any]:

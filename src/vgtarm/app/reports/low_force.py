@@ -20,7 +20,7 @@ from ...markup import md_cell, md_code
 from ...model.robot import Robot
 from ...simulation import SimulationResult
 from ..cases import case_study, joint_reference, run_case
-from ..presets import PRESETS, preset_options
+from ..presets import preset_options, preset_text
 from .beyond import ENCODER_RESOLUTION, MODEL_MASS
 from .runs import folder_cell, mm
 
@@ -135,7 +135,7 @@ def low_force_section(
     if case2_baseline is not None:
         rows.append((2, "CFC + observer", case2_baseline[0], case2_baseline[1].summary()))
     rows.sort(key=lambda row: (row[0], row[1] != "CFC + observer"))
-    settings = ", ".join(f"{key.replace('_', ' ')} {value}" for key, value in PRESETS[PRESET].items())
+    settings = preset_text(PRESET)
     command = " ".join(["vgtarm", *simulate_command(PresetRun(2), seed=seed)])
     lines = [
         "",
