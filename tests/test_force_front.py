@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from vgtarm.app.cli.presets import PRESETS, add_simulate_options, apply_preset, simulate_options
-from vgtarm.app.reports.force_front import pareto
+from vgtarm.app.reports.force_front import SETTINGS, by_setting, choose, pareto, setting_table
 
 
 def test_pareto_keeps_exactly_the_non_dominated_points():
@@ -44,3 +44,45 @@ def test_an_option_given_beside_the_preset_keeps_its_value():
     apply_preset(given)
     assert given.observer_gain == 250.0 and given.estimator == "kalman"
     assert given.kp is None and given.kv is None and not given.tool_feedforward  # no tool force: the case's gains
+
+
+def _row(kp, seed, error_mm, peak, chatter, criterion="effort"):
+    return {
+        "criterion": criterion,
+        "kp": kp,
+        "seed": str(seed),
+        "max_tip_error_m": str(error_mm * 1e-3),
+        "peak_force_n": str(peak),
+        "rms_force_n": "25.0",
+        "chatter_n": str(chatter),
+    }
+
+
+def test_the_preset_rule_takes_the_least_worst_error_within_the_first_seeds_limits():
+    """By setting: the worst error over the seeds; the rule keeps a setting whose first seed's peak and
+    chatter are within the limits, and among those the least worst error."""
+    rows = [
+        _row("1", 0, 0.020, 95.0, 3.0),  # best errors, but the first seed's peak is over 80 N
+        _row("1", 1, 0.021, 70.0, 3.0),
+        _row("2", 1, 0.040, 70.0, 9.0),  # a later seed's chatter does not count
+        _row("2", 0, 0.026, 79.0, 3.5),
+        _row("3", 0, 0.025, 78.0, 3.9),
+        _row("3", 1, 0.031, 78.0, 3.9),
+        _row("4", 0, 0.022, 60.0, 4.1),  # chatter over 4 N
+    ]
+    groups = by_setting(rows)
+    kp = SETTINGS.index("kp")
+    assert [g.settings[kp] for g in groups] == ["1", "4", "3", "2"]  # by worst error
+    assert groups[0].seeds == (0, 1) and groups[0].worst_mm == 0.021 and groups[0].peak_n == 95.0
+    pick = choose(groups)
+    assert pick is not None and groups[pick].settings[kp] == "3"
+    assert choose(groups, peak=50.0) is None
+    table = setting_table(groups).splitlines()
+    assert len(table) == 2 + len(groups) and [line.endswith("| yes |") for line in table[2:]] == [
+        False,
+        False,
+        True,
+        False,
+    ]
+    rows.append(_row("5|x", 0, 0.01, 10.0, 1.0, criterion="a|b"))  # a cell cannot add a column
+    assert all(line.count(" | ") == table[0].count(" | ") for line in setting_table(by_setting(rows)).splitlines())
