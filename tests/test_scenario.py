@@ -141,3 +141,16 @@ def test_simulate_documents_every_field_of_the_scenario():
 
     doc = inspect.getdoc(simulate) or ""
     assert [f for f in Scenario.option_names() if f"``{f}``" not in doc] == []
+
+
+def test_the_record_names_the_feedforward_speed_used():
+    """With the feedforward, the record keeps the smoothing speed it used (the default has changed
+    before: a record saying "the default" would run differently later); without it, as given."""
+    from vgtarm.simulation.external import DEFAULT_FEEDFORWARD_SPEED
+
+    fed = Scenario(external_force=ExternalForce(), tool_force_feedforward=True)
+    record = fed.record()
+    assert record["tool_force_speed"] == DEFAULT_FEEDFORWARD_SPEED
+    again = Scenario.from_record(json.loads(json.dumps(record)))
+    assert again.feedforward_speed == fed.feedforward_speed and again.tool_force_speed == DEFAULT_FEEDFORWARD_SPEED
+    assert Scenario(external_force=ExternalForce()).record()["tool_force_speed"] is None

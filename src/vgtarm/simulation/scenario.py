@@ -189,7 +189,8 @@ class Scenario:
 
     def record(self) -> dict[str, Any]:
         """The scenario as JSON values, as stored in ``summary.json``: the tool force's fields, the
-        controller model's name (``None``: the plant's), the initial state as lists."""
+        controller model's name (``None``: the plant's), the initial state as lists, and with the
+        feedforward the smoothing speed it used."""
         out: dict[str, Any] = {}
         for f in fields(self):
             value = getattr(self, f.name)
@@ -197,6 +198,8 @@ class Scenario:
                 value = {key: _plain(v) for key, v in dataclasses.asdict(value).items()}
             elif f.name == "controller_model":
                 value = None if value is None else _model_name(value)
+            elif f.name == "tool_force_speed" and self.tool_force_feedforward:
+                value = self.feedforward_speed  # the speed used, not "the default", which has changed before
             else:
                 value = _plain(value)
             out[f.name] = value
