@@ -12,7 +12,7 @@ from ..errors import InputError
 Array = NDArray[np.float64]
 
 #: Default smoothing speed (m/s) of the expected cutting force fed forward (``tool_force_speed``):
-#: measured choice in docs/control.md ("Feeding the expected tool force forward").
+#: measured choice in docs/control.md ("A reference that starts at rest, and the preset's loop").
 DEFAULT_FEEDFORWARD_SPEED = 0.003
 
 
@@ -30,7 +30,6 @@ def expected_cutting_force(velocity: Array, force: float, speed: float) -> Array
     v = np.asarray(velocity, dtype=float)
     squared = np.sum(v * v, axis=-1, keepdims=True)
     return -force * v * squared / (squared + speed * speed) ** 1.5
-
 
 
 @dataclass(frozen=True)
