@@ -190,11 +190,14 @@ def check(cost: BuildEstimate, kind: str) -> None:
         advice.append(f"raise {TIME_LIMIT_VARIABLE} (seconds)")
     if memory is not None and needed > memory:
         over.append(f"the {size_text(memory)} {where}")
-        advice.append("run it where more memory is free")
+        advice.append("free memory")
     if not over:
         return
     what = "compiled model" if kind == "compiled" else "symbolic model (for CasADi's interpreter)"
+    # what to do before the limits' details: a long stack name may make the line long enough for the
+    # command line's last guard to cut its end
     raise BuildRefused(
         f"building the {what} of {cost.model} needs about {time_text(seconds)} and {size_text(needed)} of memory "
-        f"(estimated from its {cost.joints} joints), more than {' and '.join(over)}; {', or '.join(advice)}"
+        f"(estimated from its {cost.joints} joints); {', '.join(advice[:-1]) + ' or ' if len(advice) > 1 else ''}"
+        f"{advice[-1]}: that is more than {' and '.join(over)}"
     )
