@@ -48,6 +48,7 @@ SECTIONS = [
     "Beyond the paper: tracking under the tool force",
     "Safe switching control on 60 runs (issue 23)",
     "The low-force preset (issue 22)",
+    "The trade-off: tip error against actuator force (issue 22)",
     "What bounds the remaining error",
 ]
 

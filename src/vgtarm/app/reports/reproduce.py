@@ -30,6 +30,7 @@ from ...simulation.result import MODE_GA, ROBOT_COPY
 from ..cases import case_study, joint_reference, run_case
 from ..pictures.plotting import plot_efforts, plot_path_3d, plot_tip_error, save_figure
 from ..pool import Inline, Workers
+from . import force_study
 from .beyond import BOUNDS_HEADING, BeyondRun, beyond_figure, beyond_runs, beyond_section, run_beyond_one
 from .html import runs_from_reproduction, write_html_report
 from .low_force import PresetRun, low_force_runs, low_force_section, run_low_force_one
@@ -48,6 +49,8 @@ class Reproduction:
 
 Progress = Callable[[str, int, int], None]
 
+#: The figure of issue 22's front in the section beyond the paper (:mod:`.force_study`).
+FORCE_FRONT_FIGURE = "force_front.png"
 #: Files a reproduction written before folders listed their files may hold at its top level (so
 #: such a folder of only these may be replaced; one with run folders must be moved away first).
 REPRODUCE_FILES = ("report.md", "report.html", "plotly.min.js", "*.png", ROBOT_COPY)
@@ -199,6 +202,9 @@ def _reproduce_into(
     if low:  # beside the other runs beyond the paper, before what bounds their error
         base = next(((b.folder, beyond_results[b]) for b in extra if b.label == "CFC + observer" and b.realistic), None)
         section = low_force_section({r: low_results[r] for r in low}, base, seed=seed)
+        study = force_study.load_summary()  # issue 22's front, from the shipped studies
+        save_figure(force_study.front_figure(study), folder / FORCE_FRONT_FIGURE)
+        section += force_study.section_lines(study, FORCE_FRONT_FIGURE)
         at = beyond.index(BOUNDS_HEADING) if BOUNDS_HEADING in beyond else len(beyond)
         beyond = [*beyond[:at], *section, *([""] if at < len(beyond) else []), *beyond[at:]]
     if beyond:
