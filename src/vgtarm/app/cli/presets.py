@@ -60,7 +60,8 @@ def add_simulate_options(parser: argparse.ArgumentParser) -> None:
         "--preset",
         choices=sorted(PRESETS),
         default=None,
-        help="named settings (an option you give keeps your value); low-force: " + preset_text("low-force"),
+        help="named settings (an option you set away from its default keeps your value); low-force: "
+        + preset_text("low-force"),
     )
 
 
