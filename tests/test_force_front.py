@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from vgtarm.app.cli.presets import PRESETS, add_simulate_options, apply_preset, simulate_options
-from vgtarm.app.reports.force_front import SETTINGS, by_setting, choose, pareto, setting_table
+from vgtarm.app.reports.force_front import by_setting, choose, pareto, setting_table
 
 
 def test_pareto_keeps_exactly_the_non_dominated_points():
@@ -71,11 +71,10 @@ def test_the_preset_rule_takes_the_least_worst_error_within_the_first_seeds_limi
         _row("4", 0, 0.022, 60.0, 4.1),  # chatter over 4 N
     ]
     groups = by_setting(rows)
-    kp = SETTINGS.index("kp")
-    assert [g.settings[kp] for g in groups] == ["1", "4", "3", "2"]  # by worst error
+    assert [g.value("kp") for g in groups] == ["1", "4", "3", "2"]  # by worst error
     assert groups[0].seeds == (0, 1) and groups[0].worst_mm == 0.021 and groups[0].peak_n == 95.0
     pick = choose(groups)
-    assert pick is not None and groups[pick].settings[kp] == "3"
+    assert pick is not None and groups[pick].value("kp") == "3"
     assert choose(groups, peak=50.0) is None
     table = setting_table(groups).splitlines()
     assert len(table) == 2 + len(groups) and [line.endswith("| yes |") for line in table[2:]] == [

@@ -9,7 +9,7 @@ from matplotlib.figure import Figure
 from vgtarm.app.cases import joint_reference, run_case
 from vgtarm.app.presets import PRESETS
 from vgtarm.app.reports import force_study
-from vgtarm.app.reports.force_front import SETTINGS, by_setting, choose
+from vgtarm.app.reports.force_front import by_setting, choose
 from vgtarm.app.reports.low_force import PresetRun, run_options
 from vgtarm.errors import InputError
 
@@ -53,16 +53,16 @@ def test_the_shipped_front_picks_the_low_force_preset():
     groups = by_setting(rows)
     pick = choose(groups)
     assert pick is not None
-    chosen = dict(zip((k for k in SETTINGS if k != "seed"), groups[pick].settings, strict=True))
+    chosen = groups[pick]
     low = PRESETS["low-force"]
-    assert chosen["criterion"] == low["criterion"] and chosen["estimator"] == low["estimator"]
+    assert chosen.value("criterion") == low["criterion"] and chosen.value("estimator") == low["estimator"]
     for key, preset_key in (
         ("estimator_bandwidth_hz", "estimator_bandwidth"),
         ("observer_gain", "observer_gain"),
         ("kp", "kp"),
         ("kv", "kv"),
     ):
-        assert float(chosen[key]) == low[preset_key], key
+        assert float(chosen.value(key)) == low[preset_key], key
     assert groups[pick].seeds == (0, 1, 2, 3, 4) and groups[pick].worst_mm <= force_study.ERROR_TARGET_MM
 
 

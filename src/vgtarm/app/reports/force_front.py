@@ -30,6 +30,8 @@ SETTINGS = (
     "kv",
     "seed",
 )
+#: The inputs that make a setting: every one but the seed.
+SETTING_KEYS = tuple(key for key in SETTINGS if key != "seed")
 
 
 def pareto(points: Sequence[tuple[float, float]]) -> list[bool]:
@@ -85,12 +87,16 @@ class Setting:
         """The largest max tip error over the seeds (mm)."""
         return max(self.errors_mm)
 
+    def value(self, key: str) -> str:
+        """The setting's input ``key`` (one of :data:`SETTING_KEYS`), as ``results.csv`` wrote it."""
+        return self.settings[SETTING_KEYS.index(key)]
+
 
 def by_setting(rows: list[dict[str, str]]) -> list[Setting]:
     """The runs grouped by their settings other than the seed, by worst max tip error."""
     groups: dict[tuple[str, ...], list[dict[str, str]]] = {}
     for r in rows:
-        groups.setdefault(tuple(r.get(key) or "" for key in SETTINGS if key != "seed"), []).append(r)
+        groups.setdefault(tuple(r.get(key) or "" for key in SETTING_KEYS), []).append(r)
     out = []
     for key, runs in groups.items():
         runs = sorted(runs, key=lambda r: int(r.get("seed") or 0))
@@ -119,7 +125,7 @@ def choose(groups: list[Setting], peak: float = PEAK_LIMIT_N, chatter: float = C
 def setting_table(groups: list[Setting]) -> str:
     """Markdown table of :func:`by_setting`'s groups, the chosen one marked."""
     pick = choose(groups)
-    head = [k for k in SETTINGS if k != "seed"]
+    head = list(SETTING_KEYS)
     head += ["seeds", "max tip error per seed (mm)", "worst (mm)", "first seed: peak (N)", "RMS (N)", "chatter (N)"]
     lines = ["| " + " | ".join(head) + " | chosen |", "|" + " --- |" * (len(head) + 1)]
     for i, g in enumerate(groups):

@@ -28,7 +28,7 @@ from matplotlib.figure import Figure
 from ...errors import InputError
 from ...fileio import atomic_write_text
 from ...markup import md_cell
-from .force_front import CHATTER_LIMIT_N, PEAK_LIMIT_N, SETTINGS, Setting, by_setting, choose, pareto, read_runs
+from .force_front import CHATTER_LIMIT_N, PEAK_LIMIT_N, Setting, by_setting, choose, pareto, read_runs
 
 #: The shipped summary of the studies (one row per run).
 SUMMARY_FILE = Path(__file__).with_name("force_study.csv")
@@ -73,12 +73,10 @@ def load_summary(path: Path = SUMMARY_FILE) -> list[dict[str, str]]:
 
 def _label(g: Setting) -> str:
     """A setting in words: criterion, estimate, observer gain, gains."""
-    get = dict(zip((k for k in SETTINGS if k != "seed"), g.settings, strict=True))
-    estimate = (
-        "kalman " + f"{float(get['estimator_bandwidth_hz']):g} Hz" if get["estimator"] == "kalman" else "difference"
-    )
-    gains = f"{float(get['kp']):g} / {float(get['kv']):g}"
-    return f"{get['criterion']}, {estimate}, K_O {float(get['observer_gain']):g}, {gains}"
+    bandwidth = g.value("estimator_bandwidth_hz")  # empty: the estimator's default
+    estimate = g.value("estimator") + (f" {float(bandwidth):g} Hz" if bandwidth else "")
+    gains = f"{float(g.value('kp')):g} / {float(g.value('kv')):g}"
+    return f"{g.value('criterion')}, {estimate}, K_O {float(g.value('observer_gain')):g}, {gains}"
 
 
 def section_lines(rows: list[dict[str, str]], figure: str) -> list[str]:
@@ -132,13 +130,13 @@ def front_figure(rows: list[dict[str, str]]) -> Figure:
     pick = choose(groups)
     fig = Figure(figsize=(10, 4.2), layout="constrained")
     axes = fig.subplots(1, 2)
-    kinds = sorted({(g.settings[0], g.settings[2]) for g in groups})
+    kinds = sorted({(g.value("criterion"), g.value("estimator")) for g in groups})
     for ax, value, label, target in (
         (axes[0], lambda g: g.rms_n, "seed 0: RMS leg force (N)", RMS_TARGET_N),
         (axes[1], lambda g: g.chatter_n, "seed 0: chatter (N)", CHATTER_LIMIT_N),
     ):
         for criterion, estimator in kinds:
-            pick_kind = [g for g in groups if (g.settings[0], g.settings[2]) == (criterion, estimator)]
+            pick_kind = [g for g in groups if (g.value("criterion"), g.value("estimator")) == (criterion, estimator)]
             ax.scatter(
                 [g.worst_mm for g in pick_kind],
                 [value(g) for g in pick_kind],
