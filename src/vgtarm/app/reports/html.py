@@ -66,16 +66,16 @@ COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e
 #: Dash patterns taken in turn once the colours are used up, so no two runs of a figure look alike
 #: (``vgtarm reproduce`` draws twelve runs).
 DASHES = ("solid", "dash", "dot", "dashdot")
-
-
-def run_line(i: int, width: float) -> dict[str, Any]:
-    """The line of the ``i``-th run of a figure: a colour of :data:`COLOURS`, then the next dash."""
-    return {"color": COLOURS[i % len(COLOURS)], "dash": DASHES[(i // len(COLOURS)) % len(DASHES)], "width": width}
 #: Colour scale of the legs' closeness to a limit (as the Matplotlib drawing: green to red).
 CLOSENESS_SCALE = [[i / (len(CLOSENESS_COLOURS) - 1), c] for i, c in enumerate(CLOSENESS_COLOURS)]
 _COLOURBAR_TITLE = "legs: closeness<br>to a limit<br>(0 mid-range,<br>1 at a limit)"
 #: Height of one panel of the efforts' figure (px): one panel per module and one for the twists.
 EFFORT_PANEL_PX = 190
+
+
+def run_line(i: int, width: float) -> dict[str, Any]:
+    """The line of the ``i``-th run of a figure: a colour of :data:`COLOURS`, then the next dash."""
+    return {"color": COLOURS[i % len(COLOURS)], "dash": DASHES[(i // len(COLOURS)) % len(DASHES)], "width": width}
 
 
 @dataclass(frozen=True)
