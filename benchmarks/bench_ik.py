@@ -38,7 +38,7 @@ def _reference_on_blocks(robot: vgtarm.Robot, path: paths.Path, fast_q: np.ndarr
             path.acceleration[s : s + BLOCK],
         )
         ref = inverse_kinematics(robot, block, solver="reference", initial_guess=fast_q[s - 1])
-        seconds += ref.wall_time
+        seconds += ref.wall_time_s
         count += BLOCK
         dphi = max(dphi, float(np.abs(ref.samples.phi - fast.samples.phi[s : s + BLOCK]).max()))
         residual = max(residual, float(ref.samples.residual.max()))

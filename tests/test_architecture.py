@@ -15,12 +15,12 @@ import vgtarm
 
 PACKAGE = Path(vgtarm.__file__).resolve().parent
 
-#: The package's own ``__init__`` (its public names: the errors and the model).
+#: The package's own ``__init__`` (its public names: the whole library, as the command line has it).
 ROOT = "__root__"
 #: Layers from the bottom up; a module may import its own layer and the layers below.
 LAYERS: tuple[frozenset[str], ...] = (
-    frozenset({"errors", "fileio", "memory", "markup", "machine", "progress"}),
-    frozenset({"model", ROOT}),
+    frozenset({"errors", "fileio", "kinds", "memory", "markup", "machine", "progress", "version"}),
+    frozenset({"model"}),
     frozenset({"paths", "ga"}),
     frozenset({"ik"}),
     frozenset({"control"}),
@@ -28,6 +28,7 @@ LAYERS: tuple[frozenset[str], ...] = (
     frozenset({"mujoco_bridge"}),
     frozenset({"study", "export"}),
     frozenset({"app"}),
+    frozenset({ROOT}),  # the front door: every public name, imported on first use
 )
 #: Imports a lower layer may make inside a function body, resolved at call time (documented).
 ALLOWED_UPWARD = {("model.robot", "ik")}  # Robot.inverse_kinematics, a thin convenience

@@ -17,7 +17,7 @@ def test_forward_kinematics_of_the_answer_hits_the_point(robot, seed):
     q_known = random_configurations(robot, 1, seed=seed, margin=0.03)[0]
     point = robot.tip_position(q_known)  # reachable by construction
     solution = solve_point(robot, point)
-    assert isinstance(solution, PointSolution) and solution.success, solution.reason
+    assert isinstance(solution, PointSolution) and solution.success, solution.message
     assert np.abs(robot.tip_position(solution.q) - point).max() <= 1e-9
     assert solution.residual <= 1e-9
     low, high = robot.parameters.lower, robot.parameters.upper
@@ -39,7 +39,7 @@ def test_a_point_with_an_orientation(robot):
     q_known = random_configurations(robot, 1, seed=3, margin=0.03)[0]
     fk = robot.forward_kinematics(q_known)
     solution = solve_point(robot, fk.tip, rotation=fk.rotation)
-    assert solution.success, solution.reason
+    assert solution.success, solution.message
     assert np.abs(robot.tip_position(solution.q) - fk.tip).max() <= 1e-9
     assert solution.orientation_error <= 1e-9
 
@@ -47,7 +47,7 @@ def test_a_point_with_an_orientation(robot):
 def test_an_unreachable_point_is_a_record_not_an_exception(robot):
     solution = solve_point(robot, [0.5, 0.0, 0.64])
     assert not solution.success
-    assert "cannot be reached" in solution.reason and "(0.5, 0, 0.64)" in solution.reason
+    assert "cannot be reached" in solution.message and "(0.5, 0, 0.64)" in solution.message
     assert solution.residual > 0.1 and solution.q.shape == (robot.n_joints,)
     assert robot.in_joint_range(solution.q)
 

@@ -108,7 +108,7 @@ def test_per_sample_record_shapes_and_labels(full_paths):
     assert samples.multipliers.shape == (n, 3)
     assert np.isnan(samples.orientation_error).all()
     assert result.solver == "fast" and result.rates == "exact" and result.task == "position"
-    assert result.wall_time > 0 and result.message.startswith("all")
+    assert result.wall_time_s > 0 and result.message.startswith("all")
     assert set(samples.method) == {"newton"}
     with pytest.raises(AttributeError):
         result.q = result.q  # type: ignore[misc]

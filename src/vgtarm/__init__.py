@@ -17,7 +17,20 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # the names as static type checkers and editors see them
+    from . import control, export, ga, ik, model, mujoco_bridge, paths, simulation, study
+    from .app.cases import case_study, run_case
+    from .app.library import run_study
+    from .app.pictures.plotting import (
+        comparison_figure,
+        plot_efforts,
+        plot_joint_errors,
+        plot_path_3d,
+        plot_tip_error,
+        save_figure,
+    )
+    from .app.reports.reproduce import reproduce
+    from .control import ComputedForceControl, Gains, SwitchingControl
     from .errors import (
         AssemblyError,
         ConfigError,
@@ -27,6 +40,9 @@ if TYPE_CHECKING:
         UnreachableError,
         VgtarmError,
     )
+    from .export import export_controller
+    from .ga import GAOptions
+    from .ik import IKOptions, IKResult, OrientationPath, PointSolution, inverse_kinematics, solve_point
     from .model import (
         JOINT_NAMES,
         BiasAccelerations,
@@ -36,13 +52,17 @@ if TYPE_CHECKING:
         load_parameters,
         load_robot,
     )
+    from .mujoco_bridge import to_mjcf
+    from .simulation import ExternalForce, JointReference, Scenario, SimulationResult, simulate
+    from .study import Study, load_study
 
-__version__ = "0.1.0"
-
-#: Where each public name lives.
-_SOURCES = {
-    **dict.fromkeys(
-        (
+#: Where each public name lives: ``(module, name in that module)``, the module relative to this
+#: package. The command line's capabilities are all here: a notebook needs nothing of ``vgtarm.app``.
+_SOURCES: dict[str, tuple[str, str]] = {
+    # errors
+    **{
+        name: ("errors", name)
+        for name in (
             "AssemblyError",
             "ConfigError",
             "InputError",
@@ -50,11 +70,12 @@ _SOURCES = {
             "SimulationError",
             "UnreachableError",
             "VgtarmError",
-        ),
-        "errors",
-    ),
-    **dict.fromkeys(
-        (
+        )
+    },
+    # the model
+    **{
+        name: ("model", name)
+        for name in (
             "JOINT_NAMES",
             "BiasAccelerations",
             "ForwardKinematics",
@@ -62,26 +83,114 @@ _SOURCES = {
             "RobotParameters",
             "load_parameters",
             "load_robot",
-        ),
-        "model",
-    ),
+        )
+    },
+    # inverse kinematics
+    **{
+        name: ("ik", name)
+        for name in (
+            "IKOptions",
+            "IKResult",
+            "OrientationPath",
+            "PointSolution",
+            "inverse_kinematics",
+            "solve_point",
+        )
+    },
+    # controllers
+    **{name: ("control", name) for name in ("ComputedForceControl", "Gains", "SwitchingControl")},
+    "GAOptions": ("ga", "GAOptions"),
+    # the closed loop
+    **{
+        name: ("simulation", name)
+        for name in (
+            "ExternalForce",
+            "JointReference",
+            "Scenario",
+            "SimulationResult",
+            "simulate",
+        )
+    },
+    # the paper's case studies, studies of many runs, the report
+    "case_study": ("app.cases", "case_study"),
+    "run_case": ("app.cases", "run_case"),
+    "Study": ("study", "Study"),
+    "load_study": ("study", "load_study"),
+    "run_study": ("app.library", "run_study"),
+    "reproduce": ("app.reports.reproduce", "reproduce"),
+    # other engines and targets
+    "to_mjcf": ("mujoco_bridge", "to_mjcf"),
+    "export_controller": ("export", "export_controller"),
+    # figures of runs and of comparisons (matplotlib; each takes ax=None and returns it)
+    **{
+        name: ("app.pictures.plotting", name)
+        for name in (
+            "comparison_figure",
+            "plot_efforts",
+            "plot_joint_errors",
+            "plot_path_3d",
+            "plot_tip_error",
+            "save_figure",
+        )
+    },
 }
 
+#: Subpackages a user reaches by attribute (``vgtarm.paths.case1``), imported on first use.
+_MODULES = ("control", "export", "ga", "ik", "model", "mujoco_bridge", "paths", "simulation", "study")
+
 __all__ = [
-    "JOINT_NAMES",
     "AssemblyError",
     "BiasAccelerations",
+    "ComputedForceControl",
     "ConfigError",
+    "ExternalForce",
     "ForwardKinematics",
+    "GAOptions",
+    "Gains",
+    "IKOptions",
+    "IKResult",
     "InputError",
+    "JOINT_NAMES",
+    "JointReference",
+    "OrientationPath",
     "PathError",
+    "PointSolution",
     "Robot",
     "RobotParameters",
+    "Scenario",
     "SimulationError",
+    "SimulationResult",
+    "Study",
+    "SwitchingControl",
     "UnreachableError",
     "VgtarmError",
+    "case_study",
+    "comparison_figure",
+    "control",
+    "export",
+    "export_controller",
+    "ga",
+    "ik",
+    "inverse_kinematics",
     "load_parameters",
     "load_robot",
+    "load_study",
+    "model",
+    "mujoco_bridge",
+    "paths",
+    "plot_efforts",
+    "plot_joint_errors",
+    "plot_path_3d",
+    "plot_tip_error",
+    "reproduce",
+    "run_case",
+    "run_study",
+    "save_figure",
+    "simulate",
+    "simulation",
+    "solve_point",
+    "study",
+    "to_mjcf",
 ]
 
 
@@ -89,7 +198,8 @@ def __getattr__(name: str) -> Any:
     """A public name, or a subpackage (``vgtarm.model``), imported on first use."""
     source = _SOURCES.get(name)
     if source is not None:
-        value = getattr(importlib.import_module(f".{source}", __name__), name)
+        module, attribute = source
+        value = getattr(importlib.import_module(f".{module}", __name__), attribute)
         globals()[name] = value
         return value
     if not name.startswith("__"):
@@ -102,4 +212,5 @@ def __getattr__(name: str) -> Any:
 
 
 def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+    """The public names only (not ``importlib`` or the typing helpers of this module)."""
+    return sorted({"__version__", *__all__})

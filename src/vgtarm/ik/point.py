@@ -9,6 +9,7 @@ the feasible configuration that comes closest, ``success`` False and a one-line 
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -45,8 +46,11 @@ class PointSolution:
             limit (column 1), in the joint's unit; both >= 0 within the limits.
         phi: the joint-limit cost ``Phi(q)`` of eq. 12.
         success: the point was reached and the optimality conditions verified.
-        reason: one line: what was solved, or why not.
+        status: ``"solved"``, ``"unverified"`` (reached, the optimality conditions not verified)
+            or ``"unreachable"`` (``q`` is then the closest feasible configuration).
+        message: one line: what was solved, or why not.
         joint_names: the robot's joint names, in the order of ``q``.
+        wall_time_s: wall-clock time of the solve (s).
     """
 
     point: Array
@@ -57,8 +61,10 @@ class PointSolution:
     margins: Array
     phi: float
     success: bool
-    reason: str
+    status: str
+    message: str
     joint_names: tuple[str, ...]
+    wall_time_s: float
 
     @property
     def closest_limit(self) -> tuple[int, str, float]:
@@ -98,12 +104,14 @@ def solve_point(
 
     Returns:
         A :class:`PointSolution`; an unreachable point gives ``success`` False, the closest
-        feasible configuration and a ``reason`` naming the point and the smallest residual.
+        feasible configuration, ``status`` ``"unreachable"`` and a ``message`` naming the point and
+        the smallest residual.
 
     Raises:
         InputError: a point that is not three finite numbers within 1 km, a rotation that is not
             a rotation matrix, or a bad solver or option (as :func:`inverse_kinematics`).
     """
+    started = time.perf_counter()
     p = _as_point(point)
     target = None if rotation is None else orientation_target(rotation, 2, True)
     path = Path(
@@ -113,20 +121,23 @@ def solve_point(
     try:
         result = inverse_kinematics(robot, path, solver=solver, rates="finite_difference", pose=pose, **options)
     except UnreachableError:
-        return _closest(robot, path, p, target, options)
+        return _closest(robot, path, p, target, options, started)
     q = np.array(result.q[0])
     tip, tip_rotation = robot.tip_position(q), robot.forward_kinematics(q).rotation
     error = float("nan") if pose is None else float(angle_error(tip_rotation[None], pose[None])[0])
     success = bool(result.samples.success[0])
-    reason = (
+    message = (
         f"point {_format(p)} m reached and the optimality conditions of eq. 12 verified"
         if success
         else f"point {_format(p)} m: {result.message}"
     )
-    return _solution(robot, p, pose, q, float(np.linalg.norm(tip - p)), error, success, reason)
+    status = "solved" if success else "unverified"
+    return _solution(robot, p, pose, q, float(np.linalg.norm(tip - p)), error, status, message, started)
 
 
-def _closest(robot: Robot, path: Path, p: Array, target: Any, options: dict[str, Any]) -> PointSolution:
+def _closest(
+    robot: Robot, path: Path, p: Array, target: Any, options: dict[str, Any], started: float
+) -> PointSolution:
     """The record of an unreachable point: the feasible configuration closest to it."""
     settings = IKOptions.from_keywords(options, robot.n_joints)
     problem = IKProblem.from_parameters(robot.parameters, settings.margin, 1.0)
@@ -136,16 +147,24 @@ def _closest(robot: Robot, path: Path, p: Array, target: Any, options: dict[str,
     residual = float(np.linalg.norm(r[:3]))
     error = float(np.arcsin(min(1.0, float(np.linalg.norm(r[3:]))))) if task.m == 6 else float("nan")
     extra = f" and orientation error {error:.3g} rad" if task.m == 6 else ""
-    reason = (
+    message = (
         f"point {_format(p)} m cannot be reached: the closest tip within the joint limits and the assembly margin "
         f"({problem.margin:g} m) is {residual:.3g} m away{extra} (tolerance {REACH_TOLERANCE:g} m)"
     )
     pose = None if target is None else target.rotation[0]
-    return _solution(robot, p, pose, np.array(q, dtype=float), residual, error, False, reason)
+    return _solution(robot, p, pose, np.array(q, dtype=float), residual, error, "unreachable", message, started)
 
 
 def _solution(
-    robot: Robot, p: Array, pose: Array | None, q: Array, residual: float, error: float, success: bool, reason: str
+    robot: Robot,
+    p: Array,
+    pose: Array | None,
+    q: Array,
+    residual: float,
+    error: float,
+    status: str,
+    message: str,
+    started: float,
 ) -> PointSolution:
     low, high = robot.parameters.lower, robot.parameters.upper
     margins = np.stack([q - low, high - q], axis=1)
@@ -160,7 +179,9 @@ def _solution(
         orientation_error=error,
         margins=margins,
         phi=phi,
-        success=success,
-        reason=reason,
+        success=status == "solved",
+        status=status,
+        message=message,
         joint_names=robot.joint_names,
+        wall_time_s=time.perf_counter() - started,
     )

@@ -8,6 +8,7 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -89,8 +90,9 @@ class IKResult:
         task: ``"position"`` or ``"pose"``.
         margin: assembly margin used (m).
         lower, upper: ``(n,)`` joint limits.
-        wall_time: wall-clock time of the solve (s).
-        success: every sample succeeded.
+        wall_time_s: wall-clock time of the solve (s).
+        success: every sample succeeded (``status`` ``"completed"``; else ``"unverified"``: some
+            samples reached their target without their optimality conditions verified).
         message: a one-line summary (which samples failed, if any).
         work: the solver's work counters (``n_iterations``, ``n_evaluations``, ``n_converged``,
             ``wall_time_s``; see :class:`vgtarm.ik.SolverResult`), before any fallback.
@@ -119,7 +121,7 @@ class IKResult:
     margin: float
     lower: Array
     upper: Array
-    wall_time: float
+    wall_time_s: float
     success: bool
     message: str
     work: Mapping[str, float] = field(default_factory=dict)
@@ -132,6 +134,40 @@ class IKResult:
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
+
+    @property
+    def status(self) -> str:
+        """``"completed"`` when every sample succeeded, else ``"unverified"`` (an unreachable sample
+        raises :class:`~vgtarm.errors.UnreachableError` instead of giving a result)."""
+        return "completed" if self.success else "unverified"
+
+    def to_dataframe(self) -> Any:
+        """The reference as a :class:`pandas.DataFrame`, one row per sample and the columns of the
+        CSV file (:func:`csv_columns`: ``t``, the tip point, the joints, their rates and
+        accelerations; SI units). Needs pandas (``pip install "vgtarm[dataframe]"``)."""
+        try:
+            import pandas
+        except ImportError:
+            raise ImportError('to_dataframe() needs pandas: pip install "vgtarm[dataframe]"') from None
+        table = np.column_stack([self.t, self.position, self.q, self.qd, self.qdd])
+        return pandas.DataFrame(table, columns=list(csv_columns(self.joint_names)))
+
+    def plot(self, ax: Any = None) -> Any:
+        """Each joint's distance to its nearer limit as a fraction of its span (0 at a limit, 0.5
+        at mid-range) against time, into ``ax`` (a new figure's axes when None); returns the axes.
+        This is what eq. 12's criterion spends the redundancy on."""
+        if ax is None:
+            from matplotlib.figure import Figure
+
+            ax = Figure(figsize=(6.0, 3.0), layout="constrained").add_subplot()
+        span = self.upper - self.lower
+        clearance = np.minimum(self.q - self.lower, self.upper - self.q) / span
+        for j, name in enumerate(self.joint_names):
+            ax.plot(self.t, clearance[:, j], linewidth=0.9, label=name)
+        ax.set_xlabel("t (s)")
+        ax.set_ylabel("clearance / span")
+        ax.legend(fontsize="small", ncol=min(len(self.joint_names), 7))
+        return ax
 
     def limit_clearance(self) -> tuple[Array, Array]:
         """Smallest distance of each joint to its lower and to its upper limit over the path, ``(n,)`` each."""

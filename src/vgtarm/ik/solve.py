@@ -382,7 +382,7 @@ def _result(
         margin=problem.margin,
         lower=problem.lower,
         upper=problem.upper,
-        wall_time=time.perf_counter() - started,
+        wall_time_s=time.perf_counter() - started,
         success=failed.size == 0 and unbounded.size == 0,
         message=message,
     )

@@ -228,8 +228,15 @@ class Robot:
         check_input(qa, where, (-largest, largest), self.joint_names, self._units["q"], raw=raw)
         self._check_margins(qa, where)
 
+    def joint_limits(self) -> tuple[Array, Array]:
+        """The joints' limits from the robot file, lower and upper, ``(n,)`` each (m, rad): what the
+        inverse kinematics keeps every joint within and what a run is stopped outside of.
+        (:meth:`joint_range` is the wider range of values the methods accept at all.)"""
+        return self.parameters.lower.copy(), self.parameters.upper.copy()
+
     def joint_range(self) -> tuple[Array, Array]:
-        """Lowest and highest joint values the methods accept, ``(n,)`` each (m, rad).
+        """Lowest and highest joint values the methods accept, ``(n,)`` each (m, rad); wider than
+        :meth:`joint_limits`.
 
         The joint limits widened on each side by :data:`~vgtarm.model.sanity.SANE_WIDENING`
         times their span for lengths (at least 0), by :data:`~vgtarm.model.sanity.SANE_TURNS`

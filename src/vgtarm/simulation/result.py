@@ -53,6 +53,11 @@ class SimulationResult:
     ``f_ext`` (N, 3) N, the force on the tool; ``mode`` (N,) 0 fixed gains, 1 GA gains, -1 not
     reached. Samples after a failure are NaN (``mode == -1``).
 
+    How it ended: ``success`` (every sample reached), ``status`` (``"completed"``, or what stopped
+    it: ``"not_finite"``, ``"not_assemblable"``, ``"outside_limits"``, ``"function_failed"``,
+    ``"no_memory"``), ``message`` (one line), ``wall_time_s``; :func:`~vgtarm.simulation.simulate`
+    with ``check=False`` returns a failed run with its arrays up to the failure.
+
     With a disturbance observer or a force sensor, ``effort_estimate`` (N, 7) N and N m holds the
     estimated external joint efforts the controller subtracted; with realistic sensing,
     ``tip_error_measured`` (N,) m is the tip error the controller saw, ``|P(q_d) - P(q_meas)|``
@@ -78,11 +83,15 @@ class SimulationResult:
     metadata: Mapping[str, Any] = field(default_factory=dict)
     effort_estimate: Array | None = None
     tip_error_measured: Array | None = None
+    status: str = "completed"
 
     @property
     def dt(self) -> float:
-        """Control period (s)."""
-        return float(self.metadata.get("dt_s", self.t[1] - self.t[0]))
+        """Control period (s): the run's recorded ``dt_s``, else the first step of ``t`` (NaN for a
+        run of one sample that records none)."""
+        if "dt_s" in self.metadata:
+            return float(self.metadata["dt_s"])
+        return float(self.t[1] - self.t[0]) if len(self.t) >= 2 else float("nan")
 
     @property
     def completed(self) -> int:
@@ -101,6 +110,7 @@ class SimulationResult:
         summary: dict[str, Any] = {key: self.metadata[key] for key in self.metadata}
         summary.update(
             success=self.success,
+            status=self.status,
             message=self.message,
             samples=len(self.t),
             samples_completed=n,
@@ -167,6 +177,32 @@ class SimulationResult:
         figure.savefig(buffer, format="png")
         data = base64.b64encode(buffer.getvalue()).decode("ascii")
         return f'<img alt="tip error over time" src="data:image/png;base64,{data}"/>'
+
+    def to_dataframe(self) -> Any:
+        """The time series as a :class:`pandas.DataFrame`, one row per sample and the columns of
+        ``timeseries.csv`` (``t``, the tip, the joints, the efforts, ...; SI units). Needs pandas
+        (``pip install "vgtarm[dataframe]"``)."""
+        pandas = _pandas()
+        columns, table = self._table()
+        frame = pandas.DataFrame(table, columns=columns)
+        frame["mode"] = self.mode
+        return frame
+
+    def plot(self, ax: Any = None) -> Any:
+        """The tip error (mm) against time, into ``ax`` (a new figure's axes when None); returns the
+        axes. Samples not reached (a failed run) are left out. The comparison of several runs is
+        :func:`vgtarm.comparison_figure`."""
+        if ax is None:
+            from matplotlib.figure import Figure
+
+            ax = Figure(figsize=(6.0, 3.0), layout="constrained").add_subplot()
+        label = str(self.metadata.get("controller", "run"))
+        ax.plot(self.t, self.tip_error * 1e3, linewidth=0.9, label=label)
+        ax.set_xlabel("t (s)")
+        ax.set_ylabel("tip error (mm)")
+        if not self.success:
+            ax.set_title(f"stopped: {self.status}")
+        return ax
 
     def save(self, folder: str | Path) -> Path:
         """Write ``timeseries.csv``, ``ga_activations.csv`` and ``summary.json`` into ``folder``.
@@ -243,6 +279,7 @@ class SimulationResult:
             mode=mode,
             activations=tuple(activations),
             success=bool(summary["success"]),
+            status=str(summary.get("status", "completed" if summary["success"] else "failed")),
             message=str(summary["message"]),
             wall_time_s=float(summary["wall_time_s"]),
             ga_time_s=float(summary["ga_time_s"]),
@@ -292,6 +329,15 @@ class SimulationResult:
             ]
         )
         return columns, table
+
+
+def _pandas() -> Any:
+    """pandas, or :class:`ImportError` saying which extra brings it."""
+    try:
+        import pandas
+    except ImportError:
+        raise ImportError('to_dataframe() needs pandas: pip install "vgtarm[dataframe]"') from None
+    return pandas
 
 
 def force_figures(forces: Array, torque: Array, effort: Array, qd: Array, dt: float) -> dict[str, Any]:

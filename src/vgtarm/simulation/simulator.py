@@ -32,7 +32,7 @@ import numpy as np
 
 from ..control.cfc import ComputedForceControl
 from ..control.scm import SwitchingControl
-from ..errors import InputError, SimulationError
+from ..errors import InputError, SimulationError, shown
 from ..machine import blas_on_one_thread
 from ..memory import check_memory
 from ..model.closedloop import (
@@ -81,6 +81,15 @@ _FAILURES = {
     NO_MEMORY: "out of memory",
 }
 
+#: The ``status`` of a run that stopped, by the loop's status code.
+_STATUS_NAMES = {
+    NOT_FINITE: "not_finite",
+    NOT_ASSEMBLABLE: "not_assemblable",
+    OUTSIDE_LIMITS: "outside_limits",
+    FUNCTION_FAILED: "function_failed",
+    NO_MEMORY: "no_memory",
+}
+
 Controller = ComputedForceControl | SwitchingControl
 Progress = Callable[[int, int], None]
 
@@ -118,6 +127,7 @@ def simulate(
     *,
     metadata: Mapping[str, Any] | None = None,
     progress: Progress | None = None,
+    check: bool = True,
     **options: Any,
 ) -> SimulationResult:
     """Run ``controller`` on ``plant`` along ``reference`` and return the record of the run.
@@ -161,16 +171,21 @@ def simulate(
               (needs the cutting force; exclusive with ``force_sensor``).
         metadata: extra entries for the summary (case name, ...).
         progress: called as ``progress(samples_done, samples_total)`` now and then.
+        check: raise when the run fails (the default); with False, a failed run is returned as it
+            is, ``success`` False, its ``status`` and ``message`` saying what stopped it and its
+            arrays up to then (as :func:`scipy.integrate.solve_ivp` does).
 
     Raises:
-        SimulationError: the run diverged; ``error.result`` holds the samples up to then.
+        SimulationError: the run diverged (with ``check``); ``error.result`` holds the samples up to then.
         InputError: a bad argument (the message names it).
     """
+    if not isinstance(check, bool):
+        raise InputError(f"check = {shown(check)}: expected True or False")
     scenario = Scenario.of(scenario, options)
     run = prepare(plant, reference, controller, scenario, metadata, progress)
     outcome = drive(run, progress)
     result = run.result(outcome, metadata)
-    if not result.success:
+    if check and not result.success:
         raise SimulationError(result.message, result)
     return result
 
@@ -232,6 +247,7 @@ class Run:
             mode=mode,
             activations=activations,
             success=outcome.success,
+            status="completed" if outcome.success else _STATUS_NAMES.get(outcome.status, f"status_{outcome.status}"),
             message=message,
             wall_time_s=outcome.wall_time_s,
             ga_time_s=sum((a.wall_time_s for a in outcome.activations), 0.0),

@@ -20,7 +20,7 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from ... import __version__, paths, progress
+from ... import paths, progress
 from ...control.scm import MAX_HORIZON, SWITCH_ON
 from ...errors import MESSAGE_LENGTH, ConfigError, InputError, UnreachableError, VgtarmError, cut, escape, shown
 from ...fileio import (
@@ -35,6 +35,7 @@ from ...ik import CSV_COLUMNS, write_csv
 from ...model.parameters import JOINT_NAMES, JOINT_UNITS, ROBOT_FILE_LIMIT
 from ...model.robot import load_robot
 from ...paths import Path as DesiredPath
+from ...version import __version__
 from . import mujoco as cli_mujoco
 from . import presets
 from . import stack as cli_stack
@@ -539,7 +540,7 @@ def cmd_ik(args: argparse.Namespace) -> int:
     span = f"dt = {path.dt:g} s, t = {path.t[0]:g} .. {path.t[-1]:g} s"
     print(f"path       {escape(path.name)}: {len(result)} samples, {span}")  # the name of a user's file, escaped
     print(f"task       {task}")
-    print(f"solver     {result.solver}, rates {result.rates}, {result.wall_time * 1e3:.1f} ms")
+    print(f"solver     {result.solver}, rates {result.rates}, {result.wall_time_s * 1e3:.1f} ms")
     fallbacks = int(np.count_nonzero(np.char.find(samples.method.astype(str), "fallback") >= 0))
     print(f"result     {result.message}; {fallbacks} samples re-solved by the reference solver")
     print(f"residual   worst {samples.residual[worst]:.3g} m at t = {result.t[worst]:.6g} s")
@@ -574,7 +575,7 @@ def _ik_one_point(args: argparse.Namespace, sample: tuple[float, np.ndarray], ro
     held = rotation is None or isinstance(rotation, str)  # "hold": the free optimum's own orientation
     solution = solve_point(robot, point, rotation=None if held else rotation, solver=args.solver, **_criterion(args))
     if not solution.success:
-        raise UnreachableError(f"{solution.reason}; nothing written")
+        raise UnreachableError(f"{solution.message}; nothing written")
     if args.output is not None:
         row = np.concatenate([[t], solution.point, solution.q, np.zeros(2 * robot.n_joints)])
         line = ",".join(f"{v:.17g}" for v in row)
@@ -586,7 +587,7 @@ def _ik_one_point(args: argparse.Namespace, sample: tuple[float, np.ndarray], ro
     space = reduced_space(robot)  # a robot whose tip moves in a plane or a line: that reduced task
     tip_task = "tip position" if space is None else f"{space.label} (its tip cannot leave it)"
     print(f"task       {tip_task}, orientation {'free' if held else 'of --pose'}")
-    print(f"result     {solution.reason}")
+    print(f"result     {solution.message}")
     print(f"residual   {solution.residual:.3g} m")
     if not held:
         print(f"           orientation error {solution.orientation_error:.3g} rad")
