@@ -4,7 +4,7 @@ A long computation (the inverse kinematics of a long path, the functions ``vgtar
 builds for a large stack) calls :func:`report` with how much of it is done; nothing listens by
 default, so a call costs a context-variable lookup and library users see nothing. The command line
 listens (:func:`listening`) and shows a progress bar on a terminal once the computation has run
-for :data:`DELAY` seconds (:mod:`vgtarm.app.cli.progress`).
+for :data:`DELAY` seconds (:mod:`vgtarm.app.cli.bars`).
 
 ``vgtarm -q`` (any command's ``-q``) sets :func:`set_quiet`: then nothing is shown at all, the
 progress lines of a model build included (:mod:`vgtarm.model.building` asks :func:`quiet`).

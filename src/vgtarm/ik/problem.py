@@ -4,7 +4,7 @@
 joint range and ``n`` the number of joints (7 for the paper's robot, any for a stack), subject to
 the task's equality constraints (tip point, optionally the
 orientation), the joint limits ``q_min <= q <= q_max`` and assemblability with a margin: the
-triangle inequalities of the truss are linear in ``q`` (:func:`vgtarm.assembly.linear_form`), and
+triangle inequalities of the truss are linear in ``q`` (:func:`vgtarm.model.assembly.linear_form`), and
 every sample must satisfy ``G q + h >= margin``. Rows that the joint limits already imply with
 that margin are dropped, so the active-set systems stay small (for the reference robot only the two
 ``s + 2d > p`` rows remain).
@@ -16,7 +16,7 @@ The equality constraints of a path, evaluated through the compiled model.
 A :class:`Task` holds the desired tip point per sample (and, for the pose variant, the desired
 orientation with its angular velocity and acceleration) and evaluates, for any subset of samples,
 the residual ``c(q) - c_d``, its Jacobian and the Hessian of ``lam^T c`` (functions ``ik_position``
-and ``ik_pose`` of :mod:`vgtarm.functions_ik`), and the path derivatives of the KKT residual that
+and ``ik_pose`` of :mod:`vgtarm.model.codegen.ik`), and the path derivatives of the KKT residual that
 the exact rates need.
 
 The working arrays of a batch of inverse-kinematics samples (primal, dual, active set, last model values).

@@ -10,7 +10,7 @@ reachable point of a target (:func:`closest`), used to report unreachable sample
 A second reference solver: IPOPT (interior point, through ``casadi.nlpsol``) per sample.
 
 The nonlinear program is the reference solver's (SLSQP, above), written symbolically
-from :func:`vgtarm.symbolic.kinematics` so that IPOPT gets exact first and second derivatives.
+from :func:`~vgtarm.model.symbolic.kinematics` so that IPOPT gets exact first and second derivatives.
 Samples are solved in order, each started from the previous solution.
 """
 

@@ -9,7 +9,7 @@ psi3)``; module 1 in the ``u2-u3`` plane of F0, module 2 mirrored in the ``u1-u3
 ``C01 = Rx(theta1)``, ``C02 = C01 Ry(theta2)``, ``C03 = C02 Rz(psi3)``; tip
 ``P = r1 + C01 r2 + h1 C02 u3`` (paper eq. 6).
 
-Expressions take the flat parameter vector of :meth:`vgtarm.parameters.RobotParameters.vector`
+Expressions take the flat parameter vector of :meth:`~vgtarm.model.parameters.RobotParameters.vector`
 as a symbol, so the compiled code serves every robot.
 """
 

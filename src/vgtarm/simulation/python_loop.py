@@ -1,7 +1,7 @@
 """The closed loop in NumPy: the interpreter fallback and the tests' second implementation.
 
-:class:`PythonLoop` has the interface of :class:`vgtarm.closedloop.ClosedLoopDriver` and does
-the same computation sample by sample through the :class:`~vgtarm.robot.Robot` methods.
+:class:`PythonLoop` has the interface of :class:`~vgtarm.model.closedloop.ClosedLoopDriver` and does
+the same computation sample by sample through the :class:`~vgtarm.model.robot.Robot` methods.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Closed-loop simulation: a plant, a controller with its own model, a reference, tool forces.
 
-The plant is the model of :class:`~vgtarm.robot.Robot` driven by the actuator efforts and the
+The plant is the model of :class:`~vgtarm.model.robot.Robot` driven by the actuator efforts and the
 external tool force; the controller runs once per control period (the reference's sampling
 period) with its own copy of the parameters, so it can be given a wrong model. Integrators:
 

@@ -2,7 +2,7 @@
 
 Inverse kinematics (paper eq. 12) needs, per sample, the equality constraints ``c(q)`` of the
 task, their Jacobian and the Hessian of ``lam^T c``, all derived from the one kinematic
-definition :func:`vgtarm.symbolic.kinematics` by automatic differentiation:
+definition :func:`~vgtarm.model.symbolic.kinematics` by automatic differentiation:
 
 - the **position** task: ``c(q) = P(q)`` (3 rows; the desired point is subtracted outside);
 - the **pose** task: ``c(q) = [P(q); e(q, R_d)]`` (6 rows) with the orientation residual
