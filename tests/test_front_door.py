@@ -58,6 +58,12 @@ def test_dir_lists_the_public_names_only():
         assert helper not in names
 
 
+def test_the_version_is_the_packages():
+    from vgtarm.version import __version__
+
+    assert vgtarm.__version__ == __version__ and "__version__" in dir(vgtarm)
+
+
 def test_an_unknown_name_is_an_attribute_error():
     with pytest.raises(AttributeError, match="no attribute 'simulat'"):
         vgtarm.simulat  # noqa: B018

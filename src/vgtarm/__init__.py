@@ -17,6 +17,8 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from .version import __version__ as __version__
+
 if TYPE_CHECKING:  # the names as static type checkers and editors see them
     from . import control, export, ga, ik, model, mujoco_bridge, paths, simulation, study
     from .app.cases import case_study, run_case
