@@ -189,7 +189,6 @@ def iterate(
     """
     compiled_rates = with_rates and task.compiled_rates
     in_call = compiled_rates and not task.rates_at_the_end  # else asked for where samples stop
-    nj = problem.n
     working = np.asarray(idx, dtype=np.intp)
     state.converged[working] = False
     state.rates_ready[working] = False
@@ -197,13 +196,7 @@ def iterate(
         if working.size == 0:
             break
         q, lam, mu, active = state.q[working], state.lam[working], state.mu[working], state.active[working]
-        if in_call:
-            residual, J, H, g, rates = task.evaluate_with_rates(working, q, lam, problem.weight)
-        else:
-            residual, J, H, g = task.evaluate_cost(working, q, lam)
-        state.residual[working], state.J[working], state.H[working] = residual, J, H
-        if g is not None and state.g is not None:
-            state.g[working] = g
+        residual, J, H, g, rates = _evaluate(problem, task, state, working, q, lam, in_call)
         done, predicted, finite = stopping_test(problem, q, lam, mu, active, (residual, J, H), settings, g)
         saddle = np.zeros(working.size, dtype=bool)
         if curvature:
@@ -212,11 +205,7 @@ def iterate(
             done &= ~saddle
         state.converged[working[done]] = True
         if compiled_rates and not in_call:
-            ready = done & ~active.any(axis=1)
-            if ready.any():
-                rows = working[ready]
-                *_, late = task.evaluate_with_rates(rows, q[ready], lam[ready], problem.weight)
-                _store_rates(state, rows, np.ones(rows.size, dtype=bool), late)
+            _rates_at_the_end(problem, task, state, working, q, lam, done & ~active.any(axis=1))
         elif in_call:
             _store_rates(state, working, done & ~active.any(axis=1), rates)
         elif with_rates:
@@ -227,42 +216,89 @@ def iterate(
         working = working[keep]
         if working.size == 0:
             break
-        q, residual, J, H, active = q[keep], residual[keep], J[keep], H[keep], predicted[keep]
         g = None if g is None else g[keep]
-        saddle = saddle[keep]
-        W = kkt.hessian(problem, H)
-        K = kkt.kkt_matrix(problem, W, J, active)
-        x, solvable = kkt.solve(K, kkt.newton_rhs(problem, q, residual, active, g))
-        if saddle.any():
-            x[saddle] = curvature_step(
-                problem,
-                q[saddle],
-                W[saddle],
-                J[saddle],
-                residual[saddle],
-                None if g is None else g[saddle],
-                settings.max_step,
-            )
-            solvable[saddle] = np.isfinite(x[saddle]).all(axis=1)
-        solvable &= np.isfinite(x).all(axis=1)
-        if not solvable.all():
-            working, q, W, J, x, active = (a[solvable] for a in (working, q, W, J, x, active))  # type: ignore[assignment]
-            g = None if g is None else g[solvable]
-        m = J.shape[1]
-        dq = x[:, :nj]
-        mu_new = kkt.bound_multipliers(problem, q, W, J, x, active, g)
-        alpha = _step_length(problem, q, dq, settings.max_step)[:, None]
-        q_new = q + alpha * dq
-        full = alpha[:, 0] == 1.0
-        lower, upper = active[:, :nj] & full[:, None], active[:, nj : 2 * nj] & full[:, None]
-        q_new = np.where(lower, problem.lower, np.where(upper, problem.upper, q_new))
-        lam_old, mu_old = state.lam[working], state.mu[working]
-        state.q[working] = q_new
-        state.lam[working] = lam_old + alpha * (x[:, nj : nj + m] - lam_old)
-        state.mu[working] = mu_old + alpha * (mu_new - mu_old)
-        state.active[working] = active
-        state.iterations[working] += 1
+        model = (residual[keep], J[keep], H[keep], g)
+        working = _newton_step(problem, state, working, q[keep], model, predicted[keep], saddle[keep], settings)
     return np.asarray(state.converged[idx])
+
+
+def _evaluate(
+    problem: IKProblem, task: Task, state: BatchState, working: Index, q: Array, lam: Array, in_call: bool
+) -> tuple[Array, Array, Array, Array | None, tuple[Array, ...]]:
+    """The model values ``(residual, J, H, g)`` at the iterate ``(q, lam)`` of the samples
+    ``working``, stored into ``state``, and with ``in_call`` the exact rates from the same compiled
+    call (else an empty tuple)."""
+    rates: tuple[Array, ...] = ()
+    if in_call:
+        residual, J, H, g, rates = task.evaluate_with_rates(working, q, lam, problem.weight)
+    else:
+        residual, J, H, g = task.evaluate_cost(working, q, lam)
+    state.residual[working], state.J[working], state.H[working] = residual, J, H
+    if g is not None and state.g is not None:
+        state.g[working] = g
+    return residual, J, H, g, rates
+
+
+def _rates_at_the_end(
+    problem: IKProblem, task: Task, state: BatchState, working: Index, q: Array, lam: Array, ready: NDArray[np.bool_]
+) -> None:
+    """The exact rates of the samples ``working[ready]`` that stopped here, by one more compiled
+    call at their iterate ``(q, lam)`` (a task whose rates come :attr:`Task.rates_at_the_end`)."""
+    if ready.any():
+        rows = working[ready]
+        *_, late = task.evaluate_with_rates(rows, q[ready], lam[ready], problem.weight)
+        _store_rates(state, rows, np.ones(rows.size, dtype=bool), late)
+
+
+def _newton_step(
+    problem: IKProblem,
+    state: BatchState,
+    working: Index,
+    q: Array,
+    model: tuple[Array, Array, Array, Array | None],
+    active: NDArray[np.bool_],
+    saddle: NDArray[np.bool_],
+    settings: NewtonSettings,
+) -> Index:
+    """One step of the samples ``working`` still going from ``q`` (the model's ``(residual, J, H,
+    g)`` there), with the predicted active sets ``active``: the Newton step of the KKT system (the
+    :func:`curvature_step` for a ``saddle``), limited in length and kept assemblable, written into
+    ``state``. Returns the samples that took it: those whose step could be solved."""
+    nj = problem.n
+    residual, J, H, g = model
+    W = kkt.hessian(problem, H)
+    K = kkt.kkt_matrix(problem, W, J, active)
+    x, solvable = kkt.solve(K, kkt.newton_rhs(problem, q, residual, active, g))
+    if saddle.any():
+        x[saddle] = curvature_step(
+            problem,
+            q[saddle],
+            W[saddle],
+            J[saddle],
+            residual[saddle],
+            None if g is None else g[saddle],
+            settings.max_step,
+        )
+        solvable[saddle] = np.isfinite(x[saddle]).all(axis=1)
+    solvable &= np.isfinite(x).all(axis=1)
+    if not solvable.all():
+        working, q, W, J, x, active = (a[solvable] for a in (working, q, W, J, x, active))  # type: ignore[assignment]
+        g = None if g is None else g[solvable]
+    m = J.shape[1]
+    dq = x[:, :nj]
+    mu_new = kkt.bound_multipliers(problem, q, W, J, x, active, g)
+    alpha = _step_length(problem, q, dq, settings.max_step)[:, None]
+    q_new = q + alpha * dq
+    full = alpha[:, 0] == 1.0
+    lower, upper = active[:, :nj] & full[:, None], active[:, nj : 2 * nj] & full[:, None]
+    q_new = np.where(lower, problem.lower, np.where(upper, problem.upper, q_new))
+    lam_old, mu_old = state.lam[working], state.mu[working]
+    state.q[working] = q_new
+    state.lam[working] = lam_old + alpha * (x[:, nj : nj + m] - lam_old)
+    state.mu[working] = mu_old + alpha * (mu_new - mu_old)
+    state.active[working] = active
+    state.iterations[working] += 1
+    return working
 
 
 #: Largest joint difference (m, rad) for two Newton runs to count as the same solution.

@@ -425,6 +425,28 @@ def ga_threads() -> int:
     return min(usable_cpus(), MAX_GA_THREADS)
 
 
+def _ga_arrays(
+    lower: Array, upper: Array, p_ctrl: Array, reference: dict[str, Array], quadratic: bool
+) -> dict[str, Array]:
+    """The arrays the compiled GA reads and fills, C-contiguous float64: the gene bounds, the
+    controller's parameters, the reference ``q_d, qd_d, qdd_d`` ``(N, n)`` and ``tip_d`` ``(N, 3)``,
+    and room for the tip offsets ``(N, 3)``, Jacobians ``(N, 3, n)`` and, with ``quadratic``, Hessians
+    ``(N, 3, n, n)`` at the reference (one element without)."""
+    n, n_joints = np.shape(reference["q_d"])
+    return {
+        name: np.ascontiguousarray(value, dtype=np.float64)
+        for name, value in dict(
+            lower=lower,
+            upper=upper,
+            p_ctrl=p_ctrl,
+            **reference,
+            tip_offset=np.zeros((n, 3)),
+            J_d=np.zeros((n, 3, n_joints)),
+            H_d=np.zeros((n, 3, n_joints, n_joints) if quadratic else 1),
+        ).items()
+    }
+
+
 class CompiledGA:
     """The switching method's genetic algorithm in C (``csrc/ga.c``), bound to one run.
 
@@ -487,21 +509,8 @@ class CompiledGA:
         self.n_joints, self.n_genes, self.n = n_joints, n_genes, n
         self.horizon = horizon
         words = bit_words(n_genes * n_bits)
-        self._arrays = {
-            name: np.ascontiguousarray(value, dtype=np.float64)
-            for name, value in dict(
-                lower=lower,
-                upper=upper,
-                p_ctrl=p_ctrl,
-                q_d=q_d,
-                qd_d=qd_d,
-                qdd_d=qdd_d,
-                tip_d=tip_d,
-                tip_offset=np.zeros((n, 3)),
-                J_d=np.zeros((n, 3, n_joints)),
-                H_d=np.zeros((n, 3, n_joints, n_joints) if quadratic else 1),
-            ).items()
-        }
+        reference = dict(q_d=q_d, qd_d=qd_d, qdd_d=qdd_d, tip_d=tip_d)
+        self._arrays = _ga_arrays(lower, upper, p_ctrl, reference, quadratic)
         self._ready = np.zeros(n, dtype=np.uint8)  # rows whose tip derivatives ga.c has computed
         self._initial = pack_bits(np.atleast_2d(initial_bits), words)
         self._settings = ffi().new("vgt_settings *", {"n_joints": n_joints, "dt": dt})
@@ -525,20 +534,31 @@ class CompiledGA:
             },
         )
         if safe is not None and damping is not None:
-            self._damping = np.ascontiguousarray([damping[1], damping[2]], dtype=np.float64)
-            self._ga.safe_nkv = self._damping.shape[1]
-            self._ga.safe_kv_step = damping[0]
-            self._ga.safe_lo_tab = _ptr(self._damping[0])
-            self._ga.safe_hi_tab = _ptr(self._damping[1])
+            self._bind_damping(damping)
         self._best = np.empty(n_genes)
         self._state = np.empty((2, n_joints))
         self._result = ffi().new("vgt_ga_result *", {"best": _ptr(self._best)})
+        self._bind_problem(quadratic)
+
+    def _bind_damping(self, damping: tuple[float, tuple[float, ...], tuple[float, ...]]) -> None:
+        """The safe variant's damping grid ``(step, lo, hi)`` in the GA's settings."""
+        self._damping = np.ascontiguousarray([damping[1], damping[2]], dtype=np.float64)
+        self._ga.safe_nkv = self._damping.shape[1]
+        self._ga.safe_kv_step = damping[0]
+        self._ga.safe_lo_tab = _ptr(self._damping[0])
+        self._ga.safe_hi_tab = _ptr(self._damping[1])
+
+    def _bind_problem(self, quadratic: bool) -> None:
+        """The ``vgt_ga_problem`` structure pointing into the arrays (the bounds, the seeded rows,
+        the controller's parameters, the start state), the reference's rows from sample 0 and each
+        row's length, by which :meth:`_window` moves them."""
+        n_joints = self.n_joints
         self._problem = ffi().new("vgt_ga_problem *")
         self._problem.lower = _ptr(self._arrays["lower"])
         self._problem.upper = _ptr(self._arrays["upper"])
         self._problem.initial_bits = ffi().cast("uint64_t *", self._initial.ctypes.data)
         self._problem.p_ctrl = _ptr(self._arrays["p_ctrl"])
-        driver.bind(self._arrays["p_ctrl"])
+        self.driver.bind(self._arrays["p_ctrl"])
         self._problem.q0 = _ptr(self._state[0:1])
         self._problem.qd0 = ffi().cast("double *", self._state[1:2].ctypes.data)
         self._base = {name: _ptr(self._arrays[name]) for name in ("q_d", "qd_d", "qdd_d", "tip_d", "tip_offset", "J_d")}

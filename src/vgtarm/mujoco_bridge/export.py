@@ -279,124 +279,166 @@ def to_spec(
     """The robot (the paper's or any stack of modules) as a ``mujoco.MjSpec``, MuJoCo's own model
     (see :func:`to_mjcf`, which writes it). Needs MuJoCo (``vgtarm[mujoco]``)."""
     _check_export(robot, timestep, solver_tolerance, leg_mass, leg_inertia, digits)
-    mujoco = require_mujoco()
-    g = home_geometry(robot)
-    stack = g.stack
-    q = stack.home
-    names = stack.joint_names
-    damping = dict(zip(names, stack.viscous, strict=True))
-    # the closed legs v and p of every module (the s leg of each is on the tree path)
-    closed = [names[j] for legs in stack.leg_indices for j in legs[1:]]
-    last = len(g.modules) - 1
-    end_effector = stack.end_effector
-    tool = np.array(stack.tool, dtype=float)
+    builder = _SpecBuilder(
+        robot, require_mujoco(), leg_mass=leg_mass, leg_inertia=leg_inertia, digits=digits, scene=scene
+    )
+    return builder.build(timestep, solver_tolerance)
 
-    def r(x: ArrayLike) -> list[float]:
-        return rounded(x, digits)
 
-    def r1(x: float) -> float:
-        return rounded(x, digits)[0]
+class _SpecBuilder:
+    """The ``mujoco.MjSpec`` of one robot, built by :func:`to_spec`: the options, then the tree
+    module by module from the world (:meth:`module`, :meth:`stage`), then the loop closures,
+    tendons and motors. Every number goes through :meth:`r` (``digits`` significant digits)."""
 
-    spec = mujoco.MjSpec()
-    spec.modelname = stack.name
-    spec.compiler.degree = False
-    spec.compiler.autolimits = True
-    # every body has its inertial: geoms (the scene's drawing) never add mass or inertia
-    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
-    # written as built (fullinertia, fromto, motor, ...) and each number exactly as given
-    spec.compiler.savecompiled = False
-    spec.compiler.savecanonical = False
-    option = spec.option
-    option.timestep = r1(timestep)
-    option.gravity = r(stack.gravity)
-    option.solver = mujoco.mjtSolver.mjSOL_NEWTON
-    option.iterations = 200
-    option.tolerance = r1(solver_tolerance)
-    option.integrator = mujoco.mjtIntegrator.mjINT_EULER
-    option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
-    if scene:
-        _materials(spec, mujoco)
+    def __init__(
+        self, robot: Robot, mujoco: Any, *, leg_mass: float, leg_inertia: float, digits: int, scene: bool
+    ) -> None:
+        self.mujoco = mujoco
+        self.g = home_geometry(robot)
+        self.stack = self.g.stack
+        self.q = self.stack.home
+        self.names = self.stack.joint_names
+        self.damping = dict(zip(self.names, self.stack.viscous, strict=True))
+        # the closed legs v and p of every module (the s leg of each is on the tree path)
+        self.closed = [self.names[j] for legs in self.stack.leg_indices for j in legs[1:]]
+        self.last = len(self.g.modules) - 1
+        self.tool = np.array(self.stack.tool, dtype=float)
+        self.leg_mass = leg_mass
+        self.leg_inertia = leg_inertia
+        self.digits = digits
+        self.scene = scene
+        self.spec = mujoco.MjSpec()
 
-    def visual(body: Any, kind: Any, size: list[float], material: str, **placement: Any) -> Any:
+    def r(self, x: ArrayLike) -> list[float]:
+        return rounded(x, self.digits)
+
+    def r1(self, x: float) -> float:
+        return rounded(x, self.digits)[0]
+
+    def build(self, timestep: float, solver_tolerance: float) -> Any:
+        """The whole spec: options, scene, tree, loop closures, tendons, motors, keyframe."""
+        self.options(timestep, solver_tolerance)
+        spec = self.spec
+        if self.scene:
+            _surroundings(spec, self.g, self.visual, self.r, self.mujoco)
+        self.module(spec.worldbody, 0, np.zeros(3))
+        self.closures(timestep)
+        self.drives()
+        spec.add_key(name="home")  # the reference configuration: the home pose, at rest
+        return spec
+
+    def options(self, timestep: float, solver_tolerance: float) -> None:
+        """The model's name, compiler settings, simulation options and (with a scene) materials."""
+        mujoco, spec, r, r1 = self.mujoco, self.spec, self.r, self.r1
+        spec.modelname = self.stack.name
+        spec.compiler.degree = False
+        spec.compiler.autolimits = True
+        # every body has its inertial: geoms (the scene's drawing) never add mass or inertia
+        spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+        # written as built (fullinertia, fromto, motor, ...) and each number exactly as given
+        spec.compiler.savecompiled = False
+        spec.compiler.savecanonical = False
+        option = spec.option
+        option.timestep = r1(timestep)
+        option.gravity = r(self.stack.gravity)
+        option.solver = mujoco.mjtSolver.mjSOL_NEWTON
+        option.iterations = 200
+        option.tolerance = r1(solver_tolerance)
+        option.integrator = mujoco.mjtIntegrator.mjINT_EULER
+        option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
+        if self.scene:
+            _materials(spec, mujoco)
+
+    def visual(self, body: Any, kind: Any, size: list[float], material: str, **placement: Any) -> Any:
         """A geom that is only drawn: no contact, no mass (the compiler takes no inertia from
         geoms), in group 0 (shown)."""
         geom = body.add_geom(type=kind, size=size, contype=0, conaffinity=0, **placement)
-        if scene:
+        if self.scene:
             geom.material = material
         else:
             geom.rgba = COLOURS[material]
         return geom
 
-    def inertial(body: Any, mass: float, com: ArrayLike, inertia: Array) -> None:
+    def inertial(self, body: Any, mass: float, com: ArrayLike, inertia: Array) -> None:
+        r = self.r
         sym = 0.5 * (inertia + inertia.T)
         body.explicitinertial = True
-        body.mass = r1(mass)
+        body.mass = self.r1(mass)
         body.ipos = r(com)
         body.fullinertia = r([sym[0, 0], sym[1, 1], sym[2, 2], sym[0, 1], sym[0, 2], sym[1, 2]])
 
-    def part(body: Any, part: Body, origin: Array, rotation: Array, body_origin: Array) -> None:
+    def part(self, body: Any, part: Body, origin: Array, rotation: Array, body_origin: Array) -> None:
         """``part`` (given in the frame ``rotation`` at ``origin``) as the inertial of ``body``,
         whose frame is at ``body_origin`` (F0 axes)."""
         com = origin + rotation @ np.array(part.com) - body_origin
-        inertial(body, part.mass, com, rotation @ part.inertia_matrix @ rotation.T)
+        self.inertial(body, part.mass, com, rotation @ part.inertia_matrix @ rotation.T)
 
-    def light(body: Any) -> None:
+    def light(self, body: Any) -> None:
         """A leg's mass and inertia (or a twist's without a part of its own)."""
         body.explicitinertial = True
-        body.mass = r1(leg_mass)
+        body.mass = self.r1(self.leg_mass)
         body.ipos = [0.0, 0.0, 0.0]
-        body.inertia = r([leg_inertia] * 3)
+        body.inertia = self.r([self.leg_inertia] * 3)
 
-    def leg(parent: Any, name: str, base: Array, direction: Array, normal: Array, length: float, at: Array) -> Any:
+    def leg(
+        self, parent: Any, name: str, base: Array, direction: Array, normal: Array, length: float, at: Array
+    ) -> Any:
         """A base hinge body at ``base`` and in it a rod body sliding along ``direction``; the
         slide of a leg on the tree path (``s``) carries its friction, the closed legs' friction
         is on their tendons. Returns the rod body."""
+        mujoco, r, r1 = self.mujoco, self.r, self.r1
         hinge = parent.add_body(name=f"{name}_base", pos=r(base - at))
-        light(hinge)
+        self.light(hinge)
         hinge.add_joint(name=f"{name}_base", type=mujoco.mjtJoint.mjJNT_HINGE, axis=r(normal))
         rod = hinge.add_body(name=f"{name}_rod")
-        light(rod)
+        self.light(rod)
         slide = rod.add_joint(name=name, type=mujoco.mjtJoint.mjJNT_SLIDE, axis=r(direction), ref=r1(length))
-        if name not in closed:
-            slide.damping = [r1(damping[name]), 0.0, 0.0]
+        if name not in self.closed:
+            slide.damping = [r1(self.damping[name]), 0.0, 0.0]
         material = "diagonal" if name.startswith("p") else "leg"
-        visual(rod, mujoco.mjtGeom.mjGEOM_CAPSULE, [0.006], material, fromto=[0.0] * 3 + r(direction * length))
+        self.visual(rod, mujoco.mjtGeom.mjGEOM_CAPSULE, [0.006], material, fromto=[0.0] * 3 + r(direction * length))
         return rod
 
-    def effector(body: Any, origin: Array, rotation: Array, mount: Array) -> None:
+    def effector(self, body: Any, origin: Array, rotation: Array, mount: Array) -> None:
         """The end-effector's inertial, and the tip site (with a rod from the mount point to it
         when the tool stands off), in ``body`` at ``origin`` (the last platform's centre) whose
         tool is mounted at ``mount`` from it."""
-        part(body, end_effector, origin, rotation, origin)
-        tip = mount + rotation @ tool
+        r = self.r
+        self.part(body, self.stack.end_effector, origin, rotation, origin)
+        tip = mount + rotation @ self.tool
         site = body.add_site(name="tip", pos=r(tip), size=[0.005])
-        if scene:
+        if self.scene:
             site.material = "tip"
-        if tool.any():
-            visual(body, mujoco.mjtGeom.mjGEOM_CAPSULE, [0.005], "tool", fromto=r(mount) + r(tip))
+        if self.tool.any():
+            self.visual(body, self.mujoco.mjtGeom.mjGEOM_CAPSULE, [0.005], "tool", fromto=r(mount) + r(tip))
 
-    def stage(platform: Any, k: int) -> None:
+    def stage(self, platform: Any, k: int) -> None:
         """Everything inside platform ``k``'s body (origin ``A'``): its inertial, then the twist
-        with what rides on it, or directly what stands on the platform."""
-        mod = g.modules[k]
-        part(platform, stack.modules[k].platform, mod.centre, mod.rotation, mod.A_top)
-        twist = mod.twist
-        if twist is None and k < last:
-            module(platform, k + 1, mod.A_top)
-            return
-        if twist is None:  # the end-effector fixed on the last platform
-            body = platform.add_body(name="end_effector", pos=r(mod.centre - mod.A_top))
-            effector(body, mod.centre, g.rotation, np.zeros(3))
-            return
-        lumped = k == last and twist.body is None  # the twist's body is the end-effector
+        with what rides on it (:meth:`twist`), or directly what stands on the platform."""
+        mod = self.g.modules[k]
+        self.part(platform, self.stack.modules[k].platform, mod.centre, mod.rotation, mod.A_top)
+        if mod.twist is not None:
+            self.twist(platform, k, mod.twist)
+        elif k < self.last:
+            self.module(platform, k + 1, mod.A_top)
+        else:  # the end-effector fixed on the last platform
+            body = platform.add_body(name="end_effector", pos=self.r(mod.centre - mod.A_top))
+            self.effector(body, mod.centre, self.g.rotation, np.zeros(3))
+
+    def twist(self, platform: Any, k: int, twist: TwistHome) -> None:
+        """The twist after module ``k`` in its platform's body: a hinged body (the end-effector
+        itself when it is the last frame and has no part of its own) carrying what follows."""
+        mujoco, r, r1 = self.mujoco, self.r, self.r1
+        mod = self.g.modules[k]
+        lumped = k == self.last and twist.body is None  # the twist's body is the end-effector
         name = "end_effector" if lumped else f"twist{twist.joint[3:]}"
         body = platform.add_body(name=name, pos=r(mod.centre - mod.A_top))
         if lumped:
-            effector(body, mod.centre, twist.rotation, twist.mount)
+            self.effector(body, mod.centre, twist.rotation, twist.mount)
         elif twist.body is None:
-            light(body)
+            self.light(body)
         else:
-            part(body, twist.body, mod.centre, twist.rotation, mod.centre)
+            self.part(body, twist.body, mod.centre, twist.rotation, mod.centre)
         body.add_joint(
             name=twist.joint,
             type=mujoco.mjtJoint.mjJNT_HINGE,
@@ -404,64 +446,68 @@ def to_spec(
             ref=r1(twist.home),
             damping=[r1(twist.viscous), 0.0, 0.0],
         )
-        visual(body, mujoco.mjtGeom.mjGEOM_CYLINDER, [0.03], "tool", fromto=[0.0] * 3 + r(twist.mount))
+        self.visual(body, mujoco.mjtGeom.mjGEOM_CYLINDER, [0.03], "tool", fromto=[0.0] * 3 + r(twist.mount))
         if lumped:
             return
-        if k == last:  # the end-effector fixed on the twist's part
-            effector(body.add_body(name="end_effector"), mod.centre, twist.rotation, twist.mount)
+        if k == self.last:  # the end-effector fixed on the twist's part
+            self.effector(body.add_body(name="end_effector"), mod.centre, twist.rotation, twist.mount)
         else:
-            module(body, k + 1, mod.centre)
+            self.module(body, k + 1, mod.centre)
 
-    def module(parent: Any, k: int, at: Array) -> None:
+    def module(self, parent: Any, k: int, at: Array) -> None:
         """Module ``k`` (0-based) in ``parent``, a body whose origin is at ``at`` (F0)."""
-        mod = g.modules[k]
-        i = stack.leg_indices[k][0]
-        s, v, p = q[i : i + 3]
+        mujoco, r = self.mujoco, self.r
+        mod = self.g.modules[k]
+        i = self.stack.leg_indices[k][0]
+        s, v, p = self.q[i : i + 3]
         ln = [f"s{k + 1}", f"v{k + 1}", f"p{k + 1}"]
-        if scene:  # the module's base: a bar from A to B on what it stands on
-            visual(parent, mujoco.mjtGeom.mjGEOM_CAPSULE, [0.01], "base", fromto=r(mod.A - at) + r(mod.B - at))
+        if self.scene:  # the module's base: a bar from A to B on what it stands on
+            self.visual(parent, mujoco.mjtGeom.mjGEOM_CAPSULE, [0.01], "base", fromto=r(mod.A - at) + r(mod.B - at))
         # the closed legs' tendons run between these sites: their feet on the module's base
         # body, their heads at the platform's corner B'
         parent.add_site(name=f"{ln[1]}_foot", pos=r(mod.B - at), size=[0.004])
         parent.add_site(name=f"{ln[2]}_foot", pos=r(mod.A - at), size=[0.004])
         # leg s carries the platform, hinged at A'
-        rod = leg(parent, ln[0], mod.A, mod.dir_s, mod.normal, s, at)
+        rod = self.leg(parent, ln[0], mod.A, mod.dir_s, mod.normal, s, at)
         platform = rod.add_body(name=f"platform{k + 1}", pos=r(mod.A_top - mod.A))
         platform.add_joint(name=f"platform{k + 1}", type=mujoco.mjtJoint.mjJNT_HINGE, axis=r(mod.normal))
         for n in ln[1:]:
             platform.add_site(name=f"{n}_head", pos=r(mod.B_top - mod.A_top), size=[0.004])
-        if scene:
-            _platform(platform, mod, stack, k, visual, r, mujoco)
-        stage(platform, k)
-        leg(parent, ln[1], mod.B, mod.dir_v, mod.normal, v, at)
-        leg(parent, ln[2], mod.A, mod.dir_p, mod.normal, p, at)
+        if self.scene:
+            _platform(platform, mod, self.stack, k, self.visual, r, mujoco)
+        self.stage(platform, k)
+        self.leg(parent, ln[1], mod.B, mod.dir_v, mod.normal, v, at)
+        self.leg(parent, ln[2], mod.A, mod.dir_p, mod.normal, p, at)
 
-    world = spec.worldbody
-    if scene:
-        _surroundings(spec, g, visual, r, mujoco)
-    module(world, 0, np.zeros(3))
-    for k, m in enumerate(g.modules):
-        for leg_name, base in ((f"v{k + 1}", m.B), (f"p{k + 1}", m.A)):
-            closure = spec.add_equality(
-                name=f"close_{leg_name}",
-                type=mujoco.mjtEq.mjEQ_CONNECT,
-                objtype=mujoco.mjtObj.mjOBJ_BODY,
-                name1=f"{leg_name}_rod",
-                name2=f"platform{k + 1}",
-                solref=[float(f"{timestep / 50:.6g}"), 1.0],
-                solimp=[0.99999, 0.99999, 0.001, 0.5, 2.0],
-            )
-            closure.data[0:3] = r(m.B_top - base)
-    for n in closed:
-        tendon = spec.add_tendon(name=f"{n}_leg", damping=[r1(damping[n]), 0.0, 0.0], width=0.004)
-        tendon.wrap_site(f"{n}_foot")
-        tendon.wrap_site(f"{n}_head")
-    for n in names:
-        kind = mujoco.mjtTrn.mjTRN_TENDON if n in closed else mujoco.mjtTrn.mjTRN_JOINT
-        motor = spec.add_actuator(name=n, trntype=kind, target=f"{n}_leg" if n in closed else n)
-        motor.set_to_motor()
-    spec.add_key(name="home")  # the reference configuration: the home pose, at rest
-    return spec
+    def closures(self, timestep: float) -> None:
+        """The ``connect`` equalities that close each module's legs ``v`` and ``p`` on its
+        platform's corner ``B'``, as stiff as the time step allows."""
+        mujoco = self.mujoco
+        for k, m in enumerate(self.g.modules):
+            for leg_name, base in ((f"v{k + 1}", m.B), (f"p{k + 1}", m.A)):
+                closure = self.spec.add_equality(
+                    name=f"close_{leg_name}",
+                    type=mujoco.mjtEq.mjEQ_CONNECT,
+                    objtype=mujoco.mjtObj.mjOBJ_BODY,
+                    name1=f"{leg_name}_rod",
+                    name2=f"platform{k + 1}",
+                    solref=[float(f"{timestep / 50:.6g}"), 1.0],
+                    solimp=[0.99999, 0.99999, 0.001, 0.5, 2.0],
+                )
+                closure.data[0:3] = self.r(m.B_top - base)
+
+    def drives(self) -> None:
+        """The closed legs' tendons (with their friction) and a motor on every joint: on its
+        tendon for a closed leg, on the joint itself otherwise."""
+        mujoco, spec = self.mujoco, self.spec
+        for n in self.closed:
+            tendon = spec.add_tendon(name=f"{n}_leg", damping=[self.r1(self.damping[n]), 0.0, 0.0], width=0.004)
+            tendon.wrap_site(f"{n}_foot")
+            tendon.wrap_site(f"{n}_head")
+        for n in self.names:
+            kind = mujoco.mjtTrn.mjTRN_TENDON if n in self.closed else mujoco.mjtTrn.mjTRN_JOINT
+            motor = spec.add_actuator(name=n, trntype=kind, target=f"{n}_leg" if n in self.closed else n)
+            motor.set_to_motor()
 
 
 def to_mjcf(

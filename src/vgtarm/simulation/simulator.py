@@ -329,7 +329,29 @@ def prepare(
     n, dt = len(ref.t), ref.dt
     per_sample = BYTES_PER_SAMPLE_SCM if isinstance(controller, SwitchingControl) else BYTES_PER_SAMPLE
     check_memory(n * per_sample, f"simulation of {n:,} reference samples", "simulate a shorter reference")
-    sensing = sensing_settings(
+    sensing = _sensing(plant, dt, scenario)
+    chosen = scenario.controller_model
+    model = chosen if isinstance(chosen, Robot) else plant.with_parameters(chosen or plant.parameters)
+    tip_d = checks.reference_tip(plant, ref)  # refuses another robot's reference, naming both
+    dist_seed, ga_seed, sensor_seed = np.random.SeedSequence(int(scenario.seed)).spawn(3)
+    arrays = _run_arrays(plant, model, ref, scenario, sensing, tip_d, dist_seed, sensor_seed)
+    settings = _loop_settings(plant, controller, scenario, sensing, dt)
+    job = Job(
+        settings=settings,
+        unswitched=dataclass_replace(settings, threshold=0.0),
+        arrays=arrays,
+        gains=controller.gains,
+        controller=controller,
+        model=model,
+        dt=dt,
+        ga_rng=np.random.default_rng(ga_seed),
+    )
+    return Run(plant, controller, scenario, ref, sensing, tip_d, job)
+
+
+def _sensing(plant: Robot, dt: float, scenario: Scenario) -> Sensing:
+    """What the controller measures and estimates in ``scenario``, at the control period ``dt`` (s)."""
+    return sensing_settings(
         plant.joint_units,
         dt,
         scenario.observer,
@@ -342,12 +364,22 @@ def prepare(
         scenario.estimator,
         scenario.estimator_bandwidth_hz,
     )
+
+
+def _run_arrays(
+    plant: Robot,
+    model: Robot,
+    ref: JointReference,
+    scenario: Scenario,
+    sensing: Sensing,
+    tip_d: np.ndarray,
+    dist_seed: np.random.SeedSequence,
+    sensor_seed: np.random.SeedSequence,
+) -> LoopArrays:
+    """The loop's arrays: the reference, the disturbance drawn from ``dist_seed``, the initial state,
+    the velocity noise drawn from ``sensor_seed`` and the expected tool force fed forward."""
     external = scenario.external_force
-    chosen = scenario.controller_model
-    model = chosen if isinstance(chosen, Robot) else plant.with_parameters(chosen or plant.parameters)
-    tip_d = checks.reference_tip(plant, ref)  # refuses another robot's reference, naming both
-    dist_seed, ga_seed, sensor_seed = np.random.SeedSequence(int(scenario.seed)).spawn(3)
-    disturbance = external.disturbance_samples(n, np.random.default_rng(dist_seed))
+    disturbance = external.disturbance_samples(len(ref.t), np.random.default_rng(dist_seed))
     q0, qd0 = checks.initial_state(plant, ref, scenario.initial_state)
     noise = (
         np.random.default_rng(sensor_seed).normal(scale=sensing.velocity_noise, size=ref.q.shape)
@@ -357,7 +389,7 @@ def prepare(
     expected = None
     if scenario.tool_force_feedforward:  # along the desired tip velocity J_P(q_d) qd_d of the controller's model
         expected = external.expected(model.tip_velocity(ref.q, ref.qd)[0], scenario.feedforward_speed)
-    arrays = loop_arrays(
+    return loop_arrays(
         plant,
         model,
         ref,
@@ -368,7 +400,14 @@ def prepare(
         velocity_noise=noise,
         tool_force_expected=expected,
     )
-    settings = LoopSettings(
+
+
+def _loop_settings(
+    plant: Robot, controller: Controller, scenario: Scenario, sensing: Sensing, dt: float
+) -> LoopSettings:
+    """The settings of the compiled loop (``vgt_settings``) for ``controller`` in ``scenario``."""
+    external = scenario.external_force
+    return LoopSettings(
         dt=dt,
         integrator=scenario.integrator,
         substeps=scenario.substeps,
@@ -386,17 +425,6 @@ def prepare(
         threshold_measured=isinstance(controller, SwitchingControl) and controller.measured_switching,
         tool_feedforward=bool(scenario.tool_force_feedforward),
     )
-    job = Job(
-        settings=settings,
-        unswitched=dataclass_replace(settings, threshold=0.0),
-        arrays=arrays,
-        gains=controller.gains,
-        controller=controller,
-        model=model,
-        dt=dt,
-        ga_rng=np.random.default_rng(ga_seed),
-    )
-    return Run(plant, controller, scenario, ref, sensing, tip_d, job)
 
 
 @dataclass(frozen=True)

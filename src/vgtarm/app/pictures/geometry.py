@@ -281,110 +281,156 @@ def _geometry(layout: ArmLayout, q: ArrayLike, fk: ForwardKinematics) -> Mechani
         raise InputError(
             f"q must be one configuration ({n},) with its forward kinematics ({m} platforms), got shape {qa.shape}"
         )
-    closeness = limit_closeness(qa, layout.lower, layout.upper)
-
-    def driven(name: str, kind: str, start: Array, end: Array, joint: int | None) -> Segment:
-        if joint is None:
-            return Segment(name, kind, start, end)
-        return Segment(name, kind, start, end, joint=joint, closeness=float(closeness[joint]))
-
-    joints: dict[str, Array] = {}
-    centres: dict[str, Array] = {}
-    segments: list[Segment] = []
-    mounts: dict[int, Plate] = {}  # the plate on top of the twist joint after module k
-    frames = [FrameAxes("F0", np.zeros(3), np.eye(3))]
-    origin, rotation = np.zeros(3), np.eye(3)  # the frame module k stands on
-    for k in range(m):
-        number = k + 1
-        c, s = layout.planes[k]
-        # (h, z) in the module's plane -> origin + R (-h sin phi, h cos phi, z) in F0
-        for name, (h, z) in _module_points(qa, layout.legs[k], fk.passive[k], layout.b[k]).items():
-            joints[f"{name}{number}"] = origin + rotation @ np.array([-s * h, c * h, z])
-        centre = 0.5 * (joints[f"A'{number}"] + joints[f"B'{number}"])
-        platform = fk.platform_rotation[k]
-        centres[f"O{number}"] = centre
-        frames.append(FrameAxes(f"F{number}", centre, platform))
-        segments.append(Segment(f"base{number}", "base", joints[f"A{number}"], joints[f"B{number}"]))
-        i_s, i_v, i_p = layout.legs[k]
-        for index, start, end in ((i_s, "A", "A'"), (i_v, "B", "B'"), (i_p, "A", "B'")):
-            segments.append(
-                driven(layout.joint_names[index], "leg", joints[f"{start}{number}"], joints[f"{end}{number}"], index)
-            )
-        segments.append(Segment(f"platform{number}", "platform", joints[f"A'{number}"], joints[f"B'{number}"]))
-        origin, rotation = centre, platform
-        twist = layout.twists[k]
-        if twist is not None:
-            index, height = twist
-            axis = platform[:, 2]
-            mount = centre + height * axis
-            overhang = TWIST_AXIS_OVERHANG * height
-            ends = (centre - overhang * axis, mount + overhang * axis)
-            rotation = fk.rotation if k == m - 1 else _twist_rotation(platform, float(qa[index]))
-            if k == m - 1:  # the end-effector's twist: its part belongs to the tool drawn below
-                segments.append(Segment("twist_axis", "twist_axis", *ends))
-            else:
-                label = f"{number + 1}"  # psi{k+1} after module k, as the stack names it
-                half_bar = END_EFFECTOR_FRACTION * layout.d[k]
-                bar_centre, bar = centre + 0.5 * height * axis, rotation[:, 0]
-                segments.append(Segment(f"twist{label}", "twist", centre, mount))
-                segments.append(Segment(f"twist_axis{label}", "twist_axis", *ends))
-                segments.append(
-                    driven(
-                        f"twist_bar{label}",
-                        "twist_bar",
-                        bar_centre - half_bar * bar,
-                        bar_centre + half_bar * bar,
-                        index,
-                    )
-                )
-                mounts[k] = Plate(f"twist{label}", _diamond(mount, rotation, layout.planes[k + 1], layout.b[k + 1]))
-            origin = mount
-    last = m - 1
-    centre = centres[f"O{m}"]
-    tip = origin + fk.rotation @ layout.tool
-    segments.append(Segment("tool", "tool", centre, tip))
-    twist = layout.twists[last]
-    half_bar = END_EFFECTOR_FRACTION * layout.d[last]
-    if twist is not None:
-        bar_centre = centre + 0.5 * twist[1] * fk.platform_rotation[last][:, 2]
-    else:
-        bar_centre = 0.5 * (centre + tip)
-    bar = fk.rotation[:, 0]
-    end_joint = None if twist is None else twist[0]
-    segments.append(
-        driven("end_effector", "end_effector", bar_centre - half_bar * bar, bar_centre + half_bar * bar, end_joint)
-    )
-    frames.append(FrameAxes(f"F{m + 1}", tip, fk.rotation))
-    # each platform: its top joints on one diagonal; on the other, the base joints of the module
-    # standing right on it (not in the same plane), else its own half-width across its plane
-    plates = [Plate("base", _diamond(np.zeros(3), np.eye(3), layout.planes[0], layout.b[0]))]
-    for k in range(m):
-        number = k + 1
-        centre, platform = centres[f"O{number}"], fk.platform_rotation[k]
-        c, s = layout.planes[k]
-        on_top = (
-            k < last and layout.twists[k] is None and abs(_relative_sine(layout.planes[k], layout.planes[k + 1])) > 1e-9
-        )
-        if on_top:
-            across = (joints[f"A{number + 1}"], joints[f"B{number + 1}"])
-        else:
-            side = layout.d[k] * (platform @ np.array([c, s, 0.0]))
-            across = (centre + side, centre - side)
-        plates.append(
-            Plate(f"platform{number}", np.stack([joints[f"A'{number}"], across[0], joints[f"B'{number}"], across[1]]))
-        )
-        if k in mounts:
-            plates.append(mounts[k])
-    joints.update(centres)
+    drawing = _Drawing(layout, qa, fk)
+    tip = drawing.end_effector(drawing.modules())
+    plates = drawing.plates()
+    joints = drawing.joints
+    joints.update(drawing.centres)
     joints["P"] = tip
     return MechanismGeometry(
         q=qa.copy(),
         joints=joints,
-        segments=tuple(sorted(segments, key=lambda seg: SEGMENT_KINDS.index(seg.kind))),
+        segments=tuple(sorted(drawing.segments, key=lambda seg: SEGMENT_KINDS.index(seg.kind))),
         plates=tuple(plates),
-        frames=tuple(frames),
+        frames=tuple(drawing.frames),
         axis_length=FRAME_AXIS_FRACTION * layout.b[0],
     )
+
+
+class _Drawing:
+    """The parts of :func:`_geometry`'s drawing as they are collected, module by module from the
+    base (:meth:`modules`), then the end-effector and the plates: joint points, platform centres,
+    bars, twist mounts and frames."""
+
+    def __init__(self, layout: ArmLayout, q: Array, fk: ForwardKinematics) -> None:
+        self.layout, self.q, self.fk = layout, q, fk
+        self.m = layout.n_modules
+        self.closeness = limit_closeness(q, layout.lower, layout.upper)
+        self.joints: dict[str, Array] = {}
+        self.centres: dict[str, Array] = {}
+        self.segments: list[Segment] = []
+        self.mounts: dict[int, Plate] = {}  # the plate on top of the twist joint after module k
+        self.frames = [FrameAxes("F0", np.zeros(3), np.eye(3))]
+
+    def driven(self, name: str, kind: str, start: Array, end: Array, joint: int | None) -> Segment:
+        """A bar, with the joint that drives it and how close that joint is to a limit."""
+        if joint is None:
+            return Segment(name, kind, start, end)
+        return Segment(name, kind, start, end, joint=joint, closeness=float(self.closeness[joint]))
+
+    def modules(self) -> Array:
+        """Every module and the twist after it, base first; returns the origin the end-effector's
+        tool is mounted at (the last platform's centre, or the top of its twist)."""
+        origin, rotation = np.zeros(3), np.eye(3)  # the frame module k stands on
+        for k in range(self.m):
+            centre, platform = self.module(k, origin, rotation)
+            origin, rotation = centre, platform
+            twist = self.layout.twists[k]
+            if twist is not None:
+                origin, rotation = self.twist(k, twist, centre, platform)
+        return origin
+
+    def module(self, k: int, origin: Array, rotation: Array) -> tuple[Array, Array]:
+        """Module ``k``'s joints, centre, frame and bars, standing on the frame ``(origin,
+        rotation)``; returns its platform's centre and frame."""
+        layout, joints, number = self.layout, self.joints, k + 1
+        c, s = layout.planes[k]
+        # (h, z) in the module's plane -> origin + R (-h sin phi, h cos phi, z) in F0
+        for name, (h, z) in _module_points(self.q, layout.legs[k], self.fk.passive[k], layout.b[k]).items():
+            joints[f"{name}{number}"] = origin + rotation @ np.array([-s * h, c * h, z])
+        centre = 0.5 * (joints[f"A'{number}"] + joints[f"B'{number}"])
+        platform = self.fk.platform_rotation[k]
+        self.centres[f"O{number}"] = centre
+        self.frames.append(FrameAxes(f"F{number}", centre, platform))
+        self.segments.append(Segment(f"base{number}", "base", joints[f"A{number}"], joints[f"B{number}"]))
+        i_s, i_v, i_p = layout.legs[k]
+        for index, start, end in ((i_s, "A", "A'"), (i_v, "B", "B'"), (i_p, "A", "B'")):
+            self.segments.append(
+                self.driven(
+                    layout.joint_names[index], "leg", joints[f"{start}{number}"], joints[f"{end}{number}"], index
+                )
+            )
+        self.segments.append(Segment(f"platform{number}", "platform", joints[f"A'{number}"], joints[f"B'{number}"]))
+        return centre, platform
+
+    def twist(self, k: int, twist: tuple[int, float], centre: Array, platform: Array) -> tuple[Array, Array]:
+        """The twist joint after module ``k`` (its axis; inside the arm also its part, cross-bar
+        and mount plate); returns the frame what follows stands on."""
+        layout = self.layout
+        index, height = twist
+        axis = platform[:, 2]
+        mount = centre + height * axis
+        overhang = TWIST_AXIS_OVERHANG * height
+        ends = (centre - overhang * axis, mount + overhang * axis)
+        rotation = self.fk.rotation if k == self.m - 1 else _twist_rotation(platform, float(self.q[index]))
+        if k == self.m - 1:  # the end-effector's twist: its part belongs to the tool drawn below
+            self.segments.append(Segment("twist_axis", "twist_axis", *ends))
+            return mount, rotation
+        label = f"{k + 2}"  # psi{k+1} after module k, as the stack names it
+        half_bar = END_EFFECTOR_FRACTION * layout.d[k]
+        bar_centre, bar = centre + 0.5 * height * axis, rotation[:, 0]
+        self.segments.append(Segment(f"twist{label}", "twist", centre, mount))
+        self.segments.append(Segment(f"twist_axis{label}", "twist_axis", *ends))
+        self.segments.append(
+            self.driven(
+                f"twist_bar{label}",
+                "twist_bar",
+                bar_centre - half_bar * bar,
+                bar_centre + half_bar * bar,
+                index,
+            )
+        )
+        self.mounts[k] = Plate(f"twist{label}", _diamond(mount, rotation, layout.planes[k + 1], layout.b[k + 1]))
+        return mount, rotation
+
+    def end_effector(self, origin: Array) -> Array:
+        """The tool from the last platform's centre to the tip, the end-effector's cross-bar and
+        its frame, with the tool mounted at ``origin``; returns the tip."""
+        layout, fk, last = self.layout, self.fk, self.m - 1
+        centre = self.centres[f"O{self.m}"]
+        tip = origin + fk.rotation @ layout.tool
+        self.segments.append(Segment("tool", "tool", centre, tip))
+        twist = layout.twists[last]
+        half_bar = END_EFFECTOR_FRACTION * layout.d[last]
+        if twist is not None:
+            bar_centre = centre + 0.5 * twist[1] * fk.platform_rotation[last][:, 2]
+        else:
+            bar_centre = 0.5 * (centre + tip)
+        bar = fk.rotation[:, 0]
+        end_joint = None if twist is None else twist[0]
+        self.segments.append(
+            self.driven(
+                "end_effector", "end_effector", bar_centre - half_bar * bar, bar_centre + half_bar * bar, end_joint
+            )
+        )
+        self.frames.append(FrameAxes(f"F{self.m + 1}", tip, fk.rotation))
+        return tip
+
+    def plates(self) -> list[Plate]:
+        """The base, each platform and the twist mounts: each platform has its top joints on one
+        diagonal; on the other, the base joints of the module standing right on it (not in the
+        same plane), else its own half-width across its plane."""
+        layout, joints, last = self.layout, self.joints, self.m - 1
+        plates = [Plate("base", _diamond(np.zeros(3), np.eye(3), layout.planes[0], layout.b[0]))]
+        for k in range(self.m):
+            number = k + 1
+            centre, platform = self.centres[f"O{number}"], self.fk.platform_rotation[k]
+            c, s = layout.planes[k]
+            on_top = (
+                k < last
+                and layout.twists[k] is None
+                and abs(_relative_sine(layout.planes[k], layout.planes[k + 1])) > 1e-9
+            )
+            if on_top:
+                across = (joints[f"A{number + 1}"], joints[f"B{number + 1}"])
+            else:
+                side = layout.d[k] * (platform @ np.array([c, s, 0.0]))
+                across = (centre + side, centre - side)
+            corners = np.stack([joints[f"A'{number}"], across[0], joints[f"B'{number}"], across[1]])
+            plates.append(Plate(f"platform{number}", corners))
+            if k in self.mounts:
+                plates.append(self.mounts[k])
+        return plates
 
 
 def _relative_sine(below: tuple[float, float], above: tuple[float, float]) -> float:

@@ -210,6 +210,18 @@ def beyond_figure(results: dict[BeyondRun, SimulationResult], folder: Path, name
 def beyond_section(results: dict[BeyondRun, SimulationResult], figure: str) -> list[str]:
     """Markdown lines of the section: table, figure, and what bounds the remaining error."""
     summaries = {spec: r.summary() for spec, r in results.items()}
+    lines = _beyond_table(summaries)
+    lines += safe_study.section_lines(safe_study.load_summary(), "safe_study.png")  # issue 23: the 60 runs
+    lines += ["", f"![tip error beyond the paper]({figure})", "", BOUNDS_HEADING, ""]
+    by_label = {(spec.label, spec.realistic): s for spec, s in summaries.items()}
+    lines += _bounds_perfect(results, by_label)
+    lines += _bounds_switching(by_label)
+    lines += _bounds_realistic(results, by_label)
+    return lines
+
+
+def _beyond_table(summaries: dict[BeyondRun, dict[str, Any]]) -> list[str]:
+    """The section's opening and its table of the runs :attr:`BeyondRun.in_table`."""
     lines = [
         "## Beyond the paper: tracking under the tool force",
         "",
@@ -235,43 +247,56 @@ def beyond_section(results: dict[BeyondRun, SimulationResult], figure: str) -> l
             f" {_n(s['chatter_n'], 2)} | {_n(s['rms_twist_torque_nm'], 3)} | {_n(s['actuator_energy_j'], 2)} |"
             f" {s['ga_activations']} | {folder_cell(spec.folder)} |"
         )
-    lines += safe_study.section_lines(safe_study.load_summary(), "safe_study.png")  # issue 23: the 60 runs
-    lines += ["", f"![tip error beyond the paper]({figure})", "", BOUNDS_HEADING, ""]
-    by_label = {(spec.label, spec.realistic): s for spec, s in summaries.items()}
+    return lines
+
+
+def _bounds_perfect(
+    results: dict[BeyondRun, SimulationResult], by_label: dict[tuple[str, bool], dict[str, Any]]
+) -> list[str]:
+    """What bounds the observer's error with perfect sensing: the cutting force's steps where the
+    tool is slow, the disturbance, and the force sensor's one-period delay (nothing without the
+    five runs that tell them apart)."""
     cfc = by_label.get(("CFC", False))
     observed = by_label.get(("CFC + observer", False))
     sensor = by_label.get(("CFC + force sensor", False))
     cutting = by_label.get(("CFC + observer, cutting force only", False))
     noise = by_label.get(("CFC + observer, disturbance only", False))
-    if cfc and observed and sensor and cutting and noise:
-        run = {spec.label: r for spec, r in results.items() if not spec.realistic}
-        slow = _slow(run["CFC + observer"])
-        steps = ", ".join(f"{t:.3f}" for t in _force_steps(run["CFC + observer, cutting force only"])) or "none"
-        gain = float(observed.get("observer_gain_per_s") or 0.0)
-        both, alone, late = (
-            _split(run[label], slow)
-            for label in ("CFC + observer", "CFC + observer, cutting force only", "CFC + force sensor")
-        )
-        lines += [
-            f"- Computed force control has no integral action: the 20 N cutting force leaves an offset"
-            f" (max {mm(cfc['max_tip_error_m'])} mm). The observer ({gain:g} 1/s) estimates the external joint"
-            f" efforts and cancels them: max {mm(observed['max_tip_error_m'])} mm, RMS"
-            f" {mm(observed['rms_tip_error_m'])} mm.",
-            f"- The cutting force points against the tool's actual velocity. Where the tool is slow (desired"
-            f" speed below {SLOW_SPEED * 1e3:g} mm/s: it starts, turns at the corner, stops; {slow.mean():.1%} of"
-            " the run) that velocity is mostly the tracking error's, and the 20 N force turns within a few"
-            f" periods, or flips from one period to the next (steps at t = {steps} s), faster than the"
-            f" observer's time constant 1/K_O = {1e3 / gain:.1f} ms. With the cutting force alone the error is"
-            f" max {mm(alone[0])} mm there and {mm(alone[1])} mm elsewhere (RMS {mm(alone[2])} mm).",
-            f"- The random disturbance alone (5 N per axis, a new value each period, faster than any observer"
-            f" can follow) leaves max {mm(noise['max_tip_error_m'])} mm, RMS {mm(noise['rms_tip_error_m'])} mm,"
-            " everywhere on the path: it sets the floor.",
-            f"- Together: max {mm(both[0])} mm in the slow phases, {mm(both[1])} mm elsewhere (RMS {mm(both[2])} mm).",
-            f"- The force sensor knows the tool force one period late, with no filter lag: max"
-            f" {mm(sensor['max_tip_error_m'])} mm, RMS {mm(sensor['rms_tip_error_m'])} mm ({mm(late[0])} mm in"
-            f" the slow phases, {mm(late[1])} mm elsewhere). What is left is the one-period delay, of the"
-            " disturbance that changes every period and of the force flipping at low speed.",
-        ]
+    if not (cfc and observed and sensor and cutting and noise):
+        return []
+    run = {spec.label: r for spec, r in results.items() if not spec.realistic}
+    slow = _slow(run["CFC + observer"])
+    steps = ", ".join(f"{t:.3f}" for t in _force_steps(run["CFC + observer, cutting force only"])) or "none"
+    gain = float(observed.get("observer_gain_per_s") or 0.0)
+    both, alone, late = (
+        _split(run[label], slow)
+        for label in ("CFC + observer", "CFC + observer, cutting force only", "CFC + force sensor")
+    )
+    return [
+        f"- Computed force control has no integral action: the 20 N cutting force leaves an offset"
+        f" (max {mm(cfc['max_tip_error_m'])} mm). The observer ({gain:g} 1/s) estimates the external joint"
+        f" efforts and cancels them: max {mm(observed['max_tip_error_m'])} mm, RMS"
+        f" {mm(observed['rms_tip_error_m'])} mm.",
+        f"- The cutting force points against the tool's actual velocity. Where the tool is slow (desired"
+        f" speed below {SLOW_SPEED * 1e3:g} mm/s: it starts, turns at the corner, stops; {slow.mean():.1%} of"
+        " the run) that velocity is mostly the tracking error's, and the 20 N force turns within a few"
+        f" periods, or flips from one period to the next (steps at t = {steps} s), faster than the"
+        f" observer's time constant 1/K_O = {1e3 / gain:.1f} ms. With the cutting force alone the error is"
+        f" max {mm(alone[0])} mm there and {mm(alone[1])} mm elsewhere (RMS {mm(alone[2])} mm).",
+        f"- The random disturbance alone (5 N per axis, a new value each period, faster than any observer"
+        f" can follow) leaves max {mm(noise['max_tip_error_m'])} mm, RMS {mm(noise['rms_tip_error_m'])} mm,"
+        " everywhere on the path: it sets the floor.",
+        f"- Together: max {mm(both[0])} mm in the slow phases, {mm(both[1])} mm elsewhere (RMS {mm(both[2])} mm).",
+        f"- The force sensor knows the tool force one period late, with no filter lag: max"
+        f" {mm(sensor['max_tip_error_m'])} mm, RMS {mm(sensor['rms_tip_error_m'])} mm ({mm(late[0])} mm in"
+        f" the slow phases, {mm(late[1])} mm elsewhere). What is left is the one-period delay, of the"
+        " disturbance that changes every period and of the force flipping at low speed.",
+    ]
+
+
+def _bounds_switching(by_label: dict[tuple[str, bool], dict[str, Any]]) -> list[str]:
+    """Switching control under realistic sensing (when it fails) and with the observer (when its
+    GA never runs)."""
+    lines: list[str] = []
     scm_realistic = by_label.get(("SCM", True))
     if scm_realistic and not scm_realistic["success"]:
         lines.append(
@@ -290,6 +315,15 @@ def beyond_section(results: dict[BeyondRun, SimulationResult], figure: str) -> l
             f" ({'both sensings' if len(quiet) == 2 else 'realistic' if quiet[0] else 'perfect'}): SCM + observer"
             " runs as CFC + observer."
         )
+    return lines
+
+
+def _bounds_realistic(
+    results: dict[BeyondRun, SimulationResult], by_label: dict[tuple[str, bool], dict[str, Any]]
+) -> list[str]:
+    """The observer and the force sensor under realistic sensing, and what each part of that
+    sensing costs (the decomposition runs)."""
+    lines: list[str] = []
     realistic = by_label.get(("CFC + observer", True))
     if realistic:
         lines.append(
@@ -297,28 +331,7 @@ def beyond_section(results: dict[BeyondRun, SimulationResult], figure: str) -> l
             f" mass the observer still tracks to max {mm(realistic['max_tip_error_m'])} mm, RMS"
             f" {mm(realistic['rms_tip_error_m'])} mm: it estimates the model's error together with the tool force."
         )
-        named = {(spec.label, spec.realistic): r for spec, r in results.items()}
-        chain = [
-            named.get(key)
-            for key in (
-                ("CFC + observer", False),
-                ("CFC + observer, 1 nm encoders, 1000 Hz filter", False),
-                ("CFC + observer, 1 nm encoders", False),
-                ("CFC + observer", True),
-            )
-        ]
-        if all(r is not None and r.success for r in chain):
-            slow = _slow(chain[0])  # type: ignore[arg-type]
-            exact, unfiltered, filtered, real = (mm(_split(r, slow)[2]) for r in chain)  # type: ignore[arg-type]
-            lines.append(
-                f"- What realistic sensing costs, RMS away from the slow phases: {exact} mm with perfect sensing;"
-                f" {unfiltered} mm with velocities differenced from 1 nm encoders and a nearly transparent filter"
-                " (1000 Hz), because a difference of positions is the velocity of the period before; "
-                f"{filtered} mm with the default 100 Hz filter, whose lag adds to that (it halves the effort's"
-                f" chatter and keeps the observer stable up to K_O = 1/dt); {real} mm with"
-                f" {ENCODER_RESOLUTION * 1e6:g} um counts and the wrong mass. The encoder resolution itself costs"
-                " little: the velocity's delay and filter bound this part."
-            )
+        lines += _sensing_cost(results)
     sensor_realistic = by_label.get(("CFC + force sensor", True))
     if sensor_realistic and sensor_realistic["success"]:
         lines.append(
@@ -327,3 +340,31 @@ def beyond_section(results: dict[BeyondRun, SimulationResult], figure: str) -> l
             " from the model's wrong mass (gravity and inertia) stays; the observer removes both."
         )
     return lines
+
+
+def _sensing_cost(results: dict[BeyondRun, SimulationResult]) -> list[str]:
+    """RMS error away from the slow phases along the chain from perfect to realistic sensing
+    (nothing unless all four runs succeeded)."""
+    named = {(spec.label, spec.realistic): r for spec, r in results.items()}
+    chain = [
+        named.get(key)
+        for key in (
+            ("CFC + observer", False),
+            ("CFC + observer, 1 nm encoders, 1000 Hz filter", False),
+            ("CFC + observer, 1 nm encoders", False),
+            ("CFC + observer", True),
+        )
+    ]
+    if not all(r is not None and r.success for r in chain):
+        return []
+    slow = _slow(chain[0])  # type: ignore[arg-type]
+    exact, unfiltered, filtered, real = (mm(_split(r, slow)[2]) for r in chain)  # type: ignore[arg-type]
+    return [
+        f"- What realistic sensing costs, RMS away from the slow phases: {exact} mm with perfect sensing;"
+        f" {unfiltered} mm with velocities differenced from 1 nm encoders and a nearly transparent filter"
+        " (1000 Hz), because a difference of positions is the velocity of the period before; "
+        f"{filtered} mm with the default 100 Hz filter, whose lag adds to that (it halves the effort's"
+        f" chatter and keeps the observer stable up to K_O = 1/dt); {real} mm with"
+        f" {ENCODER_RESOLUTION * 1e6:g} um counts and the wrong mass. The encoder resolution itself costs"
+        " little: the velocity's delay and filter bound this part."
+    ]

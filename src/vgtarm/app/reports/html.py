@@ -446,19 +446,10 @@ def mechanism_figure(
     samples = np.unique(np.linspace(0, n - 1, min(n, max_frames)).round().astype(np.int64))
     geometries = mechanism_geometries(robot, r.q[samples])
     first = mechanism_traces(geometries[0])
-    index = decimate_min_max(r.t[:n], r.tip_error[:n], MAX_POINTS)
-    d, a = r.tip_desired[index] * MM, r.tip[index] * MM
-    static = [
-        {"type": "scatter3d", **_xyz(d, np.float64), "mode": "lines", "name": "desired tip path",
-         "line": {"color": "#1f77b4", "width": 3, "dash": "dash"}, "hoverinfo": "skip"},
-        {"type": "scatter3d", **_xyz(a, np.float64), "mode": "lines", "name": "actual tip path",
-         "line": {"color": "#ff7f0e", "width": 3}, "hoverinfo": "skip"},
-    ]  # fmt: skip
+    static = _tip_paths(r, n)
     moving = list(range(len(static), len(static) + len(first)))
     label = plotly_text(run.label)
     points = np.concatenate([g.points() for g in geometries]) * MM
-    lo, hi = points.min(axis=0), points.max(axis=0)
-    pad = 0.05 * float((hi - lo).max())
     frames = [
         {
             "name": str(i),
@@ -468,80 +459,106 @@ def mechanism_figure(
         }
         for i, (g, k) in enumerate(zip(geometries, samples, strict=True))
     ]
-    step_ms = 1000.0 / fps
     layout = _layout(
         dict(
             title={"text": f"{label}: {_status(r, int(samples[0]))}"},
             height=720,
-            scene={
-                "xaxis": {"title": {"text": "x (mm)"}, "range": [lo[0] - pad, hi[0] + pad]},
-                "yaxis": {"title": {"text": "y (mm)"}, "range": [lo[1] - pad, hi[1] + pad]},
-                "zaxis": {"title": {"text": "z (mm)"}, "range": [lo[2] - pad, hi[2] + pad]},
-                "aspectmode": "manual",
-                "aspectratio": dict(zip("xyz", (hi - lo + 2 * pad) / float((hi - lo + 2 * pad).max()), strict=True)),
-                "camera": {"eye": {"x": 0.95, "y": -1.05, "z": 0.45}, "center": {"x": 0, "y": 0, "z": -0.05}},
-            },
+            scene=_mechanism_scene(points),
             margin={"l": 0, "r": 0, "t": 60, "b": 0},
             legend={"font": {"size": 10}, "x": 0.0, "y": 1.0},
-            updatemenus=[
-                {
-                    "type": "buttons",
-                    "direction": "left",
-                    "x": 0.0,
-                    "y": 0.0,
-                    "xanchor": "left",
-                    "yanchor": "top",
-                    "pad": {"t": 40},
-                    "buttons": [
-                        {
-                            "label": "\u25b6 Play",
-                            "method": "animate",
-                            "args": [
-                                None,
-                                {
-                                    "frame": {"duration": step_ms, "redraw": True},
-                                    "fromcurrent": True,
-                                    "transition": {"duration": 0},
-                                    "mode": "immediate",
-                                },
-                            ],
-                        },
-                        {
-                            "label": "\u275a\u275a Pause",
-                            "method": "animate",
-                            "args": [[None], {"frame": {"duration": 0, "redraw": False}, "mode": "immediate"}],
-                        },
-                    ],
-                }
-            ],
-            sliders=[
-                {
-                    "active": 0,
-                    "x": 0.16,
-                    "len": 0.84,
-                    "y": 0.0,
-                    "pad": {"t": 30},
-                    "currentvalue": {"prefix": "t = ", "suffix": " s"},
-                    "steps": [
-                        {
-                            "label": f"{r.t[k]:.2f}",
-                            "method": "animate",
-                            "args": [
-                                [str(i)],
-                                {
-                                    "frame": {"duration": 0, "redraw": True},
-                                    "mode": "immediate",
-                                    "transition": {"duration": 0},
-                                },
-                            ],
-                        }
-                        for i, k in enumerate(samples)
-                    ],
-                }
-            ],
+            updatemenus=[_play_buttons(1000.0 / fps)],
+            sliders=[_time_slider(r.t, samples)],
         )
     )
     return {"data": [*static, *first], "layout": layout, "frames": frames}
+
+
+def _tip_paths(r: SimulationResult, n: int) -> list[dict[str, Any]]:
+    """The desired and actual tip paths of the first ``n`` samples of ``r`` (mm), decimated for
+    display: the animation's traces that do not move."""
+    index = decimate_min_max(r.t[:n], r.tip_error[:n], MAX_POINTS)
+    d, a = r.tip_desired[index] * MM, r.tip[index] * MM
+    return [
+        {"type": "scatter3d", **_xyz(d, np.float64), "mode": "lines", "name": "desired tip path",
+         "line": {"color": "#1f77b4", "width": 3, "dash": "dash"}, "hoverinfo": "skip"},
+        {"type": "scatter3d", **_xyz(a, np.float64), "mode": "lines", "name": "actual tip path",
+         "line": {"color": "#ff7f0e", "width": 3}, "hoverinfo": "skip"},
+    ]  # fmt: skip
+
+
+def _mechanism_scene(points: Array) -> dict[str, Any]:
+    """The 3-D scene around every drawn point ``points`` (k, 3) (mm), padded by 5 % of the
+    largest extent, with equal scales on the three axes."""
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    pad = 0.05 * float((hi - lo).max())
+    return {
+        "xaxis": {"title": {"text": "x (mm)"}, "range": [lo[0] - pad, hi[0] + pad]},
+        "yaxis": {"title": {"text": "y (mm)"}, "range": [lo[1] - pad, hi[1] + pad]},
+        "zaxis": {"title": {"text": "z (mm)"}, "range": [lo[2] - pad, hi[2] + pad]},
+        "aspectmode": "manual",
+        "aspectratio": dict(zip("xyz", (hi - lo + 2 * pad) / float((hi - lo + 2 * pad).max()), strict=True)),
+        "camera": {"eye": {"x": 0.95, "y": -1.05, "z": 0.45}, "center": {"x": 0, "y": 0, "z": -0.05}},
+    }
+
+
+def _play_buttons(step_ms: float) -> dict[str, Any]:
+    """The animation's play and pause buttons (a frame every ``step_ms`` milliseconds)."""
+    return {
+        "type": "buttons",
+        "direction": "left",
+        "x": 0.0,
+        "y": 0.0,
+        "xanchor": "left",
+        "yanchor": "top",
+        "pad": {"t": 40},
+        "buttons": [
+            {
+                "label": "\u25b6 Play",
+                "method": "animate",
+                "args": [
+                    None,
+                    {
+                        "frame": {"duration": step_ms, "redraw": True},
+                        "fromcurrent": True,
+                        "transition": {"duration": 0},
+                        "mode": "immediate",
+                    },
+                ],
+            },
+            {
+                "label": "\u275a\u275a Pause",
+                "method": "animate",
+                "args": [[None], {"frame": {"duration": 0, "redraw": False}, "mode": "immediate"}],
+            },
+        ],
+    }
+
+
+def _time_slider(t: Array, samples: NDArray[np.int64]) -> dict[str, Any]:
+    """The animation's time slider: one step per frame, at the times ``t[samples]`` (s)."""
+    return {
+        "active": 0,
+        "x": 0.16,
+        "len": 0.84,
+        "y": 0.0,
+        "pad": {"t": 30},
+        "currentvalue": {"prefix": "t = ", "suffix": " s"},
+        "steps": [
+            {
+                "label": f"{t[k]:.2f}",
+                "method": "animate",
+                "args": [
+                    [str(i)],
+                    {
+                        "frame": {"duration": 0, "redraw": True},
+                        "mode": "immediate",
+                        "transition": {"duration": 0},
+                    },
+                ],
+            }
+            for i, k in enumerate(samples)
+        ],
+    }
 
 
 _STYLE = """

@@ -145,51 +145,12 @@ def _reproduce_into(
     specs = list(dict.fromkeys(specs))
     extra = beyond_runs() if beyond_paper else []
     low = low_force_runs(robot) if beyond_paper else []  # issue 22: the low-force preset's rows
-    plan = figure_plan(specs)
-    results: dict[RunSpec, SimulationResult] = {}
-    beyond_results: dict[BeyondRun, SimulationResult] = {}
-    low_results: dict[PresetRun, SimulationResult] = {}
-    figures: dict[str, str] = {}
-    beyond_figure_name: list[str] = []
-    with _pool(robot, workers) as pool:
-        tasks = _Tasks(pool)
-
-        def paper_done(spec: RunSpec, result: SimulationResult) -> None:
-            results[spec] = result
-            if progress:
-                progress(f"{spec.label}, case {spec.case}", len(results), len(specs))
-            for p in plan:  # a figure as soon as its runs are made
-                if spec in p.specs and all(s in results for s in p.specs):
-                    runs = {s: results[s] for s in p.specs}
-                    tasks.add(_figure_cost(p, runs), _draw, (p, runs, folder), partial(figures.__setitem__, p.caption))
-
-        def beyond_done(spec: BeyondRun, result: SimulationResult) -> None:
-            beyond_results[spec] = result
-            if len(beyond_results) == len(extra):  # drawn here: its 14 runs need not travel to a worker
-                beyond_figure_name.append(beyond_figure({b: beyond_results[b] for b in extra}, folder))  # in order
-
-        # the references once, here; then the runs, the longest first (switching control), and
-        # each figure as soon as its runs are made
-        keys = sorted({(s.case, s.rates) for s in specs} | ({(2, "exact")} if beyond_paper else set()))
-        references = {key: joint_reference(robot, key[0], rates=key[1], duration=duration) for key in keys}
-        for spec in specs:
-            args = (spec, references[(spec.case, spec.rates)], folder, options)
-            tasks.add(_cost(spec.controller, spec.external_force), _paper_run, args, partial(paper_done, spec))
-        for other in extra:
-            inputs = (other, references[(2, "exact")], folder, options)
-            tasks.add(_cost(other.controller, True), _beyond_run, inputs, partial(beyond_done, other))
-        for run in low:
-            tasks.add(
-                _cost("cfc", run.external_force),
-                _low_force_run,
-                (run, folder, options),
-                partial(low_results.__setitem__, run),
-            )
-        while tasks.busy():
-            tasks.step()
-    results = {spec: results[spec] for spec in specs}
-    figures = {p.caption: figures[p.caption] for p in plan}
-    beyond = beyond_section({b: beyond_results[b] for b in extra}, beyond_figure_name[0]) if extra else []
+    made = _RunsAndFigures(folder, specs, extra, progress)
+    made.make(robot, workers, options, low, beyond_paper=beyond_paper, duration=duration)
+    results = {spec: made.results[spec] for spec in specs}
+    figures = {p.caption: made.figures[p.caption] for p in made.plan}
+    beyond_results = made.beyond_results
+    beyond = beyond_section({b: beyond_results[b] for b in extra}, made.beyond_figure_name[0]) if extra else []
     text = render_report(
         results,
         figures,
@@ -201,12 +162,8 @@ def _reproduce_into(
     )
     if low:  # beside the other runs beyond the paper, before what bounds their error
         base = next(((b.folder, beyond_results[b]) for b in extra if b.label == "CFC + observer" and b.realistic), None)
-        section = low_force_section({r: low_results[r] for r in low}, base, seed=seed)
-        study = force_study.load_summary()  # issue 22's front, from the shipped studies
-        save_figure(force_study.front_figure(study), folder / FORCE_FRONT_FIGURE)
-        section += force_study.section_lines(study, FORCE_FRONT_FIGURE)
-        at = beyond.index(BOUNDS_HEADING) if BOUNDS_HEADING in beyond else len(beyond)
-        beyond = [*beyond[:at], *section, *([""] if at < len(beyond) else []), *beyond[at:]]
+        section = low_force_section({r: made.low_results[r] for r in low}, base, seed=seed)
+        beyond = _with_low_force(beyond, section, folder)
     if beyond:
         text += "\n" + "\n".join(beyond) + "\n"
     if seeds:
@@ -215,9 +172,104 @@ def _reproduce_into(
         section = seed_section(folder / "seeds", seeds, specs, integrator=integrator, substeps=substeps, config=config)
         text += "\n" + "\n".join(section)
         text += "\n"
+    _write_reports(robot, folder, text, results, progress, len(specs))
+    return results
+
+
+class _RunsAndFigures:
+    """The runs of one reproduction (the paper's, those beyond it, the low-force preset's) handed to
+    a pool by :meth:`make`, and each of the paper's figures drawn as soon as its runs are made."""
+
+    def __init__(self, folder: Path, specs: list[RunSpec], extra: list[BeyondRun], progress: Progress | None) -> None:
+        self.folder = folder
+        self.specs = specs
+        self.extra = extra
+        self.progress = progress
+        self.plan = figure_plan(specs)
+        self.results: dict[RunSpec, SimulationResult] = {}
+        self.beyond_results: dict[BeyondRun, SimulationResult] = {}
+        self.low_results: dict[PresetRun, SimulationResult] = {}
+        self.figures: dict[str, str] = {}
+        self.beyond_figure_name: list[str] = []
+
+    def make(
+        self,
+        robot: Robot,
+        workers: int,
+        options: dict[str, Any],
+        low: list[PresetRun],
+        *,
+        beyond_paper: bool,
+        duration: float | None,
+    ) -> None:
+        """Make every run and figure with ``workers`` processes (:func:`_pool`)."""
+        with _pool(robot, workers) as pool:
+            self.tasks = _Tasks(pool)
+            # the references once, here; then the runs, the longest first (switching control), and
+            # each figure as soon as its runs are made
+            keys = sorted({(s.case, s.rates) for s in self.specs} | ({(2, "exact")} if beyond_paper else set()))
+            references = {key: joint_reference(robot, key[0], rates=key[1], duration=duration) for key in keys}
+            for spec in self.specs:
+                args = (spec, references[(spec.case, spec.rates)], self.folder, options)
+                self.tasks.add(
+                    _cost(spec.controller, spec.external_force), _paper_run, args, partial(self.paper_done, spec)
+                )
+            for other in self.extra:
+                inputs = (other, references[(2, "exact")], self.folder, options)
+                self.tasks.add(_cost(other.controller, True), _beyond_run, inputs, partial(self.beyond_done, other))
+            for run in low:
+                self.tasks.add(
+                    _cost("cfc", run.external_force),
+                    _low_force_run,
+                    (run, self.folder, options),
+                    partial(self.low_results.__setitem__, run),
+                )
+            while self.tasks.busy():
+                self.tasks.step()
+
+    def paper_done(self, spec: RunSpec, result: SimulationResult) -> None:
+        """Keep one of the paper's runs; hand out each figure whose runs are now all made."""
+        results = self.results
+        results[spec] = result
+        if self.progress:
+            self.progress(f"{spec.label}, case {spec.case}", len(results), len(self.specs))
+        for p in self.plan:  # a figure as soon as its runs are made
+            if spec in p.specs and all(s in results for s in p.specs):
+                runs = {s: results[s] for s in p.specs}
+                self.tasks.add(
+                    _figure_cost(p, runs), _draw, (p, runs, self.folder), partial(self.figures.__setitem__, p.caption)
+                )
+
+    def beyond_done(self, spec: BeyondRun, result: SimulationResult) -> None:
+        """Keep a run beyond the paper; draw the section's figure once all of them are made."""
+        self.beyond_results[spec] = result
+        extra = self.extra
+        if len(self.beyond_results) == len(extra):  # drawn here: its 14 runs need not travel to a worker
+            self.beyond_figure_name.append(beyond_figure({b: self.beyond_results[b] for b in extra}, self.folder))
+
+
+def _with_low_force(beyond: list[str], section: list[str], folder: Path) -> list[str]:
+    """The section beyond the paper with the low-force preset's ``section`` and issue 22's front
+    (its figure drawn into ``folder``) before what bounds the remaining error."""
+    study = force_study.load_summary()  # issue 22's front, from the shipped studies
+    save_figure(force_study.front_figure(study), folder / FORCE_FRONT_FIGURE)
+    section += force_study.section_lines(study, FORCE_FRONT_FIGURE)
+    at = beyond.index(BOUNDS_HEADING) if BOUNDS_HEADING in beyond else len(beyond)
+    return [*beyond[:at], *section, *([""] if at < len(beyond) else []), *beyond[at:]]
+
+
+def _write_reports(
+    robot: Robot,
+    folder: Path,
+    text: str,
+    results: dict[RunSpec, SimulationResult],
+    progress: Progress | None,
+    count: int,
+) -> None:
+    """``report.md`` (``text``) and ``report.html``, the same report on one interactive page."""
     atomic_write_text(folder / "report.md", text)
     if progress:
-        progress("report.html", len(specs), len(specs))
+        progress("report.html", count, count)
     write_html_report(  # report.md on one page, its figures inlined, with the interactive figures
         robot,
         runs_from_reproduction(results),
@@ -225,7 +277,6 @@ def _reproduce_into(
         title="vgtarm: the paper's case studies reproduced",
         markdown=text,
     )
-    return results
 
 
 class _Tasks:
