@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import pty
 import subprocess
+from pathlib import Path
 
 from vgtarm._entry import single_threaded_blas
 
@@ -14,6 +15,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import vgtarm  # noqa: E402
+from vgtarm import compiler  # noqa: E402
 from vgtarm.model.assembly import triangle_margins  # noqa: E402
 
 #: Step of central finite differences: about eps**(1/3), the best balance of truncation and
@@ -78,3 +80,14 @@ def run_on_terminal(argv: list[str], env: dict[str, str]) -> tuple[int, bytes, b
     finally:
         os.close(leader)
     return process.returncode, out, shown
+
+
+#: Default limit (s) of one ``make`` of a whole export (several files, sanitizers): as the model's build.
+MAKE_TIME_LIMIT = 600.0
+
+
+def make(folder: Path, *arguments: str) -> subprocess.CompletedProcess[str]:
+    """``make ARGUMENTS`` in ``folder``, run as vgtarm runs its compilers (:func:`vgtarm.compiler.run`:
+    under a time limit, ``$VGTARM_COMPILER_TIME_LIMIT`` or :data:`MAKE_TIME_LIMIT`, in a process
+    group of its own killed with every child); what it did, as ``subprocess.run`` says it."""
+    return compiler.run(["make", *arguments], cwd=folder, limit=MAKE_TIME_LIMIT, program="make")

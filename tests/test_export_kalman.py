@@ -26,6 +26,7 @@ from vgtarm.export.controller import STRICT_FLAGS
 from vgtarm.simulation import SimulationResult, simulate
 from vgtarm.simulation.sensing import kalman_gains
 
+from .conftest import make
 from .test_export_controller import _compilers, _make, _replay, assert_imports_only_allowed
 
 CASE = case_study(2)
@@ -117,9 +118,7 @@ def test_clean_under_address_and_undefined_behaviour_sanitizers(folder, simulate
     flags = "-std=c99 -O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined -fno-sanitize-recover=all"
     build = tmp_path / "asan"
     shutil.copytree(folder, build)
-    done = subprocess.run(
-        ["make", "CC=gcc", f"CFLAGS={flags}", f"LDFLAGS={flags}"], cwd=build, capture_output=True, text=True
-    )
+    done = make(build, "CC=gcc", f"CFLAGS={flags}", f"LDFLAGS={flags}")
     assert done.returncode == 0, done.stderr
     table = _replay(build, simulated, reference, tmp_path, force_sensor=False)
     np.testing.assert_array_equal(table[:, 1 : 1 + simulated.q.shape[1]], simulated.effort)

@@ -32,6 +32,7 @@ from vgtarm.simulation import simulate
 from vgtarm.simulation.engines import compiled_ga
 from vgtarm.simulation.simulator import loop_arrays
 
+from .conftest import make
 from .test_export_controller import ALLOWED_IMPORTS, CLANG_MISSING
 
 CASE = case_study(2)
@@ -145,9 +146,7 @@ def _compilers() -> list:
 
 def _make(folder: Path, build: Path, compiler: str, flags: str) -> Path:
     shutil.copytree(folder, build)
-    done = subprocess.run(
-        ["make", f"CC={compiler}", f"CFLAGS={flags}", f"LDFLAGS={flags}"], cwd=build, capture_output=True, text=True
-    )
+    done = make(build, f"CC={compiler}", f"CFLAGS={flags}", f"LDFLAGS={flags}")
     assert done.returncode == 0, done.stderr
     assert done.stderr == ""  # not a single warning
     return build
@@ -165,7 +164,7 @@ def test_builds_strict_and_times_its_activations(compiler, exports, tmp_path):
         assert "activation" in done.stdout and "p99" in done.stdout
     native = tmp_path / f"native-{compiler}"
     shutil.copytree(exports["safe"], native)
-    done = subprocess.run(["make", f"CC={compiler}"], cwd=native, capture_output=True, text=True)
+    done = make(native, f"CC={compiler}")
     assert done.returncode == 0 and done.stderr == "", done.stderr
 
 

@@ -11,7 +11,12 @@ memory"), and refused in one line when the estimate exceeds:
 - the **memory** one request may use (:func:`vgtarm.memory.memory_limit`: ``MemAvailable`` of
   ``/proc/meminfo``, or ``$VGTARM_MEMORY_LIMIT``);
 - the **build time limit**: ``$VGTARM_BUILD_TIME_LIMIT`` seconds (a number; default
-  :data:`DEFAULT_TIME_LIMIT`, 30 min, which also bounds one compiler run).
+  :data:`DEFAULT_TIME_LIMIT`, 30 min).
+
+One compiler command of a build runs under a limit of its own (:mod:`vgtarm.compiler`):
+``$VGTARM_COMPILER_TIME_LIMIT`` seconds, else :func:`compiler_limit` of the estimate: ten times the
+estimated compile and at least :data:`COMPILER_LIMIT_FLOOR` (10 min for the paper's robot, whose
+compile took 60 s on this 2-core machine under load; about 12 min for six modules).
 
 The fits (least squares of ``y = c n^a`` in log-log, 2-core x86_64 vm, CasADi 3.8.2, gcc 12.2;
 stacks of the benchmark family, ``k`` modules, ``3k + ceil(k/2)`` joints):
@@ -41,8 +46,12 @@ from .definition import Definition, StackDefinition
 
 #: The variable that sets the longest estimated build allowed (seconds).
 TIME_LIMIT_VARIABLE = "VGTARM_BUILD_TIME_LIMIT"
-#: Longest estimated build allowed by default (s): as long as one compiler run may take.
+#: Longest estimated build allowed by default (s).
 DEFAULT_TIME_LIMIT = 1800.0
+#: One compiler command of a build may run this many times its estimated compile by default...
+COMPILER_LIMIT_FACTOR = 10.0
+#: ... and at least this long (s): ten times the paper robot's compile on a busy 2-core machine.
+COMPILER_LIMIT_FLOOR = 600.0
 #: A build estimated longer than this (s) shows its progress on a terminal.
 LONG_BUILD = 5.0
 
@@ -174,6 +183,15 @@ def time_limit() -> float:
     if not (math.isfinite(value) and value > 0):
         raise ConfigError(f"{TIME_LIMIT_VARIABLE} = {shown(text)}: expected a number of seconds > 0")
     return value
+
+
+def compiler_limit(cost: BuildEstimate, floor: float = COMPILER_LIMIT_FLOOR) -> float:
+    """The default limit (s) of one compiler command building the model of ``cost``, before
+    ``$VGTARM_COMPILER_TIME_LIMIT`` (:func:`vgtarm.compiler.time_limit`): a generous multiple of the
+    estimated compile (:data:`COMPILER_LIMIT_FACTOR`; a busy machine compiles several times more
+    slowly), at least ``floor``, so that only a compiler that hangs meets it: 10 min for the
+    paper's robot, about 12 min for six modules, 31 min for ten."""
+    return max(floor, COMPILER_LIMIT_FACTOR * cost.compiler_seconds)
 
 
 def check(cost: BuildEstimate, kind: str) -> None:

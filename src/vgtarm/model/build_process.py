@@ -22,19 +22,24 @@ from typing import Any
 
 from ..memory import size_text
 from . import compiled
-from .budget import time_limit
+from .budget import compiler_limit, estimate
 from .building import RESULT
 from .definition import Definition
 
 
 def _end_with(parent: int) -> None:
-    """End this build (and its compiler) when the process that started it ends, however it ends."""
+    """End this build (and its compiler) when the process that started it ends, however it ends.
+
+    The kernel kills this process when its parent ends (``PR_SET_PDEATHSIG``); where it cannot, a
+    watchdog kills this process's group. Either way its compiler goes too: it runs under the
+    supervisor of :mod:`vgtarm.compiler`, which ends the compiler's whole group when this process
+    ends (its own parent-death signal, and the end of its pipe from this process)."""
     with contextlib.suppress(OSError, AttributeError):
         ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG: this process
     if os.getppid() != parent:  # the parent died before the line above
         os._exit(1)
 
-    def watch() -> None:  # the compiler too (runs while this process waits for it)
+    def watch() -> None:  # where the kernel has no parent-death signal
         while os.getppid() == parent:
             time.sleep(0.5)
         with contextlib.suppress(OSError):
@@ -64,7 +69,7 @@ def _file_limit(folder: Path, failure: str) -> str | None:
 def _compile(compiler: str, folder: Path, definition: Definition, key: str) -> dict[str, Any]:
     if compiled._cache_key(compiler, definition) != key:
         return {"failure": "the model's source files changed while the library was being built; run the command again"}
-    compiled._COMPILE_TIMEOUT = max(compiled._COMPILE_TIMEOUT, time_limit())
+    compiled._COMPILE_TIMEOUT = compiler_limit(estimate(definition))  # before $VGTARM_COMPILER_TIME_LIMIT
     library, signatures = compiled._compile(compiler, folder, definition)
     return {"library": library.name, "functions": {name: sig.__dict__ for name, sig in signatures.items()}}
 

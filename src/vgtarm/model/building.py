@@ -5,10 +5,12 @@ Python for seconds to hours, so a build run in vgtarm's own process could not be
 :func:`run` starts the build process (:mod:`.build_process`) instead, in a session of its own (a
 terminal's Ctrl-C does not reach it), hands it the model definition on its standard input and
 waits for it in short polls: on Ctrl-C (or any other exception) it kills the build's whole process
-group (the build and its compiler) and lets the caller remove the build folder, so the command ends
+group and its compiler's and lets the caller remove the build folder, so the command ends
 within a fraction of a second with nothing left behind. The build process also ends with its
-parent: the kernel kills it when the parent dies (``PR_SET_PDEATHSIG``), and a watchdog kills its
-compiler too.
+parent: the kernel kills it when the parent dies (``PR_SET_PDEATHSIG``; a watchdog where there is
+none), and its compiler, which runs in a process group of its own under :mod:`vgtarm.compiler`'s
+supervisor, is killed with all its children when the build process ends, however it ends, or
+when it runs past its time limit (``$VGTARM_COMPILER_TIME_LIMIT``).
 
 Two kinds of build:
 
@@ -114,8 +116,29 @@ def _terminal() -> bool:
         return False
 
 
+def _compiler_groups(pid: int) -> set[int]:
+    """The process groups below the build process ``pid`` other than its own: its compiler's, in a
+    session of its own under :mod:`vgtarm.compiler`'s supervisor."""
+    import psutil  # imported here: only an interrupted build needs it
+
+    groups: set[int] = set()
+    with contextlib.suppress(psutil.Error, OSError):
+        for child in psutil.Process(pid).children(recursive=True):
+            with contextlib.suppress(psutil.Error, OSError):
+                groups.add(os.getpgid(child.pid))
+    groups.discard(pid)
+    return groups
+
+
 def _kill(process: subprocess.Popen[bytes]) -> None:
-    """Kill the build's process group (the build and its compiler) and reap the build."""
+    """Kill the build's process group and its compiler's, and reap the build.
+
+    The compiler's group is killed here at once, while its members run (so that none writes into
+    the build folder as the caller removes it); should one start meanwhile, its supervisor ends it
+    when the build process ends (:mod:`vgtarm.compiler`)."""
+    for group in _compiler_groups(process.pid):
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(group, signal.SIGKILL)
     with contextlib.suppress(ProcessLookupError, PermissionError):
         os.killpg(process.pid, signal.SIGKILL)
     with contextlib.suppress(subprocess.TimeoutExpired):

@@ -37,8 +37,10 @@ Trust rules of the cache (the README repeats them for users):
   folder ``.build-<pid>-*`` of the cache, under a lock, and the library and then its metadata are
   moved into place atomically; the folder goes whatever happens, and build folders left by dead
   processes or older than an hour are removed.
-- When the compiled model cannot be had (no or failing compiler, a file size limit that stops the
-  build, a read-only or refused folder, a rebuilt library that still fails), ``auto`` runs
+- When the compiled model cannot be had (no or failing compiler, one past its time limit or that
+  writes nothing: :mod:`vgtarm.compiler`, which runs every compiler command in a process group that
+  dies with vgtarm; a file size limit that stops the build, a read-only or refused folder, a
+  rebuilt library that still fails), ``auto`` runs
   CasADi's interpreter after one line naming the reason; ``VGTARM_BACKEND=interpreted`` chooses it
   silently, and ``compiled`` turns the reason into a :class:`BackendError` instead. The
   interpreter's symbolic construction is estimated and refused alike, and runs in a build process
@@ -73,6 +75,7 @@ import numpy as np
 from cffi import FFI
 from numpy.typing import NDArray
 
+from .. import compiler as compilers
 from ..errors import ConfigError, VgtarmError, cut, shown
 from . import budget, building, codegen, interface, outline
 from .definition import PAPER, Definition
@@ -125,8 +128,10 @@ _BUILD_PREFIX = ".build-"
 _STALE_BUILD_AGE = 3600.0
 #: Longest wait (s) for another process's build of the same cache before building anyway.
 _LOCK_WAIT = 900.0
-#: Longest a compiler may run (s) before the build counts as failed.
-_COMPILE_TIMEOUT = 1800.0
+#: Default limit (s) of one compiler command (:mod:`vgtarm.compiler`, before
+#: ``$VGTARM_COMPILER_TIME_LIMIT``): the build process sets it from its model's estimate
+#: (:func:`compile_limit`); the recursive model's library (a few seconds) keeps this one.
+_COMPILE_TIMEOUT = budget.COMPILER_LIMIT_FLOOR
 #: Samples of one compiled batch call: at most a few tens of milliseconds (the costliest function
 #: takes about 4 us a sample), so Ctrl-C is handled between two calls of a huge batch.
 BATCH_CHUNK = 8192
@@ -777,27 +782,31 @@ def _build_lock(folder: Path) -> Iterator[None]:
 
 
 def _compiler_failure(compiler: str, done: subprocess.CompletedProcess[str]) -> str:
-    lines = [line.strip() for line in done.stderr.splitlines() if line.strip()]
-    first = next((line for line in lines if "error" in line.lower()), lines[-1] if lines else "no message")
-    return f"the C compiler {shown(compiler, 80)} failed (exit status {done.returncode}): {cut(first, 160)}"
+    ending = compilers.ending(done.returncode)
+    return f"the C compiler {shown(compiler, 80)} failed ({ending}): {compilers.first_error(done)}"
+
+
+def compile_limit(definition: Definition = PAPER) -> float:
+    """The limit (s) of one compiler command building ``definition``: ``$VGTARM_COMPILER_TIME_LIMIT``,
+    else a generous multiple of the estimated compile (:func:`~vgtarm.model.budget.compiler_limit`).
+
+    Raises:
+        ConfigError: the variable is set but not a number of seconds > 0.
+    """
+    return compilers.time_limit(budget.compiler_limit(budget.estimate(definition)))
 
 
 def _run(compiler: str, command: list[str]) -> subprocess.CompletedProcess[str]:
-    """Run one compiler command and return what it did; :class:`_Unavailable` when it cannot run."""
+    """Run one compiler command under its time limit, in a process group of its own that dies with
+    this process (:func:`vgtarm.compiler.run`), and return what it did; :class:`_Unavailable` when
+    it cannot run, runs past the limit, or exits 0 without writing its output (``-o``)."""
     try:
-        return subprocess.run(
-            command,
-            capture_output=True,
-            text=True,
-            errors="replace",
-            stdin=subprocess.DEVNULL,
-            check=False,
-            timeout=_COMPILE_TIMEOUT,
-        )
-    except subprocess.TimeoutExpired:
-        raise _Unavailable(f"the C compiler {shown(compiler, 80)} ran longer than {_COMPILE_TIMEOUT:.0f} s") from None
-    except OSError as exc:
-        raise _Unavailable(f"cannot run the C compiler {shown(compiler, 80)}: {exc.strerror or exc}") from None
+        done = compilers.run(command, limit=_COMPILE_TIMEOUT)
+    except compilers.CompilerError as exc:
+        raise _Unavailable(str(exc)) from None
+    if done.returncode == 0 and compilers.wrote_nothing(command):
+        raise _Unavailable(f"the C compiler {shown(compiler, 80)} exited 0 but wrote no {compilers.product(command)}")
+    return done
 
 
 def _run_compiler(compiler: str, command: list[str]) -> None:
@@ -927,6 +936,7 @@ def _compiled_backend(compiler: str, definition: Definition = PAPER) -> Compiled
         )
         raise _Unavailable(why)
     budget.check(budget.estimate(definition), "compiled")  # before any work: BuildRefused in one line
+    compile_limit(definition)  # and a bad $VGTARM_COMPILER_TIME_LIMIT: ConfigError in one line
     try:
         with _build_lock(entry.folder):
             if os.path.lexists(entry.library) or os.path.lexists(entry.metadata):
