@@ -19,7 +19,7 @@ PACKAGE = Path(vgtarm.__file__).resolve().parent
 ROOT = "__root__"
 #: Layers from the bottom up; a module may import its own layer and the layers below.
 LAYERS: tuple[frozenset[str], ...] = (
-    frozenset({"errors", "fileio", "kinds", "memory", "markup", "machine", "progress", "version"}),
+    frozenset({"errors", "fileio", "kinds", "memory", "markup", "machine", "progress", "version", "compiler"}),
     frozenset({"model"}),
     frozenset({"paths", "ga"}),
     frozenset({"ik"}),

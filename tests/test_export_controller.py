@@ -22,6 +22,8 @@ from vgtarm.export import CompiledExport, ExportError, command, export_controlle
 from vgtarm.export.controller import STRICT_FLAGS
 from vgtarm.simulation import SimulationResult, simulate
 
+from .conftest import make
+
 CASE = case_study(2)
 #: The runs compared: the observer with perfect and with realistic sensing, the force sensor.
 RUNS = {
@@ -128,7 +130,7 @@ def _make(folder: Path, where: Path, compiler: str, flags: str) -> Path:
     """A copy of the export built with make, CC=compiler and CFLAGS=flags."""
     build = where / f"build-{compiler}"
     shutil.copytree(folder, build)
-    done = subprocess.run(["make", f"CC={compiler}", f"CFLAGS={flags}"], cwd=build, capture_output=True, text=True)
+    done = make(build, f"CC={compiler}", f"CFLAGS={flags}")
     assert done.returncode == 0, done.stderr
     assert done.stderr == ""  # not a single warning
     return build
@@ -137,6 +139,17 @@ def _make(folder: Path, where: Path, compiler: str, flags: str) -> Path:
 def _write_csv(path: Path, header: list[str], rows: np.ndarray) -> None:
     lines = [",".join(header)] + [",".join(repr(float(v)) for v in row) for row in rows]
     path.write_text("\n".join(lines) + "\n")
+
+
+def reference_header(n: int, expected_force: bool = False) -> list[str]:
+    """The columns replay reads as a reference (README.md of the export), with the expected force or not."""
+    joints = [f"{what}_{i}" for what in ("q_d", "qd_d", "qdd_d") for i in range(1, n + 1)]
+    return ["t", *joints, *(["f_exp_x", "f_exp_y", "f_exp_z"] if expected_force else [])]
+
+
+def measurements_header(n: int) -> list[str]:
+    """The columns replay reads as measurements."""
+    return ["t", *(f"{what}_{i}" for what in ("q", "qd") for i in range(1, n + 1)), "f_x", "f_y", "f_z"]
 
 
 def _replay(  # type: ignore[no-untyped-def]
@@ -152,8 +165,8 @@ def _replay(  # type: ignore[no-untyped-def]
         np.vstack([np.full((1, 3), np.nan), run.f_ext[:-1]]) if force_sensor else np.full((len(run.t), 3), np.nan)
     )
     meas_rows = np.column_stack([run.t, run.q, run.qd, previous_force])
-    _write_csv(where / "reference.csv", ["t"] + [f"c{i}" for i in range(ref_rows.shape[1] - 1)], ref_rows)
-    _write_csv(where / "measurements.csv", ["t"] + [f"c{i}" for i in range(2 * n + 3)], meas_rows)
+    _write_csv(where / "reference.csv", reference_header(n, expected_force is not None), ref_rows)
+    _write_csv(where / "measurements.csv", measurements_header(n), meas_rows)
     done = subprocess.run(
         [
             str(build / "replay"),
@@ -195,9 +208,7 @@ def test_clean_under_address_and_undefined_behaviour_sanitizers(exports, simulat
     flags = "-std=c99 -O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined -fno-sanitize-recover=all"
     build = tmp_path / "asan"
     shutil.copytree(exports["observer, encoders"], build)
-    done = subprocess.run(
-        ["make", "CC=gcc", f"CFLAGS={flags}", f"LDFLAGS={flags}"], cwd=build, capture_output=True, text=True
-    )
+    done = make(build, "CC=gcc", f"CFLAGS={flags}", f"LDFLAGS={flags}")
     assert done.returncode == 0, done.stderr
     table = _replay(build, simulated["observer, encoders"], reference, tmp_path, force_sensor=False)
     assert len(table) == len(reference.t)

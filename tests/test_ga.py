@@ -363,7 +363,7 @@ def test_zero_generations_evaluates_only_the_initial_population():
 def test_non_finite_costs_are_never_best():
     def cost(x: np.ndarray) -> np.ndarray:
         values = np.sum(x**2, axis=1)
-        values[x[:, 0] < 0.5] = np.nan  # the true optimum region is NaN
+        values[x[:, 0] < 0.5] = np.inf  # the true optimum region is infinite (a NaN is refused)
         values[x[:, 1] < -0.5] = -np.inf
         return values
 
@@ -375,7 +375,7 @@ def test_non_finite_costs_are_never_best():
 
 def test_all_non_finite_costs_report_failure():
     result = ga.minimize(
-        lambda x: np.full(x.shape[0], np.nan),
+        lambda x: np.full(x.shape[0], np.inf),  # every candidate unusable (a NaN is refused)
         np.zeros(2),
         np.ones(2),
         seed=0,

@@ -200,7 +200,7 @@ def test_report_command_writes_a_page_for_saved_runs(runs, tmp_path, capsys):
     assert all((made.parent / link).exists() for link in links)
     assert "report written to" in capsys.readouterr().out
     assert cli.main(["report", str(tmp_path / "nothing"), "--out", str(tmp_path / "x")]) == 1
-    assert "missing summary.json" in capsys.readouterr().err
+    assert "nothing: not found" in capsys.readouterr().err
 
 
 def _browser_or_skip():

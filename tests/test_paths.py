@@ -370,8 +370,8 @@ def test_case1_bad_arguments(kwargs, match):
     ("text", "match"),
     [
         ("", r"is empty; expected a header row t,x,y,z"),
-        ("t,x,y\n0,0,0\n", r"line 1: header must be the columns t,x,y,z, found 't,x,y'"),
-        ("time,x,y,z\n0,0,0,0\n", r"line 1: header .* found 'time,x,y,z'"),
+        ("t,x,y\n0,0,0\n", r"line 1: header must be the columns t,x,y,z \(.*\); found 3 columns t, x, y$"),
+        ("time,x,y,z\n0,0,0,0\n", r"line 1: header .* found 4 columns time, x, y, z$"),
         ("t,x,y,z\n0,0,0,0\n0.1,0,0\n", r"line 3: expected 4 fields \(t,x,y,z\), found 3"),
         ("t,x,y,z\n0,0,0,0\n0.1,0,0,0,5\n", r"line 3: expected 4 fields .* found 5"),
         ("t,x,y,z\n0,0,0,0\n0.1,0,abc,0\n", r"line 3, column 'y': 'abc' is not a number"),

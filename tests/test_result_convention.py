@@ -113,3 +113,15 @@ def test_an_ik_result_becomes_a_dataframe_and_a_plot(robot):
     assert len(ax.lines) == robot.n_joints
     clearance = np.asarray(ax.lines[0].get_ydata())
     assert ((clearance > 0) & (clearance <= 0.5)).all()  # inside the limits, at most mid-range
+
+
+def test_records_become_strict_json_alike_for_runs_and_studies():
+    """One conversion for summary.json and a study's records: NumPy scalars and arrays become
+    numbers and lists, a non-finite number None (strict JSON has no NaN)."""
+    import json
+
+    from vgtarm.fileio import json_value
+
+    record = {"a": np.float64("nan"), "b": np.arange(3), "c": (np.int8(2), float("inf")), "d": {"e": np.float32(0.5)}}
+    text = json.dumps(json_value(record), allow_nan=False)
+    assert json.loads(text) == {"a": None, "b": [0, 1, 2], "c": [2, None], "d": {"e": 0.5}}

@@ -53,7 +53,7 @@ def test_a_scenario_and_keywords_together_or_an_unknown_option_are_refused(robot
         ("integrator", "leapfrog", "integrator = 'leapfrog': expected one of"),
         ("substeps", 0, "substeps = 0: expected a whole number from 1 to 1,000,000"),
         ("substeps", True, "substeps = True: expected a whole number"),
-        ("seed", -1, "seed = -1: expected a whole number >= 0"),
+        ("seed", -1, "seed = -1: expected a whole number from 0 to 2"),
         ("observer", "kalman", "observer = 'kalman': expected one of"),
         ("transient_s", float("nan"), "transient_s = nan: expected a duration >= 0"),
         ("external_force", 20.0, "external_force = 20.0: expected None or a vgtarm.simulation.ExternalForce"),

@@ -42,6 +42,20 @@ class VgtarmError(Exception):
     """Base class of every error raised by vgtarm on purpose."""
 
 
+class Terminated(KeyboardInterrupt):
+    """A SIGTERM while the ``vgtarm`` program runs, raised by its entry point (:mod:`vgtarm._entry`).
+
+    A ``KeyboardInterrupt``, so that it unwinds a command as Ctrl-C does and every clean-up that
+    undoes a Ctrl-C undoes it too; the program then ends with the line ``vgtarm: terminated`` and
+    status 143. :attr:`arrived` stays True once one came: a library may swallow the exception
+    (CasADi does, raised inside one of its own calls), so the writers of :mod:`vgtarm.fileio`
+    raise it again before they put a result in place, and the program ends with status 143
+    whatever happened to the exception."""
+
+    #: Whether a SIGTERM arrived since the program started.
+    arrived = False
+
+
 class ConfigError(VgtarmError, ValueError):
     """A robot configuration (TOML file or parameters) is invalid."""
 
@@ -68,3 +82,26 @@ class SimulationError(VgtarmError, RuntimeError):
     def __init__(self, message: str, result: object = None) -> None:
         super().__init__(message)
         self.result = result
+
+
+def refuse_masked(value: object, name: str, error: type[VgtarmError] = InputError) -> None:
+    """Refuse, in one ``error`` line naming ``name``, a NumPy masked array with masked entries.
+
+    NumPy's conversions (``np.asarray``, ``np.array``) drop the mask and keep the values under it,
+    which would be used without a word; the shared converters of the public API's array arguments
+    call this first. A masked array with no entry masked is its data and passes."""
+    import numpy as np  # loaded already by whoever passes an array; this module stays import-light
+
+    if not isinstance(value, np.ma.MaskedArray):
+        return
+    mask = np.ma.getmaskarray(value)
+    if not mask.any():
+        return
+    first = tuple(int(i) for i in np.argwhere(mask)[0])
+    where = f"[{', '.join(str(i) for i in first)}]"
+    count = int(mask.sum())
+    entries = "1 masked entry (at" if count == 1 else f"{count:,} masked entries (the first at"
+    raise error(
+        f"{name} is a masked array with {entries} {where}): expected "
+        "numbers without a mask; fill them first (.filled(value)), or pass .data if the hidden values are meant"
+    )

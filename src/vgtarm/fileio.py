@@ -40,7 +40,15 @@ between the two renames leaves no folder at the user's path but the old one asid
 run into the same parent puts back (see :func:`clean_stale`).
 
 A read-only file system, a folder without write permission and a mount point (which a rename
-cannot replace) are found by the checks before the work.
+cannot replace) are found by the checks before the work. A write that meets a full disk, a quota
+or the file size limit (``ulimit -f``) raises :class:`OutputSpaceError`, one line naming the path
+(and the limit); the temporary file or folder is removed.
+
+Inputs: every reader of a user's file goes through :func:`open_input` (or :func:`read_text_limited`,
+:func:`read_bytes_limited` on it), which refuses anything but a regular file (a named pipe, a
+device, a socket, a folder) before it is opened, with :func:`check_input_file`, and again on the
+descriptor opened without waiting, so no read ever blocks on a pipe or never ends on a device.
+:func:`check_input_folder` does the same for an input folder (a saved run, a study's folder).
 """
 
 from __future__ import annotations
@@ -51,18 +59,19 @@ import errno
 import fnmatch
 import functools
 import logging
+import math
 import os
 import re
 import secrets
 import shutil
 import stat
 import tomllib
-from collections.abc import Callable, Collection, Iterable, Iterator
+from collections.abc import Callable, Collection, Iterable, Iterator, Mapping
 from contextlib import contextmanager, suppress
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, BinaryIO, TextIO
 
-from .errors import InputError, VgtarmError, cut
+from .errors import InputError, Terminated, VgtarmError, cut
 
 logger = logging.getLogger("vgtarm")
 
@@ -158,6 +167,54 @@ class OutputPathError(VgtarmError, FileExistsError):
 
     def __str__(self) -> str:
         return str(self.strerror)
+
+
+#: What a write that failed for want of room ran into, by ``errno``.
+_NO_ROOM = {
+    errno.ENOSPC: "no space left on the device (the disk is full)",
+    errno.EDQUOT: "the disk quota is exceeded",
+    errno.EFBIG: "larger than the file size limit",
+}
+
+
+def _size_limit() -> str:
+    """The file size limit of this process (``ulimit -f``) for a message: ``" of 4,096 bytes
+    (ulimit -f)"``, or ``""`` when there is none (the file system's own limit was met)."""
+    try:
+        import resource
+
+        soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+    except (ImportError, OSError, ValueError):  # no resource module (Windows)
+        return ""
+    return "" if soft == resource.RLIM_INFINITY else f" of {soft:,} bytes (ulimit -f)"
+
+
+class OutputSpaceError(VgtarmError, OSError):
+    """Writing an output failed for want of room: a full disk (``ENOSPC``), a quota (``EDQUOT``)
+    or the file size limit (``EFBIG``; Python ignores ``SIGXFSZ``, so ``ulimit -f`` ends a write
+    with this error rather than killing the process). Nothing partial is left (the writers of this
+    module remove their temporary file or folder). Its text is one line naming the output (its
+    :attr:`filename`, the user's path), the reason and, for the size limit, the limit."""
+
+    #: How the output is named in the message (``--out``, ``output file``).
+    what = "output file"
+
+    def __str__(self) -> str:
+        reason = _NO_ROOM.get(self.errno or 0, str(self.strerror))
+        if self.errno == errno.EFBIG:
+            reason += _size_limit()
+        return f"{self.what} {_shown(os.fsdecode(self.filename or ''))}: {reason}; nothing was written"
+
+
+def no_room_error(exc: OSError, target: str | os.PathLike[str], what: str = "output file") -> OSError:
+    """``exc`` as an :class:`OutputSpaceError` naming ``target`` (shown as ``what``) when it says
+    the disk, a quota or the file size limit was full; else ``exc`` itself. For writers that
+    cannot write atomically (an append to a log)."""
+    if isinstance(exc, OutputSpaceError) or exc.errno not in _NO_ROOM:
+        return exc
+    error = OutputSpaceError(exc.errno, exc.strerror, os.fspath(target))
+    error.what = what
+    return error
 
 
 def _file_refusal(target: Path, what: str, found: os.stat_result) -> str:
@@ -322,6 +379,7 @@ def _put_file(temporary: Path, target: Path, what: str) -> None:
     """Rename the finished file ``temporary`` to ``target``: to a new name, or over a regular file;
     never over anything else, looked at with ``lstat`` at the last moment (and, after an atomic
     exchange, looked at again and swapped back if it changed in between)."""
+    _stop_if_terminated()
     for _ in range(_ATTEMPTS):
         found = _lstat(target)
         if found is None:
@@ -344,6 +402,13 @@ def _put_file(temporary: Path, target: Path, what: str) -> None:
         _exchange(temporary, target)  # it changed after the look: put it back, refuse
         raise _not_a_file(target, what, old)
     raise FileExistsError(errno.EEXIST, "changed again and again while it was written", os.fspath(target))
+
+
+def _stop_if_terminated() -> None:
+    """Raise :class:`~vgtarm.errors.Terminated` again if a SIGTERM arrived (its exception may have
+    been swallowed by a library): no result is put in place after it, the temporary is removed."""
+    if Terminated.arrived:
+        raise Terminated
 
 
 def _drop_temporary(temporary: Path) -> None:
@@ -373,7 +438,10 @@ def atomic_path(path: str | os.PathLike[str], what: str = "output file") -> Iter
         _put_file(temporary, target, what)
     except OSError as exc:
         _drop_temporary(temporary)
-        raise _user_path(exc, temporary, target)  # noqa: B904  (the same exception, renamed)
+        failure = no_room_error(_user_path(exc, temporary, target), target, what)
+        if failure is exc:
+            raise  # the same exception, renamed
+        raise failure from exc
     except BaseException:
         _drop_temporary(temporary)
         raise
@@ -621,6 +689,14 @@ def check_writable_parent(path: str | os.PathLike[str], what: str = "output") ->
         _check_writable(named, path, what)
 
 
+def _same_entry(first: Path, second: Path) -> bool:
+    """Whether two paths lead to the same file or folder (device and inode, links followed)."""
+    try:
+        return os.path.samefile(first, second)
+    except (OSError, ValueError):  # one of them is missing, or cannot be looked up
+        return False
+
+
 def _resolved(paths: Iterable[str | os.PathLike[str] | None]) -> list[Path]:
     return [Path(p).resolve() for p in paths if p is not None and os.fspath(p) != ""]
 
@@ -688,9 +764,10 @@ def _check_output_folder(
     if resolved == resolved.parent or resolved in (Path.cwd(), *Path.cwd().parents):
         raise InputError(f"{what} {shown}: is the current folder or holds it; give a folder below it")
     for source in _resolved(inputs):
-        if source == resolved:
+        # by name, and by device and inode (another path to the folder: a bind mount)
+        if source == resolved or (found is not None and _same_entry(source, target)):
             raise InputError(f"{what} {shown}: is an input of this command; choose another folder")
-        if resolved in source.parents:
+        if resolved in source.parents or (found is not None and any(_same_entry(p, target) for p in source.parents)):
             raise InputError(f"{what} {shown}: holds {_shown(str(source))}, an input of this command; choose another")
     if found is not None:
         _refuse_mount_point(target, shown, what)
@@ -725,8 +802,8 @@ def _check_output_file(target: Path, shown: str, what: str, inputs: Iterable[str
     if found is not None and not stat.S_ISREG(found.st_mode):
         raise InputError(_file_refusal(target, what, found))
     resolved = target.resolve()
-    for source in _resolved(inputs):
-        if source == resolved or (found is not None and source.exists() and os.path.samefile(source, target)):
+    for source in _resolved(inputs):  # by name, and by device and inode (a hard link, another path)
+        if source == resolved or (found is not None and _same_entry(source, target)):
             raise InputError(f"{what} {shown}: is an input of this command; writing it would destroy it")
     check_writable_parent(target, what)
     if found is not None:
@@ -761,6 +838,7 @@ def _swap_back(new: Path, target: Path, what: str) -> bool:
 def _replace_folder(new: Path, target: Path, what: str, owned: Collection[str]) -> Path:
     """Put the complete folder ``new`` at ``target``, replacing a folder there whole if it holds
     only what vgtarm wrote; else leave it as it is and put ``new`` beside it. Returns where ``new`` went."""
+    _stop_if_terminated()
     for _ in range(_ATTEMPTS):
         found = _lstat(target)
         if found is None:
@@ -853,13 +931,135 @@ def atomic_folder(
             except OSError:
                 break
         if isinstance(exc, OSError):
-            raise _user_path(exc, temporary, target)  # noqa: B904  (the same exception, renamed)
+            failure = no_room_error(_user_path(exc, temporary, target), target, what)
+            if failure is exc:
+                raise  # the same exception, renamed
+            raise failure from exc
         raise
 
+
+# --- inputs ---------------------------------------------------------------------------------
 
 #: Largest input file :func:`read_text_limited` reads by default (bytes): robot and study files are
 #: a few kilobytes; a path CSV of a million rows is about 40 MB.
 INPUT_LIMIT = 64 * 2**20
+#: How an input is opened: never waiting for a writer (a named pipe that appeared after the check
+#: is opened at once and refused by ``fstat``), never becoming the controlling terminal, not
+#: inherited by the programs vgtarm runs.
+_INPUT_FLAGS = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_CLOEXEC", 0)
+
+
+def _input_refusal(path: str | os.PathLike[str], what: str, found: os.stat_result, expected: str) -> str:
+    """The one line refusing the input ``path`` (``found``: what ``stat`` sees there, links
+    followed), which is not the ``expected`` kind (``"a file"``, ``"a folder"``)."""
+    shown = _shown(os.fspath(path))
+    if expected == "a file" and stat.S_ISDIR(found.st_mode):
+        return f"{what} {shown}: is a folder, not a file"
+    there = describe(path)  # a link is named as one, with what it leads to
+    if there == "nothing":  # gone since it was looked at: what it was
+        there = _kind(found.st_mode)
+    regular = "a regular file" if expected == "a file" else "a folder"
+    return f"{what} {shown}: is {there}; expected {regular}"
+
+
+def _stat_input(path: str | os.PathLike[str], what: str, error: type[VgtarmError], kind: str) -> os.stat_result:
+    """``os.stat(path)`` (links followed) or ``error`` in one line: an empty or invalid name, a
+    missing path, one the system will not look up."""
+    text = os.fspath(path)
+    shown = _shown(text)
+    if text == "":
+        raise error(f"{what} '': expected a {kind} name")
+    if "\0" in text:
+        raise error(f"{what} {shown}: not a valid {kind} name (it holds a NUL character)")
+    try:
+        return os.stat(path)
+    except FileNotFoundError:
+        raise error(f"{what} {shown}: not found") from None
+    except NotADirectoryError:
+        raise error(f"{what} {shown}: not found (a part of the path is a file, not a folder)") from None
+    except UnicodeError:  # characters with no bytes in the file system's encoding (possible only from Python)
+        raise error(f"{what} {shown}: not a valid {kind} name on this system") from None
+    except OSError as exc:  # no permission on a folder above, a loop of links, a name too long
+        raise error(f"{what} {shown}: cannot read it: {cut(exc.strerror or str(exc), 120)}") from None
+
+
+def check_input_file(
+    path: str | os.PathLike[str], what: str = "input file", *, error: type[VgtarmError] = InputError
+) -> os.stat_result:
+    """Check, without opening it, that the input ``path`` is a regular file (a link to one
+    included); returns what ``stat`` found.
+
+    A named pipe (which would block the reader until a writer comes), a device (``/dev/zero``
+    never ends, ``/dev/tty`` waits for the user), a socket or a folder is refused in one line
+    naming ``what``, the path, what is there and what was expected, as are an empty name, a
+    missing file and one the system will not look up; ``error`` is the class raised (a subclass
+    of :class:`~vgtarm.errors.VgtarmError`: ``InputError``, ``ConfigError``, ``PathError``).
+    Every reader of a user's file calls this (through :func:`open_input`) before it opens it.
+    """
+    found = _stat_input(path, what, error, "file")
+    if not stat.S_ISREG(found.st_mode):
+        raise error(_input_refusal(path, what, found, "a file"))
+    return found
+
+
+def check_input_folder(
+    path: str | os.PathLike[str], what: str = "input folder", *, error: type[VgtarmError] = InputError
+) -> os.stat_result:
+    """Check that the input ``path`` is a folder (a link to one included), as
+    :func:`check_input_file` checks a file: anything else is refused in one line."""
+    found = _stat_input(path, what, error, "folder")
+    if not stat.S_ISDIR(found.st_mode):
+        raise error(_input_refusal(path, what, found, "a folder"))
+    return found
+
+
+def open_input(
+    path: str | os.PathLike[str], what: str = "input file", *, error: type[VgtarmError] = InputError
+) -> BinaryIO:
+    """The input file ``path`` opened for reading (binary), after :func:`check_input_file`.
+
+    It is opened without waiting (``O_NONBLOCK``) and looked at again on the open descriptor
+    (``fstat``): a path that became a named pipe or a device between the check and the opening
+    is refused as well, so no reader ever blocks on it. Failures raise ``error`` in one line.
+    """
+    check_input_file(path, what, error=error)
+    shown = _shown(os.fspath(path))
+    try:
+        fd = os.open(path, _INPUT_FLAGS)
+    except FileNotFoundError:
+        raise error(f"{what} {shown}: not found") from None
+    except OSError as exc:
+        raise error(f"{what} {shown}: cannot read it: {cut(exc.strerror or str(exc), 120)}") from None
+    try:
+        found = os.fstat(fd)
+        if not stat.S_ISREG(found.st_mode):  # it changed since the check
+            raise error(_input_refusal(path, what, found, "a file"))
+        os.set_blocking(fd, True)  # a regular file: reads as usual
+        return os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def read_bytes_limited(
+    path: str | os.PathLike[str],
+    limit: int = INPUT_LIMIT,
+    what: str = "input file",
+    *,
+    error: type[VgtarmError] = InputError,
+) -> bytes:
+    """The bytes of the input file ``path`` (:func:`open_input`), read only if it holds at most
+    ``limit`` bytes (at most ``limit + 1`` are read, so a huge file never fills the memory)."""
+    with open_input(path, what, error=error) as stream:
+        try:
+            data = stream.read(limit + 1)
+        except OSError as exc:
+            raise error(
+                f"{what} {_shown(os.fspath(path))}: cannot read it: {cut(exc.strerror or str(exc), 120)}"
+            ) from None
+    if len(data) > limit:
+        raise error(f"{what} {_shown(os.fspath(path))}: larger than {limit:,} bytes; expected a small text file")
+    return data
 
 
 def read_text_limited(
@@ -872,32 +1072,20 @@ def read_text_limited(
 ) -> str:
     """The text of the input file ``path``, read only if it holds at most ``limit`` bytes.
 
-    At most ``limit + 1`` bytes are read, so an endless device (``/dev/zero``) or a huge file is
-    refused without filling the memory. Every failure (an empty name, a missing file, a folder,
-    no permission, too large, not ``encoding`` text) raises ``error`` (a subclass of
-    :class:`~vgtarm.errors.VgtarmError`: ``InputError``, ``ConfigError``, ``PathError``) with one
-    line naming ``what`` and ``path``.
+    The path must be a regular file (:func:`check_input_file`): a named pipe, a device, a socket
+    or a folder is refused before it is opened, so no read ever blocks or never ends. At most
+    ``limit + 1`` bytes are read, so a huge file is refused without filling the memory. Every
+    failure (an empty name, a missing file, not a regular file, no permission, too large, not
+    ``encoding`` text) raises ``error`` (a subclass of :class:`~vgtarm.errors.VgtarmError`:
+    ``InputError``, ``ConfigError``, ``PathError``) with one line naming ``what`` and ``path``.
     """
-    shown = _shown(os.fspath(path))
-    if os.fspath(path) == "":
-        raise error(f"{what} '': expected a file name")
-    try:
-        with open(path, "rb") as stream:
-            data = stream.read(limit + 1)
-    except FileNotFoundError:
-        raise error(f"{what} {shown}: not found") from None
-    except IsADirectoryError:
-        raise error(f"{what} {shown}: is a folder, not a file") from None
-    except OSError as exc:
-        raise error(f"{what} {shown}: cannot read it: {cut(exc.strerror or str(exc), 120)}") from None
-    except ValueError:  # a NUL character: no file can have that name
-        raise error(f"{what} {shown}: not a valid file name (it holds a NUL character)") from None
-    if len(data) > limit:
-        raise error(f"{what} {shown}: larger than {limit:,} bytes; expected a small text file")
+    data = read_bytes_limited(path, limit, what, error=error)
     try:
         return data.decode(encoding)
     except UnicodeDecodeError as exc:
-        raise error(f"{what} {shown}: not {encoding} text (byte {exc.start} cannot be decoded)") from None
+        raise error(
+            f"{what} {_shown(os.fspath(path))}: not {encoding} text (byte {exc.start} cannot be decoded)"
+        ) from None
 
 
 def parse_toml(text: str, source: str, *, error: type[VgtarmError] = InputError) -> dict[str, Any]:
@@ -910,3 +1098,18 @@ def parse_toml(text: str, source: str, *, error: type[VgtarmError] = InputError)
         raise error(f"{source}: not valid TOML: {cut(str(exc), 120)}") from None
     except RecursionError:
         raise error(f"{source}: not valid TOML: arrays or tables nested too deep") from None
+
+
+def json_value(value: Any) -> Any:
+    """``value`` as plain JSON data, for ``json.dumps`` of a record (``summary.json``, a study's
+    run records): mappings with their keys, sequences and NumPy arrays as lists, NumPy scalars as
+    Python numbers, and a non-finite number as ``None`` (JSON has no NaN or infinity)."""
+    if isinstance(value, Mapping):
+        return {key: json_value(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_value(item) for item in value]
+    if hasattr(value, "tolist") and not isinstance(value, str | bytes):  # a NumPy array or scalar
+        return json_value(value.tolist())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value

@@ -17,9 +17,10 @@ and Appendix B), written so that any cost can use it:
 Choices the paper leaves open (it ran MATLAB and does not state them):
 
 - **Cost, not fitness.** The cost is minimised (the paper minimises the Euclidean norm of the
-  tracking error). Non-finite costs (NaN, +inf and -inf) rank worst and are never reported as
-  the best unless no individual has a finite cost, in which case the result has
-  ``success=False``.
+  tracking error). Infinite costs (+inf and -inf: a candidate that cannot be used) rank worst
+  and are never reported as the best unless no individual has a finite cost, in which case the
+  result has ``success=False`` and its ``reason`` says so. A NaN cost is no cost: it is refused
+  (:class:`~vgtarm.errors.InputError` naming the individual and the generation).
 - **Rank scaling** as MATLAB's ``ga`` does by default (``fitscalingrank``): the individual of
   rank ``r`` (rank 1 = lowest cost) gets an expectation proportional to ``1/sqrt(r)``, scaled so
   the expectations sum to the number of parents to select (:func:`rank_expectations`). Unlike
@@ -47,13 +48,15 @@ from numbers import Integral, Real
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import InputError, shown
+from .errors import InputError, VgtarmError, refuse_masked, shown
 
 __all__ = [
+    "MAX_SEED",
     "CostFunction",
     "GAOptions",
     "GAResult",
     "bit_flip_mutation",
+    "check_seed",
     "decode",
     "encode",
     "minimize",
@@ -70,6 +73,12 @@ _MAX_BITS = 32
 #: keep a mistyped value from allocating the machine's memory or running for days).
 _MAX_POPULATION = 1_000_000
 _MAX_GENERATIONS = 1_000_000
+#: Largest seed accepted wherever a seed enters vgtarm (this GA's ``seed``, a run's ``seed`` in
+#: :func:`vgtarm.simulation.simulate`, a study's ``seeds`` and ``random.seed``, the command line's
+#: ``--seed``): seeds are whole numbers from 0 to 2**63 - 1. NumPy's generators take any whole
+#: number >= 0, but a run's seed is stored as a 64-bit signed integer (a study's results table), so
+#: a larger one would run and fail only when stored.
+MAX_SEED = 2**63 - 1
 
 
 # ---------------------------------------------------------------------------------------------
@@ -98,19 +107,33 @@ def _check_probability(name: str, value: object) -> float:
     return number
 
 
+def check_seed(value: object, name: str, error: type[VgtarmError] = InputError) -> int:
+    """``value`` as a seed: a whole number from 0 to :data:`MAX_SEED`, else one ``error`` line
+    naming ``name``, showing the value and the accepted range (booleans are refused)."""
+    if isinstance(value, bool) or not isinstance(value, Integral) or not 0 <= int(value) <= MAX_SEED:
+        raise error(f"{name} = {shown(value)}: expected a whole number from 0 to 2**63 - 1 = {MAX_SEED}")
+    return int(value)
+
+
 def _as_rng(seed: object, name: str = "seed") -> np.random.Generator:
-    """Turn an integer seed, a generator or None into a :class:`numpy.random.Generator`."""
+    """Turn an integer seed (0 to :data:`MAX_SEED`), a generator or None into a
+    :class:`numpy.random.Generator`."""
     if isinstance(seed, np.random.Generator):
         return seed
     if seed is None:
         return np.random.default_rng()
-    if isinstance(seed, bool) or not isinstance(seed, Integral) or int(seed) < 0:
-        raise InputError(f"`{name}` must be a non-negative integer, a numpy Generator or None, got {seed!r}")
+    if isinstance(seed, bool) or not isinstance(seed, Integral) or not 0 <= int(seed) <= MAX_SEED:
+        raise InputError(
+            f"`{name}` must be a whole number from 0 to 2**63 - 1 = {MAX_SEED}, a numpy Generator or None,"
+            f" got {shown(seed)}"
+        )
     return np.random.default_rng(int(seed))
 
 
 def _numbers(name: str, value: object) -> NDArray[np.float64]:
-    """``value`` as a float64 array; strings, objects and ``None`` are refused, not converted."""
+    """``value`` as a float64 array; strings, objects, ``None`` and masked arrays with masked entries
+    are refused, not converted."""
+    refuse_masked(value, f"`{name}`")
     try:
         arr = np.asarray(value)
     except (TypeError, ValueError, OverflowError):  # ragged nested lists
@@ -486,10 +509,15 @@ def _mutate(bits: NDArray[np.uint8], probability: float, rng: np.random.Generato
 # ---------------------------------------------------------------------------------------------
 
 
-def _evaluate(cost: CostFunction, candidates: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Call ``cost`` on (m, n_genes) candidates; check it returns (m,) and sanitise non-finite."""
+def _evaluate(
+    cost: CostFunction, candidates: NDArray[np.float64], generation: int, individuals: NDArray[np.intp]
+) -> NDArray[np.float64]:
+    """Call ``cost`` on (m, n_genes) candidates, the ``individuals`` (their rows in the population)
+    of ``generation`` (0: the initial population); check it returns (m,) numbers, none NaN, and
+    rank the infinite ones worst (+inf)."""
     m = candidates.shape[0]
     returned = cost(candidates)
+    refuse_masked(returned, "`cost`'s result")
     try:
         values = np.asarray(returned, dtype=np.float64)
     except (TypeError, ValueError, OverflowError):
@@ -498,6 +526,14 @@ def _evaluate(cost: CostFunction, candidates: NDArray[np.float64]) -> NDArray[np
         raise InputError(
             f"`cost` must return an array of shape ({m},) for a ({m}, {candidates.shape[1]}) "
             f"population, got shape {values.shape}"
+        )
+    undefined = np.flatnonzero(np.isnan(values))
+    if undefined.size:
+        k = int(undefined[0])
+        raise InputError(
+            f"`cost` returned nan for individual {int(individuals[k])} of generation {generation} (genes "
+            f"{shown(candidates[k].tolist(), 120)}; {undefined.size} of the {m} evaluated): expected a number "
+            "(inf ranks a candidate worst)"
         )
     return np.where(np.isfinite(values), values, np.inf)
 
@@ -573,7 +609,7 @@ def minimize(
     p_mut = float(options.mutation_probability)
 
     population = _initial_population(initial, lo, hi, options, rng)
-    costs = _evaluate(cost, _decode(population, lo, hi, n_bits))
+    costs = _evaluate(cost, _decode(population, lo, hi, n_bits), 0, np.arange(population.shape[0]))
     n_evaluations = population.shape[0]
 
     best_index = int(np.argmin(costs))
@@ -602,7 +638,7 @@ def minimize(
         child_costs = np.where(same_as_first, parent_costs, parent_costs[mate])
         new = np.flatnonzero(~(same_as_first | same_as_mate))
         if new.size:
-            child_costs[new] = _evaluate(cost, _decode(children[new], lo, hi, n_bits))
+            child_costs[new] = _evaluate(cost, _decode(children[new], lo, hi, n_bits), generation, n_elite + new)
             n_evaluations += new.size
 
         elites = np.argsort(costs, kind="stable")[:n_elite]

@@ -28,8 +28,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline
 
-from .errors import PathError, cut, shown
+from .errors import PathError, cut, refuse_masked, shown
 from .fileio import read_text_limited
+from .kinds import found_columns
 
 FloatArray = NDArray[np.float64]
 
@@ -327,10 +328,10 @@ def _read_csv(
         raise PathError(f"path file {shown_label} is empty; expected a header row t,x,y,z")
     header_line, header = rows[0]
     found = tuple(cell.strip().lower() for cell in header)
-    if found != _CSV_COLUMNS:
+    if found != _CSV_COLUMNS:  # another kind of file (an ik output, a run's table, a TOML file): never quoted
         raise PathError(
-            f"path file {shown_label}: line {header_line}: header must be the columns t,x,y,z"
-            + (f", found {shown(','.join(cell.strip() for cell in header))}" if quote else "")
+            f"path file {shown_label}: line {header_line}: header must be the columns t,x,y,z (time in s, the tip"
+            f" point in m); {found_columns(header, text=text, quote=quote)}"
         )
     if len(rows) < minimum + 1:
         raise PathError(
@@ -551,7 +552,9 @@ def _as_points(field: str, value: object) -> FloatArray:
 
 
 def _as_float_array(field: str, value: object) -> FloatArray:
-    """``value`` as a new float64 array, else PathError naming ``field``."""
+    """``value`` as a new float64 array, else PathError naming ``field`` (also a masked array with
+    masked entries: np.array would take the values under the mask)."""
+    refuse_masked(value, field, PathError)
     try:
         return np.array(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:

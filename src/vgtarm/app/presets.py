@@ -35,6 +35,20 @@ PRESETS: dict[str, dict[str, Any]] = {
 
 #: Preset arguments that apply only with the tool force (``--external-force``).
 WITH_TOOL_FORCE = frozenset({"tool_feedforward", "kp", "kv"})
+#: Preset arguments that apply only with computed force control (``--controller cfc``, as the
+#: runs of :func:`preset_options`): the gains were chosen on its measured front; the switching
+#: method starts from the case's gains (its GA's genes must hit the fixed gains exactly).
+WITH_CFC = frozenset({"kp", "kv"})
+#: Preset arguments that apply only with the value another argument has once the preset is applied
+#: (the observer's gain with the momentum observer, the Kalman filter's bandwidth with the Kalman
+#: filter): an option given beside the preset that turns the first off takes the second with it.
+NEEDS: dict[str, tuple[str, Any]] = {
+    "observer_gain": ("observer", "momentum"),
+    "estimator_bandwidth": ("estimator", "kalman"),
+}
+#: Preset arguments a force sensor (``--force-sensor``) replaces: the sensor feeds the measured tool
+#: force forward, so neither the observer nor the expected force is wanted beside it.
+NOT_WITH_FORCE_SENSOR = frozenset({"observer", "observer_gain", "tool_feedforward"})
 
 #: The simulation's (:func:`vgtarm.app.cases.run_case`'s) keyword of each preset argument that is one
 #: of its options.

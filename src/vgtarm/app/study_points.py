@@ -323,6 +323,10 @@ def simulate_command(inputs: Inputs, *, study_folder: str | Path | None = None) 
             safe = (inputs["controller"], inputs["scm_variant"]) == ("scm", "safe")
             if key in ("scm_hold", "scm_switch_on") and not safe:
                 continue  # options of the safe variant only, which the run did not use
+            if key in ("horizon", "scm_variant") and inputs["controller"] != "scm":
+                continue  # options of the switching method (simulate refuses them with another controller)
+            if key == "velocity_filter_hz" and not (inputs.get("encoder_resolution") or inputs.get("velocity_noise")):
+                continue  # it filters differenced velocities: a run without sensing has none (refused there)
             if value is not None:
                 args += [_FLAGS[key], str(value) if not isinstance(value, float) else repr(value)]
         elif key in _OPTIONAL_FLAGS:

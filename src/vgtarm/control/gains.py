@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import InputError, shown
+from ..errors import InputError, refuse_masked, shown
 from ..model.parameters import N_JOINTS
 
 Array = NDArray[np.float64]
@@ -19,22 +19,72 @@ def gain_matrix(value: ArrayLike, name: str, n: int = N_JOINTS) -> Array:
     expected = f"a number, {n} numbers or a {n}x{n} matrix"
     if isinstance(value, str | bytes) or value is None:
         raise InputError(f"{name} must be {expected}, got {shown(value)}")
+    refuse_masked(value, name)
     try:
         array = np.asarray(value, dtype=float)
     except (TypeError, ValueError, OverflowError):
         raise InputError(f"{name} must be {expected}, got {shown(value)}") from None
+    if array.shape not in ((), (n,), (n, n)):
+        raise InputError(f"{name} must be {expected}, got shape {array.shape}")
+    if not np.isfinite(array).all():  # before the scalar or the diagonal becomes a matrix (inf * 0)
+        i = int(np.argwhere(~np.isfinite(array.reshape(-1)))[0][0])
+        index = (i, i) if array.ndim < 2 else divmod(i, n)
+        raise InputError(f"{name} must be finite, got {name}[{index[0]}, {index[1]}] = {float(array.flat[i])!r}")
     if array.ndim == 0:
         array = float(array) * np.eye(n)
     elif array.shape == (n,):
         array = np.diag(array)
-    elif array.shape != (n, n):
-        raise InputError(f"{name} must be {expected}, got shape {array.shape}")
-    if not np.isfinite(array).all():
-        i, j = (int(k) for k in np.argwhere(~np.isfinite(array))[0])
-        raise InputError(f"{name} must be finite, got {name}[{i}, {j}] = {float(array[i, j])!r}")
     array = array.copy()
     array.flags.writeable = False
     return array
+
+
+def check_definite(matrix: Array, name: str) -> None:
+    """Refuse, in one :class:`InputError` line naming ``name``, fixed gains a controller cannot be
+    run with: ``matrix`` (a gain matrix of :func:`gain_matrix`) must be symmetric and positive
+    definite; for gains given per joint (a diagonal), each > 0. With these ``Kp`` and ``Kv`` the
+    error dynamics of computed force control with an exact model, ``e'' + Kv e' + Kp e = 0``, are
+    stable. The one check of ``vgtarm simulate --kp/--kv`` and of the exported controller (the
+    library's :func:`vgtarm.simulation.simulate` runs any gains, unstable ones included)."""
+    if not np.array_equal(matrix, matrix.T):
+        i, j = (int(k) for k in np.argwhere(matrix != matrix.T)[0])
+        raise InputError(
+            f"{name} must be a symmetric matrix, got {name}[{i}, {j}] = {float(matrix[i, j])!r} and "
+            f"{name}[{j}, {i}] = {float(matrix[j, i])!r}"
+        )
+    diagonal = np.diag(matrix)
+    if not (diagonal > 0).all():
+        i = int(np.argwhere(~(diagonal > 0))[0][0])
+        raise InputError(
+            f"{name} must be positive definite (each gain > 0), got {name}[{i}, {i}] = {float(diagonal[i])!r}"
+        )
+    smallest = float(np.linalg.eigvalsh(matrix)[0])
+    if not smallest > 0:
+        raise InputError(f"{name} must be positive definite, got a matrix whose smallest eigenvalue is {smallest:.6g}")
+
+
+def gains_text(text: str, option: str, joint_names: tuple[str, ...]) -> float | tuple[float, ...]:
+    """The gain of the command-line option ``option`` (``--kp``, ``--kv`` of ``vgtarm simulate`` and
+    ``vgtarm export controller``): one number for every joint, or one per joint of ``joint_names``
+    separated by commas, each finite and > 0 (:func:`check_definite` on the gains they make); else
+    one :class:`InputError` line naming the option, the value and what was expected."""
+    n = len(joint_names)
+    expected = (
+        f"expected one number for every joint or {n} numbers separated by commas (one per joint: "
+        f"{' '.join(joint_names)}), each finite and > 0"
+    )
+    try:
+        values = [float(cell) for cell in text.split(",")]
+    except ValueError:
+        raise InputError(f"{option} {shown(text)}: {expected}") from None
+    if len(values) not in (1, n):
+        raise InputError(f"{option} {shown(text)}: {expected}")
+    value = values[0] if len(values) == 1 else tuple(values)
+    try:
+        check_definite(gain_matrix(value, option, n), option)
+    except InputError:
+        raise InputError(f"{option} {shown(text)}: {expected}") from None
+    return value
 
 
 @dataclass(frozen=True, eq=False)

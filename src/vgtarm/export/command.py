@@ -9,12 +9,17 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
-from ..errors import escape
-from ..fileio import check_output_folder
-from ..model.robot import load_robot
-from ..simulation.sensing import DEFAULT_ESTIMATOR_BANDWIDTH_HZ
-from .controller import export_controller
+from ..control.gains import gains_text
+from ..errors import ConfigError, InputError, cut, escape, shown
+from ..fileio import check_output_folder, parse_toml, read_text_limited
+from ..model.parameters import ROBOT_FILE_LIMIT, RobotParameters, load_parameters
+from ..model.robot import load_robot, robot_parameters_from_dict
+from ..model.stack import Stack
+from ..simulation.checks import model_of_plant
+from ..simulation.sensing import DEFAULT_ESTIMATOR_BANDWIDTH_HZ, DEFAULT_VELOCITY_FILTER_HZ, check_twist_resolution
+from .controller import export_controller, probe_compiler
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -36,12 +41,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="export switching control too, its GA in C (default: computed force control only)",
     )
-    parser.add_argument("--kp", type=float, default=15000.0, help="position gain, every joint (1/s^2; case 2's)")
-    parser.add_argument("--kv", type=float, default=600.0, help="velocity gain, every joint (1/s; case 2's)")
+    for name, what, unit, default in (("kp", "position", "1/s^2", 15000.0), ("kv", "velocity", "1/s", 600.0)):
+        parser.add_argument(
+            f"--{name}",
+            default=None,
+            metavar="K[,K...]",
+            help=f"{what} gain ({unit}): one number for every joint or one per joint, comma-separated, each > 0 "
+            f"(default: case 2's, {default:g})",
+        )
     parser.add_argument("--dt", type=float, default=1e-3, help="control period (s)")
     parser.add_argument("--encoder-resolution", type=float, default=0.0, metavar="M", help="leg encoder step (m)")
     parser.add_argument("--twist-resolution", type=float, default=None, metavar="RAD", help="twist encoder step (rad)")
-    parser.add_argument("--velocity-filter-hz", type=float, default=100.0, metavar="HZ", help="velocity filter cut-off")
+    parser.add_argument(
+        "--velocity-filter-hz",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help=f"with encoders: the cut-off of the filter of the differenced velocities (default "
+        f"{DEFAULT_VELOCITY_FILTER_HZ:g})",
+    )
     parser.add_argument(
         "--estimator",
         choices=("difference", "kalman"),
@@ -61,16 +79,48 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _parameters(config: Path | None) -> RobotParameters | Stack:
+    """The robot file ``config``'s parameters (the shipped reference robot for None), read as
+    :func:`~vgtarm.model.robot.load_robot` reads them, without building a model."""
+    if config is None:
+        return load_parameters(None)
+    text = read_text_limited(config, ROBOT_FILE_LIMIT, "configuration file", error=ConfigError)
+    return robot_parameters_from_dict(parse_toml(text, cut(str(config), 200), error=ConfigError), source=str(config))
+
+
+def _checked_options(args: argparse.Namespace) -> tuple[dict[str, Any], RobotParameters | Stack | None]:
+    """The gains given and the controller model's parameters (None: the robot's), checked with the
+    checks simulate uses (the gains as ``vgtarm simulate --kp/--kv`` reads them, the twist
+    encoder, the model against the robot) from the robot files' parameters, before any model is
+    built; an option that would be ignored (``--velocity-filter-hz`` without encoders) is refused."""
+    if args.velocity_filter_hz is not None and not args.encoder_resolution and not args.twist_resolution:
+        raise InputError(
+            f"--velocity-filter-hz {shown(args.velocity_filter_hz)}: filters the velocities differenced from "
+            "encoders; expected --encoder-resolution (without encoders the velocities are measured)"
+        )
+    robot = _parameters(args.config)
+    gains: dict[str, Any] = {
+        name: gains_text(text, f"--{name}", robot.joint_names)
+        for name, text in (("kp", args.kp), ("kv", args.kv))
+        if text is not None
+    }
+    check_twist_resolution(robot.joint_units, args.twist_resolution, "--twist-resolution")
+    model = None if args.model_config is None else _parameters(args.model_config)
+    if model is not None:
+        model_of_plant(robot, model, f"--model-config {shown(str(args.model_config), 200)}")
+    return gains, model
+
+
 def run(args: argparse.Namespace) -> int:
     """Export the controller as the options say; prints the folder and what it holds."""
     check_output_folder(args.out, "--out", inputs=[args.config, args.model_config])
+    gains, model = _checked_options(args)  # before any compiler runs or any model is built
+    probe_compiler()  # a broken compiler: the export's one line, before the model falls back on it
     robot = load_robot(args.config)
-    model = load_robot(args.model_config).parameters if args.model_config is not None else None
     done = export_controller(
         robot,
         args.out,
-        kp=args.kp,
-        kv=args.kv,
+        **gains,  # the gains given; else export_controller's, case 2's
         dt=args.dt,
         controller_model=model,
         observer=args.observer,
@@ -78,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
         force_sensor=args.force_sensor,
         encoder_resolution=args.encoder_resolution,
         twist_resolution=args.twist_resolution,
-        velocity_filter_hz=args.velocity_filter_hz,
+        velocity_filter_hz=DEFAULT_VELOCITY_FILTER_HZ if args.velocity_filter_hz is None else args.velocity_filter_hz,
         estimator=args.estimator,
         estimator_bandwidth_hz=args.estimator_bandwidth,
         switching=args.switching,

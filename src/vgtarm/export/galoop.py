@@ -8,7 +8,6 @@ its ``vgtc_ga_activate``, timed in C, so that tests hold them to the simulation'
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import tempfile
@@ -23,7 +22,7 @@ from numpy.typing import NDArray
 from ..errors import InputError, shown
 from ..model.compiled import find_compiler
 from .controller import ExportError, run_compiler
-from .loop import PROGRAMS
+from .loop import PROGRAMS, export_settings
 
 HARNESS = Path(__file__).resolve().parent / "harness" / "ga_harness.c"
 #: The library's flags: those of the export's Makefile (no contraction: the GA writes its fused
@@ -62,12 +61,7 @@ class ExportedGA:
 
     def __init__(self, folder: str | os.PathLike[str], *, compiler: str | None = None, flags: tuple[str, ...] = FLAGS):
         self.folder = Path(folder).absolute()
-        try:
-            self.settings: dict[str, Any] = json.loads((self.folder / "export.json").read_text())
-        except (OSError, ValueError) as exc:
-            raise InputError(
-                f"exported controller {shown(str(folder), 200)}: no readable export.json ({exc})"
-            ) from None
+        self.settings: dict[str, Any] = export_settings(folder)
         if not self.settings.get("switching"):
             raise InputError(
                 f"exported controller {shown(str(folder), 200)}: exported without switching control"

@@ -27,6 +27,7 @@ from cffi import FFI
 from ..control.cfc import ComputedForceControl
 from ..control.scm import SwitchingControl
 from ..errors import InputError, SimulationError, shown
+from ..fileio import read_text_limited
 from ..model import interface
 from ..model.closedloop import DONE, ClosedLoopDriver
 from ..model.compiled import CompiledBackend, find_compiler
@@ -38,6 +39,29 @@ from ..simulation.scenario import MODEL_ENGINE, Scenario
 from ..simulation.simulator import Outcome, prepare
 from .controller import ExportError, run_compiler
 from .switching import switching_controller
+
+#: Largest ``export.json`` of an export read (bytes): a few kilobytes.
+SETTINGS_LIMIT = 2**20
+
+
+def export_settings(folder: str | os.PathLike[str]) -> dict[str, Any]:
+    """The settings of the export in ``folder`` (its ``export.json``), or one line saying why not:
+    missing, not a regular file (a named pipe or a device is refused before it is opened), not
+    JSON, or not an export's settings (a table with ``n_joints``)."""
+    where = f"exported controller {shown(str(folder), 200)}"
+    expected = "expected a folder written by vgtarm export controller"
+    try:
+        text = read_text_limited(Path(folder) / "export.json", SETTINGS_LIMIT, "export settings")
+    except InputError as exc:
+        raise InputError(f"{where}: no readable export.json ({exc}); {expected}") from None
+    try:
+        settings = json.loads(text)
+    except (ValueError, RecursionError):
+        raise InputError(f"{where}: export.json is not JSON; {expected}") from None
+    if not isinstance(settings, dict) or not isinstance(settings.get("n_joints"), int):
+        raise InputError(f"{where}: export.json holds no export's settings (no n_joints); {expected}")
+    return settings
+
 
 HARNESS = Path(__file__).resolve().parent / "harness" / "harness.c"
 MODEL_CSRC = Path(__file__).resolve().parent.parent / "model" / "csrc"
@@ -98,13 +122,7 @@ class CompiledExport:
         extra_flags: tuple[str, ...] = (),
     ) -> None:
         self.folder = Path(folder).absolute()
-        try:
-            self.settings: dict[str, Any] = json.loads((self.folder / "export.json").read_text())
-        except (OSError, ValueError) as exc:
-            raise InputError(
-                f"exported controller {shown(str(folder), 200)}: no readable export.json ({exc}); "
-                "expected a folder written by vgtarm export controller"
-            ) from None
+        self.settings: dict[str, Any] = export_settings(folder)
         self.n_joints = int(self.settings["n_joints"])
         chosen = compiler or find_compiler()
         if chosen is None:

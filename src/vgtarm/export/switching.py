@@ -238,7 +238,9 @@ instruction; at a portable -O2 (no FMA instruction) an activation is tens of tim
 activation takes 0.6 to 0.9 ms on one core of the x86-64 server this was measured on (p99 under
 1 ms on case 2's windows; `./ga_timing 1000` measures it here), so a period with an activation
 fits a 1 ms period only just: give the GA its own core a period ahead, or fewer generations
-(`vgtc_ga_params.generations`), where the rest of the period is needed."""
+(`vgtc_ga_params.generations`), where the rest of the period is needed. `ga_timing`'s one argument,
+the number of activations, is a whole number (digits only) from 1 to 10,000,000
+(`GA_MAX_ACTIVATIONS` in `ga_timing.c`); anything else is refused in one line, exit status 1."""
 
 
 def _watch_from(controller: SwitchingControl) -> int:

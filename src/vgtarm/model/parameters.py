@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 
 from ..errors import ConfigError, cut, shown
 from ..fileio import parse_toml, read_text_limited
+from ..kinds import other_toml
 from .assembly import TRIANGLE_INEQUALITIES, linear_form, triangle_margins
 from .factors import model_factor
 
@@ -226,6 +227,9 @@ def load_parameters(path: str | os.PathLike[str] | None = None) -> RobotParamete
 
 def parameters_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> RobotParameters:
     """Build :class:`RobotParameters` from the nested mapping a TOML file parses to."""
+    other = other_toml(data, "a robot file")  # a study or a stack file given as a 7-joint robot: said so
+    if other is not None:
+        raise ConfigError(f"{cut(str(source), _SOURCE_LENGTH)}: {other}")
     reader = _Reader(cut(str(source), _SOURCE_LENGTH))
     reader.keys(
         data, "", required={"geometry", "limits", "home", "bodies"}, optional={"name", "friction", "environment"}

@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..errors import ConfigError, InputError, cut, shown
 from ..fileio import parse_toml, read_text_limited
+from ..kinds import other_toml
 from ..markup import html_table
 from ..memory import check_batch
 from .assembly import check_margins
@@ -614,8 +615,7 @@ def load_robot(config: str | Path | None = None, *, model: str | None = None) ->
     if isinstance(config, str | os.PathLike):
         text = read_text_limited(config, ROBOT_FILE_LIMIT, "configuration file", error=ConfigError)
         data = parse_toml(text, cut(str(config), 200), error=ConfigError)
-        if is_stack_format(data):
-            return _robot_of(stack_from_dict(data, source=str(config)), model)
+        return _robot_of(robot_parameters_from_dict(data, source=str(config)), model)
     return _robot_of(load_parameters(config), model)
 
 
@@ -627,6 +627,9 @@ def is_stack_format(data: Mapping[str, Any]) -> bool:
 def robot_parameters_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> RobotParameters | Stack:
     """The validated parameters of a parsed robot file of either format (see :func:`load_robot`);
     nothing is compiled."""
+    other = other_toml(data, "robot")  # a study file given as a robot: said in those words
+    if other is not None:
+        raise ConfigError(f"{cut(str(source), 200)}: {other}")
     if is_stack_format(data):
         return stack_from_dict(data, source=source)
     return parameters_from_dict(data, source=source)

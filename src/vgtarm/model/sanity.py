@@ -57,7 +57,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import InputError, shown
+from ..errors import InputError, refuse_masked, shown
 
 if TYPE_CHECKING:
     from .parameters import RobotParameters
@@ -162,15 +162,17 @@ def real_array(value: Any, name: str, last: int, names: tuple[str, ...] = ()) ->
     """``value`` as an array of real numbers of shape ``(..., last)``, not yet converted to float.
 
     Refuses, with one :class:`InputError` line naming ``name``: what is not an array of numbers
-    (text, ragged lists), a wrong shape, and arrays holding complex values (even with a zero
-    imaginary part), booleans, ``None``, text or other objects; the message names the first such
-    element (with ``names[j]`` for index ``j`` of the last axis) and shows the user's value.
+    (text, ragged lists), a masked array with masked entries (:func:`~vgtarm.errors.refuse_masked`),
+    a wrong shape, and arrays holding complex values (even with a zero imaginary part), booleans,
+    ``None``, text or other objects; the message names the first such element (with ``names[j]``
+    for index ``j`` of the last axis) and shows the user's value.
     Integers, floats of any precision, ``Fraction`` and ``Decimal`` are real numbers. Nothing
     is copied for an array of floats (a broadcast view stays a view): convert with
     :func:`as_float` after checking the size of the work.
     """
     if isinstance(value, str | bytes):
         raise InputError(f"{name} must be an array of numbers, got {shown(value)}")
+    refuse_masked(value, name)  # np.asarray would take the values under the mask
     try:
         raw = np.asarray(value)
     except (TypeError, ValueError, OverflowError, RecursionError):

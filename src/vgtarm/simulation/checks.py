@@ -166,14 +166,20 @@ def _totals(parameters: RobotParameters | Stack) -> dict[str, float]:
     }
 
 
-def model_of_plant(plant: Robot, controller_model: Robot | RobotParameters | Stack) -> None:
+def model_of_plant(
+    plant: Robot | RobotParameters | Stack,
+    controller_model: Robot | RobotParameters | Stack,
+    name: str = "controller_model",
+) -> None:
     """Refuse, with one :class:`InputError` line, a controller model whose total mass, inertia or
     friction is not within :data:`~vgtarm.model.factors.MODEL_FACTOR_RANGE` of the plant's (for
     example a model of a ten-thousandth of the plant's mass): the line names the ratio and the
-    accepted range."""
+    accepted range, after ``name``. The plant and the model: robots or their parameters (nothing
+    is built)."""
     model = controller_model.parameters if isinstance(controller_model, Robot) else controller_model
+    plant_parameters = plant.parameters if isinstance(plant, Robot) else plant
     low, high = MODEL_FACTOR_RANGE
-    ours, theirs = _totals(plant.parameters), _totals(model)
+    ours, theirs = _totals(plant_parameters), _totals(model)
     for quantity, value in theirs.items():
         reference = ours[quantity]
         if reference == 0.0:  # nothing to compare with (a robot without friction)
@@ -181,7 +187,7 @@ def model_of_plant(plant: Robot, controller_model: Robot | RobotParameters | Sta
         ratio = value / reference
         if not low * (1 - 1e-9) <= ratio <= high * (1 + 1e-9):
             raise InputError(
-                f"controller_model: its {quantity} is {ratio:.3g} times the plant's (robot "
-                f"{shown(plant.parameters.name)}); expected a ratio in [{low:g}, {high:g}] (a model off by more "
+                f"{name}: its {quantity} is {ratio:.3g} times the plant's (robot "
+                f"{shown(plant_parameters.name)}); expected a ratio in [{low:g}, {high:g}] (a model off by more "
                 "is no model of the plant)"
             )

@@ -8,7 +8,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import InputError, shown
+from ..errors import InputError, refuse_masked, shown
 from ..model.parameters import N_JOINTS
 from ..paths import MIN_DT
 
@@ -130,7 +130,9 @@ class JointReference:
 
 
 def _array(value: object, label: str) -> Array:
-    """``value`` as a float array, or :class:`InputError` naming the reference's ``label``."""
+    """``value`` as a float array, or :class:`InputError` naming the reference's ``label`` (also a
+    masked array with masked entries: np.asarray would take the values under the mask)."""
+    refuse_masked(value, f"reference {label}")
     try:
         return np.asarray(value, dtype=float)
     except (TypeError, ValueError, OverflowError):

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import io
 import json
+import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -11,8 +13,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import InputError
-from ..fileio import atomic_folder, atomic_write_text
+from ..errors import InputError, cut
+from ..fileio import atomic_folder, atomic_write_text, check_input_folder, json_value, open_input, read_text_limited
+from ..kinds import found_columns
 from ..markup import html_table
 from ..model.parameters import JOINT_NAMES
 
@@ -215,7 +218,7 @@ class SimulationResult:
         columns, table = self._table()
         act_columns = list(GAActivation.__dataclass_fields__)
         act_rows = np.array([[getattr(a, c) for c in act_columns] for a in self.activations], dtype=float)
-        summary = json.dumps(_jsonable(self.summary()), indent=2) + "\n"
+        summary = json.dumps(json_value(self.summary()), indent=2) + "\n"
         with atomic_folder(folder, "folder", owned=RUN_FILES) as out:
             atomic_write_text(out / "timeseries.csv", _csv(columns, table))
             atomic_write_text(out / "ga_activations.csv", _csv(act_columns, act_rows.reshape(-1, len(act_columns))))
@@ -228,26 +231,24 @@ class SimulationResult:
         ``summary.json``); ``load(save(r))`` holds the same arrays, activations and summary as ``r``.
 
         Raises :class:`~vgtarm.errors.InputError` naming the file when the folder does not hold a
-        complete, readable run.
+        complete, readable run: a file missing, not a regular file (a named pipe, a device: refused
+        before it is opened), or not of its kind (a header that is not a run's, in one line saying
+        what it looks like).
         """
         where = Path(folder)
+        check_input_folder(where, "run folder")
         summary_file, table_file = where / "summary.json", where / "timeseries.csv"
         for file in (summary_file, table_file):
-            if not file.is_file():
-                raise InputError(f"run folder {where}: missing {file.name} (expected a folder written by save())")
-        try:
-            summary = json.loads(summary_file.read_text("utf-8"))
-            header = table_file.read_text("utf-8").split("\n", 1)[0].split(",")
-            table = np.genfromtxt(table_file, delimiter=",", skip_header=1, dtype=float, ndmin=2)
-        except (OSError, UnicodeDecodeError, ValueError) as exc:
-            raise InputError(f"run folder {where}: cannot read the run: {exc}") from None
+            if not os.path.lexists(file):
+                raise InputError(
+                    f"run folder {cut(str(where), 200)}: missing {file.name} (expected a folder written by save())"
+                )
+        summary = _read_summary(summary_file)
         joints = [str(n) for n in summary.get("joint_names", JOINT_NAMES)]  # a stack's run records its joints
         layouts = [cls._columns(estimate, measured, joints) for estimate in (False, True) for measured in (False, True)]
-        columns = next((c for c in layouts if header == c), layouts[0])
-        if header != columns or table.shape[1:] != (len(columns),):
-            raise InputError(
-                f"{table_file}: columns {header[:4]}...({len(header)}) do not match a run's {len(columns)} columns"
-            )
+        header, table = _read_table(table_file, layouts, "a run's time series (timeseries.csv)")
+        _check_summary(summary_file, summary)
+        columns = header
         index = {name: i for i, name in enumerate(columns)}
 
         def block(names: list[str]) -> Array:
@@ -255,9 +256,14 @@ class SimulationResult:
 
         activations: list[GAActivation] = []
         act_file = where / "ga_activations.csv"
-        if act_file.is_file() and len(act_file.read_text("utf-8").strip().splitlines()) > 1:
-            rows = np.genfromtxt(act_file, delimiter=",", skip_header=1, dtype=float, ndmin=2)
+        if os.path.lexists(act_file):
             fields = GAActivation.__dataclass_fields__
+            _, rows = _read_table(act_file, [list(fields)], "a run's GA activations (ga_activations.csv)")
+            whole = [name for name in fields if fields[name].type in (int, "int")]
+            if not np.isfinite(rows[:, [list(fields).index(n) for n in whole]]).all():
+                raise InputError(
+                    f"run file {cut(str(act_file), 200)}: {', '.join(whole)}: expected whole numbers in every row"
+                )
             for row in rows:
                 values: dict[str, Any] = {
                     name: int(v) if fields[name].type in (int, "int") else float(v)
@@ -331,6 +337,75 @@ class SimulationResult:
         return columns, table
 
 
+#: Largest ``summary.json`` of a run read (bytes): a few kilobytes.
+SUMMARY_LIMIT = 2**20
+#: What a run's ``summary.json`` holds at least.
+SUMMARY_KEYS = ("success", "message", "wall_time_s", "ga_time_s")
+
+
+def _read_summary(file: Path) -> dict[str, Any]:
+    """The parsed ``summary.json`` of a run: a JSON table, or one line naming the file."""
+    text = read_text_limited(file, SUMMARY_LIMIT, "run file")
+    shown_file = cut(str(file), 200)
+    try:
+        summary = json.loads(text)
+    except (ValueError, RecursionError):
+        raise InputError(f"run file {shown_file}: not JSON; expected a run's summary.json (from save())") from None
+    if not isinstance(summary, dict):
+        raise InputError(f"run file {shown_file}: not a table of figures; expected a run's summary.json")
+    return summary
+
+
+def _check_summary(file: Path, summary: Mapping[str, Any]) -> None:
+    """Refuse, in one line naming the file, a summary without the figures a run records."""
+    missing = [key for key in SUMMARY_KEYS if key not in summary]
+    if missing:
+        raise InputError(
+            f"run file {cut(str(file), 200)}: no {missing[0]!r}; expected a run's summary.json (with"
+            f" {', '.join(SUMMARY_KEYS)}, from save())"
+        )
+
+
+def _read_table(file: Path, layouts: Sequence[list[str]], kind: str) -> tuple[list[str], Array]:
+    """The header (one of ``layouts``) and the rows ``(n, columns)`` of the CSV table ``file``,
+    which must be a regular file (:func:`~vgtarm.fileio.open_input`); else one line naming the
+    file, what was expected and what was found (never quoting it)."""
+    shown_file = cut(str(file), 200)
+    with open_input(file, "run file") as raw:
+        stream = io.TextIOWrapper(raw, encoding="utf-8", newline="")
+        try:
+            first = stream.readline(1 << 20)
+        except UnicodeDecodeError as exc:
+            raise InputError(f"run file {shown_file}: not utf-8 text (byte {exc.start} cannot be decoded)") from None
+        header = [cell.strip() for cell in first.rstrip("\r\n").split(",")]
+        if header not in layouts:
+            expected = layouts[0]
+            raise InputError(
+                f"run file {shown_file}: columns do not match {kind}: expected the {len(expected)} columns"
+                f" {', '.join(expected[:4])}, ...; {found_columns(header, text=first, expected=kind.split(' (')[0])}"
+            )
+        try:
+            rows = stream.read()
+            table = (
+                np.genfromtxt(io.StringIO(rows), delimiter=",", dtype=float, ndmin=2)
+                if rows.strip()
+                else np.empty((0, len(header)))
+            )
+        except UnicodeDecodeError as exc:
+            raise InputError(f"run file {shown_file}: not utf-8 text (byte {exc.start} cannot be decoded)") from None
+        except ValueError:  # rows of other lengths than the header
+            raise InputError(
+                f"run file {shown_file}: a row of another length than its header of {len(header)} columns"
+            ) from None
+        except OSError as exc:
+            raise InputError(f"run file {shown_file}: cannot read it: {cut(exc.strerror or str(exc), 120)}") from None
+    if table.shape[1:] != (len(header),):
+        raise InputError(
+            f"run file {shown_file}: rows of {table.shape[1]} values under a header of {len(header)} columns"
+        )
+    return header, table
+
+
 def _pandas() -> Any:
     """pandas, or :class:`ImportError` saying which extra brings it."""
     try:
@@ -400,15 +475,3 @@ def _csv(columns: list[str], table: Array) -> str:
     for i in np.flatnonzero(np.isnan(values).any(axis=1)).tolist():
         lines[i] = ",".join("" if v != v else f"{v:.17g}" for v in rows[i])
     return ",".join(columns) + "\n" + ("\n".join(lines) + "\n" if lines else "")
-
-
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, float) and not np.isfinite(value):
-        return None
-    return value

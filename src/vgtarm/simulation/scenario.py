@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError, shown
+from ..ga import check_seed
 from ..model.parameters import RobotParameters
 from ..model.robot import Robot
 from ..model.stack import Stack
@@ -106,8 +107,7 @@ class Scenario:
             raise InputError(f"substeps = {shown(self.substeps)}: expected a whole number from 1 to {MAX_SUBSTEPS:,}")
         if not 1 <= self.substeps <= MAX_SUBSTEPS:
             raise InputError(f"substeps = {shown(self.substeps)}: expected a whole number from 1 to {MAX_SUBSTEPS:,}")
-        if not (isinstance(self.seed, int | np.integer) and not isinstance(self.seed, bool) and self.seed >= 0):
-            raise InputError(f"seed = {self.seed!r}: expected a whole number >= 0")
+        check_seed(self.seed, "seed")  # 0 to 2**63 - 1: the seed is stored as a 64-bit integer
         if self.observer not in OBSERVERS:
             raise InputError(f"observer = {self.observer!r}: expected one of {list(OBSERVERS)}")
         if not isinstance(self.estimator, str) or self.estimator not in ESTIMATORS:

@@ -138,6 +138,18 @@ def _observer_gain(observer: str, observer_gain: float | None, dt: float) -> flo
     return gain
 
 
+def check_twist_resolution(units: tuple[str, ...], twist_resolution: object, name: str = "twist_resolution") -> None:
+    """Refuse, in one line naming ``name`` (an argument, or a command-line option ``--...``), a twist
+    encoder's resolution given for a robot without a twist joint (``units``: its joint units, none
+    ``rad``), where it would be ignored without a word."""
+    if twist_resolution is not None and "rad" not in units:
+        given = f"{name} {shown(twist_resolution)}" if name.startswith("--") else f"{name} = {shown(twist_resolution)}"
+        raise InputError(
+            f"{given}: the robot has no twist joint (its {len(units)} joints are legs, in m); expected "
+            + ("no twist encoder (leave the option out)" if name.startswith("--") else "None")
+        )
+
+
 def sensing_settings(
     units: tuple[str, ...],
     dt: float,
@@ -154,7 +166,7 @@ def sensing_settings(
     """Validate the observer and sensing arguments of a run with control period ``dt``.
 
     ``units`` are the robot's joint units (``m``: a leg, whose encoder has ``encoder_resolution``;
-    ``rad``: a twist, ``twist_resolution``)."""
+    ``rad``: a twist, ``twist_resolution``, refused on a robot without a twist)."""
     if observer not in OBSERVERS:
         raise InputError(f"observer = {observer!r}: expected one of {list(OBSERVERS)}")
     if not isinstance(force_sensor, bool | np.bool_):
@@ -163,6 +175,7 @@ def sensing_settings(
         raise InputError(f"force_sensor = True with observer = {observer!r}: choose one way to cancel the tool force")
     gain = _observer_gain(observer, observer_gain, dt)
     legs = _number("encoder_resolution", encoder_resolution)
+    check_twist_resolution(units, twist_resolution)
     twist = DEFAULT_TWIST_RESOLUTION if twist_resolution is None and legs > 0 else twist_resolution or 0.0
     twist = _number("twist_resolution", twist)
     for label, step, largest, unit in (

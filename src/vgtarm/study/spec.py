@@ -43,7 +43,9 @@ import numpy as np
 from ..control.scm import MAX_HORIZON, SWITCH_ON
 from ..errors import ConfigError, VgtarmError, cut, shown
 from ..fileio import parse_toml, read_text_limited
+from ..ga import MAX_SEED, check_seed
 from ..ik.effort import CRITERIA, DEFAULT_JOINT_LIMIT_WEIGHT
+from ..kinds import other_toml
 from ..model.parameters import ROBOT_FILE_LIMIT
 from ..model.robot import robot_parameters_from_dict
 from ..paths import CSV_FILE_LIMIT, MIN_DT, from_csv
@@ -265,6 +267,9 @@ def parse_study(data: Mapping[str, Any], *, source: str = "<study>", folder: Pat
     source = cut(str(source), 200)
     if not isinstance(data, Mapping):
         raise ConfigError(f"{source}: {shown(data)}: expected a table of [study], [grid] and [random]")
+    other = other_toml(data, "a study file")  # a robot file given as a study: said in those words
+    if other is not None:
+        raise ConfigError(f"{source}: {other}")
     unknown = sorted(set(data) - {"study", "grid", "random"}, key=str)
     if unknown:
         raise ConfigError(f"{source}: unknown table [{cut(str(unknown[0]))}]: expected [study], [grid] and [random]")
@@ -327,8 +332,7 @@ def parse_study(data: Mapping[str, Any], *, source: str = "<study>", folder: Pat
     random_seed = random_in.pop("seed", 0)
     if isinstance(draws, bool) or not isinstance(draws, int) or draws < 0:
         raise ConfigError(f"{source}: random.draws = {shown(draws)}: expected a whole number >= 0")
-    if isinstance(random_seed, bool) or not isinstance(random_seed, int) or random_seed < 0:
-        raise ConfigError(f"{source}: random.seed = {shown(random_seed)}: expected a whole number >= 0")
+    random_seed = check_seed(random_seed, f"{source}: random.seed", ConfigError)
     random: dict[str, tuple[str, list[Value]]] = {}
     for key, value in random_in.items():
         if key not in params:
@@ -414,24 +418,32 @@ def _check_files(source: str, head: Mapping[str, Any], files: Mapping[str, str],
 
 
 def _seeds(source: str, value: object) -> Sequence[int]:
-    """The seeds of ``study.seeds``: a range (not expanded, however long) or a list."""
+    """The seeds of ``study.seeds``: a range (not expanded, however long) or a list; every seed from 0
+    to :data:`~vgtarm.ga.MAX_SEED` (a run's seed is stored as a 64-bit integer)."""
     where = f"{source}: study.seeds = {shown(value)}"
+    seeds = f"seeds from 0 to 2**63 - 1 = {MAX_SEED}"
 
     def whole(v: object) -> bool:
         return isinstance(v, int) and not isinstance(v, bool) and v >= 0
 
     if whole(value) and value:
+        if value > MAX_SEED + 1:  # type: ignore[operator]
+            raise ConfigError(f"{where}: expected a count of at most 2**63 ({seeds})")
         return range(int(value))  # type: ignore[call-overload]
     if isinstance(value, list) and value and all(whole(v) for v in value):
         if len(set(value)) != len(value):
             raise ConfigError(f"{where}: expected distinct seeds")
+        if max(value) > MAX_SEED:
+            raise ConfigError(f"{where}: seed {shown(max(value))}: expected {seeds}")
         return [int(v) for v in value]
     if isinstance(value, Mapping) and set(value) == {"start", "count"} and whole(value["start"]):
         if whole(value["count"]) and value["count"] >= 1:
             start, count = int(value["start"]), int(value["count"])
+            if start + count - 1 > MAX_SEED:
+                raise ConfigError(f"{where}: the last seed is {start + count - 1}; expected {seeds}")
             return range(start, start + count)
     raise ConfigError(
-        f"{where}: expected a count >= 1, a list of distinct whole numbers >= 0 or {{start = S, count = N}}"
+        f"{where}: expected a count >= 1, a list of distinct whole numbers >= 0 or {{start = S, count = N}} ({seeds})"
     )
 
 

@@ -33,7 +33,8 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError, cut, shown
-from ..fileio import atomic_path, atomic_write_text
+from ..fileio import atomic_path, atomic_write_text, json_value, no_room_error, open_input, read_text_limited
+from ..kinds import found_columns
 from .spec import Point
 
 #: First characters that make a spreadsheet read a cell as a formula (or, tab and carriage
@@ -54,6 +55,8 @@ TIMING_COLUMNS = (
 #: The sub-folder that held the run files of a study begun before issue 27 (``DIR/runs/<id>.json``);
 #: such a study resumes there, new studies write ``DIR/<id>.json`` as the README says.
 LEGACY_RUNS = "runs"
+#: Largest run file read (bytes): a run's record is a few kilobytes.
+RUN_RECORD_LIMIT = 16 * 2**20
 #: The name of a run file: a point's id (16 hexadecimal digits, :func:`vgtarm.study.spec.point_id_of`).
 RUN_FILE = re.compile(r"[0-9a-f]{16}\.json")
 
@@ -85,7 +88,7 @@ class Store:
     def write(self, record: Mapping[str, Any]) -> Path:
         """Store one finished run ``{"id", "inputs", "summary", "error"}`` atomically, then log it."""
         path = self.run_file(str(record["id"]))
-        atomic_write_text(path, json.dumps(_jsonable(dict(record))) + "\n")
+        atomic_write_text(path, json.dumps(json_value(dict(record))) + "\n")
         self.note("write", [str(record["id"])])
         return path
 
@@ -93,11 +96,17 @@ class Store:
         """Append ``what <id>`` lines to the execution log (one small append per call)."""
         text = "".join(f"{what} {i}\n" for i in ids)
         if text:
-            fd = os.open(self.log, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
             try:
-                os.write(fd, text.encode())
-            finally:
-                os.close(fd)
+                fd = os.open(self.log, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+                try:
+                    os.write(fd, text.encode())
+                finally:
+                    os.close(fd)
+            except OSError as exc:  # a full disk or the size limit: one line naming the log
+                failure = no_room_error(exc, self.log, "study log")
+                if failure is exc:
+                    raise
+                raise failure from exc
 
     def read(self, point_id: str) -> dict[str, Any]:
         """One stored run: a record ``{"id", "inputs", "summary", "error"}`` whose id is ``point_id``
@@ -106,9 +115,13 @@ class Store:
         path = self.run_file(point_id)
         shown_path = cut(str(path), 200)
         redo = "remove it and run the study again to redo that run"
+        try:  # a named pipe or a device at its name: refused before it is opened
+            text = read_text_limited(path, RUN_RECORD_LIMIT, "run file")
+        except InputError as exc:
+            raise InputError(f"{exc}; {redo}") from None
         try:
-            record = json.loads(path.read_text("utf-8"))
-        except (OSError, ValueError) as exc:
+            record = json.loads(text)
+        except (ValueError, RecursionError) as exc:
             raise InputError(f"run file {shown_path}: cannot read it ({type(exc).__name__}); {redo}") from None
         if not (
             isinstance(record, dict)
@@ -173,12 +186,23 @@ def table_columns(rows: list[dict[str, Any]]) -> list[str]:
 
 def read_table(folder: str | Path) -> list[dict[str, Any]]:
     """The rows of ``results.parquet`` (None for missing values)."""
+    import pyarrow as pa
     import pyarrow.parquet as pq
 
     file = Path(folder) / "results.parquet"
-    if not file.is_file():
-        raise InputError(f"study folder {folder}: no results.parquet (run `vgtarm study run` first)")
-    return list(pq.read_table(file).to_pylist())
+    shown_file = cut(str(file), 200)
+    if not os.path.lexists(file):
+        raise InputError(f"study folder {cut(str(folder), 200)}: no results.parquet (run `vgtarm study run` first)")
+    expected = "expected the results.parquet `vgtarm study run` writes"
+    with open_input(file, "study results file") as stream:  # not a regular file: refused before it is opened
+        try:
+            table = pq.read_table(stream)
+        except (pa.ArrowException, OSError, ValueError):
+            raise InputError(f"study results file {shown_file}: not a Parquet table; {expected}") from None
+    if "id" not in table.column_names:
+        found = found_columns(table.column_names)
+        raise InputError(f"study results file {shown_file}: no column 'id'; {expected}; {found}")
+    return list(table.to_pylist())
 
 
 def spreadsheet_text(text: str) -> str:
@@ -211,15 +235,3 @@ def _arrow_column(values: list[Any]) -> Any:
             return pa.array(values, type=pa.int64())
         return pa.array([None if v is None else float(v) for v in values], type=pa.float64())
     return pa.array([None if v is None else str(v) for v in values], type=pa.string())
-
-
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    if hasattr(value, "item") and not isinstance(value, str | bytes):
-        return _jsonable(value.item())
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value

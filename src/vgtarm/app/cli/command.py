@@ -22,7 +22,17 @@ import numpy as np
 
 from ... import paths, progress
 from ...control.scm import MAX_HORIZON, SWITCH_ON
-from ...errors import MESSAGE_LENGTH, ConfigError, InputError, UnreachableError, VgtarmError, cut, escape, shown
+from ...errors import (
+    MESSAGE_LENGTH,
+    ConfigError,
+    InputError,
+    Terminated,
+    UnreachableError,
+    VgtarmError,
+    cut,
+    escape,
+    shown,
+)
 from ...fileio import (
     atomic_folder,
     atomic_write_text,
@@ -42,7 +52,7 @@ from . import stack as cli_stack
 from . import study as cli_study
 from . import visual as cli_visual
 from .bars import progress_bar
-from .options import add_config, joint_gains, non_negative_int, positive_float, positive_int, positive_int_at_most
+from .options import add_config, joint_gains, positive_float, positive_int, positive_int_at_most, seed_number
 
 
 def _format_vector(values: Sequence[float] | np.ndarray, digits: int = 6) -> str:
@@ -113,6 +123,12 @@ def _robot_text(config: Path | None) -> str | None:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Run one case study, print its summary, write its results and figures."""
+    presets.apply_preset(args)
+    with presets.named(args):  # a refusal of a value the preset set says so, never as if the user typed it
+        return _simulate(args)
+
+
+def _simulate(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from ...errors import SimulationError
@@ -121,11 +137,11 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from ..cases import joint_reference, run_case, run_path, truncate_reference
     from ..pictures.plotting import comparison_figure, save_figure
 
-    presets.apply_preset(args)
     if (args.case is None) == (args.path is None):
         raise InputError("give exactly one of --case 1|2 and --path FILE")
     _criterion(args)  # a criterion option without its criterion: refused before the work
     scm_options = _scm_options(args)  # refused before any work
+    _unused_options(args)
     inputs = [args.config, args.path]
     if args.out is not None:
         check_output_folder(args.out, "--out", inputs=inputs, owned=RUN_FILES)  # before the work
@@ -292,6 +308,24 @@ def _scm_options(args: argparse.Namespace) -> dict[str, Any]:
     return {"hold": args.scm_hold, "switch_on": args.scm_switch_on}
 
 
+def _unused_options(args: argparse.Namespace) -> None:
+    """Refuse, in one line naming the option, one the user typed (even with its default value,
+    :func:`.presets.given`) that this run would not use: the switching method's options with
+    ``--controller cfc``, the velocity filter without sensing."""
+    keys = [key for key in ("scm_variant", "horizon") if presets.given(args, key)]
+    if keys and args.controller != "scm":
+        typed = " ".join(f"--{key.replace('_', '-')} {shown(getattr(args, key))}" for key in keys)
+        raise InputError(
+            f"{typed}: {'options' if len(keys) > 1 else 'an option'} of the switching method; expected --controller"
+            f" scm (--controller {args.controller} does not use {'them' if len(keys) > 1 else 'it'})"
+        )
+    if presets.given(args, "velocity_filter") and not (args.encoder_resolution or args.velocity_noise):
+        raise InputError(
+            f"--velocity-filter {shown(args.velocity_filter)}: filters the velocities differenced from encoders; "
+            "expected --encoder-resolution or --velocity-noise (without them the controller sees the true velocities)"
+        )
+
+
 def _check_scm_gains(
     args: argparse.Namespace, n_joints: int, kp: float | tuple[float, ...] | None, kv: float | tuple[float, ...] | None
 ) -> None:
@@ -366,7 +400,7 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
         "--substeps", type=substeps, default=1, help=f"integration steps per control period (1 to {MAX_SUBSTEPS:,})"
     )
     parser.add_argument(
-        "--seed", type=non_negative_int, default=0, help="seed of the disturbance and the GA (default 0)"
+        "--seed", type=seed_number, default=0, help="seed of the disturbance and the GA (default 0; 0 to 2**63 - 1)"
     )
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
 
@@ -735,7 +769,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_run_options(simulate)
     add_config(simulate)
-    presets.record_defaults(simulate)  # every option added: the preset fills only those not given
+    presets.record_given(simulate)  # every option added: what the user typed, for the preset and the checks
     simulate.set_defaults(run=cmd_simulate)
 
     again = sub.add_parser("reproduce", help="run every case the paper reports and write report.md")
@@ -875,10 +909,12 @@ def _error_line(exc: BaseException) -> str:
 
 #: Exit status of an interrupted command (Ctrl-C): 128 + SIGINT, as a shell reports it.
 INTERRUPTED = 130
+#: Exit status of a command ended by SIGTERM: 128 + SIGTERM.
+TERMINATED = 143
 
 
-def _exit_interrupted() -> NoReturn:
-    """End the program at once after Ctrl-C, without the interpreter's clean-up.
+def _exit_interrupted(status: int = INTERRUPTED) -> NoReturn:
+    """End the program at once after Ctrl-C (or SIGTERM: ``status`` 143), without the interpreter's clean-up.
 
     Everything that must be undone (temporary files and folders, worker processes, compiler
     runs) was undone while the ``KeyboardInterrupt`` unwound the command; what is left is module
@@ -888,21 +924,28 @@ def _exit_interrupted() -> NoReturn:
             stream.flush()
         except (OSError, ValueError):  # a closed pipe or stream: nothing more can be shown anyway
             pass
-    os._exit(INTERRUPTED)
+    os._exit(status)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``vgtarm`` command.
 
-    Ctrl-C at any point after start-up prints ``vgtarm: interrupted`` and gives status 130; run as
-    the program (``argv`` None) it then exits at once (:func:`_exit_interrupted`)."""
+    Ctrl-C at any point after start-up prints ``vgtarm: interrupted`` and gives status 130; a
+    SIGTERM (handled from :mod:`vgtarm._entry`, which raises :class:`~vgtarm.errors.Terminated`)
+    unwinds the command the same way and prints ``vgtarm: terminated``, status 143. Run as the
+    program (``argv`` None) it then exits at once (:func:`_exit_interrupted`)."""
     try:
-        return _main(argv)
-    except KeyboardInterrupt:
-        print("vgtarm: interrupted", file=sys.stderr)
+        status = _main(argv)
+        if not Terminated.arrived:
+            return status
+        raise Terminated  # it arrived, but a library swallowed the exception: the command still ends so
+    except KeyboardInterrupt as exc:
+        ended = isinstance(exc, Terminated) or Terminated.arrived
+        print("vgtarm: terminated" if ended else "vgtarm: interrupted", file=sys.stderr)
+        status = TERMINATED if ended else INTERRUPTED
         if argv is None:
-            _exit_interrupted()
-        return INTERRUPTED
+            _exit_interrupted(status)
+        return status
 
 
 def _main(argv: Sequence[str] | None) -> int:

@@ -11,7 +11,7 @@ from ...errors import escape
 from ...export import command as export_command
 from ...fileio import atomic_write_text, check_output_file
 from ...model.robot import load_robot
-from .options import add_config, non_negative_int, positive_float, positive_int
+from .options import add_config, positive_float, positive_int, seed_number
 
 
 def digits(text: str) -> int:
@@ -84,7 +84,7 @@ def add_parsers(sub: Any) -> None:
     check = sub.add_parser("check", help="cross-check our dynamics against another engine")
     check.add_argument("engine", choices=("mujoco",), help="mujoco: the exported model stepped by MuJoCo")
     check.add_argument("--states", type=positive_int, default=1000, help="random states (default 1000)")
-    check.add_argument("--seed", type=non_negative_int, default=0, help="seed of the states (default 0)")
+    check.add_argument("--seed", type=seed_number, default=0, help="seed of the states (default 0; 0 to 2**63 - 1)")
     add_digits(check)
     add_config(check)
     check.set_defaults(run=cmd_check)

@@ -24,6 +24,17 @@ def non_negative_int(text: str) -> int:
     return value
 
 
+def seed_number(text: str) -> int:
+    """``--seed``: a whole number from 0 to 2**63 - 1 (:data:`vgtarm.ga.MAX_SEED`, the range of every
+    seed: a run's seed is stored as a 64-bit integer)."""
+    from ...ga import MAX_SEED
+
+    value = int(text)
+    if not 0 <= value <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"expected a whole number from 0 to 2**63 - 1 = {MAX_SEED}, got {text}")
+    return value
+
+
 def positive_float(text: str) -> float:
     value = float(text)
     if not (np.isfinite(value) and value > 0):
@@ -56,21 +67,11 @@ def add_model(parser: argparse.ArgumentParser) -> None:
 def joint_gains(text: str, option: str, joint_names: tuple[str, ...]) -> float | tuple[float, ...]:
     """The gain of ``option`` (``--kp``, ``--kv``): one number for every joint, or one per joint of
     ``joint_names`` separated by commas, each finite and > 0; else one line naming the option, the
-    value and what was expected (:class:`~vgtarm.errors.InputError`)."""
-    from ...errors import InputError, shown
+    value and what was expected (:class:`~vgtarm.errors.InputError`): the one check of the gains,
+    :func:`vgtarm.control.gains.gains_text`, which ``vgtarm export controller`` uses too."""
+    from ...control.gains import gains_text
 
-    n = len(joint_names)
-    expected = (
-        f"expected one number for every joint or {n} numbers separated by commas (one per joint: "
-        f"{' '.join(joint_names)}), each finite and > 0"
-    )
-    try:
-        values = [float(cell) for cell in text.split(",")]
-    except ValueError:
-        raise InputError(f"{option} {shown(text)}: {expected}") from None
-    if len(values) not in (1, n) or not all(np.isfinite(v) and v > 0 for v in values):
-        raise InputError(f"{option} {shown(text)}: {expected}")
-    return values[0] if len(values) == 1 else tuple(values)
+    return gains_text(text, option, joint_names)
 
 
 def positive_int_at_most(largest: int, what: str) -> Callable[[str], int]:

@@ -3,11 +3,44 @@
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 from typing import Any
 
 from ...errors import InputError, cut, escape
-from ...fileio import atomic_write_text, check_output_file, check_writable_parent
+from ...fileio import atomic_write_text, check_input_folder, check_output_file, check_writable_parent
+
+#: The files ``study run`` and ``study report`` write in a study's folder, besides one ``<id>.json``
+#: a run (see :mod:`vgtarm.study.store`).
+STUDY_OUTPUTS = ("executions.log", "results.csv", "results.parquet", "report.md")
+
+
+def _check_study_outputs(out: Path, inputs: list[Path]) -> None:
+    """Refuse, in one line, a study folder ``out`` in which the study would write over one of its
+    ``inputs`` (the study file, its robot and path files): one of them is (also through a link, a
+    hard link or another path) a file the study writes there, or a run file of the folder. An
+    existing output there that is not a regular file is refused too, before the runs rather than
+    after them."""
+    from ...study.store import LEGACY_RUNS, RUN_FILE
+
+    for name in STUDY_OUTPUTS:
+        check_output_file(out / name, "the study's file", inputs=inputs)
+    for source in inputs:
+        if not RUN_FILE.fullmatch(source.name) or not source.parent.is_dir():
+            continue
+        for runs in (out, out / LEGACY_RUNS):
+            if runs.is_dir() and os.path.samefile(source.parent, runs):
+                raise InputError(
+                    f"--out {cut(str(out), 200)}: holds {cut(str(source), 200)} as a run file, but it is an input of"
+                    " this command; choose another folder"
+                )
+
+
+def _study_inputs(study_file: Path, study: object) -> list[Path]:
+    """The study file and the robot and path files it names (relative to its folder)."""
+    shared = getattr(study, "shared", {})
+    named = [shared.get(key) for key in ("path", "robot")]
+    return [study_file, *(study_file.parent / name for name in named if isinstance(name, str) and name)]
 
 
 def cmd_study_init(args: argparse.Namespace) -> int:
@@ -34,7 +67,9 @@ def cmd_study_run(args: argparse.Namespace) -> int:
     if args.out.exists() and not args.out.is_dir():
         raise InputError(f"--out {cut(str(args.out))}: is a file, not a folder; give the study's results folder")
     check_writable_parent(args.out, "--out")
+    _check_study_outputs(args.out, [args.study])  # before the study file is read
     study = load_study(args.study)
+    _check_study_outputs(args.out, _study_inputs(args.study, study))  # the files it names: before any write
     outcome = run_study(
         study,
         args.out,
@@ -59,6 +94,8 @@ def cmd_study_report(args: argparse.Namespace) -> int:
     """Write report.md and the figures of a study's results."""
     from ...study.report import write_report
 
+    check_input_folder(args.folder, "DIR")  # a file, a pipe: refused before anything is read
+    check_output_file(args.folder / "report.md", "the study's file", inputs=[args.folder / "results.parquet"])
     report = write_report(args.folder)
     print(f"report written to {escape(str(report))}")
     return 0

@@ -12,8 +12,8 @@ from pathlib import Path
 from typing import Any
 
 from ...errors import InputError, escape
-from ...fileio import atomic_folder, check_output_file, check_output_folder, placements
-from ...model.parameters import JOINT_NAMES
+from ...fileio import atomic_folder, check_output_file, check_output_folder, placements, read_bytes_limited
+from ...model.parameters import JOINT_NAMES, ROBOT_FILE_LIMIT
 from ...model.robot import load_robot
 from .options import add_model
 
@@ -64,11 +64,26 @@ def robot_file_of_runs(config: Path | None, runs: list[Path]) -> Path | None:
     if config is not None:
         return config
     copies = [_robot_copy(run) for run in runs]
-    if len({None if copy is None else copy.read_bytes() for copy in copies}) > 1:
+    texts = {
+        None if copy is None else read_bytes_limited(copy, ROBOT_FILE_LIMIT, "robot file of the run") for copy in copies
+    }
+    if len(texts) > 1:
         raise InputError(
             "the runs were made with different robots (compare their robot.toml files): give one robot with --config"
         )
     return copies[0] if copies else None
+
+
+def run_inputs(runs: list[Path]) -> list[Path]:
+    """What a command reads from saved ``runs`` (the run folders, their files, and the copies of
+    the robot file :func:`robot_file_of_runs` may read): the inputs an output must not be."""
+    from ...simulation.result import ROBOT_COPY
+
+    files: list[Path] = []
+    for run in runs:
+        files += [run, run / "summary.json", run / "timeseries.csv", run / "ga_activations.csv"]
+        files += [folder / ROBOT_COPY for folder in (run, run.parent, run.parent.parent)]
+    return files
 
 
 def _robot_copy(run: Path) -> Path | None:
@@ -94,11 +109,10 @@ def cmd_animate(args: argparse.Namespace) -> int:
     """Render a saved run as MP4 or GIF."""
     from ..pictures.animation import render_animation
 
-    check_output_file(args.out, "--out", inputs=[args.config])
+    check_output_file(args.out, "--out", inputs=[args.config, *run_inputs([args.run_dir])])  # before any read
+    run = _load_run(args.run_dir)  # a folder that is not a run: refused before any model is built
     robot = load_robot(robot_file_of_runs(args.config, [args.run_dir]))
-    made = render_animation(
-        robot, _load_run(args.run_dir), args.out, fps=args.fps, speed=args.speed, dpi=args.dpi, progress=not args.quiet
-    )
+    made = render_animation(robot, run, args.out, fps=args.fps, speed=args.speed, dpi=args.dpi, progress=not args.quiet)
     print(
         f"animation written to {escape(str(made.path))} ({len(made.plan)} frames at {made.plan.fps:g} fps,"
         f" {made.plan.duration_s:.3f} s of run at {made.plan.speed:g}x)"
@@ -111,10 +125,10 @@ def cmd_report(args: argparse.Namespace) -> int:
     from ..reports.html import PLOTLY_JS, load_runs, write_html_report
     from ..reports.runs import task_note
 
-    inputs, owned = [*args.runs, args.config], ("*.html", PLOTLY_JS)
+    inputs, owned = [*run_inputs(list(args.runs)), args.config], ("*.html", PLOTLY_JS)
     check_output_folder(args.out, "--out", inputs=inputs, owned=owned)  # before the work; never over a run
+    runs = load_runs(args.runs)  # folders that are not runs: refused before any model is built
     robot = load_robot(robot_file_of_runs(args.config, list(args.runs)))
-    runs = load_runs(args.runs)
     intro = "Runs: " + ", ".join(p.name for p in args.runs)
     note = task_note(r.result.metadata for r in runs)  # a robot whose tip moves in a plane: its task
     intro = f"{intro}. {note}" if note else intro

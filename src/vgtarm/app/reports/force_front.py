@@ -11,11 +11,13 @@ figures, with the setting that the low-force preset's rule picks (:func:`choose`
 from __future__ import annotations
 
 import csv
+import io
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from ...fileio import atomic_path, atomic_write_text, read_text_limited
 from ...markup import md_cell
 
 #: The run's inputs shown beside the figures.
@@ -44,8 +46,8 @@ def pareto(points: Sequence[tuple[float, float]]) -> list[bool]:
 
 def read_runs(folder: Path) -> list[dict[str, str]]:
     """The successful rows of ``folder/results.csv``."""
-    with (folder / "results.csv").open(newline="") as handle:
-        return [row for row in csv.DictReader(handle) if row.get("success") == "True"]
+    text = read_text_limited(folder / "results.csv", what="study results file")  # a pipe: refused, never waited on
+    return [row for row in csv.DictReader(io.StringIO(text, newline="")) if row.get("success") == "True"]
 
 
 def front_table(rows: list[dict[str, str]]) -> str:
@@ -159,7 +161,8 @@ def front_figure(rows: list[dict[str, str]], out: Path) -> None:
         ax.set_ylabel(label)
         ax.legend()
     fig.tight_layout()
-    fig.savefig(out, dpi=100)
+    with atomic_path(out) as temporary:  # never a partial picture
+        fig.savefig(temporary, dpi=100)
     plt.close(fig)
 
 
@@ -175,7 +178,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if any(len(g.seeds) > 1 for g in groups):
         rule = f"first seed's peak <= {PEAK_LIMIT_N:g} N and chatter <= {CHATTER_LIMIT_N:g} N, least worst error"
         text += f"\n## By setting, over the seeds ({rule})\n\n" + setting_table(groups)
-    (folder / "front.md").write_text(text)
+    atomic_write_text(folder / "front.md", text)
     front_figure(rows, folder / "front.png")
     print(f"{len(rows)} runs: {folder / 'front.md'}, {folder / 'front.png'}")
     return 0

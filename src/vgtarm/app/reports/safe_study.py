@@ -12,6 +12,7 @@ on ``examples/studies/issue23-safe-scm.toml`` and ``issue23-safe-cfc.toml``), an
 from __future__ import annotations
 
 import csv
+import io
 import math
 import statistics
 import sys
@@ -20,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from ...errors import InputError
+from ...fileio import atomic_write_text, read_text_limited
 
 #: The shipped summary of the study (one row per run: model mass and seed).
 SUMMARY_FILE = Path(__file__).with_name("safe_study.csv")
@@ -66,11 +68,12 @@ def summarise(scm_rows: Iterable[Row], cfc_rows: Iterable[Row]) -> list[dict[str
 
 
 def write_summary(rows: list[dict[str, float]], path: Path = SUMMARY_FILE) -> None:
-    with path.open("w", newline="", encoding="utf-8") as stream:
-        writer = csv.DictWriter(stream, fieldnames=COLUMNS)
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({k: f"{row[k]:.6g}" for k in COLUMNS})
+    stream = io.StringIO()
+    writer = csv.DictWriter(stream, fieldnames=COLUMNS)
+    writer.writeheader()
+    for row in rows:
+        writer.writerow({k: f"{row[k]:.6g}" for k in COLUMNS})
+    atomic_write_text(path, stream.getvalue(), "safe study summary")  # never a partial file
 
 
 def load_summary(path: Path = SUMMARY_FILE) -> list[dict[str, float]]:
@@ -149,8 +152,8 @@ def study_figure(rows: list[dict[str, float]]) -> Any:
 def main(argv: list[str] | None = None) -> None:
     """``python -m vgtarm.app.reports.safe_study SCM_DIR CFC_DIR``: rewrite the shipped summary."""
     scm_dir, cfc_dir = (Path(a) for a in (argv if argv is not None else sys.argv[1:]))
-    with (scm_dir / "results.csv").open(encoding="utf-8") as a, (cfc_dir / "results.csv").open(encoding="utf-8") as b:
-        write_summary(summarise(csv.DictReader(a), csv.DictReader(b)))
+    scm, cfc = (read_text_limited(d / "results.csv", what="study results file") for d in (scm_dir, cfc_dir))
+    write_summary(summarise(csv.DictReader(io.StringIO(scm)), csv.DictReader(io.StringIO(cfc))))
 
 
 if __name__ == "__main__":

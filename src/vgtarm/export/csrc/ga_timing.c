@@ -8,11 +8,16 @@
  *
  * It asks for SCHED_FIFO priority 80 and locks its memory as rt_loop does (and says whether it got
  * them). The GA's memory is one static vgtc_ga: nothing is allocated per activation.
+ *
+ * ACTIVATIONS is checked before anything runs: a whole number (digits only) from 1 to
+ * GA_MAX_ACTIVATIONS, else one line on stderr and exit status 1.
  */
 #define _POSIX_C_SOURCE 200809L
 
+#include <errno.h>
 #include <math.h>
 #include <sched.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -21,6 +26,48 @@
 
 #include "vgtc_ga.h"
 #include "vgtarm_controller.h"
+
+/* The most activations a run takes: one double of time each (80 MB), and at a millisecond or so
+ * an activation, hours of running. Below what size_t and long can count on 32-bit targets too. */
+#define GA_MAX_ACTIVATIONS 10000000L
+
+/* A whole number from 1 to `most`: digits only (no sign, space, exponent or fraction). */
+static int parse_count(const char *text, long most, long *value)
+{
+    if (!*text || strspn(text, "0123456789") != strlen(text)) return 0;
+    errno = 0;
+    char *end;
+    const long long n = strtoll(text, &end, 10);
+    if (errno == ERANGE || *end || n < 1 || n > most) return 0;
+    *value = (long)n;
+    return 1;
+}
+
+/* `text` for a message: every byte that is not printable ASCII escaped, cut after 60 bytes. */
+static const char *shown(const char *text)
+{
+    static char buffer[4 * 60 + 8];
+    static const char hex[] = "0123456789abcdef";
+    size_t at = 0, i;
+    if (!*text) return "\"\" (empty)";
+    for (i = 0; text[i] && i < 60; ++i) {
+        const unsigned char c = (unsigned char)text[i];
+        if (c < 0x20 || c >= 0x7f || c == '\\') {
+            buffer[at++] = '\\';
+            buffer[at++] = 'x';
+            buffer[at++] = hex[c >> 4];
+            buffer[at++] = hex[c & 15];
+        } else {
+            buffer[at++] = (char)c;
+        }
+    }
+    if (text[i]) {
+        memcpy(buffer + at, "...", 3);
+        at += 3;
+    }
+    buffer[at] = '\0';
+    return buffer;
+}
 
 static double seconds_between(const struct timespec *a, const struct timespec *b)
 {
@@ -52,8 +99,14 @@ int main(int argc, char **argv)
     long n = 1000, over = 0, exact = 0;
     double *times;
     int rt, locked;
-    if (argc > 2 || (argc == 2 && (n = strtol(argv[1], NULL, 10)) < 1)) {
-        fprintf(stderr, "usage: ga_timing [ACTIVATIONS (a whole number >= 1)]\n");
+    if (argc > 2) {
+        fprintf(stderr, "ga_timing: %d arguments; usage: ga_timing [ACTIVATIONS (a whole number from 1 to %ld)]\n",
+                argc - 1, GA_MAX_ACTIVATIONS);
+        return 1;
+    }
+    if (argc == 2 && !parse_count(argv[1], GA_MAX_ACTIVATIONS, &n)) {
+        fprintf(stderr, "ga_timing: ACTIVATIONS %s: expected a whole number from 1 to %ld\n", shown(argv[1]),
+                GA_MAX_ACTIVATIONS);
         return 1;
     }
     vgtc_ga_default_params(&params);
@@ -89,8 +142,8 @@ int main(int argc, char **argv)
         }
         for (int i = 0; i < VGTC_NJ; ++i) {
             const double scale = vgtc_joint_is_angle[i] ? 3e-3 : 3e-4;
-            q0[i] = ref[i] + scale * offset((uint64_t)(a * 2 * VGTC_NJ + i));
-            qd0[i] = ref[VGTC_NJ + i] + 10.0 * scale * offset((uint64_t)(a * 2 * VGTC_NJ + VGTC_NJ + i));
+            q0[i] = ref[i] + scale * offset((uint64_t)a * (2 * VGTC_NJ) + (uint64_t)i);
+            qd0[i] = ref[VGTC_NJ + i] + 10.0 * scale * offset((uint64_t)a * (2 * VGTC_NJ) + (uint64_t)(VGTC_NJ + i));
         }
         clock_gettime(CLOCK_MONOTONIC, &t0);
         const int status = vgtc_ga_activate(&ga, params.horizon, q0, qd0, ref, NULL, (uint64_t)a + 1, gains, &out);

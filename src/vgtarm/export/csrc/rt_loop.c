@@ -17,13 +17,19 @@
  * (both need CAP_SYS_NICE / CAP_IPC_LOCK or an rtprio limit; without them it runs as an ordinary
  * thread, and the jitter shows it). The joints it feeds the controller are the home pose plus a
  * slow sinusoid of 1 mm / 10 mrad, the reference the home pose: no hardware needed.
+ *
+ * Every argument is checked before anything runs (one line on stderr, exit status 1): --steps a
+ * whole number from 1 to RT_MAX_STEPS, --seconds a finite number of seconds making from 1 to
+ * RT_MAX_STEPS periods, each option at most once and not both, a value after each.
  */
 #define _POSIX_C_SOURCE 200809L
 
 #include <errno.h>
+#include <limits.h>
 #include <math.h>
 #include <sched.h>
 #include <stdio.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
@@ -33,6 +39,61 @@
 
 enum { REST_EVERY = 5000 };            /* steps between two rests of --steps (15 to 25 ms)  */
 static const long REST_NS = 3000000L; /* a rest: 3 ms, so the steps take under 95 % of any second */
+/* The most steps a run takes (--steps, or --seconds over the period): the times are kept, one
+ * double a step (800 MB at most; 1.6 GB with the jitter of --seconds), and at a few microseconds a
+ * step it runs for minutes. Also kept below what size_t and long can count (32-bit targets). */
+#define RT_MAX_STEPS 100000000L
+
+/* `text` for a message: every byte that is not printable ASCII escaped, cut after 60 bytes (`slot`:
+ * one of two buffers, for two values in one message). */
+static const char *shown(const char *text, int slot)
+{
+    static char buffers[2][4 * 60 + 8];
+    char *buffer = buffers[slot & 1];
+    static const char hex[] = "0123456789abcdef";
+    size_t at = 0, i;
+    if (!*text) return "\"\" (empty)";
+    for (i = 0; text[i] && i < 60; ++i) {
+        const unsigned char c = (unsigned char)text[i];
+        if (c < 0x20 || c >= 0x7f || c == '\\') {
+            buffer[at++] = '\\';
+            buffer[at++] = 'x';
+            buffer[at++] = hex[c >> 4];
+            buffer[at++] = hex[c & 15];
+        } else {
+            buffer[at++] = (char)c;
+        }
+    }
+    if (text[i]) {
+        memcpy(buffer + at, "...", 3);
+        at += 3;
+    }
+    buffer[at] = '\0';
+    return buffer;
+}
+
+/* A whole number from 1 to `most`: digits only (no sign, space, exponent or fraction). */
+static int parse_count(const char *text, long most, long *value)
+{
+    if (!*text || strspn(text, "0123456789") != strlen(text)) return 0;
+    errno = 0;
+    char *end;
+    const long long n = strtoll(text, &end, 10);
+    if (errno == ERANGE || *end || n < 1 || n > most) return 0;
+    *value = (long)n;
+    return 1;
+}
+
+/* A finite number (the whole text, no leading space), not out of double's range. */
+static int parse_number(const char *text, double *value)
+{
+    if (!*text || *text == ' ' || (*text >= '\t' && *text <= '\r')) return 0;
+    char *end;
+    const double x = strtod(text, &end);
+    if (*end || !isfinite(x)) return 0; /* past double's range strtod gives infinity */
+    *value = x;
+    return 1;
+}
 
 static double seconds_between(const struct timespec *a, const struct timespec *b)
 {
@@ -79,30 +140,62 @@ int main(int argc, char **argv)
     double seconds = 10.0;
     long steps = 0;
     int feedforward = 0;
+    const char *seconds_text = NULL, *steps_text = NULL;
     const double f_exp[3] = {0.0, 0.0, -20.0}; /* --feedforward: a 20 N cutting force expected */
+    const long most = (uint64_t)RT_MAX_STEPS <= SIZE_MAX / sizeof(double) ? RT_MAX_STEPS
+                                                                           : (long)(SIZE_MAX / sizeof(double));
+    vgtc_default_params(&params);
+    const double dt = params.dt;
     for (int a = 1; a < argc; ++a) {
-        if (!strcmp(argv[a], "--seconds") && a + 1 < argc) seconds = atof(argv[++a]);
-        else if (!strcmp(argv[a], "--steps") && a + 1 < argc) steps = atol(argv[++a]);
-        else if (!strcmp(argv[a], "--feedforward")) feedforward = 1;
-        else {
-            fprintf(stderr, "usage: rt_loop [--seconds S | --steps N] [--feedforward]\n");
+        const char **value = !strcmp(argv[a], "--seconds") ? &seconds_text : !strcmp(argv[a], "--steps") ? &steps_text
+                                                                                                            : NULL;
+        if (value) {
+            if (a + 1 >= argc) {
+                fprintf(stderr, "rt_loop: %s: its value is missing; expected %s\n", argv[a],
+                        value == &steps_text ? "a whole number of steps" : "a duration in seconds");
+                return 1;
+            }
+            if (*value) {
+                fprintf(stderr, "rt_loop: %s %s, then %s %s: expected the option once\n", argv[a], shown(*value, 0),
+                        argv[a], shown(argv[a + 1], 1));
+                return 1;
+            }
+            *value = argv[++a];
+        } else if (!strcmp(argv[a], "--feedforward")) {
+            feedforward = 1;
+        } else {
+            fprintf(stderr, "rt_loop: unknown argument %s; expected --seconds S or --steps N, and --feedforward "
+                    "(usage: rt_loop [--seconds S | --steps N] [--feedforward])\n", shown(argv[a], 0));
             return 1;
         }
     }
-    vgtc_default_params(&params);
+    if (seconds_text && steps_text) {
+        fprintf(stderr, "rt_loop: --seconds %s and --steps %s: expected one of them\n", shown(seconds_text, 0),
+                shown(steps_text, 1));
+        return 1;
+    }
+    if (steps_text && !parse_count(steps_text, most, &steps)) {
+        fprintf(stderr, "rt_loop: --steps %s: expected a whole number of steps from 1 to %ld\n", shown(steps_text, 0),
+                most);
+        return 1;
+    }
+    /* periods of --seconds (rounded), from 1 to `most`: seconds / dt fits a long */
+    if (seconds_text && (!parse_number(seconds_text, &seconds) || !(seconds / dt + 0.5 >= 1.0)
+                         || !(seconds / dt + 0.5 < (double)most + 1.0))) {
+        fprintf(stderr, "rt_loop: --seconds %s: expected a duration in seconds from %g to %g (1 to %ld periods of %g "
+                "s)\n", shown(seconds_text, 0), 0.5 * dt, (double)most * dt, most, dt);
+        return 1;
+    }
     int status = vgtc_init(&ctx, &params);
     if (status != VGTC_OK) {
         fprintf(stderr, "rt_loop: vgtc_init: %s\n", vgtc_status_text(status));
         return 1;
     }
-    const double dt = params.dt;
     const long n = steps > 0 ? steps : (long)(seconds / dt + 0.5);
-    if (n < 1) {
-        fprintf(stderr, "rt_loop: nothing to run (--seconds %g, --steps %ld)\n", seconds, steps);
-        return 1;
-    }
-    double *step_time = malloc(sizeof(double) * (size_t)n), *jitter = malloc(sizeof(double) * (size_t)n);
-    if (!step_time || !jitter) {
+    /* the jitter only for the periodic loop (--steps runs back to back) */
+    double *step_time = malloc(sizeof(double) * (size_t)n), *jitter = steps == 0 ? malloc(sizeof(double) * (size_t)n)
+                                                                                  : NULL;
+    if (!step_time || (steps == 0 && !jitter)) {
         fprintf(stderr, "rt_loop: out of memory for %ld samples\n", n);
         return 1;
     }
@@ -141,7 +234,7 @@ int main(int argc, char **argv)
         }
         sink += F[0];
         step_time[k] = seconds_between(&woke, &done);
-        jitter[k] = steps == 0 ? seconds_between(&next, &woke) : 0.0;
+        if (jitter) jitter[k] = seconds_between(&next, &woke);
     }
     if (steps == 0) report("jitter", jitter, n);
     report("step time", step_time, n);

@@ -56,6 +56,7 @@ from numpy.typing import NDArray
 
 from ...errors import ConfigError, cut, shown
 from ...fileio import parse_toml, read_text_limited
+from ...kinds import other_toml
 from ..assembly import TRIANGLE_INEQUALITIES, linear_form
 from ..factors import model_factor
 from ..parameters import (
@@ -396,6 +397,9 @@ def load_stack(path: str | os.PathLike[str]) -> Stack:
 
 def stack_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> Stack:
     """Build a :class:`Stack` from the nested mapping a TOML stack file parses to."""
+    other = other_toml(data, "a stack robot file")  # a 7-joint robot or a study file: said in those words
+    if other is not None:
+        raise ConfigError(f"{cut(str(source), _SOURCE_LENGTH)}: {other}")
     reader = _Reader(cut(str(source), _SOURCE_LENGTH))
     reader.keys(data, "", required=_TOP_KEYS, optional=_TOP_OPTIONAL)
     entries = data["modules"]
