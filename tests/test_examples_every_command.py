@@ -104,6 +104,8 @@ def _reproduce(r: Robot, capsys) -> None:
     report = (out_dir / "report.md").read_text()
     assert f"first {float(DURATION):g} s" in report and ("tip (u2, u3) in its plane" in report) == r.planar
     assert (out_dir / "report.html").is_file() and (out_dir / "case2_scm_force" / "summary.json").is_file()
+    for summary_file in out_dir.glob("beyond/*_realistic/summary.json"):  # the low-force rows are cut too
+        assert json.loads(summary_file.read_text())["simulated_time_s"] <= float(DURATION) + 1e-9, summary_file
 
 
 def _draw(r: Robot, capsys) -> None:

@@ -221,7 +221,7 @@ class _RunsAndFigures:
                 self.tasks.add(
                     _cost("cfc", run.external_force),
                     _low_force_run,
-                    (run, self.folder, options),
+                    (run, self.folder, {**options, "duration": duration}),  # cut like every other run
                     partial(self.low_results.__setitem__, run),
                 )
             while self.tasks.busy():
