@@ -23,14 +23,16 @@ BLOCKS = 4
 BLOCK = 150
 
 
-def _reference_on_blocks(robot: vgtarm.Robot, path: paths.Path, fast_q: np.ndarray) -> tuple[float, float, float, int]:
+def _reference_on_blocks(
+    robot: vgtarm.Robot, path: paths.TipPath, fast_q: np.ndarray
+) -> tuple[float, float, float, int]:
     """Seconds per sample of the reference, worst |Phi_fast - Phi_ref|, worst tip residual, samples timed."""
     n = len(path)
     starts = np.linspace(1, n - BLOCK - 1, BLOCKS).astype(int)
     seconds, dphi, residual, count = 0.0, 0.0, 0.0, 0
     fast = inverse_kinematics(robot, path)
     for s in starts:
-        block = paths.Path(
+        block = paths.TipPath(
             "block",
             path.t[s : s + BLOCK],
             path.position[s : s + BLOCK],

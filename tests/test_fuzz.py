@@ -430,7 +430,7 @@ def csv_files(draw: st.DrawFn) -> bytes:
     return data
 
 
-def check_path_file(file: Path, dt: Any) -> paths.Path | None:
+def check_path_file(file: Path, dt: Any) -> paths.TipPath | None:
     try:
         path = paths.from_csv(file, dt)
     except Exception as exc:  # noqa: BLE001  (any exception is judged here)

@@ -171,7 +171,7 @@ def test_bad_options(robot, options, message):
 
 def test_path_without_jerk_refused(robot):
     path = paths.case2(dt=0.5)
-    bare = paths.Path(path.name, path.t, path.position, path.velocity, path.acceleration)
+    bare = paths.TipPath(path.name, path.t, path.position, path.velocity, path.acceleration)
     with pytest.raises(InputError, match="has no jerk"):
         robot.inverse_kinematics(bare, criterion="effort", tool_force=F0)
 

@@ -11,7 +11,7 @@ from vgtarm.errors import InputError, PathError, UnreachableError, VgtarmError
 
 def test_unreachable_point_names_time_target_and_residual(robot):
     position = np.array([[0.0, 0.0, 0.66], [0.0, 0.0, 0.66], [1.0, 0.0, 0.66], [0.0, 0.0, 0.66]])
-    path = paths.Path("jump", np.arange(4) * 0.1, position, np.zeros((4, 3)), np.zeros((4, 3)))
+    path = paths.TipPath("jump", np.arange(4) * 0.1, position, np.zeros((4, 3)), np.zeros((4, 3)))
     with pytest.raises(UnreachableError) as raised:
         robot.inverse_kinematics(path)
     message = str(raised.value)
@@ -30,7 +30,7 @@ def test_path_leaving_the_workspace_is_never_returned(robot, solver):
 
 
 def test_invalid_path_is_a_path_error(robot):
-    with pytest.raises(PathError, match="vgtarm.paths.Path"):
+    with pytest.raises(PathError, match="vgtarm.paths.TipPath"):
         robot.inverse_kinematics(np.zeros((10, 3)))  # type: ignore[arg-type]
     with pytest.raises(PathError):
         paths.from_samples([0.0, 1.0, 1.0], [(0, 0, 0.66)] * 3)

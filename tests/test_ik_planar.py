@@ -34,7 +34,7 @@ def planar() -> vgtarm.Robot:
 
 
 @pytest.fixture(scope="module")
-def wave(planar) -> paths.Path:
+def wave(planar) -> paths.TipPath:
     """A smooth in-plane closed curve through the home tip, with analytic derivatives (1 s, 2 ms)."""
     tip = planar.tip_position(planar.parameters.home)
     t = np.linspace(0.0, 1.0, 501)
@@ -44,7 +44,7 @@ def wave(planar) -> paths.Path:
     velocity = np.column_stack([zero, 0.02 * w * np.cos(w * t), 0.02 * w * np.sin(2 * w * t)])
     acceleration = np.column_stack([zero, -0.02 * w**2 * np.sin(w * t), 0.04 * w**2 * np.cos(2 * w * t)])
     jerk = np.column_stack([zero, -0.02 * w**3 * np.cos(w * t), -0.08 * w**3 * np.sin(2 * w * t)])
-    return paths.Path("wave", t, position, velocity, acceleration, jerk)
+    return paths.TipPath("wave", t, position, velocity, acceleration, jerk)
 
 
 def test_the_planar_module_tracks_its_plane_and_the_3d_robots_their_space(planar):
@@ -104,9 +104,9 @@ def _multistart_slsqp(robot: vgtarm.Robot, target: np.ndarray, E: np.ndarray, ma
     return best
 
 
-def _every(path: paths.Path, k: int) -> paths.Path:
+def _every(path: paths.TipPath, k: int) -> paths.TipPath:
     jerk = None if path.jerk is None else path.jerk[::k]
-    return paths.Path(path.name, path.t[::k], path.position[::k], path.velocity[::k], path.acceleration[::k], jerk)
+    return paths.TipPath(path.name, path.t[::k], path.position[::k], path.velocity[::k], path.acceleration[::k], jerk)
 
 
 def test_fast_ipopt_and_an_independent_multistart_slsqp_agree(planar, wave):
@@ -171,7 +171,7 @@ def test_the_effort_criterion_on_the_plane_agrees_with_ipopt(planar, wave):
 
 
 def test_a_point_off_the_plane_or_a_pose_is_refused_in_one_line(planar, wave):
-    off = paths.Path("off", wave.t, wave.position + [0.003, 0.0, 0.0], wave.velocity, wave.acceleration)
+    off = paths.TipPath("off", wave.t, wave.position + [0.003, 0.0, 0.0], wave.velocity, wave.acceleration)
     with pytest.raises(vgtarm.errors.UnreachableError, match=r"0\.003 m off the plane") as caught:
         planar.inverse_kinematics(off)
     assert "\n" not in str(caught.value) and "tip (u2, u3)" in str(caught.value)

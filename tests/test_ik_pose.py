@@ -50,7 +50,7 @@ def test_one_redundant_degree_of_freedom_is_optimised(robot, held):
 def test_pose_agrees_with_ipopt(robot, held):
     path, result = held
     idx = np.arange(0, len(path), 25)
-    sub = paths.Path("sub", path.t[idx], path.position[idx], path.velocity[idx], path.acceleration[idx])
+    sub = paths.TipPath("sub", path.t[idx], path.position[idx], path.velocity[idx], path.acceleration[idx])
     ipopt = robot.inverse_kinematics(sub, pose=result.orientation[0], solver="ipopt")
     assert ipopt.success, ipopt.message
     assert_close(ipopt.samples.phi, result.samples.phi[idx], rtol=0, atol=1e-9)

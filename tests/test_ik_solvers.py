@@ -16,7 +16,7 @@ CASES = {"case1": paths.case1, "case2": paths.case2}
 
 
 @pytest.fixture(scope="module")
-def full_paths(robot) -> dict[str, tuple[paths.Path, IKResult]]:
+def full_paths(robot) -> dict[str, tuple[paths.TipPath, IKResult]]:
     """Both case paths at the paper's 1 ms and their fast solution (computed once)."""
     solved = {}
     for name, build in CASES.items():
@@ -25,17 +25,17 @@ def full_paths(robot) -> dict[str, tuple[paths.Path, IKResult]]:
     return solved
 
 
-def subsample(path: paths.Path, count: int) -> paths.Path:
+def subsample(path: paths.TipPath, count: int) -> paths.TipPath:
     """``count`` evenly spaced samples of ``path`` as a path of its own (uniform times)."""
     step = (len(path) - 1) // (count - 1)
     idx = np.arange(count) * step
-    return paths.Path(path.name, path.t[idx], path.position[idx], path.velocity[idx], path.acceleration[idx])
+    return paths.TipPath(path.name, path.t[idx], path.position[idx], path.velocity[idx], path.acceleration[idx])
 
 
-def point_path(x: np.ndarray) -> paths.Path:
+def point_path(x: np.ndarray) -> paths.TipPath:
     """A two-sample path holding the tip still at ``x``."""
     zeros = np.zeros((2, 3))
-    return paths.Path("point", np.array([0.0, 1.0]), np.stack([x, x]), zeros, zeros)
+    return paths.TipPath("point", np.array([0.0, 1.0]), np.stack([x, x]), zeros, zeros)
 
 
 @pytest.mark.parametrize("name", sorted(CASES))
@@ -88,7 +88,7 @@ def test_ipopt_reference_agrees(robot, full_paths):
 
 def test_fast_solver_matches_on_the_full_path_where_reference_is_sampled(robot, full_paths):
     path, result = full_paths["case1"]
-    block = paths.Path(
+    block = paths.TipPath(
         "block", path.t[1000:1010], path.position[1000:1010], path.velocity[1000:1010], path.acceleration[1000:1010]
     )
     reference = robot.inverse_kinematics(block, solver="slsqp", initial_guess=result.q[999])

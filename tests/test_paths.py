@@ -59,7 +59,7 @@ def test_path_is_frozen_and_read_only():
 def test_path_copies_its_inputs():
     t = np.arange(3) * 0.1
     position = np.zeros((3, 3))
-    path = paths.Path("p", t, position, position, position)
+    path = paths.TipPath("p", t, position, position, position)
     position[0, 0] = 1.0
     assert path.position[0, 0] == 0.0
     assert position.flags.writeable
@@ -78,7 +78,7 @@ def test_path_copies_its_inputs():
 )
 def test_path_validation_names_field(t, position, match):
     with pytest.raises(PathError, match=match):
-        paths.Path("p", t, position, np.zeros((len(t), 3)), np.zeros((len(t), 3)))
+        paths.TipPath("p", t, position, np.zeros((len(t), 3)), np.zeros((len(t), 3)))
 
 
 # --- case 1 ----------------------------------------------------------------------------------
@@ -120,22 +120,22 @@ def test_case1_parameters_and_duration():
 FD_DT = 1e-3
 
 
-def _case1() -> tuple[paths.Path, tuple[float, ...]]:
+def _case1() -> tuple[paths.TipPath, tuple[float, ...]]:
     return paths.case1(FD_DT), ()
 
 
-def _case2() -> tuple[paths.Path, tuple[float, ...]]:
+def _case2() -> tuple[paths.TipPath, tuple[float, ...]]:
     return paths.case2(FD_DT), (2.0,)
 
 
-def _blend(blend: str) -> Callable[[], tuple[paths.Path, tuple[float, ...]]]:
-    def make() -> tuple[paths.Path, tuple[float, ...]]:
+def _blend(blend: str) -> Callable[[], tuple[paths.TipPath, tuple[float, ...]]]:
+    def make() -> tuple[paths.TipPath, tuple[float, ...]]:
         return paths.waypoints(WAYPOINT_TIMES, WAYPOINT_POINTS, FD_DT, blend=blend), (WAYPOINT_TIMES)
 
     return make
 
 
-def _samples() -> tuple[paths.Path, tuple[float, ...]]:
+def _samples() -> tuple[paths.TipPath, tuple[float, ...]]:
     coarse = paths.case1(0.01)
     return paths.from_samples(coarse.t, coarse.position, FD_DT), tuple(coarse.t)
 
@@ -207,7 +207,7 @@ def test_case2_any_number_of_corners():
     np.testing.assert_allclose(path.position[[0, 50, 100, 150, 200]], corners, atol=1e-15)
 
 
-def _waypoint_indices(path: paths.Path) -> np.ndarray:
+def _waypoint_indices(path: paths.TipPath) -> np.ndarray:
     return np.rint((np.array(WAYPOINT_TIMES) - path.t[0]) / path.dt).astype(int)
 
 
@@ -412,3 +412,13 @@ def test_from_csv_accepts_blank_lines_and_spaces(tmp_path):
     path = paths.from_csv(file)
     assert len(path) == 2
     np.testing.assert_allclose(path.position[-1], (0.01, 0.0, 0.6))
+
+
+def test_the_old_name_path_still_works_and_says_it_moved():
+    """``TipPath`` is the desired path; ``Path``, which shadowed :class:`pathlib.Path`, is gone from
+    the module's names and still resolves, with a DeprecationWarning."""
+    assert "Path" not in vars(paths) and "Path" not in dir(paths)
+    with pytest.warns(DeprecationWarning, match="TipPath"):
+        assert paths.Path is paths.TipPath
+    with pytest.raises(AttributeError):
+        paths.Pathh  # noqa: B018

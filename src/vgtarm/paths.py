@@ -1,6 +1,6 @@
 """Desired tip paths sampled at a fixed period.
 
-A :class:`Path` holds the desired tip position, velocity and acceleration in the base frame at
+A :class:`TipPath` holds the desired tip position, velocity and acceleration in the base frame at
 uniformly spaced times ``t_k = t0 + k*dt``. It is built by one of the constructors below:
 
 - :func:`case1` -- the closed curve of the paper's first case study (eq. 22);
@@ -53,7 +53,7 @@ CSV_FILE_LIMIT = 64 * 2**20
 
 
 @dataclass(frozen=True, eq=False)
-class Path:
+class TipPath:
     """A desired tip path sampled at a fixed period.
 
     Attributes:
@@ -127,7 +127,7 @@ def case1(
     ay: float = 0.06,
     az: float = 0.03,
     duration: float = 2 * math.pi,
-) -> Path:
+) -> TipPath:
     """Closed curve of case study 1 (paper eq. 22).
 
     ``X = x0 + ax sin t``, ``Y = y0 + ay cos t``, ``Z = z0 + az sin(2t) cos(2t)``, sampled at
@@ -144,7 +144,7 @@ def case1(
         duration: Length of the path, s, >= dt.
 
     Returns:
-        A :class:`Path` named ``"case1"`` with analytic velocity and acceleration.
+        A :class:`TipPath` named ``"case1"`` with analytic velocity and acceleration.
     """
     dt = _check_dt(dt)
     for field, value in (("x0", x0), ("y0", y0), ("z0", z0), ("ax", ax), ("ay", ay), ("az", az)):
@@ -158,7 +158,7 @@ def case1(
     velocity = np.column_stack((ax * cos_t, -ay * sin_t, 2 * az * cos_4t))
     acceleration = np.column_stack((-ax * sin_t, -ay * cos_t, -8 * az * sin_4t))
     jerk = np.column_stack((-ax * cos_t, ay * sin_t, -32 * az * cos_4t))
-    return Path("case1", t, position, velocity, acceleration, jerk)
+    return TipPath("case1", t, position, velocity, acceleration, jerk)
 
 
 def case2(
@@ -170,7 +170,7 @@ def case2(
         (0.04, 0.05, 0.62),
     ),
     durations: Sequence[float] | ArrayLike = (2.0, 2.0),
-) -> Path:
+) -> TipPath:
     """Straight lines through corners, case study 2 (paper eq. 23).
 
     Each line is a rest-to-rest cubic in time, ``x(tau) = Pa + (3 tau^2 - 2 tau^3)(Pb - Pa)``
@@ -183,7 +183,7 @@ def case2(
         durations: Time spent on each line, shape ``(M - 1,)``, s, each > 0.
 
     Returns:
-        A :class:`Path` named ``"case2"``.
+        A :class:`TipPath` named ``"case2"``.
     """
     dt = _check_dt(dt)
     points = _as_points("corners", corners)
@@ -207,7 +207,7 @@ def waypoints(
     *,
     blend: str = "cubic",
     name: str | None = None,
-) -> Path:
+) -> TipPath:
     """Path through timed waypoints.
 
     Samples are ``t_k = times[0] + k*dt`` up to ``times[-1]`` (included within 1e-9 dt). A
@@ -227,7 +227,7 @@ def waypoints(
         name: Label of the path; defaults to ``"waypoints-<blend>"``.
 
     Returns:
-        A :class:`Path` with the exact derivatives of the chosen blend.
+        A :class:`TipPath` with the exact derivatives of the chosen blend.
     """
     sampler = _BLENDS.get(blend) if isinstance(blend, str) else None
     if sampler is None:
@@ -237,7 +237,7 @@ def waypoints(
     t = _sample_times(knots[0], knots[-1] - knots[0], dt, "times[-1] - times[0]")
     position, velocity, acceleration, jerk = sampler(knots, pts, t, dt)
     label = name if name is not None else f"waypoints-{blend}"
-    return Path(label, t, position, velocity, acceleration, jerk)
+    return TipPath(label, t, position, velocity, acceleration, jerk)
 
 
 def from_samples(
@@ -246,7 +246,7 @@ def from_samples(
     dt: float | None = None,
     *,
     name: str = "samples",
-) -> Path:
+) -> TipPath:
     """Path fitted through sampled positions and resampled at a fixed period.
 
     A C2 cubic spline (:class:`scipy.interpolate.CubicSpline`, ``bc_type="not-a-knot"``) is
@@ -263,7 +263,7 @@ def from_samples(
         name: Label of the path.
 
     Returns:
-        A :class:`Path` sampled at ``t[0] + k*dt`` up to ``t[-1]``.
+        A :class:`TipPath` sampled at ``t[0] + k*dt`` up to ``t[-1]``.
     """
     times, points = _check_samples(t, position, "t", "position", lambda i: f"index {i}")
     return _fit_spline(times, points, dt, name, "t", lambda i: f"index {i}")
@@ -271,7 +271,7 @@ def from_samples(
 
 def from_csv(
     file: str | os.PathLike[str], dt: float | None = None, *, name: str | None = None, quote: bool = True
-) -> Path:
+) -> TipPath:
     """Path read from a CSV file of sampled positions, fitted as in :func:`from_samples`.
 
     The file has a header row ``t,x,y,z`` (case-insensitive, whitespace around the names
@@ -286,7 +286,7 @@ def from_csv(
             path file is then never shown, only its line and column.
 
     Returns:
-        A :class:`Path` sampled at ``t[0] + k*dt`` up to the last row's time.
+        A :class:`TipPath` sampled at ``t[0] + k*dt`` up to the last row's time.
 
     Raises:
         PathError: The file cannot be read (missing, a folder, not UTF-8 text, larger than
@@ -391,7 +391,7 @@ def _fit_spline(
     name: str,
     field: str,
     where: Callable[[int], str],
-) -> Path:
+) -> TipPath:
     """Fit a not-a-knot cubic spline through checked samples and resample it every ``dt``.
 
     ``field`` names the times and ``where(i)`` sample ``i`` in error messages.
@@ -413,7 +413,7 @@ def _fit_spline(
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is found below, as a non-finite value
         spline = CubicSpline(times, points, axis=0, bc_type="not-a-knot")
         samples = spline(t), spline(t, 1), spline(t, 2), spline(t, 3)
-    return Path(name, t, *samples)
+    return TipPath(name, t, *samples)
 
 
 def _sample_cubic(
@@ -625,3 +625,18 @@ def _sample_times(start: float, duration: float, dt: float, field: str) -> Float
 def _uniform_tolerance(step: float, t: FloatArray) -> float:
     """Allowed deviation of sample times from ``t0 + k*dt``, s."""
     return _UNIFORM_RTOL * step + 8 * np.finfo(np.float64).eps * float(np.max(np.abs(t)))
+
+
+def __getattr__(name: str) -> Any:
+    """``vgtarm.paths.Path``, the old name of :class:`TipPath`, with a :class:`DeprecationWarning`:
+    it shadowed :class:`pathlib.Path` in a module that imported both."""
+    if name == "Path":
+        import warnings
+
+        warnings.warn(
+            "vgtarm.paths.Path is now vgtarm.paths.TipPath (Path shadowed pathlib.Path)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return TipPath
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -57,7 +57,7 @@ class CaseStudy:
 
     number: int
     title: str
-    path_factory: Callable[[float], paths.Path] = field(repr=False)
+    path_factory: Callable[[float], paths.TipPath] = field(repr=False)
     kp: float | tuple[float, ...]
     kv: float | tuple[float, ...]
     kp_bounds: tuple[float, float]
@@ -65,7 +65,7 @@ class CaseStudy:
     threshold: float = 2e-4
     external_force: ExternalForce = field(default_factory=ExternalForce)
 
-    def path(self, dt: float = 1e-3) -> paths.Path:
+    def path(self, dt: float = 1e-3) -> paths.TipPath:
         """The desired tip path sampled at ``dt`` (s)."""
         return self.path_factory(dt)
 
@@ -191,11 +191,11 @@ class PathPlacement:
     reach: float
     space: TaskSpace | None = None
 
-    def apply(self, path: paths.Path) -> paths.Path:
+    def apply(self, path: paths.TipPath) -> paths.TipPath:
         """The path moved and scaled (timing unchanged); turned into the robot's plane or line if it has one."""
         c0, c = np.array(PAPER_HOME_TIP), np.array(self.centre)
         if self.space is None:
-            return paths.Path(
+            return paths.TipPath(
                 path.name,
                 path.t,
                 c + self.scale * (path.position - c0),
@@ -204,7 +204,7 @@ class PathPlacement:
                 None if path.jerk is None else self.scale * path.jerk,
             )
         M = self.scale * self.turn(path)
-        return paths.Path(
+        return paths.TipPath(
             path.name,
             path.t,
             c + (path.position - c0) @ M.T,
@@ -213,7 +213,7 @@ class PathPlacement:
             None if path.jerk is None else path.jerk @ M.T,
         )
 
-    def turn(self, path: paths.Path) -> NDArray[np.float64]:
+    def turn(self, path: paths.TipPath) -> NDArray[np.float64]:
         """The linear map ``(3, 3)`` that takes ``path``'s displacements into the robot's plane or line
         (before scaling): the smallest rotation of the path's plane normal onto the robot's, then the
         projection on the robot's plane (module docstring); the projection alone for a line, or for a
@@ -282,7 +282,7 @@ def path_placement(robot: Robot) -> PathPlacement | None:
     return PathPlacement((float(tip[0]), float(tip[1]), float(tip[2])), scale, reach, space)
 
 
-def case_path(robot: Robot, number: int, dt: float = 1e-3) -> paths.Path:
+def case_path(robot: Robot, number: int, dt: float = 1e-3) -> paths.TipPath:
     """The desired tip path of case ``number`` placed on ``robot`` (:func:`path_placement`)."""
     path = case_study(number).path(dt)
     placement = path_placement(robot)
@@ -375,7 +375,7 @@ PATH_GAINS_CASE = 1
 
 def run_path(
     robot: Robot,
-    path: paths.Path,
+    path: paths.TipPath,
     *,
     controller: str = "cfc",
     external_force: bool = False,

@@ -83,7 +83,7 @@ def _criterion(inputs: Inputs) -> tuple[tuple[str, Any], ...]:
     return (("criterion", str(inputs["criterion"])), ("joint_limit_weight", weight), ("tool_force", force))
 
 
-def _path_of(text: str, dt: float) -> paths.Path:
+def _path_of(text: str, dt: float) -> paths.TipPath:
     """A desired path from a CSV file's text (written to a private temporary file to be read)."""
     digest = hashlib.sha256(text.encode()).hexdigest()[:12]
     fd, name = tempfile.mkstemp(suffix=".csv", prefix=f"vgtarm-path-{digest}-")
@@ -234,7 +234,7 @@ def check_point(inputs: Inputs, files: Mapping[str, str]) -> None:
     else:
         try:  # sampling the case's path (no inverse kinematics): a dt longer than the path is refused
             case_path(robot, int(inputs["case"]), dt)  # type: ignore[arg-type]
-        except paths.PathError as exc:
+        except paths.TipPathError as exc:
             raise ConfigError(f"study.dt = {dt!r}: case {inputs['case']}'s path cannot be sampled: {exc}") from None
     n_joints = len(robot.parameters.home)
     q = np.tile(np.asarray(robot.parameters.home, dtype=float), (3, 1))

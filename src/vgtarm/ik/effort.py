@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 
 from ..errors import InputError
 from ..model.robot import Robot
-from ..paths import Path
+from ..paths import TipPath
 
 Array = NDArray[np.float64]
 
@@ -100,11 +100,11 @@ def _force_model() -> ca.Function:
     return ca.Function("expected_tool_force", [v, a, j, f0, speed], outputs)
 
 
-def expected_tool_force(path: Path, force: float, speed: float) -> tuple[Array, Array, Array]:
+def expected_tool_force(path: TipPath, force: float, speed: float) -> tuple[Array, Array, Array]:
     """Expected tool force ``(N, 3)`` on the tip along ``path`` and its two time derivatives (module docstring).
 
     Raises :class:`InputError` when the force acts and the path has no jerk (a hand-made
-    :class:`~vgtarm.paths.Path` without one): the second derivative needs it.
+    :class:`~vgtarm.paths.TipPath` without one): the second derivative needs it.
     """
     n = len(path)
     if force == 0.0:
@@ -113,7 +113,7 @@ def expected_tool_force(path: Path, force: float, speed: float) -> tuple[Array, 
     if path.jerk is None:
         raise InputError(
             f"path {path.name!r} has no jerk: the effort criterion with tool_force = {force:g} N needs the path's "
-            "third derivative (every constructor of vgtarm.paths gives it; pass jerk= to Path)"
+            "third derivative (every constructor of vgtarm.paths gives it; pass jerk= to TipPath)"
         )
     mapped = _force_model().map(n)
     out = mapped(path.velocity.T, path.acceleration.T, path.jerk.T, force, speed)
@@ -121,7 +121,7 @@ def expected_tool_force(path: Path, force: float, speed: float) -> tuple[Array, 
     return f, fd, fdd
 
 
-def effort_terms(robot: Robot, path: Path, force: float, speed: float) -> EffortTerms:
+def effort_terms(robot: Robot, path: TipPath, force: float, speed: float) -> EffortTerms:
     """The effort criterion's per-sample terms for ``robot`` along ``path``."""
     f, fd, fdd = expected_tool_force(path, force, speed)
     return EffortTerms(f, fd, fdd, 1.0 / reference_efforts(robot))

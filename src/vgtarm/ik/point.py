@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from ..errors import InputError, UnreachableError, shown
 from ..model.robot import Robot
-from ..paths import MAX_COORDINATE, Path
+from ..paths import MAX_COORDINATE, TipPath
 from . import reference
 from .options import IKOptions
 from .pose import angle_error, orientation_target
@@ -114,7 +114,7 @@ def solve_point(
     started = time.perf_counter()
     p = _as_point(point)
     target = None if rotation is None else orientation_target(rotation, 2, True)
-    path = Path(
+    path = TipPath(
         "point", np.array([0.0, _REST_DT]), np.stack([p, p]), np.zeros((2, 3)), np.zeros((2, 3)), np.zeros((2, 3))
     )
     pose = None if target is None else target.rotation[0]
@@ -136,7 +136,7 @@ def solve_point(
 
 
 def _closest(
-    robot: Robot, path: Path, p: Array, target: Any, options: dict[str, Any], started: float
+    robot: Robot, path: TipPath, p: Array, target: Any, options: dict[str, Any], started: float
 ) -> PointSolution:
     """The record of an unreachable point: the feasible configuration closest to it."""
     settings = IKOptions.from_keywords(options, robot.n_joints)

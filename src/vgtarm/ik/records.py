@@ -100,7 +100,7 @@ class IKResult:
         robot_fingerprint: :attr:`vgtarm.Robot.fingerprint` of that robot's parameters, so a
             simulation of another robot can say so ("" if unknown).
         joint_names: the robot's joint names, in the order of the columns of ``q``.
-        path: the name of the desired path (:attr:`vgtarm.paths.Path.name`; "" if unknown).
+        path: the name of the desired path (:attr:`vgtarm.paths.TipPath.name`; "" if unknown).
         task_space: the tip coordinates the task constrained: ``"tip (u1, u2, u3)"`` (with
             ``" and orientation"`` for the pose task), or for a robot whose tip moves in a plane or a
             line the reduced task (:mod:`vgtarm.ik.taskspace`), e.g. ``"tip (u2, u3) in its plane"``.

@@ -24,7 +24,7 @@ from ..errors import InputError, PathError, UnreachableError, shown
 from ..machine import blas_on_one_thread
 from ..memory import check_memory
 from ..model.robot import Robot
-from ..paths import MAX_COORDINATE, Path
+from ..paths import MAX_COORDINATE, TipPath
 from . import fast, kkt, reference
 from . import rates as rate_modes
 from .effort import EffortTerms, effort_terms
@@ -65,7 +65,7 @@ def _check_start(robot: Robot, problem: IKProblem, q: Array) -> Array:
 
 def _task(
     robot: Robot,
-    path: Path,
+    path: TipPath,
     target: OrientationTarget | None,
     effort: EffortTerms | None = None,
     space: TaskSpace | None = None,
@@ -136,7 +136,7 @@ def _recover(problem: IKProblem, task: Task, state: BatchState, q_start: Array, 
 
 
 def _hold_orientation(
-    robot: Robot, path: Path, solver: Solver, problem: IKProblem, q_start: Array, options: IKOptions
+    robot: Robot, path: TipPath, solver: Solver, problem: IKProblem, q_start: Array, options: IKOptions
 ) -> Array:
     """Orientation ``(3, 3)`` of the free-orientation optimum at the first sample."""
     first = _task(robot, path, None).subset(np.array([0], dtype=np.intp))
@@ -149,7 +149,7 @@ def _hold_orientation(
 
 def inverse_kinematics(
     robot: Robot,
-    path: Path,
+    path: TipPath,
     *,
     solver: str = "fast",
     rates: str = "exact",
@@ -164,7 +164,7 @@ def inverse_kinematics(
 
     Args:
         robot: The robot (its parameters, compiled model and home pose).
-        path: The desired tip path (:class:`vgtarm.paths.Path`).
+        path: The desired tip path (:class:`vgtarm.paths.TipPath`).
         solver: ``"fast"`` (batched, warm-started trajectory solver), ``"slsqp"`` (per-sample
             reference; alias ``"reference"``) or ``"ipopt"``.
         rates: ``"exact"`` (differentiated optimality conditions) or ``"finite_difference"``
@@ -180,7 +180,7 @@ def inverse_kinematics(
         An :class:`IKResult` with ``.q``, ``.qd``, ``.qdd`` ``(N, n)`` and the per-sample record.
 
     Raises:
-        PathError: ``path`` is not a :class:`vgtarm.paths.Path`, or has a point farther than
+        PathError: ``path`` is not a :class:`vgtarm.paths.TipPath`, or has a point farther than
             :data:`vgtarm.paths.MAX_COORDINATE` (1 km) from the base.
         InputError: Unknown solver, rate mode or option, or a bad option value or pose; an
             ``initial_guess`` outside :meth:`vgtarm.Robot.joint_range`; ``robot`` not a Robot.
@@ -198,11 +198,13 @@ def inverse_kinematics(
         return _inverse_kinematics(robot, path, solver=solver, rates=rates, pose=pose, **options)
 
 
-def _inverse_kinematics(robot: Robot, path: Path, *, solver: str, rates: str, pose: object, **options: Any) -> IKResult:
+def _inverse_kinematics(
+    robot: Robot, path: TipPath, *, solver: str, rates: str, pose: object, **options: Any
+) -> IKResult:
     """:func:`inverse_kinematics` (its BLAS limited to one thread)."""
     started = time.perf_counter()
-    if not isinstance(path, Path):
-        raise PathError(f"path must be a vgtarm.paths.Path (see vgtarm.paths), got {type(path).__name__}")
+    if not isinstance(path, TipPath):
+        raise PathError(f"path must be a vgtarm.paths.TipPath (see vgtarm.paths), got {type(path).__name__}")
     if not isinstance(robot, Robot):
         raise InputError(f"robot must be a vgtarm.Robot (see vgtarm.load_robot), got {type(robot).__name__}")
     far = np.flatnonzero(np.abs(path.position).max(axis=1) > MAX_COORDINATE)
@@ -272,7 +274,7 @@ def _inverse_kinematics(robot: Robot, path: Path, *, solver: str, rates: str, po
 TASK_FULL = MappingProxyType({"position": "tip (u1, u2, u3)", "pose": "tip (u1, u2, u3) and orientation"})
 
 
-def reduced_task(robot: Robot, path: Path, q_start: Array, pose: object = None) -> TaskSpace:
+def reduced_task(robot: Robot, path: TipPath, q_start: Array, pose: object = None) -> TaskSpace:
     """The plane or line of a robot whose tip Jacobian at ``q_start`` has rank < 3 (:mod:`.taskspace`),
     checked against the path: a point off it (by more than :data:`REACH_TOLERANCE`) cannot be reached
     (:class:`UnreachableError`; :func:`vgtarm.ik.solve_point` then gives the closest configuration)."""
@@ -336,7 +338,7 @@ def _samples(
 
 
 def _result(
-    path: Path,
+    path: TipPath,
     state: BatchState,
     qd: Array,
     qdd: Array,

@@ -5,7 +5,8 @@ A model is built once per structure: CasADi constructs its symbolic functions (t
 construction*), writes them as C and the C compiler compiles it; the interpreter needs the
 symbolic construction alone. Both grow fast with the number of joints ``n``: fifty modules
 (175 joints, the most a stack may have) would take hours and tens of GB. So a build is first
-estimated from ``n`` with the fits of ``docs/benchmarks.md`` ("Building a model"), and refused in one line when the estimate exceeds:
+estimated from ``n`` with the fits of ``docs/benchmarks.md`` ("Building a model"), and refused
+in one line when the estimate exceeds:
 
 - the **memory** one request may use (:func:`vgtarm.memory.memory_limit`: ``MemAvailable`` of
   ``/proc/meminfo``, or ``$VGTARM_MEMORY_LIMIT``);

@@ -42,9 +42,9 @@ from ...fileio import (
     read_text_limited,
 )
 from ...ik import CSV_COLUMNS, write_csv
-from ...model.parameters import JOINT_NAMES, JOINT_UNITS, ROBOT_FILE_LIMIT
-from ...model.robot import load_robot
-from ...paths import Path as DesiredPath
+from ...model.parameters import JOINT_NAMES, JOINT_UNITS, ROBOT_FILE_LIMIT, RobotParameters
+from ...model.robot import Robot, load_robot
+from ...paths import TipPath as DesiredPath
 from ...version import __version__
 from . import mujoco as cli_mujoco
 from . import presets
