@@ -223,3 +223,17 @@ def test_one_frame_rendered_offscreen_shows_the_robot_in_a_lit_scene():
         assert image["robot"] > 0.03, image
         return
     pytest.skip(f"no offscreen OpenGL context here: {failures}")
+
+
+def test_a_robot_name_with_control_characters_reaches_the_file_escaped(robot):
+    """The robot's name is a user's text: terminal escapes and bidirectional marks are written as
+    visible escapes, so the file is well-formed XML and ``cat`` of it cannot drive a terminal."""
+    import dataclasses
+
+    name = "evil\x1b]0;pwned\x07\u202ename\x00"
+    hostile = robot.with_parameters(dataclasses.replace(robot.parameters, name=name))
+    text = to_mjcf(hostile)
+    model = ET.fromstring(text).get("model")
+    assert model == "evil\\x1b]0;pwned\\x07\\u202ename\\x00"
+    assert all(c.isprintable() or c in "\n\t" for c in text)
+    assert to_mjcf(robot) == to_mjcf(robot.with_parameters(robot.parameters))  # an ordinary name unchanged

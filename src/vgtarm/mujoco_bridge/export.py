@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import InputError, shown
+from ..errors import InputError, escape, shown
 from ..model.parameters import Body, RobotParameters
 from ..model.robot import Robot
 from ..model.stack.description import Stack, stack_from_parameters
@@ -330,7 +330,7 @@ class _SpecBuilder:
     def options(self, timestep: float, solver_tolerance: float) -> None:
         """The model's name, compiler settings, simulation options and (with a scene) materials."""
         mujoco, spec, r, r1 = self.mujoco, self.spec, self.r, self.r1
-        spec.modelname = self.stack.name
+        spec.modelname = escape(self.stack.name)  # a user's name: no control character reaches the file
         spec.compiler.degree = False
         spec.compiler.autolimits = True
         # every body has its inertial: geoms (the scene's drawing) never add mass or inertia
