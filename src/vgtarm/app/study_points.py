@@ -234,7 +234,7 @@ def check_point(inputs: Inputs, files: Mapping[str, str]) -> None:
     else:
         try:  # sampling the case's path (no inverse kinematics): a dt longer than the path is refused
             case_path(robot, int(inputs["case"]), dt)  # type: ignore[arg-type]
-        except paths.TipPathError as exc:
+        except paths.PathError as exc:
             raise ConfigError(f"study.dt = {dt!r}: case {inputs['case']}'s path cannot be sampled: {exc}") from None
     n_joints = len(robot.parameters.home)
     q = np.tile(np.asarray(robot.parameters.home, dtype=float), (3, 1))
