@@ -29,6 +29,7 @@ from . import (  # noqa: E402
     bench_sim,
     bench_stacks,
     bench_study,
+    bench_threads,
 )
 from .common import machine  # noqa: E402
 
@@ -48,6 +49,7 @@ MODULES: dict[str, Any] = {
     "export-ga": bench_export_ga,
     "footprint": bench_footprint,
     "pathwide": bench_path_wide,
+    "threads": bench_threads,
 }
 #: Groups run when none is named (``stacks`` is long: it compiles ten libraries from cold).
 DEFAULT = [name for name in MODULES if name not in ("stacks", "pathwide", "recursive-control")]

@@ -9,7 +9,6 @@ from the header (:mod:`.interface`); nothing of the C interface is repeated here
 
 from __future__ import annotations
 
-import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -18,8 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import ConfigError, shown
-from ..machine import usable_cpus
+from ..machine import threads_setting, usable_cpus
 from .compiled import CompiledBackend
 from .interface import enum, ffi
 
@@ -413,16 +411,8 @@ MAX_GA_THREADS = 4
 def ga_threads() -> int:
     """Threads of the compiled GA's prediction: ``$VGTARM_THREADS``, else the CPUs this process may
     use, at most :data:`MAX_GA_THREADS`. A study's workers set 1 (they already fill the CPUs)."""
-    text = os.environ.get("VGTARM_THREADS", "").strip()
-    if text:
-        try:
-            value = int(text)
-        except ValueError:
-            value = 0
-        if not 1 <= value <= 256:
-            raise ConfigError(f"VGTARM_THREADS = {shown(text)}: expected a whole number of threads from 1 to 256")
-        return value
-    return min(usable_cpus(), MAX_GA_THREADS)
+    value = threads_setting()
+    return value if value is not None else min(usable_cpus(), MAX_GA_THREADS)
 
 
 def _ga_arrays(

@@ -77,6 +77,7 @@ from numpy.typing import NDArray
 
 from .. import compiler as compilers
 from ..errors import ConfigError, VgtarmError, cut, shown
+from ..machine import split_rows
 from . import budget, building, codegen, interface, outline
 from .definition import PAPER, Definition
 
@@ -133,8 +134,11 @@ _LOCK_WAIT = 900.0
 #: (:func:`compile_limit`); the recursive model's library (a few seconds) keeps this one.
 _COMPILE_TIMEOUT = budget.COMPILER_LIMIT_FLOOR
 #: Samples of one compiled batch call: at most a few tens of milliseconds (the costliest function
-#: takes about 4 us a sample), so Ctrl-C is handled between two calls of a huge batch.
-BATCH_CHUNK = 8192
+#: takes about 4 us a sample), so Ctrl-C is handled between two calls of a huge batch. Below the
+#: 4,096 samples from which ``vgt_batch`` (``csrc/batch.c``) starts OpenMP threads of its own: a
+#: batch's threads are :func:`vgtarm.machine.split_rows`'s, sized by the machine, taking chunks
+#: one at a time and waiting without spinning.
+BATCH_CHUNK = 4095
 #: Samples of one call into CasADi's interpreter (about 50 ms at the costliest 90 us a sample).
 INTERPRETED_CHUNK = 512
 #: Largest metadata file and library read (bytes): anything bigger is damaged, not read.
@@ -249,6 +253,10 @@ class CompiledBackend:
         if not library_path.is_absolute():
             raise ValueError(f"a compiled library is opened only by absolute path, not {library_path}")
         self.library_path = library_path
+        #: Threads of a batch (:func:`vgtarm.machine.split_rows`): ``None``, the default, as many as
+        #: :func:`vgtarm.machine.batch_threads` gives; 1 the calling thread alone. Every sample is
+        #: computed alone, so the results are the same bit for bit.
+        self.threads: int | None = None
         self.ffi = interface.ffi()
         self.library = interface.open_library(library_path)
         self._signatures = signatures
@@ -335,23 +343,32 @@ class CompiledBackend:
         in_ptrs = [ffi.cast("double *", x.ctypes.data) for x in arrays]
         in_strides = [0 if x.ndim == 1 else x.shape[1] for x in arrays]
         out_ptrs = [ffi.cast("double *", y.ctypes.data) for y in outputs]
-        for start in range(0, n, BATCH_CHUNK):  # Ctrl-C is handled between two chunks
-            status = self.library.vgt_batch(
-                self._pointers[name],
-                sig.sz_arg,
-                sig.sz_res,
-                sig.sz_iw,
-                sig.sz_w,
-                len(arrays),
-                len(outputs),
-                min(BATCH_CHUNK, n - start),
-                [p + start * s for p, s in zip(in_ptrs, in_strides, strict=True)],
-                in_strides,
-                [p + start * s for p, s in zip(out_ptrs, sig.nnz_out, strict=True)],
-                list(sig.nnz_out),
-            )
-            if status != 0:
-                raise RuntimeError(f"compiled function {sig.name} failed (status {status})")
+        out_strides = list(sig.nnz_out)
+        batch, function = self.library.vgt_batch, self._pointers[name]
+
+        def work(begin: int, end: int) -> None:
+            for start in range(begin, end, BATCH_CHUNK):  # Ctrl-C is handled between two chunks
+                status = batch(
+                    function,
+                    sig.sz_arg,
+                    sig.sz_res,
+                    sig.sz_iw,
+                    sig.sz_w,
+                    len(arrays),
+                    len(outputs),
+                    min(BATCH_CHUNK, end - start),
+                    [p + start * s for p, s in zip(in_ptrs, in_strides, strict=True)],
+                    in_strides,
+                    [p + start * s for p, s in zip(out_ptrs, out_strides, strict=True)],
+                    out_strides,
+                )
+                if status != 0:
+                    raise RuntimeError(f"compiled function {sig.name} failed (status {status})")
+
+        if self.threads == 1:
+            work(0, n)
+        else:
+            split_rows(n, work, self.threads)
         return outputs
 
 

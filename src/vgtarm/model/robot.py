@@ -27,6 +27,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..errors import ConfigError, InputError, cut, shown
 from ..fileio import parse_toml, read_text_limited
 from ..kinds import other_toml
+from ..machine import blas_on_one_thread
 from ..markup import html_table
 from ..memory import check_batch
 from .assembly import check_margins
@@ -93,6 +94,15 @@ _MARGIN_BYTES = 17
 #: singular where a module cannot be assembled), else on an input above this fraction of its bound.
 _SINGULAR_MARGIN = 1e-6
 _LARGE_INPUT = 1e-3
+#: Size (rows x joints x margin rows) from which the margin check's product ``q @ G.T`` runs with
+#: NumPy's BLAS held to one thread. OpenBLAS splits a product above 262,144 multiply-adds over its
+#: threads (a 10-module arm's batch of 2,000: 4.2 million), which then spin for a while after it:
+#: through the Robot, a batch of the recursive model's forward dynamics burned a second core for
+#: nothing (13.7 us CPU a state for 6.9 us wall, against 6.4 us each for the model alone) and took
+#: twice the wall time when another process held a core. One thread gives the same product bit
+#: for bit (OpenBLAS splits the rows and columns of the result, never its sums); the limit costs
+#: about 10 us, so a product OpenBLAS keeps on one thread anyway skips it.
+_BLAS_THREADED_PRODUCT = 262144
 
 
 def definition_of(parameters: RobotParameters | Stack) -> Definition:
@@ -326,7 +336,11 @@ class Robot:
 
     def _check_margins(self, q: Array, where: str) -> None:
         p = self.parameters
-        check_margins(q, self._G, self._h, p.margin_legs(), p.b, p.d, where=where)
+        if q.size * self._G.shape[0] <= _BLAS_THREADED_PRODUCT:
+            check_margins(q, self._G, self._h, p.margin_legs(), p.b, p.d, where=where)
+            return
+        with blas_on_one_thread():  # the same product, on the calling thread (see _BLAS_THREADED_PRODUCT)
+            check_margins(q, self._G, self._h, p.margin_legs(), p.b, p.d, where=where)
 
     def _refuse_result(
         self,
@@ -429,7 +443,10 @@ class Robot:
         largest = np.full(self.n_joints, np.finfo(float).max)
         (qa,), _ = self._arrays("is_assemblable", [("q", q, self.n_joints)], outputs=0, margins=True, finite=False)
         check_input(qa, "q", (-largest, largest), self.joint_names, self._units["q"])
-        return np.asarray((qa @ self._G.T + self._h > margin).all(axis=-1))
+        if qa.size * self._G.shape[0] <= _BLAS_THREADED_PRODUCT:
+            return np.asarray((qa @ self._G.T + self._h > margin).all(axis=-1))
+        with blas_on_one_thread():
+            return np.asarray((qa @ self._G.T + self._h > margin).all(axis=-1))
 
     def forward_kinematics(self, q: ArrayLike) -> ForwardKinematics:
         """Passive angles, platform frames, tip point and orientation (paper eqs. 1-11)."""

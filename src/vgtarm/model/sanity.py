@@ -261,9 +261,17 @@ def inside(array: Array, low: Array, high: Array) -> bool:
 
 
 def finite(array: NDArray[np.floating]) -> bool:
-    """Whether every element of ``array`` is finite (fast for a small array)."""
+    """Whether every element of ``array`` is finite (fast for a small array).
+
+    A large array is first summed, which allocates nothing: a NaN or an infinity makes the sum
+    NaN or infinite, so a finite sum proves every element finite; only a sum that overflowed (or
+    a value that is not finite) is looked at element by element."""
     if array.size <= _SMALL:
         return all(map(math.isfinite, array.ravel().tolist()))
+    with np.errstate(over="ignore", invalid="ignore"):
+        total = float(np.sum(array))
+    if math.isfinite(total):
+        return True
     return bool(np.isfinite(array).all())
 
 

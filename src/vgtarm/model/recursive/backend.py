@@ -152,8 +152,11 @@ class RecursiveBackend:
 
     kind = "recursive"
 
-    def __init__(self, stack: Stack, *, fused: bool = True) -> None:
+    def __init__(self, stack: Stack, *, fused: bool = True, threads: int | None = None) -> None:
         self.stack = stack
+        #: Threads of a batch (:attr:`RecursiveModel.threads`): ``None``, the default, as many as
+        #: :func:`vgtarm.machine.batch_threads` gives; 1 the calling thread alone (the same results).
+        self.threads = threads
         #: The closed loop's functions share a step's kinematics (:data:`FUSED_LOOP_FUNCTIONS`) and
         #: ``tip`` is computed from the poses alone; ``False``: the previous implementation (the
         #: separate adapters of :data:`LOOP_FUNCTIONS`, ``tip`` from the whole forward kinematics),
@@ -175,7 +178,7 @@ class RecursiveBackend:
             )
             for key in FUNCTIONS
         }
-        self._models: dict[bytes, RecursiveModel] = {stack.vector().tobytes(): RecursiveModel(stack)}
+        self._models: dict[bytes, RecursiveModel] = {stack.vector().tobytes(): RecursiveModel(stack, threads=threads)}
 
     #: The compiled closed loop runs on this backend (:class:`~vgtarm.model.closedloop.ClosedLoopDriver`).
     closed_loop = True
@@ -246,7 +249,10 @@ class RecursiveBackend:
         if model is None:
             if len(self._models) > 16:
                 self._models.clear()
-            model = self._models[key] = RecursiveModel(stack_from_vector(self.stack, np.frombuffer(key)))
+            model = self._models[key] = RecursiveModel(
+                stack_from_vector(self.stack, np.frombuffer(key)), threads=self.threads
+            )
+        model.threads = self.threads
         return model
 
     def evaluate(self, name: str, inputs: Sequence[Array], n: int) -> list[Array]:

@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ...errors import AssemblyError, InputError, shown
+from ...machine import PROBE_ROWS, split_rows
 from ..assembly import TRIANGLE_INEQUALITIES
 from ..parameters import Body
 from ..sanity import as_float, real_array
@@ -59,10 +60,16 @@ class RecursiveModel:
     checks them: the right length, real and finite numbers, every module assemblable.
     """
 
-    def __init__(self, stack: Stack, *, gravity: ArrayLike | None = None) -> None:
+    def __init__(self, stack: Stack, *, gravity: ArrayLike | None = None, threads: int | None = 1) -> None:
         if not isinstance(stack, Stack):
             raise InputError(f"stack = {shown(stack)}: expected a Stack (see vgtarm.model.stack.load_stack)")
+        if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
+            raise InputError(f"threads = {shown(threads)}: expected a number of threads >= 1, or None (the machine's)")
         self.stack = stack
+        #: Threads a batch runs on (:func:`vgtarm.machine.split_rows`): 1, the default, the calling
+        #: thread alone; ``None`` as many as :func:`vgtarm.machine.batch_threads` gives (the
+        #: :class:`~vgtarm.model.robot.Robot`'s backend). The results are the same bit for bit.
+        self.threads = threads
         self.n = stack.n_joints
         self._ffi, self._lib = load_library()
         types: list[int] = []
@@ -123,7 +130,7 @@ class RecursiveModel:
 
     def with_gravity(self, gravity: ArrayLike) -> RecursiveModel:
         """The same arm under another gravity (the zero vector gives the pure inertial model)."""
-        return RecursiveModel(self.stack, gravity=gravity)
+        return RecursiveModel(self.stack, gravity=gravity, threads=self.threads)
 
     # -- checks and calls ------------------------------------------------------------------
 
@@ -167,9 +174,22 @@ class RecursiveModel:
         return self._ffi.NULL if array is None else self._ffi.cast("double *", self._ffi.from_buffer(array))
 
     def _call(self, name: str, count: int, *arrays: Array | None) -> None:
-        status = getattr(self._lib, name)(self._arm, count, *(self._ptr(a) for a in arrays))
-        if status != 0:
-            raise MemoryError(f"{name}: the recursive model could not allocate its scratch memory")
+        """``name(arm, count, arrays...)`` over the batch: every array holds ``count`` rows (or is
+        ``None``), each sample is computed alone, so the rows are split over :attr:`threads`."""
+        function, arm = getattr(self._lib, name), self._arm
+        pointers = [self._ptr(a) for a in arrays]
+        if self.threads == 1 or count <= PROBE_ROWS:
+            if function(arm, count, *pointers) != 0:
+                raise MemoryError(f"{name}: the recursive model could not allocate its scratch memory")
+            return
+        rows = [0 if a is None else a.size // count for a in arrays]
+
+        def work(start: int, stop: int) -> None:
+            moved = [p if r == 0 else p + start * r for p, r in zip(pointers, rows, strict=True)]
+            if function(arm, stop - start, *moved) != 0:
+                raise MemoryError(f"{name}: the recursive model could not allocate its scratch memory")
+
+        split_rows(count, work, self.threads)
 
     @staticmethod
     def _shaped(value: ArrayLike, result: Array) -> Array:
