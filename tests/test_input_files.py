@@ -302,8 +302,11 @@ def test_a_study_folder_holding_the_path_file_it_would_write_over_is_refused(
     files: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """The study's path file is the results table the study writes in its folder: refused after the
-    study file is read, before any run and any write."""
-    (files / "out").mkdir()
+    study file is read, before any run and any write. The folder is a study folder vgtarm wrote,
+    whose results.csv the study names as its path (else the folder itself is refused first)."""
+    from vgtarm.study.store import Store
+
+    Store(files / "out").claim("results.csv")  # marked, results.csv listed as vgtarm's
     os.replace(files / "path.csv", files / "out" / "results.csv")
     (files / "s.toml").write_text('[study]\npath = "out/results.csv"\n')
     before = _state(files)

@@ -27,7 +27,7 @@ import vgtarm
 from vgtarm import ga, paths
 from vgtarm.app.cli import presets
 from vgtarm.app.cli.command import build_parser, main
-from vgtarm.control.gains import Gains, check_definite, gain_matrix
+from vgtarm.control.gains import KP_MAX, KV_MAX, Gains, check_definite, gain_matrix
 from vgtarm.errors import ConfigError, InputError, PathError
 from vgtarm.export import export_controller
 from vgtarm.model.parameters import load_parameters
@@ -72,6 +72,12 @@ GAIN_CASES = [
     (["--kv", "nan"], "--kv 'nan': expected"),
     (["--kp", "1,2,3"], "--kp '1,2,3': expected"),
     (["--kp", "1,2,3,4,5,6,-7"], "each finite and > 0"),
+    (["--kp", "\u0661\u0660\u0660"], "--kp '\u0661\u0660\u0660': expected"),  # Arabic-Indic 100: float() reads it
+    (["--kv", "\uff11\uff10\uff10"], "written in ASCII digits (0-9)"),  # full-width 100
+    (["--kp", "100,100,100,100,100,100,\u0661"], "written in ASCII digits"),
+    (["--kp", "1e300"], "--kp '1e300': expected one number for every joint or 7 numbers"),
+    (["--kp", "2e12"], "and at most 1e+12"),
+    (["--kv", "1.5e6"], "--kv '1.5e6': expected"),
 ]
 
 
@@ -128,6 +134,8 @@ MATRIX_CASES = {
     "negative diagonal": (-100.0 * np.eye(7), "each gain > 0), got Kp[0, 0] = -100.0"),
     "indefinite": (_symmetric(500.0), "positive definite, got a matrix whose smallest eigenvalue is -400"),
     "zero": (0.0, "each gain > 0), got Kp[0, 0] = 0.0"),
+    "beyond the largest": (1e300, "Kp must be at most 1e+12 on every element"),
+    "one beyond the largest": (np.diag([100.0] * 6 + [2e12]), "got Kp[6, 6] = 2000000000000.0"),
 }
 
 
@@ -145,6 +153,48 @@ def test_gain_matrices_a_controller_cannot_run_with_are_refused_by_the_export(
 def test_a_diagonal_and_a_symmetric_positive_definite_matrix_pass_the_one_check() -> None:
     check_definite(gain_matrix([1.0, 2, 3, 4, 5, 6, 7], "Kp"), "Kp")
     check_definite(gain_matrix(_symmetric(50.0), "Kp"), "Kp")
+
+
+@pytest.mark.parametrize(("name", "largest"), [("Kp", KP_MAX), ("--kp", KP_MAX), ("Kv", KV_MAX), ("--kv", KV_MAX)])
+def test_the_one_check_bounds_the_gains_at_the_documented_maximum(name: str, largest: float) -> None:
+    """At most 1e12 (Kp) and 1e6 (Kv) on every element: beyond, no control period vgtarm runs
+    (down to 1 us) is stable; a huge gain is refused before its eigenvalues overflow."""
+    check_definite(gain_matrix(largest, name), name)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for value in (largest * 1.01, 1e300, _symmetric(50.0) * largest / 10):
+            with pytest.raises(
+                InputError, match="^" + re.escape(f"{name} must be at most {largest:g} on every element")
+            ):
+                check_definite(gain_matrix(value, name), name)
+
+
+#: Options read by argparse's ``type=float``/``type=int`` or vgtarm's number types, per command.
+NUMBER_OPTIONS = [
+    (["simulate", "--case", "1"], "--duration"),
+    (["simulate", "--case", "1"], "--seed"),
+    (["simulate", "--case", "1"], "--model-mass"),
+    (["simulate", "--case", "1"], "--tool-force-speed"),
+    (["export", "controller", "--out", "x"], "--dt"),
+    (["export", "controller", "--out", "x"], "--observer-gain"),
+    (["export", "mjcf", "--out", "x.xml"], "--digits"),
+    (["animate", "run", "--out", "x.gif"], "--fps"),
+    (["reproduce"], "--seeds"),
+]
+
+
+@pytest.mark.parametrize(
+    "text", ["\u0661", "\uff11", "\u0661\u066b\u0665"], ids=["arabic-indic", "full-width", "decimal sign"]
+)
+@pytest.mark.parametrize(("command", "option"), NUMBER_OPTIONS, ids=[f"{c[0]} {o}" for c, o in NUMBER_OPTIONS])
+def test_a_number_not_written_in_ascii_digits_is_refused_naming_the_option(
+    command: list[str], option: str, text: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as caught:
+        main([*command, option, text])
+    assert caught.value.code == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[-1].endswith(f"error: argument {option}: expected a number written in ASCII digits (0-9), got {text!r}")
 
 
 def test_an_infinite_gain_is_one_line_without_a_numpy_warning() -> None:

@@ -55,8 +55,8 @@ WRITERS: dict[str, tuple[list[str], str]] = {
     "study init FILE": (["study", "init", "{out}"], "target.toml"),
     "study run --out": (["study", "run", "{study}", "--out", "{out}", "-q"], "target"),
 }
-#: Writers whose refusal does not say what is there (``study run`` checks its folder itself).
-KIND_NOT_NAMED = {"study run --out"}
+#: Writers whose refusal does not say what is there (none now: ``study run`` names it too).
+KIND_NOT_NAMED: set[str] = set()
 
 
 def _make_device(path: Path) -> None:

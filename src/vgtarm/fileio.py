@@ -49,6 +49,12 @@ Inputs: every reader of a user's file goes through :func:`open_input` (or :func:
 device, a socket, a folder) before it is opened, with :func:`check_input_file`, and again on the
 descriptor opened without waiting, so no read ever blocks on a pipe or never ends on a device.
 :func:`check_input_folder` does the same for an input folder (a saved run, a study's folder).
+
+A folder that grows in place rather than being replaced (a study's results) is checked with
+:func:`check_growing_folder`; its writer decides what it may hold (:mod:`vgtarm.study.store`).
+Scratch folders of the programs vgtarm runs (a compiler's objects) come from
+:func:`scratch_folder`: ``<tmp>/<prefix><pid>-<random>``, so that those of a process killed with
+SIGKILL are removed by the next run (:func:`clean_stale_scratch`).
 """
 
 from __future__ import annotations
@@ -65,6 +71,7 @@ import re
 import secrets
 import shutil
 import stat
+import tempfile
 import tomllib
 from collections.abc import Callable, Collection, Iterable, Iterator, Mapping
 from contextlib import contextmanager, suppress
@@ -580,6 +587,12 @@ def _empty(old: Path, target: Path, what: str, owned: Collection[str]) -> None:
         )
 
 
+def is_temporary(name: str) -> bool:
+    """Whether ``name`` is one of the temporary names this module's writers give a file or folder
+    while it is written (``.<name>.<pid>.<random>.tmp``, ``....old``): a writer's, never a user's."""
+    return _TEMPORARY.match(name) is not None
+
+
 def _alive(pid: int) -> bool:
     """Whether process ``pid`` exists (somebody else's too; on Linux a thread's id is no process)."""
     import psutil  # imported here: only the clean-up of stale files needs it
@@ -629,6 +642,42 @@ def clean_stale(folder: str | os.PathLike[str]) -> list[Path]:
             continue
         touched.append(path)
     return touched
+
+
+def clean_stale_scratch(prefix: str, folder: str | os.PathLike[str] | None = None) -> list[Path]:
+    """Remove the scratch folders ``<prefix><pid>-<random>`` (:func:`scratch_folder`) left in
+    ``folder`` (default: the system's temporary folder) by processes that were killed: only real
+    folders (never a link) of the current user whose process no longer runs (:func:`_alive`, the
+    rule of :func:`clean_stale`). Returns what was removed."""
+    where = Path(tempfile.gettempdir() if folder is None else folder)
+    pattern = re.compile(re.escape(prefix) + r"(?P<pid>\d+)-")
+    removed: list[Path] = []
+    try:
+        entries = list(os.scandir(where))
+    except OSError:
+        return removed
+    for entry in entries:
+        match = pattern.match(entry.name)
+        try:
+            if match is None or not entry.is_dir(follow_symlinks=False):
+                continue
+            if entry.stat(follow_symlinks=False).st_uid != os.geteuid() or _alive(int(match["pid"])):
+                continue
+        except OSError:
+            continue
+        shutil.rmtree(entry.path, ignore_errors=True)  # only vgtarm writes in it
+        removed.append(Path(entry.path))
+    return removed
+
+
+@contextmanager
+def scratch_folder(prefix: str) -> Iterator[Path]:
+    """A new private folder ``<tmp>/<prefix><pid>-<random>`` for the block's scratch files (a
+    compiler's objects), removed with what it holds when the block ends. Those of killed
+    processes (a SIGKILL leaves them) are removed first (:func:`clean_stale_scratch`)."""
+    clean_stale_scratch(prefix)
+    with tempfile.TemporaryDirectory(prefix=f"{prefix}{os.getpid()}-") as scratch:
+        yield Path(scratch)
 
 
 # --- checks before the work -----------------------------------------------------------------
@@ -760,20 +809,59 @@ def _check_output_folder(
     if found is not None and not stat.S_ISDIR(found.st_mode):
         raise _not_a_folder(target, what)
     check_writable_parent(target, what)
-    resolved = target.resolve()
-    if resolved == resolved.parent or resolved in (Path.cwd(), *Path.cwd().parents):
-        raise InputError(f"{what} {shown}: is the current folder or holds it; give a folder below it")
-    for source in _resolved(inputs):
-        # by name, and by device and inode (another path to the folder: a bind mount)
-        if source == resolved or (found is not None and _same_entry(source, target)):
-            raise InputError(f"{what} {shown}: is an input of this command; choose another folder")
-        if resolved in source.parents or (found is not None and any(_same_entry(p, target) for p in source.parents)):
-            raise InputError(f"{what} {shown}: holds {_shown(str(source))}, an input of this command; choose another")
+    _refuse_inputs(target, found is not None, shown, what, inputs)
     if found is not None:
         _refuse_mount_point(target, shown, what)
         reason = _foreign(target, owned) if foreign else None
         if reason is not None:
             raise InputError(f"{what} {shown}: {reason}; give a new or empty folder, or move that away")
+    return target
+
+
+def _refuse_inputs(
+    target: Path, exists: bool, shown: str, what: str, inputs: Iterable[str | os.PathLike[str] | None]
+) -> None:
+    """Refuse an output folder ``target`` that is the current folder or holds it, or is or holds one
+    of ``inputs`` (by name, and, when it ``exists``, by device and inode: another path to it)."""
+    resolved = target.resolve()
+    if resolved == resolved.parent or resolved in (Path.cwd(), *Path.cwd().parents):
+        raise InputError(f"{what} {shown}: is the current folder or holds it; give a folder below it")
+    for source in _resolved(inputs):
+        # by name, and by device and inode (another path to the folder: a bind mount)
+        if source == resolved or (exists and _same_entry(source, target)):
+            raise InputError(f"{what} {shown}: is an input of this command; choose another folder")
+        if resolved in source.parents or (exists and any(_same_entry(p, target) for p in source.parents)):
+            raise InputError(f"{what} {shown}: holds {_shown(str(source))}, an input of this command; choose another")
+
+
+def check_growing_folder(
+    path: str | os.PathLike[str], what: str = "output folder", *, inputs: Iterable[str | os.PathLike[str] | None] = ()
+) -> Path:
+    """Check, before any work, a folder that a command writes in file by file and that grows from
+    run to run, so is never replaced whole (a study's results folder, :mod:`vgtarm.study.store`).
+
+    ``path`` must be a new name or a folder (a symbolic link to a folder included: no file is ever
+    written through a link in it, and the folder itself is never renamed); the folder, or the
+    nearest existing parent, one we may write in, on a file system that is not read-only; not the
+    current folder or one that holds it; not one of ``inputs`` and not holding one of them (by
+    name, and by device and inode). What the folder may hold is its writer's rule. Raises
+    :class:`~vgtarm.errors.InputError` with one line naming ``path``, what is there and what was
+    expected.
+    """
+    target = _named(path, what, "folder")
+    shown = _shown(str(path))
+    try:
+        found = _lstat(target)
+        if found is not None and not target.is_dir():
+            raise InputError(
+                f"{what} {shown}: is {describe(target)}, not a folder; expected a folder or a new folder name"
+            )
+        check_writable_parent(target, what)
+        if found is not None and stat.S_ISLNK(found.st_mode):  # the folder it leads to is written in
+            _check_writable(target.resolve(), path, what)
+        _refuse_inputs(target, found is not None, shown, what, inputs)
+    except OSError as exc:
+        raise _unusable(exc, path, what) from exc
     return target
 
 

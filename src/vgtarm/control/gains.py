@@ -12,6 +12,17 @@ from ..model.parameters import N_JOINTS
 
 Array = NDArray[np.float64]
 
+#: Largest fixed position gain ``Kp`` (1/s^2) :func:`check_definite` accepts, on any joint: the
+#: discretized error dynamics ``e'' + Kv e' + Kp e = 0`` stay stable only while ``Kp dt^2`` is
+#: below about 4, which at the smallest control period vgtarm runs (1 us, ``vgtarm.paths.MIN_DT``)
+#: is 4e12; a 1 kHz loop would need ``Kp`` under about 4e6 (the paper's are 5,000 to 20,000).
+KP_MAX = 1e12
+#: Largest fixed velocity gain ``Kv`` (1/s): ``Kv dt`` below 2, that is 2e6 at 1 us (2,000 at
+#: 1 kHz; the paper's are 100 to 600), rounded down.
+KV_MAX = 1e6
+#: The largest fixed gain by its name (``Kp``, ``--kp``, ``Kv``, ``--kv``; the case aside).
+_GAIN_MAX = {"kp": KP_MAX, "kv": KV_MAX}
+
 
 def gain_matrix(value: ArrayLike, name: str, n: int = N_JOINTS) -> Array:
     """An n x n gain matrix (n joints, default the paper's 7) from a scalar (times the identity: the
@@ -44,8 +55,18 @@ def check_definite(matrix: Array, name: str) -> None:
     run with: ``matrix`` (a gain matrix of :func:`gain_matrix`) must be symmetric and positive
     definite; for gains given per joint (a diagonal), each > 0. With these ``Kp`` and ``Kv`` the
     error dynamics of computed force control with an exact model, ``e'' + Kv e' + Kp e = 0``, are
-    stable. The one check of ``vgtarm simulate --kp/--kv`` and of the exported controller (the
-    library's :func:`vgtarm.simulation.simulate` runs any gains, unstable ones included)."""
+    stable. A gain named ``Kp`` (``--kp``) or ``Kv`` (``--kv``) must also be at most
+    :data:`KP_MAX` (1e12 1/s^2) or :data:`KV_MAX` (1e6 1/s) on every element: beyond, no control
+    period vgtarm runs keeps the loop stable (``--kp 1e300`` diverges at once). The one check of
+    ``vgtarm simulate --kp/--kv`` and of the exported controller (the library's
+    :func:`vgtarm.simulation.simulate` runs any gains, unstable ones included)."""
+    largest = _GAIN_MAX.get(name.lstrip("-").lower())
+    if largest is not None and not (np.abs(matrix) <= largest).all():  # before eigvalsh meets 1e300
+        i, j = (int(k) for k in np.argwhere(~(np.abs(matrix) <= largest))[0])
+        raise InputError(
+            f"{name} must be at most {largest:g} on every element (no control period vgtarm runs is stable"
+            f" beyond), got {name}[{i}, {j}] = {float(matrix[i, j])!r}"
+        )
     if not np.array_equal(matrix, matrix.T):
         i, j = (int(k) for k in np.argwhere(matrix != matrix.T)[0])
         raise InputError(
@@ -69,10 +90,13 @@ def gains_text(text: str, option: str, joint_names: tuple[str, ...]) -> float | 
     separated by commas, each finite and > 0 (:func:`check_definite` on the gains they make); else
     one :class:`InputError` line naming the option, the value and what was expected."""
     n = len(joint_names)
+    largest = _GAIN_MAX.get(option.lstrip("-").lower())
     expected = (
         f"expected one number for every joint or {n} numbers separated by commas (one per joint: "
-        f"{' '.join(joint_names)}), each finite and > 0"
+        f"{' '.join(joint_names)}), each finite and > 0" + ("" if largest is None else f" and at most {largest:g}")
     )
+    if not text.isascii():  # float() reads other scripts' digits too: '١٠٠' (Arabic-Indic) as 100
+        raise InputError(f"{option} {shown(text)}: {expected}, written in ASCII digits (0-9)")
     try:
         values = [float(cell) for cell in text.split(",")]
     except ValueError:

@@ -12,6 +12,7 @@ labels through :func:`~vgtarm.markup.mpl_text`.
 
 from __future__ import annotations
 
+import fnmatch
 import math
 import time
 from collections.abc import Sequence
@@ -25,7 +26,7 @@ from matplotlib.figure import Figure
 from ..errors import InputError
 from ..fileio import atomic_path, atomic_write_text
 from ..markup import md_cell, md_code, mpl_text
-from .store import read_table
+from .store import FIGURE_FILES, Store, read_table
 
 #: Figures of the table: (column, label, scale to the shown unit).
 FIGURES = (
@@ -100,12 +101,15 @@ def varied(rows: Sequence[dict[str, Any]], columns: Sequence[str]) -> list[str]:
 
 
 def write_report(folder: str | Path) -> Path:
-    """Write ``report.md`` and its figures into the study folder ``folder``; returns the report."""
+    """Write ``report.md`` and its figures into the study folder ``folder``; returns the report.
+
+    Each is written atomically, and only over a file vgtarm wrote (listed in the folder's mark,
+    :meth:`~vgtarm.study.store.Store.claim`): a ``report.md`` or figure of the user's, or a folder
+    vgtarm does not recognise as a study folder, is refused in one line before anything is written."""
     where = Path(folder)
     rows = read_table(where)
     if not rows:
         raise InputError(f"study folder {where}: results.parquet has no runs")
-    (where / "report.md").unlink(missing_ok=True)
     ok = sum(1 for r in rows if r.get("success"))
     lines = [
         "# Study report",
@@ -154,9 +158,12 @@ def write_report(folder: str | Path) -> Path:
     ]
     figures += [(f"Maximum tip error against {c}", f"study_error_vs_{c}.png", c) for c in varied(rows, GAIN_INPUTS)]
     keep = {name for _, name, _ in figures}
-    for stale in where.glob("study_error_*.png"):  # figures of an earlier report against other columns
-        if stale.name not in keep:
-            stale.unlink(missing_ok=True)
+    store = Store(where)
+    store.claim("report.md", *sorted(keep))  # before anything is written: never over a user's file
+    (where / "report.md").unlink(missing_ok=True)  # vgtarm's (claimed): no report of other figures meanwhile
+    for stale in sorted((store.listed() or set()) - keep):  # figures of an earlier report against other columns
+        if fnmatch.fnmatchcase(stale, FIGURE_FILES):
+            store.discard(stale)
     for caption, name, against in figures:
         fig = Figure(figsize=(6.4, 4.2), layout="constrained")
         if against is None:

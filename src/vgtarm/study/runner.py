@@ -116,7 +116,8 @@ def run_study(
 
     Args:
         study: a validated study (:func:`~vgtarm.study.spec.load_study`).
-        out: the results folder; runs already stored there are not run again.
+        out: the results folder; runs already stored there are not run again. It must be new,
+            empty or a study folder vgtarm wrote (:meth:`~vgtarm.study.store.Store.check`).
         execute: runs one point on a worker (see the module's docstring).
         check: validates a point's inputs before any run starts (raises InputError/ConfigError).
         scheduler: address of a running Dask scheduler (``tcp://host:port``); None starts a
@@ -127,8 +128,9 @@ def run_study(
         raise InputError(f"workers = {workers!r}: expected a whole number >= 1")
     start = time.perf_counter()
     address = None if scheduler is None else scheduler_address(scheduler)
-    points = check_study(study, check) if check is not None else study.points()
     store = Store(out)
+    store.check()  # a folder vgtarm may not write in (a user's files of the study's names): before any run
+    points = check_study(study, check) if check is not None else study.points()
     done = store.done()
     todo = [p for p in points if p.id not in done]
     failed = sum(1 for row in store.rows([p for p in points if p.id in done]) if not row.get("success"))

@@ -8,6 +8,16 @@ Layout of ``DIR``::
     executions.log        "submit <id>" when a run is sent to the cluster, "write <id>" once stored
     results.csv           one row per run of the study: id, every input, every summary figure
     results.parquet       the same table (pyarrow)
+    .vgtarm-study         the mark of a study folder vgtarm made: the files of fixed names it wrote
+                          there (the four above, report.md and the figures of ``vgtarm study report``)
+
+The folder grows in place (resume), so it is never replaced whole; vgtarm writes only in a folder
+it made (a new or empty one, which gets the mark) or one it recognises as its own: marked, or,
+written before the mark existed, holding only run files and the files above (it is marked then).
+A file of one of the fixed names that the mark does not list is the user's: refused in one line,
+never written over (:meth:`Store.check`, :meth:`Store.claim`). Every file is written atomically
+(a temporary name, then a rename: never through a link); the log, which is appended to, is opened
+without following a link and refused unless it is a regular file with one link that vgtarm wrote.
 
 A run file either exists complete or not at all (written to a temporary name, then renamed), so
 an interrupted study resumes by running exactly the ids without a file. A run file is read only
@@ -23,17 +33,30 @@ value as it is.
 from __future__ import annotations
 
 import csv
+import errno
+import fnmatch
 import io
 import json
 import math
 import os
 import re
+import stat
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
 from ..errors import InputError, cut, shown
-from ..fileio import atomic_path, atomic_write_text, json_value, no_room_error, open_input, read_text_limited
+from ..fileio import (
+    OutputPathError,
+    atomic_path,
+    atomic_write_text,
+    describe,
+    is_temporary,
+    json_value,
+    no_room_error,
+    open_input,
+    read_text_limited,
+)
 from ..kinds import found_columns
 from .spec import Point
 
@@ -59,20 +82,183 @@ LEGACY_RUNS = "runs"
 RUN_RECORD_LIMIT = 16 * 2**20
 #: The name of a run file: a point's id (16 hexadecimal digits, :func:`vgtarm.study.spec.point_id_of`).
 RUN_FILE = re.compile(r"[0-9a-f]{16}\.json")
+#: The mark of a study folder vgtarm made: a first line saying so, then the files of fixed names
+#: (:data:`NAMED_FILES`, the report's figures) vgtarm wrote there, one a line.
+MARK = ".vgtarm-study"
+_MARK_HEADER = "# a study folder of vgtarm: it writes here only run files <id>.json and the files listed below"
+#: The files of fixed names a study's commands write in its folder (run files aside).
+NAMED_FILES = ("executions.log", "results.csv", "results.parquet", "report.md")
+#: The figures of ``vgtarm study report``.
+FIGURE_FILES = "study_error_*.png"
+#: Largest mark read (bytes): a few names.
+_MARK_LIMIT = 2**20
+
+
+def _named_file(name: str) -> bool:
+    """Whether ``name`` is one of the fixed names a study writes (:data:`NAMED_FILES`, a figure)."""
+    return name in NAMED_FILES or fnmatch.fnmatchcase(name, FIGURE_FILES)
 
 
 class Store:
-    """The results folder of a study."""
+    """The results folder of a study (see the module's docstring for what it may hold)."""
 
     def __init__(self, folder: str | Path) -> None:
         self.folder = Path(folder)
         legacy = self.folder / LEGACY_RUNS
-        #: Where run files go: the study folder itself, or ``runs/`` of a study begun there before.
-        self.runs = legacy if legacy.is_dir() else self.folder
+        #: Where run files go: the study folder itself, or ``runs/`` of a study begun there before
+        #: (a real folder: a link named ``runs`` is not followed).
+        self.runs = legacy if legacy.is_dir() and not legacy.is_symlink() else self.folder
         self.log = self.folder / "executions.log"
+        #: Whether the whole folder was checked and marked by this store (then each write checks
+        #: only its own file and the mark: a study of 100,000 runs does not list its folder each time).
+        self._checked = False
+
+    # -- what the folder holds ----------------------------------------------------------------
+
+    def listed(self) -> set[str] | None:
+        """The files of fixed names vgtarm wrote in the folder (its mark), or None: no mark."""
+        mark = self.folder / MARK
+        try:
+            if not stat.S_ISREG(os.lstat(mark).st_mode):
+                return None
+            text = read_text_limited(mark, _MARK_LIMIT, "study folder mark")
+        except (OSError, InputError):
+            return None
+        lines = text.splitlines()
+        if not lines or lines[0] != _MARK_HEADER:
+            return None
+        return {line for line in lines[1:] if line and not line.startswith("#")}
+
+    def refusal(self) -> str | None:
+        """Why vgtarm may not write in the folder, or None: it is new, empty, marked as a study
+        folder of vgtarm (and every file of a fixed name there is listed, a regular file, the log
+        with one link), or a study folder of an earlier version (only run files, the files of fixed
+        names and temporaries of vgtarm's writers; at least one run file)."""
+        try:
+            names = sorted(os.listdir(self.folder))
+        except FileNotFoundError:
+            return None
+        except NotADirectoryError:
+            return f"is {describe(self.folder)}, not a folder"
+        except OSError as exc:
+            return f"cannot be read ({exc.strerror})"
+        listed = self.listed()
+        if listed is None:
+            return None if not names else self._earlier(names)
+        for name in names:  # anything else is the user's, never written (``runs`` only if a real folder)
+            if _named_file(name):
+                reason = self._entry(name, listed)
+                if reason is not None:
+                    return reason
+        return None
+
+    def _entry(self, name: str, listed: set[str] | None) -> str | None:
+        """Why the file ``name`` of a fixed name may not be written (``listed``: the mark's list,
+        None for a folder of an earlier version), or None."""
+        try:
+            found = os.lstat(self.folder / name)
+        except FileNotFoundError:
+            return None
+        if listed is not None and name not in listed:
+            return f"holds {name!r}, which vgtarm did not write there (the folder's {MARK} does not list it)"
+        if not stat.S_ISREG(found.st_mode):
+            return f"holds {name!r}, {describe(self.folder / name)}, where vgtarm writes a file"
+        if name == "executions.log" and found.st_nlink != 1:
+            return f"holds {name!r} with {found.st_nlink} links to it (vgtarm does not append through links)"
+        return None
+
+    def _earlier(self, names: list[str]) -> str | None:
+        """For a folder without the mark: why it is not a study folder of an earlier version, or None."""
+        runs = 0
+        for name in names:
+            path = self.folder / name
+            try:
+                found = os.lstat(path)
+            except FileNotFoundError:
+                continue
+            if RUN_FILE.fullmatch(name) and stat.S_ISREG(found.st_mode):
+                runs += 1
+            elif name == LEGACY_RUNS and stat.S_ISDIR(found.st_mode):
+                inside = sorted(os.listdir(path))
+                other = [n for n in inside if not (RUN_FILE.fullmatch(n) or is_temporary(n))]
+                if other:
+                    return f"holds {LEGACY_RUNS}/{other[0]!r} and no {MARK}: not a study folder vgtarm wrote"
+                runs += sum(1 for n in inside if RUN_FILE.fullmatch(n))
+            elif _named_file(name):
+                reason = self._entry(name, None)
+                if reason is not None:
+                    return reason
+            elif not is_temporary(name):
+                return f"holds {name!r} and no {MARK}: not a study folder vgtarm wrote"
+        if runs == 0:
+            return f"holds {names[0]!r} but no run file <id>.json and no {MARK}: not a study folder vgtarm wrote"
+        return None
+
+    def check(self, what: str = "study folder") -> None:
+        """Raise :class:`~vgtarm.errors.InputError`, one line naming the folder as ``what``, if vgtarm
+        may not write in it (:meth:`refusal`): before any work."""
+        reason = self.refusal()
+        if reason is not None:
+            raise InputError(
+                f"{what} {cut(str(self.folder), 200)}: {reason}; give a new or empty folder, or the folder of an"
+                " earlier run of this study (or move that file away)"
+            )
+
+    def _refused(self, reason: str, path: Path) -> OutputPathError:
+        """The one line refusing to write ``path`` in the folder (at the moment of writing)."""
+        where = cut(str(self.folder), 200)
+        return OutputPathError(f"study folder {where}: {reason}; move that away or give another folder", path)
+
+    def _mark(self, names: set[str]) -> None:
+        atomic_write_text(self.folder / MARK, "\n".join([_MARK_HEADER, *sorted(names)]) + "\n", "study folder mark")
+
+    def _marked(self) -> set[str]:
+        """The mark's list, after the folder is checked (:meth:`check`, :class:`OutputPathError` at
+        the moment of writing), created and, when new or written by an earlier version, marked."""
+        listed = self.listed() if self._checked else None
+        if listed is not None:
+            return listed
+        reason = self.refusal()
+        if reason is not None:
+            raise self._refused(reason, self.folder)
+        listed = self.listed()
+        if listed is None:
+            self.folder.mkdir(parents=True, exist_ok=True)
+            listed = {n for n in os.listdir(self.folder) if _named_file(n)}  # an earlier version's
+            self._mark(listed)
+        self._checked = True
+        return listed
+
+    def claim(self, *names: str) -> set[str]:
+        """Make the files ``names`` (fixed names) vgtarm's to write, before they are written: the
+        folder must be one vgtarm may write in, and each name new or listed in its mark (a file
+        vgtarm did not write is refused with :class:`OutputPathError`, one line); new names are
+        listed. Returns those of ``names`` that did not exist."""
+        listed = self._marked()
+        new: set[str] = set()
+        for name in names:
+            reason = self._entry(name, listed)
+            if reason is not None:
+                raise self._refused(reason, self.folder / name)
+            if not os.path.lexists(self.folder / name):
+                new.add(name)
+        if not set(names) <= listed:
+            self._mark(listed | set(names))
+        return new
+
+    def discard(self, name: str) -> None:
+        """Remove the file ``name`` of a fixed name if vgtarm wrote it (listed, a regular file),
+        and take it off the list; never anything else."""
+        listed = self.listed() or set()
+        path = self.folder / name
+        if name in listed and os.path.lexists(path) and stat.S_ISREG(os.lstat(path).st_mode):
+            path.unlink(missing_ok=True)
+        if name in listed:
+            self._mark(listed - {name})
 
     def prepare(self) -> None:
-        """Create the folder."""
+        """Create the folder (and mark it), after the check of what it holds."""
+        self._marked()
         self.runs.mkdir(parents=True, exist_ok=True)
 
     def done(self) -> set[str]:
@@ -96,8 +282,8 @@ class Store:
         """Append ``what <id>`` lines to the execution log (one small append per call)."""
         text = "".join(f"{what} {i}\n" for i in ids)
         if text:
+            fd = self._open_log()
             try:
-                fd = os.open(self.log, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
                 try:
                     os.write(fd, text.encode())
                 finally:
@@ -107,6 +293,38 @@ class Store:
                 if failure is exc:
                     raise
                 raise failure from exc
+
+    def _open_log(self) -> int:
+        """The log opened to append to: vgtarm's (listed in the mark; created new, ``O_EXCL``, when
+        not there), never through a link (``O_NOFOLLOW``), never waiting on a pipe, and only a
+        regular file with one link (a hard link would carry the lines elsewhere):
+        :class:`OutputPathError` in one line otherwise."""
+        new = self.log.name in self.claim(self.log.name)
+        flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NOCTTY", 0)
+        flags |= getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0) | (os.O_EXCL if new else 0)
+        where = cut(str(self.log), 200)
+        try:
+            fd = os.open(self.log, flags, 0o644)
+        except FileExistsError:
+            raise OutputPathError(f"study log {where}: appeared meanwhile; vgtarm did not write it", self.log) from None
+        except OSError as exc:
+            if exc.errno in (errno.ELOOP, errno.ENXIO, errno.EISDIR):  # a link, a pipe without reader, a folder
+                raise OutputPathError(
+                    f"study log {where}: is {describe(self.log)}; expected the regular file vgtarm writes"
+                    " (it does not write through links)",
+                    self.log,
+                ) from None
+            raise
+        found = os.fstat(fd)
+        if stat.S_ISREG(found.st_mode) and found.st_nlink == 1:
+            return fd
+        os.close(fd)
+        kind = f"a file with {found.st_nlink} links to it" if stat.S_ISREG(found.st_mode) else describe(self.log)
+        raise OutputPathError(
+            f"study log {where}: is {kind}; expected the regular file vgtarm writes, with one link"
+            " (it does not write through links)",
+            self.log,
+        )
 
     def read(self, point_id: str) -> dict[str, Any]:
         """One stored run: a record ``{"id", "inputs", "summary", "error"}`` whose id is ``point_id``
@@ -156,6 +374,7 @@ class Store:
         writer.writerow([spreadsheet_text(c) for c in columns])
         for row in rows:
             writer.writerow([_cell(row.get(c)) for c in columns])
+        self.claim("results.csv", "results.parquet")  # never a user's file of that name
         csv_file = atomic_write_text(self.folder / "results.csv", buffer.getvalue())
         import pyarrow as pa
         import pyarrow.parquet as pq

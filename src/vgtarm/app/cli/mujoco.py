@@ -11,14 +11,14 @@ from ...errors import escape
 from ...export import command as export_command
 from ...fileio import atomic_write_text, check_output_file
 from ...model.robot import load_robot
-from .options import add_config, positive_float, positive_int, seed_number
+from .options import add_config, positive_float, positive_int, seed_number, whole_number
 
 
 def digits(text: str) -> int:
     """``--digits``: a whole number of significant digits the export may write."""
     from ...mujoco_bridge.export import MAX_DIGITS, MIN_DIGITS
 
-    value = int(text)
+    value = whole_number(text)
     if not MIN_DIGITS <= value <= MAX_DIGITS:
         raise argparse.ArgumentTypeError(f"expected a whole number from {MIN_DIGITS} to {MAX_DIGITS}, got {text}")
     return value

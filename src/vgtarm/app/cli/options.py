@@ -9,16 +9,46 @@ from pathlib import Path
 
 import numpy as np
 
+from ...errors import shown
+
+
+def _ascii(text: str) -> str:
+    """``text``, refused (argparse's one line, which names the option) unless it is written in ASCII:
+    Python's ``int`` and ``float`` also read other scripts' digits (``١٠٠``, Arabic-Indic, as 100;
+    full-width digits), which a command line must not take silently for a number."""
+    if not text.isascii():
+        raise argparse.ArgumentTypeError(f"expected a number written in ASCII digits (0-9), got {shown(text, 80)}")
+    return text
+
+
+def number(text: str) -> float:
+    """An option's number (``type=float`` of every ``vgtarm`` parser, see :func:`register_numbers`):
+    written in ASCII only, else argparse's one line naming the option."""
+    return float(_ascii(text))
+
+
+def whole_number(text: str) -> int:
+    """An option's whole number (``type=int`` of every ``vgtarm`` parser): ASCII only, as :func:`number`."""
+    return int(_ascii(text))
+
+
+def register_numbers(parser: argparse.ArgumentParser) -> None:
+    """Make ``type=float`` and ``type=int`` of ``parser``'s options read ASCII numbers only
+    (:func:`number`, :func:`whole_number`; argparse's own registry of types, looked up by the
+    ``type`` given, so every option declared with the built-in types is covered)."""
+    parser.register("type", float, number)
+    parser.register("type", int, whole_number)
+
 
 def positive_int(text: str) -> int:
-    value = int(text)
+    value = whole_number(text)
     if value < 1:
         raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text}")
     return value
 
 
 def non_negative_int(text: str) -> int:
-    value = int(text)
+    value = whole_number(text)
     if value < 0:
         raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text}")
     return value
@@ -29,14 +59,14 @@ def seed_number(text: str) -> int:
     seed: a run's seed is stored as a 64-bit integer)."""
     from ...ga import MAX_SEED
 
-    value = int(text)
+    value = whole_number(text)
     if not 0 <= value <= MAX_SEED:
         raise argparse.ArgumentTypeError(f"expected a whole number from 0 to 2**63 - 1 = {MAX_SEED}, got {text}")
     return value
 
 
 def positive_float(text: str) -> float:
-    value = float(text)
+    value = number(text)
     if not (np.isfinite(value) and value > 0):
         raise argparse.ArgumentTypeError(f"expected a positive number, got {text}")
     return value

@@ -8,7 +8,14 @@ from pathlib import Path
 from typing import Any
 
 from ...errors import InputError, cut, escape
-from ...fileio import atomic_write_text, check_input_folder, check_output_file, check_writable_parent
+from ...fileio import (
+    atomic_write_text,
+    check_growing_folder,
+    check_input_folder,
+    check_output_file,
+    check_writable_parent,
+    describe,
+)
 
 #: The files ``study run`` and ``study report`` write in a study's folder, besides one ``<id>.json``
 #: a run (see :mod:`vgtarm.study.store`).
@@ -34,6 +41,24 @@ def _check_study_outputs(out: Path, inputs: list[Path]) -> None:
                     f"--out {cut(str(out), 200)}: holds {cut(str(source), 200)} as a run file, but it is an input of"
                     " this command; choose another folder"
                 )
+
+
+def _check_study_folder(out: Path, inputs: list[Path]) -> None:
+    """Refuse, in one line before any work, a results folder ``out`` that ``study run`` may not
+    write in: not a folder; one of its files of fixed names is (another name of) an input; the
+    current folder, an input or a folder holding one; a folder vgtarm did not make or recognise as
+    a study folder of its own (:meth:`vgtarm.study.store.Store.check`)."""
+    from ...study.store import Store
+
+    if os.path.lexists(out) and not out.is_dir():  # a link to a folder is one: it grows where it leads
+        raise InputError(
+            f"--out {cut(str(out), 200)}: is {describe(out)}, not a folder; expected the study's results folder"
+            " (a new or empty folder, or one an earlier run of the study wrote)"
+        )
+    check_writable_parent(out, "--out")  # a read-only file system: named for --out itself
+    _check_study_outputs(out, inputs)  # an input at one of the study's file names: named as such
+    check_growing_folder(out, "--out", inputs=inputs)
+    Store(out).check("--out")
 
 
 def _study_inputs(study_file: Path, study: object) -> list[Path]:
@@ -64,12 +89,9 @@ def cmd_study_run(args: argparse.Namespace) -> int:
 
     # The folder keeps finished runs to resume from (each run file is atomic): it grows, it is not
     # replaced; check it before the work.
-    if args.out.exists() and not args.out.is_dir():
-        raise InputError(f"--out {cut(str(args.out))}: is a file, not a folder; give the study's results folder")
-    check_writable_parent(args.out, "--out")
-    _check_study_outputs(args.out, [args.study])  # before the study file is read
+    _check_study_folder(args.out, [args.study])  # before the study file is read
     study = load_study(args.study)
-    _check_study_outputs(args.out, _study_inputs(args.study, study))  # the files it names: before any write
+    _check_study_folder(args.out, _study_inputs(args.study, study))  # the files it names: before any write
     outcome = run_study(
         study,
         args.out,

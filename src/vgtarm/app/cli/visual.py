@@ -15,7 +15,7 @@ from ...errors import InputError, escape
 from ...fileio import atomic_folder, check_output_file, check_output_folder, placements, read_bytes_limited
 from ...model.parameters import JOINT_NAMES, ROBOT_FILE_LIMIT
 from ...model.robot import load_robot
-from .options import add_model
+from .options import add_model, number
 
 #: Picture formats of ``vgtarm draw``.
 PICTURE_FORMATS = (".png", ".svg", ".pdf")
@@ -23,7 +23,7 @@ PICTURE_FORMATS = (".png", ".svg", ".pdf")
 
 def _positive(text: str) -> float:
     try:
-        value = float(text)
+        value = number(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
     if not (math.isfinite(value) and value > 0):
