@@ -602,44 +602,24 @@ def minimize(
         raise InputError(f"`cost` must be callable, got {type(cost).__name__}")
     lo, hi = _check_bounds(lower, upper)
     rng = _as_rng(seed)
-    n_bits = options.n_bits
     n_elite = options.elite_count
-    n_children = options.population_size - n_elite
-    p_cross = float(options.crossover_probability)
-    p_mut = float(options.mutation_probability)
 
     population = _initial_population(initial, lo, hi, options, rng)
-    costs = _evaluate(cost, _decode(population, lo, hi, n_bits), 0, np.arange(population.shape[0]))
+    costs = _evaluate(cost, _decode(population, lo, hi, options.n_bits), 0, np.arange(population.shape[0]))
     n_evaluations = population.shape[0]
 
     best_index = int(np.argmin(costs))
     best_bits = population[best_index].copy()
     best_cost = float(costs[best_index])
     history = [best_cost]
-
-    # Each child's mate in the shuffled mating pool (the last one of an odd pool is its own).
-    mate = np.arange(n_children) ^ 1
-    if n_children % 2:
-        mate[-1] = n_children - 1
+    mate = _mates(options.population_size - n_elite)
 
     generation = 0
     last_improvement = 0
     reason = f"reached max_generations={options.max_generations}"
     for generation in range(1, options.max_generations + 1):
-        expectations = _rank_expectations(costs, n_children)
-        pool = rng.permutation(_sus(expectations, n_children, rng))
-        parents = population[pool]
-        parent_costs = costs[pool]
-        children = _mutate(_crossover(parents, p_cross, rng), p_mut, rng)
-
-        # Children equal to one of their parents keep that parent's cost.
-        same_as_first = np.all(children == parents, axis=1)
-        same_as_mate = np.all(children == parents[mate], axis=1)
-        child_costs = np.where(same_as_first, parent_costs, parent_costs[mate])
-        new = np.flatnonzero(~(same_as_first | same_as_mate))
-        if new.size:
-            child_costs[new] = _evaluate(cost, _decode(children[new], lo, hi, n_bits), generation, n_elite + new)
-            n_evaluations += new.size
+        children, child_costs, evaluated = _offspring(cost, population, costs, mate, generation, lo, hi, options, rng)
+        n_evaluations += evaluated
 
         elites = np.argsort(costs, kind="stable")[:n_elite]
         population = np.concatenate([population[elites], children])
@@ -657,10 +637,67 @@ def minimize(
             reason = f"best cost did not improve for stall_generations={stall} generations"
             break
 
+    return _result(best_bits, best_cost, (lo, hi), options.n_bits, generation, n_evaluations, history, reason)
+
+
+def _mates(n_children: int) -> NDArray[np.intp]:
+    """Each child's mate in the shuffled mating pool (the last one of an odd pool is its own)."""
+    mate = np.arange(n_children) ^ 1
+    if n_children % 2:
+        mate[-1] = n_children - 1
+    return mate
+
+
+def _offspring(
+    cost: CostFunction,
+    population: NDArray[np.uint8],
+    costs: NDArray[np.float64],
+    mate: NDArray[np.intp],
+    generation: int,
+    lower: NDArray[np.float64],
+    upper: NDArray[np.float64],
+    options: GAOptions,
+    rng: np.random.Generator,
+) -> tuple[NDArray[np.uint8], NDArray[np.float64], int]:
+    """The children of ``generation``: parents drawn by rank (stochastic universal sampling,
+    shuffled into pairs), crossed and mutated; a child equal to one of its parents keeps that
+    parent's cost, the others are evaluated. Returns the children, their costs and how many were
+    evaluated."""
+    n_children = options.population_size - options.elite_count
+    expectations = _rank_expectations(costs, n_children)
+    pool = rng.permutation(_sus(expectations, n_children, rng))
+    parents = population[pool]
+    parent_costs = costs[pool]
+    crossed = _crossover(parents, float(options.crossover_probability), rng)
+    children = _mutate(crossed, float(options.mutation_probability), rng)
+
+    # Children equal to one of their parents keep that parent's cost.
+    same_as_first = np.all(children == parents, axis=1)
+    same_as_mate = np.all(children == parents[mate], axis=1)
+    child_costs = np.where(same_as_first, parent_costs, parent_costs[mate])
+    new = np.flatnonzero(~(same_as_first | same_as_mate))
+    if new.size:
+        decoded = _decode(children[new], lower, upper, options.n_bits)
+        child_costs[new] = _evaluate(cost, decoded, generation, options.elite_count + new)
+    return children, child_costs, int(new.size)
+
+
+def _result(
+    best_bits: NDArray[np.uint8],
+    best_cost: float,
+    bounds: tuple[NDArray[np.float64], NDArray[np.float64]],
+    n_bits: int,
+    generations: int,
+    n_evaluations: int,
+    history: list[float],
+    reason: str,
+) -> GAResult:
+    """The record of a search that found ``best_bits`` (read-only arrays); without a finite cost
+    it failed, and ``reason`` says so."""
     success = bool(np.isfinite(best_cost))
     if not success:
         reason = f"no individual had a finite cost ({reason})"
-    x = _decode(best_bits, lo, hi, n_bits)
+    x = _decode(best_bits, *bounds, n_bits)
     history_array = np.asarray(history, dtype=np.float64)
     for arr in (x, best_bits, history_array):
         arr.setflags(write=False)
@@ -668,7 +705,7 @@ def minimize(
         x=x,
         cost=best_cost,
         bits=best_bits,
-        generations=generation,
+        generations=generations,
         n_evaluations=n_evaluations,
         history=history_array,
         success=success,

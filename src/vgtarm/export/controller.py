@@ -37,14 +37,14 @@ from .. import compiler as compilers
 from ..control.gains import Gains, check_definite
 from ..control.scm import SwitchingControl
 from ..errors import InputError, VgtarmError, escape, shown
-from ..fileio import atomic_folder, atomic_write_text
+from ..fileio import atomic_folder, atomic_write_text, scratch_folder
 from ..model import budget, codegen
 from ..model.compiled import find_compiler
 from ..model.parameters import RobotParameters
 from ..model.robot import Robot
 from ..model.stack import Stack
 from ..simulation.checks import model_of_plant
-from ..simulation.sensing import DEFAULT_VELOCITY_FILTER_HZ, ESTIMATORS, sensing_settings
+from ..simulation.sensing import DEFAULT_VELOCITY_FILTER_HZ, ESTIMATORS, Sensing, sensing_settings
 from .switching import GAExport, ga_export, simulator_fuses, switching_controller, switching_readme
 
 #: The hand-written files copied into every export (``csrc/`` of this package).
@@ -174,6 +174,16 @@ def export_controller(
         ExportError: no compiler or a compile that fails; nothing is left at ``out_dir`` (an
             existing folder stays as it was).
     """
+    export = _Export.checked(**locals())  # every argument by its name: checked in one place, before any work
+    return export.write()
+
+
+def _check_choices(
+    robot: object, switching: object, observer: str, dt: object, check_build: object, estimator: str
+) -> None:
+    """Refuse, in one line naming it, an argument of :func:`export_controller` that is not one of
+    its kinds or choices: the robot, the switching control, the observer, the period, the build
+    check, the estimator (in that order)."""
     if not isinstance(robot, Robot):
         raise InputError(f"robot = {shown(robot)}: expected a vgtarm.Robot (vgtarm.load_robot)")
     if not isinstance(switching, SwitchingControl) and switching not in SWITCHING:
@@ -186,48 +196,127 @@ def export_controller(
         raise InputError(f"check_build = {shown(check_build)}: expected True or False")
     if estimator not in ESTIMATORS:
         raise InputError(f"estimator = {shown(estimator)}: expected one of {list(ESTIMATORS)}")
-    n = robot.n_joints
-    gains = Gains.of(kp, kv, n)
-    for label, matrix in (("Kp", gains.Kp), ("Kv", gains.Kv)):  # vgtarm simulate's check of --kp and --kv
-        check_definite(matrix, label)
-    sensing = sensing_settings(
-        robot.joint_units,
-        float(dt),
-        observer,
-        observer_gain,
-        force_sensor,
-        encoder_resolution,
-        twist_resolution,
-        0.0,
-        velocity_filter_hz,
-        estimator,
-        estimator_bandwidth_hz,
-    )
-    model = robot if controller_model is None else _controller_model(robot, controller_model)
-    if controller_model is not None:  # simulate's check: a model off by more than its range is no model of the plant
-        model_of_plant(robot, model)
-    tolerance = float(limit_tolerance) if _is_number(limit_tolerance) else math.nan
-    if not (math.isfinite(tolerance) and tolerance >= 0):
-        raise InputError(f"limit_tolerance = {shown(limit_tolerance)}: expected a distance >= 0 (m, rad)")
-    clip = _effort_max(effort_max, n)
-    ga = None
-    if switching is not None:
-        scm = switching_controller(switching, gains.Kp, gains.Kv, n)
-        fuses = simulator_fuses() if fused_multiply_add is None else bool(fused_multiply_add)
-        ga = ga_export(scm, n, float(dt), sensing.velocity_filter if sensing.active else None, fuses)
-    compiler = None
-    if check_build:
-        compiler = _compiler()
-        limit = check_limit(robot)  # a bad $VGTARM_COMPILER_TIME_LIMIT: ConfigError before any work
-    settings: dict[str, Any] = {
+
+
+@dataclass(frozen=True)
+class _Export:
+    """One export, its arguments checked: what :meth:`write` puts in its folder ``out_dir``.
+
+    Attributes:
+        robot, out_dir: as given to :func:`export_controller`.
+        model: the controller's model (the robot itself for an exact model).
+        gains, sensing, clip: the checked gains, sensing and effort clip ``(n,)`` (inf: none).
+        ga: switching control's part (None: computed force control alone).
+        compiler, limit: the check compile's compiler and its time limit per command (None: no check).
+        settings: ``export.json``.
+    """
+
+    robot: Robot
+    out_dir: str | os.PathLike[str]
+    model: Robot
+    gains: Gains
+    sensing: Sensing
+    clip: np.ndarray
+    ga: GAExport | None
+    compiler: str | None
+    limit: float | None
+    settings: dict[str, Any]
+
+    @classmethod
+    def checked(
+        cls,
+        robot: Robot,
+        out_dir: str | os.PathLike[str],
+        *,
+        kp: ArrayLike,
+        kv: ArrayLike,
+        dt: float,
+        controller_model: RobotParameters | Stack | Robot | None,
+        observer: str,
+        observer_gain: float | None,
+        force_sensor: bool,
+        encoder_resolution: float,
+        twist_resolution: float | None,
+        velocity_filter_hz: float,
+        estimator: str,
+        estimator_bandwidth_hz: float | None,
+        limit_tolerance: float,
+        effort_max: ArrayLike | None,
+        switching: str | SwitchingControl | None,
+        check_build: bool,
+        fused_multiply_add: bool | None,
+    ) -> _Export:
+        """The export of :func:`export_controller`'s arguments (see there), each checked, in this
+        order, with the checks simulate uses; :class:`~vgtarm.errors.InputError` (or
+        :class:`ExportError`: no compiler) before any work."""
+        _check_choices(robot, switching, observer, dt, check_build, estimator)
+        n = robot.n_joints
+        gains = Gains.of(kp, kv, n)
+        for label, matrix in (("Kp", gains.Kp), ("Kv", gains.Kv)):  # vgtarm simulate's check of --kp and --kv
+            check_definite(matrix, label)
+        sensing = sensing_settings(
+            robot.joint_units,
+            float(dt),
+            observer,
+            observer_gain,
+            force_sensor,
+            encoder_resolution,
+            twist_resolution,
+            0.0,
+            velocity_filter_hz,
+            estimator,
+            estimator_bandwidth_hz,
+        )
+        model = _checked_model(robot, controller_model)
+        tolerance = float(limit_tolerance) if _is_number(limit_tolerance) else math.nan
+        if not (math.isfinite(tolerance) and tolerance >= 0):
+            raise InputError(f"limit_tolerance = {shown(limit_tolerance)}: expected a distance >= 0 (m, rad)")
+        clip = _effort_max(effort_max, n)
+        ga = None
+        if switching is not None:
+            scm = switching_controller(switching, gains.Kp, gains.Kv, n)
+            fuses = simulator_fuses() if fused_multiply_add is None else bool(fused_multiply_add)
+            ga = ga_export(scm, n, float(dt), sensing.velocity_filter if sensing.active else None, fuses)
+        compiler: str | None = None
+        limit: float | None = None
+        if check_build:
+            compiler = _compiler()
+            limit = check_limit(robot)  # a bad $VGTARM_COMPILER_TIME_LIMIT: ConfigError before any work
+        settings = _settings(robot, model, float(dt), gains, sensing, tolerance, clip, ga)
+        return cls(robot, out_dir, model, gains, sensing, clip, ga, compiler, limit, settings)
+
+    def write(self) -> ExportedController:
+        """Write the folder as one unit, compiled with :data:`STRICT_FLAGS` before it is put in
+        place when there is a compiler; its record."""
+        with atomic_folder(self.out_dir, "output folder", owned=()) as folder:
+            _write(folder, self)
+            if self.compiler is not None:
+                check_compile(folder, self.compiler, limit=self.limit)
+            files = tuple(sorted(p.name for p in folder.iterdir()))
+        final = Path(self.out_dir).absolute()
+        return ExportedController(final, files, self.robot.n_joints, self.settings, self.compiler)
+
+
+def _settings(
+    robot: Robot,
+    model: Robot,
+    dt: float,
+    gains: Gains,
+    sensing: Sensing,
+    tolerance: float,
+    clip: np.ndarray,
+    ga: GAExport | None,
+) -> dict[str, Any]:
+    """The exported values as ``export.json`` records them (``clip``: inf for no clip, null in JSON)."""
+    return {
         "robot": str(robot.parameters.name),
         "fingerprint": robot.fingerprint,
         "controller_model": str(model.parameters.name),
         "controller_model_fingerprint": model.fingerprint,
-        "n_joints": n,
+        "n_joints": robot.n_joints,
         "joint_names": list(robot.joint_names),
         "joint_units": list(robot.joint_units),
-        "dt_s": float(dt),
+        "dt_s": dt,
         "Kp": gains.Kp.tolist(),
         "Kv": gains.Kv.tolist(),
         "observer": "force" if sensing.force_sensor else sensing.observer,
@@ -244,23 +333,20 @@ def export_controller(
         "switching": ga.settings if ga is not None else None,
         "casadi": str(getattr(ca, "__version__", "unknown")),
     }
-    with atomic_folder(out_dir, "output folder", owned=()) as folder:
-        _write(folder, robot, model, gains, sensing.observer_gain, settings, clip, ga)
-        if compiler is not None:
-            check_compile(folder, compiler, limit=limit)
-        files = tuple(sorted(p.name for p in folder.iterdir()))
-    final = Path(out_dir).absolute()
-    return ExportedController(final, files, n, settings, compiler)
 
 
 def _is_number(value: object) -> bool:
     return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
 
 
-def _controller_model(robot: Robot, model: RobotParameters | Stack | Robot) -> Robot:
-    if isinstance(model, Robot):
-        return robot.with_parameters(model.parameters)
-    return robot.with_parameters(model)
+def _checked_model(robot: Robot, model: RobotParameters | Stack | Robot | None) -> Robot:
+    """The controller's model: ``robot`` itself for None, else ``robot`` with the parameters of
+    ``model``, refused as simulate refuses it (:func:`~vgtarm.simulation.checks.model_of_plant`)."""
+    if model is None:
+        return robot
+    controller = robot.with_parameters(model.parameters if isinstance(model, Robot) else model)
+    model_of_plant(robot, controller)  # simulate's check: a model off by more than its range is no model of the plant
+    return controller
 
 
 def _effort_max(value: ArrayLike | None, n: int) -> np.ndarray:
@@ -311,53 +397,75 @@ def _generate_model(folder: Path, robot: Robot, names: Sequence[str] = MODEL_FUN
     return sizes
 
 
-def _write(
-    folder: Path,
-    robot: Robot,
-    model: Robot,
-    gains: Gains,
-    observer_gain: float,
-    settings: dict[str, Any],
-    clip: np.ndarray,
-    ga: GAExport | None = None,
-) -> None:
-    n = robot.n_joints
-    p = model.parameter_vector
+def _write(folder: Path, export: _Export) -> None:
+    """Every file of ``export`` into ``folder``: the model functions, the hand-written sources (with
+    the GA's), ``vgtc_config.h``, ``vgtc_defaults.c``, the README and ``export.json``."""
+    robot, settings, ga = export.robot, export.settings, export.ga
+    p = export.model.parameter_vector
     kalman = settings["estimator"] == "kalman"
     names = MODEL_FUNCTIONS + (KALMAN_FUNCTIONS if kalman else ()) + (("tip_hessian",) if ga else ())
     sizes = _generate_model(folder, robot, names)
+    _copy_sources(folder, ga is not None)
+    description = _description(settings)
+    (folder / "vgtc_config.h").write_text(_config_header(robot, len(p), sizes, kalman, settings, description, ga))
+    observer_gain = export.sensing.observer_gain
+    (folder / "vgtc_defaults.c").write_text(
+        _defaults_source(robot, p, export.gains, observer_gain, settings, export.clip, ga)
+    )
+    _write_readme(folder, robot, settings, description, len(p))
+    atomic_write_text(folder / "export.json", json.dumps(settings, indent=1) + "\n")
+
+
+#: What the GA adds to the build files when it is exported: ``(file, text, replacement)``.
+_GA_BUILD_EDITS = (
+    ("Makefile", "vgtc_defaults.o", "vgtc_defaults.o vgtc_ga.o vgtc_switching.o"),
+    ("Makefile", "vgt_control.h", "vgt_control.h vgtc_ga.h vgtc_switching.h"),
+    ("Makefile", "all: libvgtc.a replay rt_loop", "all: libvgtc.a replay rt_loop ga_timing"),
+    (  # the GA wants its fmaf as an instruction and its lane loops vectorised
+        "Makefile",
+        "CFLAGS ?= -std=c99 -O2 -Wall",
+        "CFLAGS ?= -std=c99 -O2 -march=native -Wall",
+    ),
+    ("Makefile", "libvgtc.a replay rt_loop\n", "libvgtc.a replay rt_loop ga_timing\n"),
+    (
+        "Makefile",
+        "\nclean:",
+        "\nga_timing: ga_timing.o libvgtc.a\n"
+        "\t$(CC) $(CFLAGS) $(EXACT) $(LDFLAGS) -o $@ ga_timing.o libvgtc.a $(LDLIBS)\n\nclean:",
+    ),
+    ("CMakeLists.txt", "vgtc_defaults.c", "vgtc_defaults.c vgtc_ga.c vgtc_switching.c"),
+    ("CMakeLists.txt", "foreach(program replay rt_loop)", "foreach(program replay rt_loop ga_timing)"),
+)
+
+
+def _copy_sources(folder: Path, ga: bool) -> None:
+    """The hand-written files (:data:`COPIED`; with ``ga``, :data:`GA_FILES` too, and the build
+    files gain them: :data:`_GA_BUILD_EDITS`) and the shared header, into ``folder``."""
     for name in COPIED + (GA_FILES if ga else ()):
         shutil.copyfile(TEMPLATE_DIR / name, folder / name)
     if ga:  # the library's sources gain the GA
-        for name, old, new in (
-            ("Makefile", "vgtc_defaults.o", "vgtc_defaults.o vgtc_ga.o vgtc_switching.o"),
-            ("Makefile", "vgt_control.h", "vgt_control.h vgtc_ga.h vgtc_switching.h"),
-            ("Makefile", "all: libvgtc.a replay rt_loop", "all: libvgtc.a replay rt_loop ga_timing"),
-            (  # the GA wants its fmaf as an instruction and its lane loops vectorised
-                "Makefile",
-                "CFLAGS ?= -std=c99 -O2 -Wall",
-                "CFLAGS ?= -std=c99 -O2 -march=native -Wall",
-            ),
-            ("Makefile", "libvgtc.a replay rt_loop\n", "libvgtc.a replay rt_loop ga_timing\n"),
-            (
-                "Makefile",
-                "\nclean:",
-                "\nga_timing: ga_timing.o libvgtc.a\n"
-                "\t$(CC) $(CFLAGS) $(EXACT) $(LDFLAGS) -o $@ ga_timing.o libvgtc.a $(LDLIBS)\n\nclean:",
-            ),
-            ("CMakeLists.txt", "vgtc_defaults.c", "vgtc_defaults.c vgtc_ga.c vgtc_switching.c"),
-            ("CMakeLists.txt", "foreach(program replay rt_loop)", "foreach(program replay rt_loop ga_timing)"),
-        ):
+        for name, old, new in _GA_BUILD_EDITS:
             (folder / name).write_text((folder / name).read_text().replace(old, new))
     shutil.copyfile(SHARED_HEADER, folder / SHARED_HEADER.name)
-    observer = {"none": "VGTC_OBSERVER_NONE", "momentum": "VGTC_OBSERVER_MOMENTUM", "force": "VGTC_OBSERVER_FORCE"}
-    description = _description(settings)
+
+
+def _config_header(
+    robot: Robot,
+    n_params: int,
+    sizes: dict[str, Any],
+    kalman: bool,
+    settings: dict[str, Any],
+    description: str,
+    ga: GAExport | None,
+) -> str:
+    """``vgtc_config.h``: the export's sizes (joints, ``n_params`` parameters of the model, the model
+    functions' work ``sizes``, the GA's), the robot's name, the description and the joints' names."""
     config = [
         "/* Sizes of this export (generated by vgtarm export controller). */",
         "#ifndef VGTC_CONFIG_H",
         "#define VGTC_CONFIG_H",
-        f"#define VGTC_NJ {n}                /* joints */",
-        f"#define VGTC_NP {len(p)}               /* parameters of the model */",
+        f"#define VGTC_NJ {robot.n_joints}                /* joints */",
+        f"#define VGTC_NP {n_params}               /* parameters of the model */",
         *(f"#define VGTC_{key} {value}" for key, value in sizes.items()),
         f"#define VGTC_KALMAN {int(kalman)}            /* the forward dynamics of the Kalman estimator */",
         f'#define VGTC_ROBOT "{_c_string(settings["robot"])}"',
@@ -370,8 +478,26 @@ def _write(
         "#endif",
         "",
     ]
-    (folder / "vgtc_config.h").write_text("\n".join(config))
-    limits_low, limits_high = robot.parameters.lower, robot.parameters.upper
+    return "\n".join(config)
+
+
+#: The controller's C names of the exported ``observer`` settings.
+_C_OBSERVERS = {"none": "VGTC_OBSERVER_NONE", "momentum": "VGTC_OBSERVER_MOMENTUM", "force": "VGTC_OBSERVER_FORCE"}
+
+
+def _defaults_source(
+    robot: Robot,
+    p: np.ndarray,
+    gains: Gains,
+    observer_gain: float,
+    settings: dict[str, Any],
+    clip: np.ndarray,
+    ga: GAExport | None,
+) -> str:
+    """``vgtc_defaults.c``: the robot's home pose, which joints are angles, and
+    ``vgtc_default_params`` with the exported values (``p``: the controller model's parameter
+    vector), every number the exact double in hexadecimal; the GA's defaults after them."""
+    kalman = settings["estimator"] == "kalman"
     home = np.asarray(robot.parameters.q_home, dtype=float)
     resolution = settings["resolution"]
     defaults = [
@@ -394,15 +520,15 @@ def _write(
         _c_array("Kv", gains.Kv.ravel()),
         _c_array("model", p),
         _c_array("resolution", resolution),
-        _c_array("q_min", limits_low),
-        _c_array("q_max", limits_high),
+        _c_array("q_min", robot.parameters.lower),
+        _c_array("q_max", robot.parameters.upper),
         _c_array("effort_max", clip),
         "    memset(params, 0, sizeof *params);",
         f"    params->dt = {_c_number(settings['dt_s'])};",
         "    memcpy(params->Kp, Kp, sizeof Kp);",
         "    memcpy(params->Kv, Kv, sizeof Kv);",
         "    memcpy(params->model, model, sizeof model);",
-        f"    params->observer = {observer[settings['observer']]};",
+        f"    params->observer = {_C_OBSERVERS[settings['observer']]};",
         f"    params->observer_gain = {_c_number(observer_gain)};",
         "    params->velocity = "
         + ("VGTC_VELOCITY_DIFFERENCED;" if settings["velocity"] == "differenced" else "VGTC_VELOCITY_MEASURED;"),
@@ -422,9 +548,7 @@ def _write(
         "",
         *(ga.defaults if ga else ()),
     ]
-    (folder / "vgtc_defaults.c").write_text("\n".join(defaults))
-    _write_readme(folder, robot, settings, description, len(p))
-    atomic_write_text(folder / "export.json", json.dumps(settings, indent=1) + "\n")
+    return "\n".join(defaults)
 
 
 #: Characters of a user's name (the robot's, from its file) written into the C as they are.
@@ -551,7 +675,7 @@ def probe_compiler() -> str:
     back to the interpreter, with that same compiler): a compiler that fails, hangs or writes
     nothing is one :class:`ExportError` line, not a fall-back line and then the export's error."""
     compiler = _compiler()
-    with tempfile.TemporaryDirectory(prefix="vgtc-probe-") as scratch:
+    with scratch_folder("vgtc-probe-") as scratch:  # vgtc-probe-<pid>-*: a killed run's is removed next time
         source = Path(scratch) / "vgtc_probe.c"
         source.write_text(_PROBE_SOURCE)
         command = [compiler, *STRICT_FLAGS, "-c", "-o", str(Path(scratch) / "vgtc_probe.o"), str(source)]
@@ -567,7 +691,7 @@ def check_compile(
     the time limit (``limit``, else :data:`vgtarm.compiler.CHECK_TIME_LIMIT`, before
     ``$VGTARM_COMPILER_TIME_LIMIT``) or writes no object file."""
     sources = sorted(p.name for p in folder.glob("*.c"))
-    with tempfile.TemporaryDirectory(prefix="vgtc-check-") as scratch:
+    with scratch_folder("vgtc-check-") as scratch:  # vgtc-check-<pid>-*: a killed run's is removed next time
         for source in sources:
             command = [compiler, *flags, "-c", "-o", str(Path(scratch) / f"{source}.o"), str(folder / source)]
             run_compiler(command, f"{source} with {' '.join(flags)}", limit=limit)

@@ -240,6 +240,45 @@ def _check_switching(exported: Mapping[str, Any], controller: SwitchingControl) 
             )
 
 
+class _SwitchingOutputs:
+    """What ``vgtc_harness_run_switching`` writes for a run of ``n`` samples: each sample's mode
+    (0 fixed gains, 1 the GA's, 2 a held set dropped), the activations' records and costs, where the
+    run stopped, the controller's refusal and the activations' count; :meth:`pointers` passes them."""
+
+    def __init__(self, ffi: Any, n: int) -> None:
+        self.ffi = ffi
+        self.mode = np.zeros(n, dtype=np.int8)
+        self.records = {name: np.zeros(n, dtype=np.int64) for name in ("sample", "generations", "evaluations")}
+        self.costs = {name: np.zeros(n) for name in ("best_cost", "seeded_cost", "wall")}
+        self.stop, self.refused, self.count = ffi.new("long *"), ffi.new("int *"), ffi.new("long *")
+
+    def doubles(self, a: np.ndarray) -> Any:
+        """``a``'s data as ``double *``."""
+        return self.ffi.cast("double *", a.ctypes.data)
+
+    def pointers(self) -> tuple[Any, ...]:
+        """The harness's last ten arguments, from ``stop`` to ``wall``."""
+        longs = [self.ffi.cast("long *", self.records[name].ctypes.data) for name in self.records]
+        costs = [self.doubles(self.costs[name]) for name in self.costs]
+        mode = self.ffi.cast("signed char *", self.mode.ctypes.data)
+        return (self.stop, self.refused, mode, self.count, *longs, *costs)
+
+    def activations(self) -> tuple[RawActivation, ...]:
+        """The GA's activations, in order."""
+        records, costs = self.records, self.costs
+        return tuple(
+            RawActivation(
+                sample=int(records["sample"][i]),
+                generations=int(records["generations"][i]),
+                evaluations=int(records["evaluations"][i]),
+                best_cost=float(costs["best_cost"][i]),
+                seeded_cost=float(costs["seeded_cost"][i]),
+                wall_time_s=float(costs["wall"][i]),
+            )
+            for i in range(int(self.count[0]))
+        )
+
+
 def _simulate_switching(
     compiled: CompiledExport, plant: Robot, run: Any, metadata: Mapping[str, Any] | None
 ) -> SimulationResult:
@@ -256,18 +295,7 @@ def _simulate_switching(
     loop_settings = job.settings.struct(arrays.n_joints, arrays.n_margins)
     switching = compiled.new_switching()
     t = np.ascontiguousarray(run.reference.t, dtype=np.float64)
-    mode_ga = np.zeros(n, dtype=np.int8)
-    records = {name: np.zeros(n, dtype=np.int64) for name in ("sample", "generations", "evaluations")}
-    costs = {name: np.zeros(n) for name in ("best_cost", "seeded_cost", "wall")}
-    ffi = compiled.ffi
-    stop, refused, count = ffi.new("long *"), ffi.new("int *"), ffi.new("long *")
-
-    def d(a: np.ndarray) -> Any:
-        return ffi.cast("double *", a.ctypes.data)
-
-    def lp(a: np.ndarray) -> Any:
-        return ffi.cast("long *", a.ctypes.data)
-
+    out = _SwitchingOutputs(compiled.ffi, n)
     started = time.perf_counter()
     status = int(
         compiled.lib.vgtc_harness_run_switching(
@@ -275,53 +303,84 @@ def _simulate_switching(
             loop_settings,
             arrays.struct,
             switching,
-            d(t),
-            d(ref),
-            ffi.cast("uint64_t *", seeds.ctypes.data),
+            out.doubles(t),
+            out.doubles(ref),
+            compiled.ffi.cast("uint64_t *", seeds.ctypes.data),
             int(not job.controller.measured_switching),
             0,
             n,
+            *out.pointers(),
+        )
+    )
+    wall = time.perf_counter() - started
+    at = int(out.stop[0])
+    mode = np.where(out.mode == 1, MODE_GA, MODE_FIXED).astype(np.int8)
+    drops = tuple(np.flatnonzero(out.mode == 2).tolist())  # held sets dropped for the fixed gains
+    success = status == DONE
+    if not success:
+        mode[at:] = MODE_NOT_RUN
+    # the drops are recorded where the simulator's outcome keeps them (vgtarm with the drop rule)
+    kept = {"drops": drops} if "drops" in {f.name for f in dataclasses.fields(Outcome)} else {}
+    outcome = Outcome(status, at, success, mode, out.activations(), wall, **kept)
+    return _finished(compiled, run, outcome, t, int(out.refused[0]), metadata)
+
+
+def _simulate_fixed(
+    compiled: CompiledExport, plant: Robot, run: Any, metadata: Mapping[str, Any] | None
+) -> SimulationResult:
+    """The run of :func:`simulate_exported` under the exported computed force control."""
+    arrays = run.job.arrays
+    assert isinstance(plant.backend, CompiledBackend)  # checked by simulate_exported
+    driver = ClosedLoopDriver(plant.backend)
+    loop_settings = run.job.settings.struct(arrays.n_joints, arrays.n_margins)
+    context = compiled.new_context()
+    t = np.ascontiguousarray(run.reference.t, dtype=np.float64)
+    ffi = compiled.ffi
+    stop, refused = ffi.new("long *"), ffi.new("int *")
+    started = time.perf_counter()
+    status = int(
+        compiled.lib.vgtc_harness_run(
+            driver.model,
+            loop_settings,
+            arrays.struct,
+            context,
+            ffi.cast("double *", t.ctypes.data),
+            0,
+            arrays.n,
             stop,
             refused,
-            ffi.cast("signed char *", mode_ga.ctypes.data),
-            count,
-            lp(records["sample"]),
-            lp(records["generations"]),
-            lp(records["evaluations"]),
-            d(costs["best_cost"]),
-            d(costs["seeded_cost"]),
-            d(costs["wall"]),
         )
     )
     wall = time.perf_counter() - started
     at = int(stop[0])
-    mode = np.where(mode_ga == 1, MODE_GA, MODE_FIXED).astype(np.int8)
-    drops = tuple(np.flatnonzero(mode_ga == 2).tolist())  # held sets dropped for the fixed gains
+    mode = np.full(arrays.n, MODE_FIXED, dtype=np.int8)
     success = status == DONE
     if not success:
         mode[at:] = MODE_NOT_RUN
-    found = tuple(
-        RawActivation(
-            sample=int(records["sample"][i]),
-            generations=int(records["generations"][i]),
-            evaluations=int(records["evaluations"][i]),
-            best_cost=float(costs["best_cost"][i]),
-            seeded_cost=float(costs["seeded_cost"][i]),
-            wall_time_s=float(costs["wall"][i]),
-        )
-        for i in range(int(count[0]))
-    )
-    # the drops are recorded where the simulator's outcome keeps them (vgtarm with the drop rule)
-    kept = {"drops": drops} if "drops" in {f.name for f in dataclasses.fields(Outcome)} else {}
-    outcome = Outcome(status, at, success, mode, found, wall, **kept)
+    outcome = Outcome(status, at, success, mode, (), wall)
+    return _finished(compiled, run, outcome, t, int(refused[0]), metadata)
+
+
+def _finished(
+    compiled: CompiledExport,
+    run: Any,
+    outcome: Outcome,
+    t: np.ndarray,
+    refused: int,
+    metadata: Mapping[str, Any] | None,
+) -> SimulationResult:
+    """The record of a run closed through the export: its message says which sample the controller
+    refused (``refused`` < 0: its status); :class:`~vgtarm.errors.SimulationError` with the record
+    when the run did not reach its end."""
     extra = {"exported_controller": str(compiled.folder), **dict(metadata or {})}
     result = run.result(outcome, extra)
-    if int(refused[0]) < 0:
-        text = compiled._text(int(refused[0]))
+    if refused < 0:
+        at = outcome.stop
+        text = compiled._text(refused)
         result = dataclasses.replace(
             result, message=f"the exported controller refused sample {at} (t = {t[min(at, len(t) - 1)]:.4f} s): {text}"
         )
-    if not success:
+    if not outcome.success:
         raise SimulationError(result.message, result)
     return result
 
@@ -360,56 +419,27 @@ def simulate_exported(
     if not isinstance(plant, Robot) or not isinstance(plant.backend, CompiledBackend):
         raise InputError(f"plant = {shown(plant)}: expected a vgtarm.Robot with the compiled backend")
     scenario = Scenario.of(scenario, options)
-    s = compiled.settings
-    n = plant.n_joints
-    switching = s.get("switching")
-    law: ComputedForceControl | SwitchingControl
-    if switching:
-        law = switching_controller(controller or switching["variant"], np.array(s["Kp"]), np.array(s["Kv"]), n)
-        _check_switching(switching, law)
-    elif controller is not None:
-        raise InputError("controller: the export has no switching control (export it with switching=...)")
-    else:
-        law = ComputedForceControl.with_gains(np.array(s["Kp"]), np.array(s["Kv"]), n)
+    law = _exported_law(compiled.settings, controller, plant.n_joints)
     run = prepare(plant, reference, law, scenario, metadata)
-    _check_agrees(s, run, plant)
-    if switching:
+    _check_agrees(compiled.settings, run, plant)
+    if compiled.settings.get("switching"):
         return _simulate_switching(compiled, plant, run, metadata)
-    arrays = run.job.arrays
-    driver = ClosedLoopDriver(plant.backend)
-    loop_settings = run.job.settings.struct(arrays.n_joints, arrays.n_margins)
-    context = compiled.new_context()
-    t = np.ascontiguousarray(run.reference.t, dtype=np.float64)
-    ffi = compiled.ffi
-    stop, refused = ffi.new("long *"), ffi.new("int *")
-    started = time.perf_counter()
-    status = int(
-        compiled.lib.vgtc_harness_run(
-            driver.model,
-            loop_settings,
-            arrays.struct,
-            context,
-            ffi.cast("double *", t.ctypes.data),
-            0,
-            arrays.n,
-            stop,
-            refused,
+    return _simulate_fixed(compiled, plant, run, metadata)
+
+
+def _exported_law(
+    settings: Mapping[str, Any], controller: SwitchingControl | None, n: int
+) -> ComputedForceControl | SwitchingControl:
+    """The control law of an export's ``settings`` for ``n`` joints: its computed force control, or
+    its switching control (``controller``, else the one its variant names around the exported
+    gains), refused in one line unless it agrees with the export."""
+    switching = settings.get("switching")
+    if switching:
+        law = switching_controller(
+            controller or switching["variant"], np.array(settings["Kp"]), np.array(settings["Kv"]), n
         )
-    )
-    wall = time.perf_counter() - started
-    at = int(stop[0])
-    mode = np.full(arrays.n, MODE_FIXED, dtype=np.int8)
-    success = status == DONE
-    if not success:
-        mode[at:] = MODE_NOT_RUN
-    outcome = Outcome(status, at, success, mode, (), wall)
-    extra = {"exported_controller": str(compiled.folder), **dict(metadata or {})}
-    result = run.result(outcome, extra)
-    if int(refused[0]) < 0:
-        text = compiled._text(int(refused[0]))
-        result = dataclasses.replace(
-            result, message=f"the exported controller refused sample {at} (t = {t[min(at, len(t) - 1)]:.4f} s): {text}"
-        )
-    if not success:
-        raise SimulationError(result.message, result)
-    return result
+        _check_switching(switching, law)
+        return law
+    if controller is not None:
+        raise InputError("controller: the export has no switching control (export it with switching=...)")
+    return ComputedForceControl.with_gains(np.array(settings["Kp"]), np.array(settings["Kv"]), n)

@@ -20,6 +20,7 @@ import numpy as np
 
 from ..control.scm import SwitchingControl
 from ..errors import InputError, shown
+from ..ga import GAOptions
 from ..model.closedloop import bit_words, pack_bits
 
 #: Flags an x86-64 CPU needs for the x86-64-v3 clone of ga.c's kernel, the one that fuses.
@@ -73,6 +74,36 @@ def ga_export(controller: SwitchingControl, n: int, dt: float, velocity_filter: 
     """The GA's part of an export for a robot of ``n`` joints at period ``dt``; the safe variant is
     admitted on a loop whose velocities are filtered with ``velocity_filter`` (None: measured).
     What the export does not reproduce is refused in one line."""
+    _check_exportable(controller, n)
+    options = controller.ga
+    lower, upper = controller.bounds()
+    n_genes = len(lower)
+    words = bit_words(n_genes * options.n_bits)
+    seeded = pack_bits(np.atleast_2d(controller.initial_bits()), words)
+    n_seeded = len(seeded) if seeded.size else 0
+    max_flips = _max_flips(options, n_genes)
+    safe = _safe_terms(controller, dt, velocity_filter)
+    n_kv = len(safe.damping[1]) if safe.damping is not None else 0
+    config = (
+        "/* switching control's GA (vgtc_ga.h) */",
+        "#define VGTC_SWITCHING 1",
+        f"#define VGTC_GA_POPULATION {options.population_size}",
+        f"#define VGTC_GA_WORDS {words}",
+        f"#define VGTC_GA_HORIZON {controller.horizon}",
+        f"#define VGTC_GA_SEEDED {max(n_seeded, 1)}",
+        f"#define VGTC_GA_NKV {max(n_kv, 1)}",
+        f"#define VGTC_GA_MAX_FLIPS {max_flips}",
+        f"#define VGTC_GA_FMA {int(fuses)}     /* the simulation's kernel fuses multiply-adds here */",
+    )
+    bits = seeded.ravel() if n_seeded else np.zeros(1, dtype=np.uint64)
+    lines = _default_params(controller, lower, upper, bits, n_seeded, dt, safe)
+    return GAExport(config, (*(line for line in lines if line), ""), _settings(controller, fuses))
+
+
+def _check_exportable(controller: SwitchingControl, n: int) -> None:
+    """Refuse, in one line, a controller the export does not reproduce: gains of another size than
+    the robot's ``n`` joints, genes of other than 8 bits, the exact prediction, a GA that stops on
+    stalling."""
     options = controller.ga
     if controller.fixed.Kp.shape != (n, n):
         raise InputError(
@@ -91,42 +122,56 @@ def ga_export(controller: SwitchingControl, n: int, dt: float, velocity_filter: 
             f"switching: ga.stall_generations = {shown(options.stall_generations)}: the export runs every"
             " generation (expected None, as the simulation's compiled GA)"
         )
-    lower, upper = controller.bounds()
-    n_genes = len(lower)
-    words = bit_words(n_genes * options.n_bits)
-    seeded = pack_bits(np.atleast_2d(controller.initial_bits()), words)
-    n_seeded = len(seeded) if seeded.size else 0
-    population, elite = options.population_size, options.elite_count
-    children = population - elite
-    total = children * n_genes * options.n_bits
+
+
+def _max_flips(options: GAOptions, n_genes: int) -> int:
+    """The most bits one generation's mutation flips in the export (``VGTC_GA_MAX_FLIPS``): the
+    mean of the children's flips with a margin of 64 plus eight standard deviations, at most all
+    their bits."""
+    total = (options.population_size - options.elite_count) * n_genes * options.n_bits
     max_flips = 64 + int(4.0 * options.mutation_probability * float(total)) + 8 * int(math.sqrt(float(total) + 1.0))
-    max_flips = min(max_flips, total)
-    safe = controller.variant == "safe"
-    kv0 = lo = hi = 0.0
-    damping = None
-    if safe:
-        lo, hi = controller.admitted_interval(dt, velocity_filter)
-        eig = np.linalg.eigvalsh(controller.fixed.Kp)
-        if not (lo <= eig[0] and eig[-1] <= hi):
-            raise InputError(
-                f"switching: fixed Kp eigenvalues [{eig[0]:g}, {eig[-1]:g}]: the safe variant expects them in the"
-                f" admitted interval [{lo:g}, {hi:g}]"
-            )
-        kv0 = float(controller.fixed.Kv[0, 0])
-        damping = controller.damping_table(dt, velocity_filter)
-    n_kv = len(damping[1]) if damping is not None else 0
-    config = (
-        "/* switching control's GA (vgtc_ga.h) */",
-        "#define VGTC_SWITCHING 1",
-        f"#define VGTC_GA_POPULATION {population}",
-        f"#define VGTC_GA_WORDS {words}",
-        f"#define VGTC_GA_HORIZON {controller.horizon}",
-        f"#define VGTC_GA_SEEDED {max(n_seeded, 1)}",
-        f"#define VGTC_GA_NKV {max(n_kv, 1)}",
-        f"#define VGTC_GA_MAX_FLIPS {max_flips}",
-        f"#define VGTC_GA_FMA {int(fuses)}     /* the simulation's kernel fuses multiply-adds here */",
-    )
-    bits = seeded.ravel() if n_seeded else np.zeros(1, dtype=np.uint64)
+    return min(max_flips, total)
+
+
+@dataclass(frozen=True)
+class _SafeTerms:
+    """The safe variant's values in the GA's parameters (zero and None for the paper's variant)."""
+
+    safe: bool = False
+    kv: float = 0.0  #: the fixed gains' damping
+    lo: float = 0.0  #: the admitted interval of the eigenvalues of Kp (1/s^2)
+    hi: float = 0.0
+    damping: tuple[float, tuple[float, ...], tuple[float, ...]] | None = None  #: the damping grid (step, lo, hi)
+
+
+def _safe_terms(controller: SwitchingControl, dt: float, velocity_filter: float | None) -> _SafeTerms:
+    """The safe variant's admitted interval and damping grid for period ``dt`` and ``velocity_filter``;
+    fixed gains outside the interval are refused in one line."""
+    if controller.variant != "safe":
+        return _SafeTerms()
+    lo, hi = controller.admitted_interval(dt, velocity_filter)
+    eig = np.linalg.eigvalsh(controller.fixed.Kp)
+    if not (lo <= eig[0] and eig[-1] <= hi):
+        raise InputError(
+            f"switching: fixed Kp eigenvalues [{eig[0]:g}, {eig[-1]:g}]: the safe variant expects them in the"
+            f" admitted interval [{lo:g}, {hi:g}]"
+        )
+    kv0 = float(controller.fixed.Kv[0, 0])
+    return _SafeTerms(True, kv0, lo, hi, controller.damping_table(dt, velocity_filter))
+
+
+def _default_params(
+    controller: SwitchingControl,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    bits: np.ndarray,
+    n_seeded: int,
+    dt: float,
+    safe: _SafeTerms,
+) -> list[str]:
+    """The C functions ``vgtc_ga_default_params`` and ``vgtc_switching_default_params``, line by line
+    (an empty line: none; ``bits``: the seeded individuals' words)."""
+    options = controller.ga
     lines = [
         "void vgtc_ga_default_params(vgtc_ga_params *params)",
         "{",
@@ -138,9 +183,9 @@ def ga_export(controller: SwitchingControl, n: int, dt: float, velocity_filter: 
         "    memset(params, 0, sizeof *params);",
         "    memcpy(params->model, controller.model, sizeof params->model);",
         f"    params->dt = {_hex(dt)};",
-        f"    params->population = {population};",
+        f"    params->population = {options.population_size};",
         f"    params->generations = {options.max_generations};",
-        f"    params->elite = {elite};",
+        f"    params->elite = {options.elite_count};",
         f"    params->n_seeded = {n_seeded};",
         f"    params->p_crossover = {_hex(options.crossover_probability)};",
         f"    params->p_mutation = {_hex(options.mutation_probability)};",
@@ -150,21 +195,21 @@ def ga_export(controller: SwitchingControl, n: int, dt: float, velocity_filter: 
         "    memcpy(params->lower, lower, sizeof lower);",
         "    memcpy(params->upper, upper, sizeof upper);",
         "    memcpy(params->initial_bits, seeded, sizeof seeded);" if n_seeded else "",
-        f"    params->safe = {int(safe)};",
-        f"    params->safe_kv = {_hex(kv0)};",
-        f"    params->safe_lo = {_hex(lo)};",
-        f"    params->safe_hi = {_hex(hi)};",
+        f"    params->safe = {int(safe.safe)};",
+        f"    params->safe_kv = {_hex(safe.kv)};",
+        f"    params->safe_lo = {_hex(safe.lo)};",
+        f"    params->safe_hi = {_hex(safe.hi)};",
     ]
-    if damping is not None:
+    if safe.damping is not None:
         lines += [
-            _array("kv_lo", damping[1]),
-            _array("kv_hi", damping[2]),
-            f"    params->safe_nkv = {n_kv};",
-            f"    params->safe_kv_step = {_hex(damping[0])};",
+            _array("kv_lo", safe.damping[1]),
+            _array("kv_hi", safe.damping[2]),
+            f"    params->safe_nkv = {len(safe.damping[1])};",
+            f"    params->safe_kv_step = {_hex(safe.damping[0])};",
             "    memcpy(params->safe_lo_tab, kv_lo, sizeof kv_lo);",
             "    memcpy(params->safe_hi_tab, kv_hi, sizeof kv_hi);",
         ]
-    lines += [
+    return lines + [
         "}",
         "void vgtc_switching_default_params(vgtc_switching_params *params)",
         "{",
@@ -174,21 +219,25 @@ def ga_export(controller: SwitchingControl, n: int, dt: float, velocity_filter: 
         f"    params->watch_from = {_watch_from(controller)};",
         "}",
     ]
-    settings = {
+
+
+def _settings(controller: SwitchingControl, fuses: bool) -> dict[str, Any]:
+    """What ``export.json`` records of switching control (its ``switching``)."""
+    options = controller.ga
+    return {
         "variant": controller.variant,
         "threshold_m": controller.threshold,
         "horizon": controller.horizon,
         "prediction": controller.prediction,
         "exact_above": controller.exact_above,
-        "population": population,
+        "population": options.population_size,
         "generations": options.max_generations,
-        "elite": elite,
+        "elite": options.elite_count,
         "hold": controller.hold_periods,
         "switch_on": "measured" if controller.measured_switching else "true",
         "watch_from": _watch_from(controller),
         "fused_multiply_add": bool(fuses),
     }
-    return GAExport(config, (*(line for line in lines if line), ""), settings)
 
 
 def switching_readme(settings: dict[str, Any] | None) -> str:

@@ -265,6 +265,29 @@ def load_study(file: str | Path) -> Study:
 def parse_study(data: Mapping[str, Any], *, source: str = "<study>", folder: Path | None = None) -> Study:
     """Validate a study given as a dict (a parsed TOML file); files are relative to ``folder``."""
     source = cut(str(source), 200)
+    head, grid_in, random_in = _tables(source, data)
+    params = all_parameters()
+    name = head.get("name", "study")
+    if not isinstance(name, str) or not name or len(name) > NAME_LENGTH:
+        raise ConfigError(
+            f"{source}: study.name = {shown(name)}: expected a non-empty string of at most {NAME_LENGTH} characters"
+        )
+    files: dict[str, str] = {}
+    shared = _shared(source, head, folder, files)
+    seeds = _seeds(source, head.get("seeds", 1))
+    grid = _grid(source, grid_in, params)
+    draws, random_seed, random = _random(source, random_in, grid, params)
+    _check_criterion(source, grid, random)
+    _check_size(source, head, grid, draws, seeds)
+    study = Study(name, shared, grid, random, draws, random_seed, tuple(seeds), files, source)
+    study.points()  # draws are checked here, before any run
+    return study
+
+
+def _tables(source: str, data: Mapping[str, Any]) -> tuple[Mapping[str, Any], Mapping[str, Any], dict[str, Any]]:
+    """The tables ``[study]``, ``[grid]`` and ``[random]`` (a copy) of a study file's ``data``, each
+    refused in one line when ``data`` is not a study file's, a table is unknown or ``[study]`` has a
+    key it does not know."""
     if not isinstance(data, Mapping):
         raise ConfigError(f"{source}: {shown(data)}: expected a table of [study], [grid] and [random]")
     other = other_toml(data, "a study file")  # a robot file given as a study: said in those words
@@ -279,14 +302,14 @@ def parse_study(data: Mapping[str, Any], *, source: str = "<study>", folder: Pat
     for key in head:
         if key not in _STUDY_KEYS:
             raise ConfigError(f"{source}: study.{cut(str(key))}: unknown key; expected one of {list(_STUDY_KEYS)}")
-    params = all_parameters()
-    name = head.get("name", "study")
-    if not isinstance(name, str) or not name or len(name) > NAME_LENGTH:
-        raise ConfigError(
-            f"{source}: study.name = {shown(name)}: expected a non-empty string of at most {NAME_LENGTH} characters"
-        )
+    return head, grid_in, random_in
+
+
+def _shared(source: str, head: Mapping[str, Any], folder: Path | None, files: dict[str, str]) -> dict[str, Value]:
+    """What every run of the study shares, from ``[study]``: the case or the path file, the
+    duration, the period, the rates and the robot file; the files' text is read into ``files``
+    and parsed, so a bad one is refused before any run."""
     shared: dict[str, Value] = {}
-    files: dict[str, str] = {}
     if ("case" in head) == ("path" in head):
         raise ConfigError(f'{source}: [study]: give exactly one of case = 1|2 and path = "FILE.csv"')
     if "case" in head:
@@ -317,8 +340,11 @@ def parse_study(data: Mapping[str, Any], *, source: str = "<study>", folder: Pat
     shared["rates"] = rates
     shared["robot"] = None if head.get("robot") is None else _file(source, folder, "robot", head["robot"], files)
     _check_files(source, head, files, float(dt))
-    seeds = _seeds(source, head.get("seeds", 1))
+    return shared
 
+
+def _grid(source: str, grid_in: Mapping[str, Any], params: Mapping[str, Parameter]) -> dict[str, list[Value]]:
+    """The ``[grid]`` table: each parameter's values (one value: a list of one), each checked."""
     grid: dict[str, list[Value]] = {}
     for key, value in grid_in.items():
         if key not in params:
@@ -327,7 +353,14 @@ def parse_study(data: Mapping[str, Any], *, source: str = "<study>", folder: Pat
         if not values:
             raise ConfigError(f"{source}: grid.{key} = []: expected a value or a non-empty list of values")
         grid[key] = [_check_value(f"{source}: grid.{key}", v, params[key]) for v in values]
+    return grid
 
+
+def _random(
+    source: str, random_in: dict[str, Any], grid: Mapping[str, list[Value]], params: Mapping[str, Parameter]
+) -> tuple[int, int, dict[str, tuple[str, list[Value]]]]:
+    """The ``[random]`` table (``random_in``, whose ``draws`` and ``seed`` are taken out of it): the
+    number of draws, their seed and each drawn parameter's distribution, none of them in ``grid``."""
     draws = random_in.pop("draws", 0)
     random_seed = random_in.pop("seed", 0)
     if isinstance(draws, bool) or not isinstance(draws, int) or draws < 0:
@@ -342,7 +375,13 @@ def parse_study(data: Mapping[str, Any], *, source: str = "<study>", folder: Pat
         random[key] = _distribution(f"{source}: random.{key}", value, params[key])
     if random and draws == 0:
         raise ConfigError(f"{source}: random.draws = 0: expected a whole number >= 1 with random parameters")
-    _check_criterion(source, grid, random)
+    return draws, random_seed, random
+
+
+def _check_size(
+    source: str, head: Mapping[str, Any], grid: Mapping[str, list[Value]], draws: int, seeds: Sequence[int]
+) -> None:
+    """Refuse a study of more than :data:`MAX_POINTS` runs (grid combinations x draws x seeds)."""
     combinations = math.prod(len(values) for values in grid.values())
     n_seeds = seeds.stop - seeds.start if isinstance(seeds, range) else len(seeds)  # len() of a vast range fails
     total = combinations * max(draws, 1) * n_seeds
@@ -351,9 +390,6 @@ def parse_study(data: Mapping[str, Any], *, source: str = "<study>", folder: Pat
             f"{source}: {total:,} runs = {combinations:,} grid combinations x {max(draws, 1):,} random.draws x"
             f" {n_seeds:,} seeds (study.seeds = {shown(head.get('seeds', 1))}); at most {MAX_POINTS:,}"
         )
-    study = Study(name, shared, grid, random, draws, random_seed, tuple(seeds), files, source)
-    study.points()  # draws are checked here, before any run
-    return study
 
 
 def _check_criterion(

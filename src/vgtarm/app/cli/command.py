@@ -13,10 +13,10 @@ import os
 import re
 import select
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
 
@@ -26,6 +26,7 @@ from ...errors import (
     MESSAGE_LENGTH,
     ConfigError,
     InputError,
+    SimulationError,
     Terminated,
     UnreachableError,
     VgtarmError,
@@ -52,7 +53,22 @@ from . import stack as cli_stack
 from . import study as cli_study
 from . import visual as cli_visual
 from .bars import progress_bar
-from .options import add_config, joint_gains, positive_float, positive_int, positive_int_at_most, seed_number
+from .options import (
+    add_config,
+    joint_gains,
+    positive_float,
+    positive_int,
+    positive_int_at_most,
+    register_numbers,
+    seed_number,
+)
+
+if TYPE_CHECKING:
+    from ...model.stack import Stack
+    from ...simulation.result import SimulationResult
+
+#: A gain of ``--kp`` or ``--kv``: one for every joint, one per joint, or None (the case's).
+_Gain = float | tuple[float, ...] | None
 
 
 def _format_vector(values: Sequence[float] | np.ndarray, digits: int = 6) -> str:
@@ -129,29 +145,20 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def _simulate(args: argparse.Namespace) -> int:
+    """``vgtarm simulate`` with the preset's settings in ``args``: the options checked before any
+    work, the run, its summary on standard output and its folder (``--out``)."""
     from tqdm import tqdm
 
-    from ...errors import SimulationError
-    from ...simulation import JointReference
-    from ...simulation.result import ROBOT_COPY, RUN_FILES
-    from ..cases import joint_reference, run_case, run_path, truncate_reference
-    from ..pictures.plotting import comparison_figure, save_figure
+    from ...simulation.result import RUN_FILES
 
-    if (args.case is None) == (args.path is None):
-        raise InputError("give exactly one of --case 1|2 and --path FILE")
-    _criterion(args)  # a criterion option without its criterion: refused before the work
-    scm_options = _scm_options(args)  # refused before any work
-    _unused_options(args)
+    scm_options = _check_simulate_options(args)
     inputs = [args.config, args.path]
     if args.out is not None:
         check_output_folder(args.out, "--out", inputs=inputs, owned=RUN_FILES)  # before the work
     desired = None if args.path is None else paths.from_csv(args.path)  # a bad file: one line, before the model
     robot = load_robot(args.config)
     robot_text = _robot_text(args.config)
-    kp = None if args.kp is None else joint_gains(args.kp, "--kp", robot.joint_names)
-    kv = None if args.kv is None else joint_gains(args.kv, "--kv", robot.joint_names)
-    if args.controller == "scm" and (kp is not None or kv is not None):  # the GA's genes must hit them
-        _check_scm_gains(args, robot.n_joints, kp, kv)
+    gains = _simulate_gains(args, robot)
     if args.plant == "mujoco":
         from ... import mujoco_bridge  # noqa: F401  (registers the MuJoCo plant)
     model = robot.parameters.scaled(mass=args.model_mass, inertia=args.model_inertia, friction=args.model_friction)
@@ -165,103 +172,167 @@ def _simulate(args: argparse.Namespace) -> int:
         def progress(done: int, total: int) -> None:
             bar.update(round(100 * done / total) - bar.n)
 
-        options: dict[str, Any] = dict(
-            controller=args.controller,
-            external_force=args.external_force,
-            integrator=args.integrator,
-            substeps=args.substeps,
-            seed=args.seed,
-            rates=args.rates,
-            horizon=args.horizon,
-            scm_variant=args.scm_variant,
-            scm_options=scm_options,
-            controller_model=None if exact_model else model,
-            progress=progress,
-            observer=args.observer,
-            observer_gain=args.observer_gain,
-            force_sensor=args.force_sensor,
-            encoder_resolution=args.encoder_resolution,
-            velocity_noise=args.velocity_noise,
-            velocity_filter_hz=args.velocity_filter,
-            plant_engine=args.plant,
-            kp=kp,
-            kv=kv,
-            **presets.simulate_options(args),
-        )
+        options = _run_options(args, scm_options, None if exact_model else model, gains, progress)
         try:
-            if desired is not None:
-                ik = robot.inverse_kinematics(desired, rates=args.rates, **_criterion(args))
-                reference = JointReference.of(ik, name=desired.name)
-                if args.duration is not None:
-                    reference = truncate_reference(reference, args.duration)
-                result = run_path(
-                    robot, desired, reference=reference, metadata={"path_file": str(args.path)}, **options
-                )
-            else:
-                result = run_case(
-                    robot,
-                    args.case,
-                    reference=None
-                    if args.duration is None and args.criterion == "joint_limits"
-                    else joint_reference(
-                        robot, args.case, rates=args.rates, duration=args.duration, **_criterion(args)
-                    ),
-                    **options,
-                )
+            result = _run(args, robot, desired, options)
         except SimulationError as exc:
             if args.out is not None and exc.result is not None:
-                try:  # the folder is replaced whole: no figure of an earlier run stays beside it
-                    with (
-                        placements() as moved,
-                        atomic_folder(args.out, "--out", inputs=inputs, owned=RUN_FILES, checked=True) as partial,
-                    ):
-                        exc.result.save(partial)  # type: ignore[attr-defined]
-                        if robot_text is not None:
-                            atomic_write_text(partial / ROBOT_COPY, robot_text)
-                except (VgtarmError, OSError, ValueError) as failure:
-                    note = f"partial results not written: {cut(str(failure), 120)}"
-                else:
-                    where = moved.get(args.out, args.out)  # beside it if the folder gained a user's file
-                    note = f"partial results (up to the failure, success false) written to {cut(str(where), 200)}"
-                # one line: the failure (cut so that the note is never cut off), then where its results are
-                raise SimulationError(f"{cut(str(exc), 200)}; {note}", exc.result) from exc
+                raise _partial_results_saved(args.out, inputs, exc, robot_text) from exc
             raise
     if args.criterion != "joint_limits":  # recorded in summary.json; the paper's runs stay as they were
         result = replace(result, metadata={**result.metadata, "ik_criterion": args.criterion})
-    summary = result.summary()
-    for key in (
-        "case",
-        "path",
-        "path_file",
-        "kp",
-        "kv",
-        "ik_criterion",
-        "controller",
-        "external_force",
-        "integrator",
-        "reference_rates",
-        "seed",
-        "observer",
-        "observer_gain_per_s",
-        "estimator",
-        "force_sensor",
-        "sensing",
-        "simulated_time_s",
-        "wall_time_s",
-        "real_time_factor",
-        "max_tip_error_m",
-        "rms_tip_error_m",
-        "max_tip_error_after_transient_m",
-        "peak_force_n",
-        "rms_force_n",
-        "chatter_n",
-        "actuator_energy_j",
-        "ga_activations",
-        "ga_time_s",
-        "path_centre_m",
-        "path_scale",
-        "ik_task",
-    ):
+    _print_summary(result.summary())
+    if args.out is not None:
+        _save_run(args.out, inputs, result, robot_text)
+    return 0
+
+
+def _check_simulate_options(args: argparse.Namespace) -> dict[str, Any]:
+    """Refuse, before any work, options that describe no run (neither or both of ``--case`` and
+    ``--path``, a criterion's option without its criterion, the switching method's options where
+    they cannot apply, an option the run would not use); the switching method's options
+    (:func:`_scm_options`)."""
+    if (args.case is None) == (args.path is None):
+        raise InputError("give exactly one of --case 1|2 and --path FILE")
+    _criterion(args)  # a criterion option without its criterion: refused before the work
+    scm_options = _scm_options(args)  # refused before any work
+    _unused_options(args)
+    return scm_options
+
+
+def _simulate_gains(args: argparse.Namespace, robot: Robot) -> tuple[_Gain, _Gain]:
+    """``--kp`` and ``--kv`` for ``robot``'s joints (None: the case's), refused when the switching
+    method cannot start from them (:func:`_check_scm_gains`)."""
+    kp = None if args.kp is None else joint_gains(args.kp, "--kp", robot.joint_names)
+    kv = None if args.kv is None else joint_gains(args.kv, "--kv", robot.joint_names)
+    if args.controller == "scm" and (kp is not None or kv is not None):  # the GA's genes must hit them
+        _check_scm_gains(args, robot.n_joints, kp, kv)
+    return kp, kv
+
+
+def _run_options(
+    args: argparse.Namespace,
+    scm_options: dict[str, Any],
+    controller_model: RobotParameters | Stack | None,
+    gains: tuple[_Gain, _Gain],
+    progress: Callable[[int, int], None],
+) -> dict[str, Any]:
+    """The options of :func:`~vgtarm.app.cases.run_case` and :func:`~vgtarm.app.cases.run_path` for
+    ``args`` (``controller_model`` None: the robot's own, an exact model)."""
+    kp, kv = gains
+    options: dict[str, Any] = dict(
+        controller=args.controller,
+        external_force=args.external_force,
+        integrator=args.integrator,
+        substeps=args.substeps,
+        seed=args.seed,
+        rates=args.rates,
+        horizon=args.horizon,
+        scm_variant=args.scm_variant,
+        scm_options=scm_options,
+        controller_model=controller_model,
+        progress=progress,
+        observer=args.observer,
+        observer_gain=args.observer_gain,
+        force_sensor=args.force_sensor,
+        encoder_resolution=args.encoder_resolution,
+        velocity_noise=args.velocity_noise,
+        velocity_filter_hz=args.velocity_filter,
+        plant_engine=args.plant,
+        kp=kp,
+        kv=kv,
+        **presets.simulate_options(args),
+    )
+    return options
+
+
+def _run(
+    args: argparse.Namespace, robot: Robot, desired: DesiredPath | None, options: dict[str, Any]
+) -> SimulationResult:
+    """The run of ``--case`` or of ``desired`` (``--path``), whose reference is its inverse
+    kinematics, cut to ``--duration``."""
+    from ...simulation import JointReference
+    from ..cases import joint_reference, run_case, run_path, truncate_reference
+
+    if desired is not None:
+        ik = robot.inverse_kinematics(desired, rates=args.rates, **_criterion(args))
+        reference = JointReference.of(ik, name=desired.name)
+        if args.duration is not None:
+            reference = truncate_reference(reference, args.duration)
+        return run_path(robot, desired, reference=reference, metadata={"path_file": str(args.path)}, **options)
+    return run_case(
+        robot,
+        args.case,
+        reference=None
+        if args.duration is None and args.criterion == "joint_limits"
+        else joint_reference(robot, args.case, rates=args.rates, duration=args.duration, **_criterion(args)),
+        **options,
+    )
+
+
+def _partial_results_saved(
+    out: Path, inputs: list[Path | None], exc: SimulationError, robot_text: str | None
+) -> SimulationError:
+    """The error of the failed run of ``exc`` once its results up to the failure are in ``out``
+    (replaced whole: no figure of an earlier run stays beside them), or could not be written: one
+    line, the failure (cut so that the note is never cut off), then where its results are."""
+    from ...simulation.result import ROBOT_COPY, RUN_FILES
+
+    try:
+        with (
+            placements() as moved,
+            atomic_folder(out, "--out", inputs=inputs, owned=RUN_FILES, checked=True) as partial,
+        ):
+            exc.result.save(partial)  # type: ignore[attr-defined]
+            if robot_text is not None:
+                atomic_write_text(partial / ROBOT_COPY, robot_text)
+    except (VgtarmError, OSError, ValueError) as failure:
+        note = f"partial results not written: {cut(str(failure), 120)}"
+    else:
+        where = moved.get(out, out)  # beside it if the folder gained a user's file
+        note = f"partial results (up to the failure, success false) written to {cut(str(where), 200)}"
+    return SimulationError(f"{cut(str(exc), 200)}; {note}", exc.result)
+
+
+#: The lines of ``vgtarm simulate``'s summary, in order: these keys of the run's summary.
+_SUMMARY_KEYS = (
+    "case",
+    "path",
+    "path_file",
+    "kp",
+    "kv",
+    "ik_criterion",
+    "controller",
+    "external_force",
+    "integrator",
+    "reference_rates",
+    "seed",
+    "observer",
+    "observer_gain_per_s",
+    "estimator",
+    "force_sensor",
+    "sensing",
+    "simulated_time_s",
+    "wall_time_s",
+    "real_time_factor",
+    "max_tip_error_m",
+    "rms_tip_error_m",
+    "max_tip_error_after_transient_m",
+    "peak_force_n",
+    "rms_force_n",
+    "chatter_n",
+    "actuator_energy_j",
+    "ga_activations",
+    "ga_time_s",
+    "path_centre_m",
+    "path_scale",
+    "ik_task",
+)
+
+
+def _print_summary(summary: dict[str, Any]) -> None:
+    """Print ``summary``'s :data:`_SUMMARY_KEYS`, one per line (a gain the same on every joint: one number)."""
+    for key in _SUMMARY_KEYS:
         if key not in summary:  # the path placement: only on a robot other than the paper's
             continue
         value = summary[key]
@@ -269,17 +340,22 @@ def _simulate(args: argparse.Namespace) -> int:
             value = value[0]  # one gain for every joint
         text = f"{value:.6g}" if isinstance(value, float) else escape(str(value))
         print(f"{key:<34} {text}")
-    if args.out is not None:
-        with (
-            placements() as moved,
-            atomic_folder(args.out, "--out", inputs=inputs, owned=RUN_FILES, checked=True) as written,
-        ):
-            result.save(written)
-            save_figure(comparison_figure([result]), written / "figure.png")
-            if robot_text is not None:  # animate and report find the run's robot by it
-                atomic_write_text(written / ROBOT_COPY, robot_text)
-        print(f"results written to {escape(str(moved.get(args.out, args.out)))}")  # escaped: never drives the terminal
-    return 0
+
+
+def _save_run(out: Path, inputs: list[Path | None], result: SimulationResult, robot_text: str | None) -> None:
+    """Write the run, its figure and the robot's file as the folder ``out``; say where it went."""
+    from ...simulation.result import ROBOT_COPY, RUN_FILES
+    from ..pictures.plotting import comparison_figure, save_figure
+
+    with (
+        placements() as moved,
+        atomic_folder(out, "--out", inputs=inputs, owned=RUN_FILES, checked=True) as written,
+    ):
+        result.save(written)
+        save_figure(comparison_figure([result]), written / "figure.png")
+        if robot_text is not None:  # animate and report find the run's robot by it
+            atomic_write_text(written / ROBOT_COPY, robot_text)
+    print(f"results written to {escape(str(moved.get(out, out)))}")  # escaped: never drives the terminal
 
 
 def _scm_options(args: argparse.Namespace) -> dict[str, Any]:
@@ -640,15 +716,190 @@ def _ik_one_point(args: argparse.Namespace, sample: tuple[float, np.ndarray], ro
 
 class _Parser(argparse.ArgumentParser):
     """argparse whose usage errors echo a user's text escaped and cut, and which takes no
-    abbreviated options (``--force`` silently meant ``--force-sensor``); subcommands inherit it."""
+    abbreviated options (``--force`` silently meant ``--force-sensor``), and whose numbers
+    (``type=float``, ``type=int``) are ASCII only (:func:`~.options.register_numbers`); subcommands
+    inherit it."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         kwargs.setdefault("allow_abbrev", False)
         super().__init__(*args, **kwargs)
+        register_numbers(self)
 
     def error(self, message: str) -> NoReturn:
         self.print_usage(sys.stderr)
         self.exit(2, f"{self.prog}: error: {cut(message, MESSAGE_LENGTH - 100)}\n")
+
+
+#: One option of a command: its names (or a positional's name) and the keywords of ``add_argument``.
+_Flag = tuple[tuple[str, ...], dict[str, Any]]
+
+
+def _add_flags(parser: argparse.ArgumentParser, flags: Sequence[_Flag]) -> None:
+    """Declare ``flags`` on ``parser``, in their order (the order of ``--help``)."""
+    for names, settings in flags:
+        parser.add_argument(*names, **settings)
+
+
+#: ``vgtarm simulate``'s own flags up to the observer's: the path, the gains, the controller and
+#: the switching method, the reference's criterion, the controller model's errors, the duration.
+_SIMULATE_FLAGS: tuple[_Flag, ...] = (
+    (("--case",), dict(type=int, choices=(1, 2), default=None, help="the paper's case study 1 or 2")),
+    (
+        ("--path",),
+        dict(
+            type=Path,
+            default=None,
+            metavar="FILE",
+            help="your own path instead: a CSV file of t,x,y,z rows (s, m), as for vgtarm ik, run at its own spacing",
+        ),
+    ),
+    *(
+        (
+            (f"--{name}",),
+            dict(
+                default=None,
+                metavar="K[,K...]",
+                help=f"the {what}: one number for every joint or one per joint, comma-separated (default: the case's; "
+                "a path: case 1's)",
+            ),
+        )
+        for name, what in (("kp", "stiffness Kp (N/m, N m/rad)"), ("kv", "damping Kv (N s/m, N m s/rad)"))
+    ),
+    (
+        ("--controller",),
+        dict(choices=("cfc", "scm"), default="cfc", help="computed force control or the GA switching method"),
+    ),
+    (
+        ("--external-force",),
+        dict(action="store_true", help="cutting force (20 N) and disturbance (5 N) on the tool"),
+    ),
+    (
+        ("--rates",),
+        dict(
+            choices=("exact", "finite_difference"),
+            default="exact",
+            help="how the reference rates are computed (default: exact)",
+        ),
+    ),
+    (
+        ("--criterion",),
+        dict(
+            choices=("joint_limits", "effort"),
+            default="joint_limits",
+            help="redundancy criterion of the reference: eq. 12 (default) or the static actuator efforts",
+        ),
+    ),
+    (
+        ("--joint-limit-weight",),
+        dict(
+            type=positive_float,
+            default=None,
+            metavar="W",
+            help="--criterion effort: the weight of eq. 12's joint-limit cost beside the efforts (default 0.5)",
+        ),
+    ),
+    (
+        ("--horizon",),
+        dict(type=positive_int, default=20, help="GA fitness prediction horizon in control periods (default 20)"),
+    ),
+    (
+        ("--scm-variant",),
+        dict(
+            choices=("paper", "safe"),
+            default="safe",
+            help="switching method: the paper's GA, or safe (gains admitted on the discrete loop first; default)",
+        ),
+    ),
+    (
+        ("--scm-hold",),
+        dict(
+            type=positive_int_at_most(MAX_HORIZON, "control periods"),
+            default=None,
+            metavar="N",
+            help="--scm-variant safe: control periods an admitted gain set is held from its switch, unless the error "
+            "it sees rises above its value at the switch (1 to the horizon; default half the horizon)",
+        ),
+    ),
+    (
+        ("--scm-switch-on",),
+        dict(
+            choices=SWITCH_ON,
+            default=None,
+            help="--scm-variant safe: the tip error the threshold is tested on: measured (the controller model's tip "
+            "at the encoder readings; default) or true (the plant's, as the paper's variant)",
+        ),
+    ),
+    *(
+        (
+            (f"--model-{name}",),
+            dict(
+                type=positive_float,
+                default=1.0,
+                metavar="FACTOR",
+                help=f"scale the controller model's {name} (a wrong model; default 1)",
+            ),
+        )
+        for name in ("mass", "inertia", "friction")
+    ),
+    (
+        ("--duration",),
+        dict(type=positive_float, default=None, metavar="S", help="run only the first S seconds of the path"),
+    ),
+)
+
+#: ``vgtarm simulate``'s flags after the estimator's and the presets': what integrates the robot,
+#: where the results go.
+_SIMULATE_PLANT_AND_OUTPUT_FLAGS: tuple[_Flag, ...] = (
+    (
+        ("--plant",),
+        dict(
+            choices=("model", "mujoco"),
+            default="model",
+            help="what integrates the robot: our model (default) or MuJoCo on the exported MJCF (vgtarm[mujoco])",
+        ),
+    ),
+    (
+        ("--out",),
+        dict(type=Path, default=None, metavar="DIR", help="write summary.json, the time series and a figure here"),
+    ),
+)
+
+#: ``vgtarm ik``'s flags (the robot's come after them).
+_IK_FLAGS: tuple[_Flag, ...] = (
+    (("--case",), dict(default=None, metavar="1|2", help="the paper's case study path 1 or 2")),
+    (
+        ("--path",),
+        dict(type=Path, default=None, metavar="FILE", help="CSV file of t,x,y,z rows (s, m); one row: one point"),
+    ),
+    (
+        ("--point",),
+        dict(default=None, metavar="X,Y,Z", help="one tip point (m): its joint configuration, residual and margins"),
+    ),
+    (
+        ("--pose",),
+        dict(
+            nargs="?",
+            const="hold",
+            default=None,
+            metavar="C03",
+            help="also the end-effector orientation: alone, that of the free-orientation optimum at the first sample "
+            "(held); or nine numbers R11,R12,...,R33, the rotation C03 row by row (as vgtarm fk prints it)",
+        ),
+    ),
+    (("--solver",), dict(default="fast", metavar="NAME", help="fast (default), reference, slsqp or ipopt")),
+    (("--rates",), dict(default="exact", metavar="MODE", help="exact (default) or finite_difference")),
+    (("--dt",), dict(default=None, metavar="DT", help="sampling period in s (case: 0.001; file: its own)")),
+    (
+        ("--criterion",),
+        dict(choices=("joint_limits", "effort"), default="joint_limits", help="eq. 12 (default) or effort"),
+    ),
+    (("--tool-force",), dict(type=float, default=None, metavar="N", help="expected cutting force (effort; 0)")),
+    (
+        ("--joint-limit-weight",),
+        dict(type=positive_float, default=None, metavar="W", help="eq. 12's weight (effort; 0.5)"),
+    ),
+    (("-o", "--output"), dict(type=Path, default=None, metavar="FILE", help="CSV file to write")),
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -675,166 +926,10 @@ def build_parser() -> argparse.ArgumentParser:
     add_config(fk)
     fk.set_defaults(run=cmd_fk)
 
-    simulate = sub.add_parser("simulate", help="run one of the paper's case studies or your own path")
-    simulate.add_argument("--case", type=int, choices=(1, 2), default=None, help="the paper's case study 1 or 2")
-    simulate.add_argument(
-        "--path",
-        type=Path,
-        default=None,
-        metavar="FILE",
-        help="your own path instead: a CSV file of t,x,y,z rows (s, m), as for vgtarm ik, run at its own spacing",
-    )
-    for name, what in (("kp", "stiffness Kp (N/m, N m/rad)"), ("kv", "damping Kv (N s/m, N m s/rad)")):
-        simulate.add_argument(
-            f"--{name}",
-            default=None,
-            metavar="K[,K...]",
-            help=f"the {what}: one number for every joint or one per joint, comma-separated (default: the case's; "
-            "a path: case 1's)",
-        )
-    simulate.add_argument(
-        "--controller", choices=("cfc", "scm"), default="cfc", help="computed force control or the GA switching method"
-    )
-    simulate.add_argument(
-        "--external-force", action="store_true", help="cutting force (20 N) and disturbance (5 N) on the tool"
-    )
-    simulate.add_argument(
-        "--rates",
-        choices=("exact", "finite_difference"),
-        default="exact",
-        help="how the reference rates are computed (default: exact)",
-    )
-    simulate.add_argument(
-        "--criterion",
-        choices=("joint_limits", "effort"),
-        default="joint_limits",
-        help="redundancy criterion of the reference: eq. 12 (default) or the static actuator efforts",
-    )
-    simulate.add_argument(
-        "--joint-limit-weight",
-        type=positive_float,
-        default=None,
-        metavar="W",
-        help="--criterion effort: the weight of eq. 12's joint-limit cost beside the efforts (default 0.5)",
-    )
-    simulate.add_argument(
-        "--horizon",
-        type=positive_int,
-        default=20,
-        help="GA fitness prediction horizon in control periods (default 20)",
-    )
-    simulate.add_argument(
-        "--scm-variant",
-        choices=("paper", "safe"),
-        default="safe",
-        help="switching method: the paper's GA, or safe (gains admitted on the discrete loop first; default)",
-    )
-    simulate.add_argument(
-        "--scm-hold",
-        type=positive_int_at_most(MAX_HORIZON, "control periods"),
-        default=None,
-        metavar="N",
-        help="--scm-variant safe: control periods an admitted gain set is held from its switch, unless the error "
-        "it sees rises above its value at the switch (1 to the horizon; default half the horizon)",
-    )
-    simulate.add_argument(
-        "--scm-switch-on",
-        choices=SWITCH_ON,
-        default=None,
-        help="--scm-variant safe: the tip error the threshold is tested on: measured (the controller model's tip "
-        "at the encoder readings; default) or true (the plant's, as the paper's variant)",
-    )
-    for name in ("mass", "inertia", "friction"):
-        simulate.add_argument(
-            f"--model-{name}",
-            type=positive_float,
-            default=1.0,
-            metavar="FACTOR",
-            help=f"scale the controller model's {name} (a wrong model; default 1)",
-        )
-    simulate.add_argument(
-        "--duration", type=positive_float, default=None, metavar="S", help="run only the first S seconds of the path"
-    )
-    _add_observer_options(simulate)
-    presets.add_simulate_options(simulate)
-    simulate.add_argument(
-        "--plant",
-        choices=("model", "mujoco"),
-        default="model",
-        help="what integrates the robot: our model (default) or MuJoCo on the exported MJCF (vgtarm[mujoco])",
-    )
-
-    simulate.add_argument(
-        "--out", type=Path, default=None, metavar="DIR", help="write summary.json, the time series and a figure here"
-    )
-    _add_run_options(simulate)
-    add_config(simulate)
-    presets.record_given(simulate)  # every option added: what the user typed, for the preset and the checks
-    simulate.set_defaults(run=cmd_simulate)
-
-    again = sub.add_parser("reproduce", help="run every case the paper reports and write report.md")
-    again.add_argument(
-        "--out", type=Path, default=Path("results"), metavar="DIR", help="output folder (default: results)"
-    )
-
-    from ..reports.seeds import MAX_SEEDS
-
-    seed_count = positive_int_at_most(MAX_SEEDS, "seeds")
-    again.add_argument(
-        "--seeds",
-        type=seed_count,
-        default=None,
-        metavar="N",
-        help="also run everything with seeds 0..N-1 on Dask and report mean and spread (needs the study extra)",
-    )
-    again.add_argument(
-        "--workers",
-        type=positive_int,
-        default=None,
-        metavar="N",
-        help="worker processes for the runs and figures (default: the CPUs, at most 4; 1: all in this process)",
-    )
-    again.add_argument(
-        "--duration",
-        type=positive_float,
-        default=None,
-        metavar="S",
-        help="run only the first S seconds of each case path (a quick look; default: the whole path)",
-    )
-    _add_run_options(again)
-    add_config(again)
-    again.set_defaults(run=cmd_reproduce)
+    _add_simulate_parser(sub)
+    _add_reproduce_parser(sub)
     ik = sub.add_parser("ik", help="joint reference of a desired tip path (inverse kinematics, paper eq. 12)")
-    ik.add_argument("--case", default=None, metavar="1|2", help="the paper's case study path 1 or 2")
-    ik.add_argument(
-        "--path", type=Path, default=None, metavar="FILE", help="CSV file of t,x,y,z rows (s, m); one row: one point"
-    )
-    ik.add_argument(
-        "--point",
-        default=None,
-        metavar="X,Y,Z",
-        help="one tip point (m): its joint configuration, residual and margins",
-    )
-    ik.add_argument(
-        "--pose",
-        nargs="?",
-        const="hold",
-        default=None,
-        metavar="C03",
-        help="also the end-effector orientation: alone, that of the free-orientation optimum at the first sample "
-        "(held); or nine numbers R11,R12,...,R33, the rotation C03 row by row (as vgtarm fk prints it)",
-    )
-    ik.add_argument("--solver", default="fast", metavar="NAME", help="fast (default), reference, slsqp or ipopt")
-    ik.add_argument("--rates", default="exact", metavar="MODE", help="exact (default) or finite_difference")
-    ik.add_argument("--dt", default=None, metavar="DT", help="sampling period in s (case: 0.001; file: its own)")
-    ik.add_argument(
-        "--criterion", choices=("joint_limits", "effort"), default="joint_limits", help="eq. 12 (default) or effort"
-    )
-    ik.add_argument("--tool-force", type=float, default=None, metavar="N", help="expected cutting force (effort; 0)")
-    ik.add_argument(
-        "--joint-limit-weight", type=positive_float, default=None, metavar="W", help="eq. 12's weight (effort; 0.5)"
-    )
-    ik.add_argument("-o", "--output", type=Path, default=None, metavar="FILE", help="CSV file to write")
+    _add_flags(ik, _IK_FLAGS)
     add_config(ik)
     ik.set_defaults(run=cmd_ik)
     cli_mujoco.add_parsers(sub)  # export mjcf, check mujoco
@@ -845,6 +940,65 @@ def build_parser() -> argparse.ArgumentParser:
     _accept_negative_numbers(parser)
 
     return parser
+
+
+def _add_simulate_parser(sub: argparse._SubParsersAction) -> None:
+    """``vgtarm simulate``: its own flags, the observer's, the estimator's and the presets', the
+    plant and the output, a run's and the robot's; then what the user typed is recorded."""
+    simulate = sub.add_parser("simulate", help="run one of the paper's case studies or your own path")
+    _add_flags(simulate, _SIMULATE_FLAGS)
+    _add_observer_options(simulate)
+    presets.add_simulate_options(simulate)
+    _add_flags(simulate, _SIMULATE_PLANT_AND_OUTPUT_FLAGS)
+    _add_run_options(simulate)
+    add_config(simulate)
+    presets.record_given(simulate)  # every option added: what the user typed, for the preset and the checks
+    simulate.set_defaults(run=cmd_simulate)
+
+
+def _add_reproduce_parser(sub: argparse._SubParsersAction) -> None:
+    """``vgtarm reproduce``: the output folder, the seeds, the workers and the duration, then a run's
+    and the robot's flags."""
+    from ..reports.seeds import MAX_SEEDS
+
+    again = sub.add_parser("reproduce", help="run every case the paper reports and write report.md")
+    flags: tuple[_Flag, ...] = (
+        (
+            ("--out",),
+            dict(type=Path, default=Path("results"), metavar="DIR", help="output folder (default: results)"),
+        ),
+        (
+            ("--seeds",),
+            dict(
+                type=positive_int_at_most(MAX_SEEDS, "seeds"),
+                default=None,
+                metavar="N",
+                help="also run everything with seeds 0..N-1 on Dask and report mean and spread (needs the study extra)",
+            ),
+        ),
+        (
+            ("--workers",),
+            dict(
+                type=positive_int,
+                default=None,
+                metavar="N",
+                help="worker processes for the runs and figures (default: the CPUs, at most 4; 1: all in this process)",
+            ),
+        ),
+        (
+            ("--duration",),
+            dict(
+                type=positive_float,
+                default=None,
+                metavar="S",
+                help="run only the first S seconds of each case path (a quick look; default: the whole path)",
+            ),
+        ),
+    )
+    _add_flags(again, flags)
+    _add_run_options(again)
+    add_config(again)
+    again.set_defaults(run=cmd_reproduce)
 
 
 def _add_quiet(sub: argparse._SubParsersAction) -> None:
