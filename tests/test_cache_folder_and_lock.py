@@ -179,12 +179,13 @@ def test_liveness_of_a_process_is_that_of_the_system() -> None:
     """A running child is alive, a reaped one is not, this process and pid 1 (someone else's) are."""
     child = subprocess.Popen([sys.executable, "-c", "import sys; sys.stdin.read()"], stdin=subprocess.PIPE)
     try:
-        assert compiled._process_alive(child.pid) and fileio._alive(child.pid)
+        assert fileio.process_alive(child.pid)
     finally:
         assert child.stdin is not None
         child.stdin.close()
         child.wait(timeout=30)
-    assert not compiled._process_alive(child.pid) and not fileio._alive(child.pid)
+    assert not fileio.process_alive(child.pid)
     for pid in (os.getpid(), 1):
-        assert compiled._process_alive(pid) and fileio._alive(pid)
-    assert not compiled._process_alive(999_999_999)
+        assert fileio.process_alive(pid)
+    assert not fileio.process_alive(999_999_999)
+    assert not hasattr(compiled, "_process_alive")  # one liveness check for the cache and the files

@@ -593,9 +593,10 @@ def is_temporary(name: str) -> bool:
     return _TEMPORARY.match(name) is not None
 
 
-def _alive(pid: int) -> bool:
-    """Whether process ``pid`` exists (somebody else's too; on Linux a thread's id is no process)."""
-    import psutil  # imported here: only the clean-up of stale files needs it
+def process_alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (somebody else's too; on Linux a thread's id is no process):
+    whether the writer of a temporary file, scratch folder or build folder named by its pid still runs."""
+    import psutil  # imported here: only the clean-up of stale files and folders needs it
 
     return psutil.pid_exists(pid)
 
@@ -621,7 +622,7 @@ def clean_stale(folder: str | os.PathLike[str]) -> list[Path]:
         return touched
     for entry in entries:
         match = _TEMPORARY.match(entry.name)
-        if match is None or _alive(int(match["pid"])):
+        if match is None or process_alive(int(match["pid"])):
             continue
         path = Path(entry.path)
         original = where / match["name"]
@@ -647,7 +648,7 @@ def clean_stale(folder: str | os.PathLike[str]) -> list[Path]:
 def clean_stale_scratch(prefix: str, folder: str | os.PathLike[str] | None = None) -> list[Path]:
     """Remove the scratch folders ``<prefix><pid>-<random>`` (:func:`scratch_folder`) left in
     ``folder`` (default: the system's temporary folder) by processes that were killed: only real
-    folders (never a link) of the current user whose process no longer runs (:func:`_alive`, the
+    folders (never a link) of the current user whose process no longer runs (:func:`process_alive`, the
     rule of :func:`clean_stale`). Returns what was removed."""
     where = Path(tempfile.gettempdir() if folder is None else folder)
     pattern = re.compile(re.escape(prefix) + r"(?P<pid>\d+)-")
@@ -661,7 +662,7 @@ def clean_stale_scratch(prefix: str, folder: str | os.PathLike[str] | None = Non
         try:
             if match is None or not entry.is_dir(follow_symlinks=False):
                 continue
-            if entry.stat(follow_symlinks=False).st_uid != os.geteuid() or _alive(int(match["pid"])):
+            if entry.stat(follow_symlinks=False).st_uid != os.geteuid() or process_alive(int(match["pid"])):
                 continue
         except OSError:
             continue

@@ -77,6 +77,7 @@ from numpy.typing import NDArray
 
 from .. import compiler as compilers
 from ..errors import ConfigError, VgtarmError, cut, shown
+from ..fileio import process_alive
 from ..machine import split_rows
 from . import budget, building, codegen, interface, outline
 from .definition import PAPER, Definition
@@ -745,13 +746,6 @@ def _load_checked(entry: CacheEntry) -> CompiledBackend:
 # ----------------------------------------------------------------------------- building
 
 
-def _process_alive(pid: int) -> bool:
-    """Whether process ``pid`` exists (somebody else's too; on Linux a thread's id is no process)."""
-    import psutil  # imported here: only the clean-up of build folders needs it
-
-    return psutil.pid_exists(pid)
-
-
 def _clean_stale_builds(folder: Path, prefix: str = _BUILD_PREFIX) -> None:
     """Remove the build folders ``prefix<pid>-*`` of ``folder`` that are the current user's and
     whose process is gone or that are older than an hour."""
@@ -766,7 +760,7 @@ def _clean_stale_builds(folder: Path, prefix: str = _BUILD_PREFIX) -> None:
         if info.st_uid != os.geteuid():
             continue
         pid_text = item.name[len(prefix) :].split("-", 1)[0]
-        dead = not (pid_text.isdigit() and _process_alive(int(pid_text)))
+        dead = not (pid_text.isdigit() and process_alive(int(pid_text)))
         if dead or now - info.st_mtime > _STALE_BUILD_AGE:
             if stat.S_ISDIR(info.st_mode):
                 shutil.rmtree(item, ignore_errors=True)
