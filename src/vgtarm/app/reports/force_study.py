@@ -3,8 +3,8 @@
 Case 2 with the tool force, realistic sensing (1 um leg encoders, a controller model 10 % heavy), the
 expected cutting force fed forward, seeds 0 to 4, over the redundancy criterion, the state estimate
 (differenced velocities, or the Kalman estimate at 100, 120 and 140 Hz), the observer gain and the
-gains: the studies ``examples/studies/issue22-preset.toml`` (480 runs) and
-``issue22-front-difference.toml`` (80 runs), about 20 s on two Dask workers. The reproduction does not
+gains: the studies ``examples/studies/low-force-front-kalman.toml`` (480 runs) and
+``low-force-front-differenced.toml`` (80 runs), about 20 s on two Dask workers. The reproduction does not
 rerun them: their per-run figures ship as the small file ``force_study.csv`` beside this module,
 written by :func:`summarise` from the study folders (``python -m vgtarm.app.reports.force_study
 PRESET_RUNS DIFFERENCE_RUNS``, the folders of ``vgtarm study run``), and the report reads it
@@ -95,7 +95,7 @@ def section_lines(rows: list[dict[str, str]], figure: str) -> list[str]:
         " Each setting is a point: its worst max tip error over the seeds against the first seed's RMS leg force"
         " and chatter. Figures from the studies shipped as `force_study.csv` (the reproduction does not rerun"
         " them; `python -m vgtarm.app.reports.force_study` rebuilds the file from the folders of `vgtarm study"
-        " run` on `examples/studies/issue22-preset.toml` and `issue22-front-difference.toml`). Listed: the"
+        " run` on `examples/studies/low-force-front-kalman.toml` and `low-force-front-differenced.toml`). Listed: the"
         " settings on either front, and the low-force preset, the least worst error with seed 0's peak at most"
         f" {PEAK_LIMIT_N:g} N and chatter at most {CHATTER_LIMIT_N:g} N.",
         "",

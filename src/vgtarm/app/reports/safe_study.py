@@ -5,7 +5,7 @@ plant's, seeds 0-19: safe SCM, paper SCM and CFC on the same runs (180 runs, abo
 two workers). The reproduction does not rerun them: the study's per-run figures ship as the small
 file ``safe_study.csv`` beside this module, written by :func:`summarise` from the study folders
 (``python -m vgtarm.app.reports.safe_study SCM_DIR CFC_DIR``, the folders of ``vgtarm study run``
-on ``examples/studies/issue23-safe-scm.toml`` and ``issue23-safe-cfc.toml``), and the report reads it
+on ``examples/studies/safe-switching-scm.toml`` and ``safe-switching-cfc.toml``), and the report reads it
 (:func:`load_summary`, :func:`section_lines`, :func:`study_figure`).
 """
 
@@ -91,8 +91,8 @@ def section_lines(rows: list[dict[str, float]], figure: str) -> list[str]:
         "Case 2 with the tool force, 1 um leg encoders, controller model mass 0.9 / 1.0 / 1.1 times the"
         " plant's, seeds 0-19; the same runs for each controller. Figures from the study shipped as"
         " `safe_study.csv` (the reproduction does not rerun its 180 runs; `python -m vgtarm.app.reports.safe_study`"
-        " rebuilds the file from the folders of `vgtarm study run` on `examples/studies/issue23-safe-scm.toml`"
-        " and `issue23-safe-cfc.toml`).",
+        " rebuilds the file from the folders of `vgtarm study run` on `examples/studies/safe-switching-scm.toml`"
+        " and `safe-switching-cfc.toml`).",
         "",
         "| model mass | safe: diverged | safe: median / max of max tip error | safe below CFC | paper: diverged"
         " | CFC: max tip error | safe: activations (median) |",
