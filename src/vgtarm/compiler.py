@@ -119,7 +119,17 @@ def time_limit(default: float = CHECK_TIME_LIMIT) -> float:
     Raises:
         ConfigError: the variable is set but not a finite number of seconds > 0.
     """
-    text = os.environ.get(TIME_LIMIT_VARIABLE, "")
+    return seconds_setting(TIME_LIMIT_VARIABLE, default)
+
+
+def seconds_setting(variable: str, default: float) -> float:
+    """The environment variable ``variable`` as a duration (s), ``default`` when it is unset or
+    empty: the compiler's limit here and the model build's (:func:`vgtarm.model.budget.time_limit`).
+
+    Raises:
+        ConfigError: the variable is set but not a finite number of seconds > 0.
+    """
+    text = os.environ.get(variable, "")
     if not text.strip():
         return float(default)
     try:
@@ -127,7 +137,7 @@ def time_limit(default: float = CHECK_TIME_LIMIT) -> float:
     except ValueError:
         value = math.nan
     if not (math.isfinite(value) and value > 0):
-        raise ConfigError(f"{TIME_LIMIT_VARIABLE} = {shown(text)}: expected a number of seconds > 0")
+        raise ConfigError(f"{variable} = {shown(text)}: expected a number of seconds > 0")
     return value
 
 

@@ -36,11 +36,11 @@ The paper's fixed robot is measured apart (its C is compiled whole at ``-O2``).
 
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass
 
-from ..errors import ConfigError, VgtarmError, shown
+from ..compiler import seconds_setting
+from ..errors import VgtarmError, shown
 from ..memory import memory_limit, size_text
 from .definition import Definition, StackDefinition
 
@@ -173,16 +173,7 @@ def time_limit() -> float:
     Raises:
         ConfigError: the variable is set but not a positive number of seconds.
     """
-    text = os.environ.get(TIME_LIMIT_VARIABLE, "")
-    if not text.strip():
-        return DEFAULT_TIME_LIMIT
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not (math.isfinite(value) and value > 0):
-        raise ConfigError(f"{TIME_LIMIT_VARIABLE} = {shown(text)}: expected a number of seconds > 0")
-    return value
+    return seconds_setting(TIME_LIMIT_VARIABLE, DEFAULT_TIME_LIMIT)
 
 
 def compiler_limit(cost: BuildEstimate, floor: float = COMPILER_LIMIT_FLOOR) -> float:
