@@ -28,7 +28,7 @@ import pytest
 
 import vgtarm
 from vgtarm.errors import ConfigError
-from vgtarm.model import compiled, outline
+from vgtarm.model import compiled, library_cache, outline
 from vgtarm.model.definition import PAPER, Definition, StackDefinition
 from vgtarm.model.stack import load_stack
 
@@ -101,7 +101,7 @@ def stderr_lines(done: subprocess.CompletedProcess[str]) -> list[str]:
 
 def assert_clean_entry(entry: compiled.CacheEntry) -> None:
     """The entry passes every check again, and its metadata records the file on disk."""
-    backend = compiled._load(entry)
+    backend = library_cache._load(entry)
     meta = json.loads(entry.metadata.read_text())
     assert meta["size"] == entry.library.stat().st_size
     assert backend.library_path == entry.library and entry.library.is_absolute()
@@ -114,7 +114,7 @@ def assert_clean_entry(entry: compiled.CacheEntry) -> None:
 @pytest.fixture
 def cheap_rebuild(monkeypatch: pytest.MonkeyPatch, pristine: compiled.CacheEntry) -> list[Path]:
     """Replace the compile step by a copy of the pristine library; returns the build folders used."""
-    signatures = compiled._parse_metadata(pristine.metadata.read_bytes(), pristine).signatures
+    signatures = library_cache._parse_metadata(pristine.metadata.read_bytes(), pristine).signatures
     builds: list[Path] = []
 
     def copy(compiler: str, workdir: Path, definition: object, key: str) -> tuple[Path, dict[str, compiled.Signature]]:
@@ -126,7 +126,7 @@ def cheap_rebuild(monkeypatch: pytest.MonkeyPatch, pristine: compiled.CacheEntry
 
     monkeypatch.setattr(compiled, "_produce", copy)
     # the key of the pristine copy, even if a model source changes while the suite runs
-    monkeypatch.setattr(compiled, "_cache_key", lambda compiler, definition=compiled.PAPER: pristine.key)
+    monkeypatch.setattr(library_cache, "_cache_key", lambda compiler, definition=compiled.PAPER: pristine.key)
     monkeypatch.delenv("VGTARM_BACKEND", raising=False)
     return builds
 
@@ -518,13 +518,13 @@ def test_an_entry_whose_structure_field_is_rewritten_too_fails_on_its_sizes(tmp_
     with pytest.raises(
         compiled._Damaged, match=r"^metadata field functions\.fk\.nnz_in is \[7, 45\], expected \[3, \d+\]"
     ):
-        compiled._load(entry)
+        library_cache._load(entry)
 
 
 def test_the_library_report_is_checked_against_the_signatures(pristine):
     """Second line of defence: the library's own report of its functions' sizes (after the
     metadata's checks) catches signatures that do not describe it."""
-    meta = compiled._parse_metadata(pristine.metadata.read_bytes(), pristine)
+    meta = library_cache._parse_metadata(pristine.metadata.read_bytes(), pristine)
     wrong = dict(meta.signatures)
     wrong["tip"] = compiled.Signature(**{**wrong["tip"].__dict__, "nnz_out": (2,)})
     backend = compiled.CompiledBackend(pristine.library, wrong)

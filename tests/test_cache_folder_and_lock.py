@@ -19,7 +19,8 @@ from pathlib import Path
 import pytest
 
 from vgtarm import fileio
-from vgtarm.model import compiled
+from vgtarm.model import build_lock, compiled
+from vgtarm.model.library_errors import _Unavailable
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the Linux folder rule and flock")
 
@@ -108,7 +109,7 @@ def test_build_lock_waits_for_another_process_and_takes_the_lock_itself(tmp_path
             holder.wait(timeout=30)
 
         threading.Thread(target=release, daemon=True).start()
-        with compiled._build_lock(tmp_path):
+        with build_lock._build_lock(tmp_path):
             entered.append(time.monotonic())
             fd = os.open(tmp_path / ".lock", os.O_RDWR)
             try:  # held here: another open file description cannot take it
@@ -133,11 +134,11 @@ def test_build_lock_waits_for_another_process_and_takes_the_lock_itself(tmp_path
 def test_build_lock_goes_on_without_the_lock_after_the_longest_wait(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(compiled, "_LOCK_WAIT", 0.3)
+    monkeypatch.setattr(build_lock, "_LOCK_WAIT", 0.3)
     holder = _holder(tmp_path / ".lock")
     try:
         start = time.monotonic()
-        with compiled._build_lock(tmp_path):
+        with build_lock._build_lock(tmp_path):
             waited = time.monotonic() - start
     finally:
         assert holder.stdin is not None
@@ -147,7 +148,7 @@ def test_build_lock_goes_on_without_the_lock_after_the_longest_wait(
 
 
 def test_build_lock_is_created_private(tmp_path: Path) -> None:
-    with compiled._build_lock(tmp_path):
+    with build_lock._build_lock(tmp_path):
         pass
     assert ((tmp_path / ".lock").stat().st_mode & 0o777) == 0o600
 
@@ -156,7 +157,7 @@ def test_build_lock_never_follows_a_symbolic_link(tmp_path: Path) -> None:
     target = tmp_path / "target"
     target.write_text("keep")
     (tmp_path / ".lock").symlink_to(target)
-    with pytest.raises(compiled._Unavailable, match="cannot write in the cache folder"), compiled._build_lock(tmp_path):
+    with pytest.raises(_Unavailable, match="cannot write in the cache folder"), build_lock._build_lock(tmp_path):
         pytest.fail("the block must not run")
     assert target.read_text() == "keep"
 
@@ -167,8 +168,8 @@ def test_build_lock_in_a_read_only_folder_is_one_reason(tmp_path: Path) -> None:
     folder.mkdir(mode=0o500)
     try:
         with (
-            pytest.raises(compiled._Unavailable, match="cannot write in the cache folder"),
-            compiled._build_lock(folder),
+            pytest.raises(_Unavailable, match="cannot write in the cache folder"),
+            build_lock._build_lock(folder),
         ):
             pytest.fail("the block must not run")
     finally:

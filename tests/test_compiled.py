@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import vgtarm
-from vgtarm.model import compiled
+from vgtarm.model import compiled, compiling, library_cache
 
 
 def test_cache_is_reused_and_keyed_by_the_sources(robot):
@@ -19,11 +19,11 @@ def test_cache_is_reused_and_keyed_by_the_sources(robot):
     assert compiler is not None
     again = compiled._compiled_backend(compiler)  # a second load: from the cache, no rebuild
     assert again.library_path == backend.library_path
-    assert compiled._cache_key(compiler) in backend.library_path.name
+    assert library_cache._cache_key(compiler) in backend.library_path.name
 
 
 def test_without_a_compiler_the_interpreter_runs_the_same_model(monkeypatch, caplog, robot):
-    monkeypatch.setattr(compiled, "find_compiler", lambda: None)
+    monkeypatch.setattr(compiling, "find_compiler", lambda: None)
     with caplog.at_level(logging.WARNING, logger="vgtarm"):
         backend = compiled.get_backend.__wrapped__("auto")
     assert isinstance(backend, compiled.InterpretedBackend)

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from tests.test_recursive import configurations, varied_stack
+from tests.test_recursive import EXAMPLES, configurations, varied_stack
 from vgtarm.model.recursive import RecursiveModel
 from vgtarm.model.recursive.backend import RecursiveBackend
 from vgtarm.model.robot import Robot
@@ -59,7 +59,7 @@ def _same(a: Any, b: Any) -> None:
 
 @pytest.mark.parametrize("k", [3, 12])
 def test_fused_step_equals_the_separate_adapters(k: int) -> None:
-    from vgtarm.app.cases import run_case
+    from vgtarm.experiment.cases import run_case
 
     stack = varied_stack(k) if k <= 6 else long_stack(k)
     fused, separate = Robot(stack, RecursiveBackend(stack)), Robot(stack, RecursiveBackend(stack, fused=False))
@@ -183,7 +183,7 @@ def test_cfc_law_with_bound_gains_equals_the_separate_adapter() -> None:
 
 
 def test_switching_control_on_the_fused_step_equals_the_separate_adapters() -> None:
-    from vgtarm.app.cases import run_case
+    from vgtarm.experiment.cases import run_case
 
     stack = varied_stack(3)
     fused, separate = Robot(stack, RecursiveBackend(stack)), Robot(stack, RecursiveBackend(stack, fused=False))
@@ -198,8 +198,8 @@ def test_switching_control_on_the_fused_step_equals_the_separate_adapters() -> N
 def test_runs_that_fail_stop_alike() -> None:
     """Runs driven out of the limits and out of the assembled set (the driver's assembly check over
     the bound margin rows' nonzero entries) stop at the same sample, with the same status and samples."""
-    from vgtarm.app.cases import run_case
     from vgtarm.errors import SimulationError
+    from vgtarm.experiment.cases import run_case
 
     stack = varied_stack(3)
     fused, separate = Robot(stack, RecursiveBackend(stack)), Robot(stack, RecursiveBackend(stack, fused=False))
@@ -250,10 +250,68 @@ def test_margin_rows_bound_and_not_bound_agree() -> None:
     assert np.allclose(dense, q @ G.T + h, rtol=0.0, atol=1e-14)
 
 
-def test_the_driver_copy_applies() -> None:
-    """The recursive library's copy of ``closed_loop.c`` replaces its assembly check's line (were the
-    line changed, the file itself would be compiled: the dense check, slower, the same results)."""
-    from vgtarm.model.recursive import library
+class _PlantedMargins(RecursiveBackend):
+    """A recursive backend that, once a run's margin rows ``G`` are bound, plants a NaN in every zero
+    entry of ``G`` (the very array the driver reads): a sum over the bound rows' nonzero entries
+    never reads one, a sum over every entry is NaN, which the assembly check refuses."""
 
-    text = (library._DRIVERS / "closed_loop.c").read_text()
-    assert library.driver_adaptable(text)
+    def bind_run(self, Kp: Any, Kv: Any, G: Any = None) -> None:
+        super().bind_run(Kp, Kv, G)
+        if G is not None:
+            G[G == 0.0] = np.nan
+
+
+def test_the_driver_s_assembly_check_sums_the_margin_rows_through_the_hook() -> None:
+    """The recursive library compiles ``closed_loop.c`` itself with ``-DVGT_MARGIN_ROW=vgt_rec_margin``:
+    the drivers' assembly check sums the rows a run bound over their nonzero entries. With a NaN in
+    every zero entry of ``G`` after the binding, a run of the fused step is the same bit for bit (the
+    dense loop of ``closed_loop.c`` would read the NaNs and stop at the first sample), while the
+    separate adapters, which bind nothing, sum every entry and stop at the first check."""
+    from vgtarm.errors import SimulationError
+    from vgtarm.experiment.cases import run_case
+
+    stack = varied_stack(3)
+    robot = Robot(stack, RecursiveBackend(stack))
+    G, _ = robot.margin_form()
+    assert (G == 0.0).any() and (G != 0.0).any()
+    reference = sinusoids(robot, stack, samples=60)
+    start = (reference.q[0] + 0.004, np.zeros(stack.n_joints))
+    plain = run_case(robot, 1, reference=reference, initial_state=start, integrator="rk4")
+    planted = run_case(
+        Robot(stack, _PlantedMargins(stack)), 1, reference=reference, initial_state=start, integrator="rk4"
+    )
+    assert plain.success and planted.success
+    _same(plain, planted)
+    with pytest.raises(SimulationError, match="can no longer be assembled") as caught:
+        run_case(Robot(stack, _PlantedMargins(stack, fused=False)), 1, reference=reference, initial_state=start)
+    assert np.isnan(caught.value.result.q[1:]).all()  # stopped at the first check
+
+
+def test_a_run_out_of_the_assembled_set_stops_as_on_the_symbolic_library() -> None:
+    """The recursive library's assembly check (``closed_loop.c`` with the hook: the bound rows'
+    nonzero entries) and the symbolic library's (the same file without it: every entry) stop a run
+    driven out of the assembled set at the same sample for the same reason, the samples before the
+    same to rounding (the one-module stack, whose symbolic library the suite builds anyway)."""
+    import vgtarm
+    from vgtarm.errors import SimulationError
+    from vgtarm.experiment.cases import joint_reference, run_case
+
+    path = EXAMPLES / "planar_module.toml"
+    symbolic = vgtarm.load_robot(path, model="symbolic")
+    if symbolic.backend.kind != "compiled":
+        pytest.skip("no C compiler: no symbolic library to hold the recursive one to")
+    recursive = vgtarm.load_robot(path, model="recursive")
+    assert recursive.backend.kind == "recursive"
+    reference = joint_reference(symbolic, 1, duration=0.1)
+    start = (reference.q[0] + 0.01, np.zeros(reference.q.shape[1]))
+    stops, results = [], []
+    for robot in (symbolic, recursive):
+        with pytest.raises(SimulationError, match="a leg set can no longer be assembled") as caught:
+            run_case(robot, 1, reference=reference, kp=1e7, kv=10.0, initial_state=start)
+        stops.append(str(caught.value).split(":")[0])  # "diverged at t = ... s (sample k of n)"
+        results.append(caught.value.result)
+    a, b = results
+    ran = np.isfinite(a.q).all(axis=1)
+    assert stops[0] == stops[1] and np.array_equal(ran, np.isfinite(b.q).all(axis=1))
+    assert 1 < ran.sum() < len(ran)
+    assert np.abs(b.q[ran] - a.q[ran]).max() < 1e-12

@@ -47,7 +47,7 @@ def forced(monkeypatch: pytest.MonkeyPatch) -> list[int]:
         return count
 
     monkeypatch.setattr(machine, "split_rows", recorded)
-    for module in ("vgtarm.model.compiled", "vgtarm.model.recursive.model"):
+    for module in ("vgtarm.model.backends", "vgtarm.model.recursive.model"):
         monkeypatch.setattr(f"{module}.split_rows", recorded)
     return used
 

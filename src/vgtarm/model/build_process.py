@@ -1,7 +1,8 @@
 """The build process that :func:`vgtarm.model.building.run` starts: it builds one model (the
 compiled library, or the symbolic functions for the interpreter) into the private folder it is
-given and writes its result there (:data:`~vgtarm.model.building.RESULT`). It imports the cache
-module it builds for; :mod:`.building`, which the cache imports, does not import this one.
+given and writes its result there (:data:`~vgtarm.model.building.RESULT`). It imports the modules
+it builds with (:mod:`.compiling`, :mod:`.library_cache`); :mod:`.building`, which the cache's front
+:mod:`.compiled` imports, does not import this one.
 """
 
 from __future__ import annotations
@@ -21,7 +22,8 @@ from pathlib import Path
 from typing import Any
 
 from ..memory import size_text
-from . import compiled
+from . import compiling, library_cache
+from .backends import build_functions
 from .budget import compiler_limit, estimate
 from .building import RESULT
 from .definition import Definition
@@ -67,15 +69,15 @@ def _file_limit(folder: Path, failure: str) -> str | None:
 
 
 def _compile(compiler: str, folder: Path, definition: Definition, key: str) -> dict[str, Any]:
-    if compiled._cache_key(compiler, definition) != key:
+    if library_cache._cache_key(compiler, definition) != key:
         return {"failure": "the model's source files changed while the library was being built; run the command again"}
-    compiled._COMPILE_TIMEOUT = compiler_limit(estimate(definition))  # before $VGTARM_COMPILER_TIME_LIMIT
-    library, signatures = compiled._compile(compiler, folder, definition)
+    compiling._COMPILE_TIMEOUT = compiler_limit(estimate(definition))  # before $VGTARM_COMPILER_TIME_LIMIT
+    library, signatures = compiling._compile(compiler, folder, definition)
     return {"library": library.name, "functions": {name: sig.__dict__ for name, sig in signatures.items()}}
 
 
 def _functions(folder: Path, definition: Definition) -> dict[str, Any]:
-    built = compiled.build_functions(definition)
+    built = build_functions(definition)
     for name, f in built.items():
         f.save(str(folder / f"{name}.casadi"))
     return {"functions": sorted(built)}

@@ -14,7 +14,7 @@ when it runs past its time limit (``$VGTARM_COMPILER_TIME_LIMIT``).
 
 Two kinds of build:
 
-- ``compile``: :func:`vgtarm.model.compiled._compile` into the private build folder the caller
+- ``compile``: :func:`vgtarm.model.compiling._compile` into the private build folder the caller
   made; the result names the library and gives the functions' signatures; the caller keeps every
   check of the compile cache (metadata, SHA-256, lock, atomic moves);
 - ``functions``: the symbolic functions alone, saved into the folder for CasADi's interpreter.

@@ -15,6 +15,14 @@
 #include "vgtarm.h"
 #include "vgt_control.h" /* the controller's per-period arithmetic, shared with the exported controller */
 
+#ifdef VGT_MARGIN_ROW
+/* A library may sum the margin rows of the assembly check (check_state) with a function of its
+ * own, named by this macro: margin + G[row] . q. The recursive model's library is compiled with
+ * -DVGT_MARGIN_ROW=vgt_rec_margin (model/recursive/library.py), which sums the rows a run bound over
+ * their nonzero entries; the symbolic libraries define no such macro and sum every entry here. */
+double VGT_MARGIN_ROW(const double *G, int nj, int row, double margin, const double *q);
+#endif
+
 typedef struct {
     const double **arg;
     double **res;
@@ -142,7 +150,11 @@ static int check_state(const vgt_settings *s, const vgt_run *r, const double *q,
         if (!isfinite(q[i]) || !isfinite(qd[i])) return VGT_NOT_FINITE;
     for (int row = 0; row < s->n_margins; ++row) {
         double margin = r->h[row];
+#ifdef VGT_MARGIN_ROW
+        margin = VGT_MARGIN_ROW(r->G, nj, row, margin, q);
+#else
         for (int i = 0; i < nj; ++i) margin += r->G[nj * row + i] * q[i];
+#endif
         if (!(margin > 0.0)) return VGT_NOT_ASSEMBLABLE;
     }
     for (int i = 0; i < nj; ++i)

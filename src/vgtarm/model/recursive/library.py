@@ -29,7 +29,8 @@ from typing import Any
 import casadi as ca
 import cffi
 
-from .. import compiled, interface
+from .. import build_lock, compiling, interface, library_cache
+from ..library_errors import BackendError, _Damaged, _Unavailable
 from .joint import module_functions
 
 _HERE = Path(__file__).resolve().parent
@@ -70,38 +71,13 @@ def _ffi() -> cffi.FFI:
     return ffi
 
 
-#: The one line of the driver's assembly check (``closed_loop.c``, ``check_state``) that the
-#: recursive library's copy of the driver replaces, and its replacement: the margin rows summed over
-#: their nonzero entries when the run bound them (``vgt_rec_bind_run``), else as the line does.
-_MARGIN_LINE = "        for (int i = 0; i < nj; ++i) margin += r->G[nj * row + i] * q[i];\n"
-_MARGIN_CALL = "        margin = vgt_rec_margin(r->G, nj, row, margin, q);\n"
-_MARGIN_DECLARATION = "double vgt_rec_margin(const double *G, int nj, int row, double margin, const double *q);\n"
-
-
-_INCLUDE = '#include "vgt_control.h"'
-
-
-def driver_adaptable(text: str) -> bool:
-    """Whether ``closed_loop.c``'s text has the one line :func:`_driver_copy` replaces (a test holds it)."""
-    return text.count(_MARGIN_LINE) == 1 and text.count(_INCLUDE) == 1
-
-
-def _driver_copy(workdir: Path) -> Path:
-    """``closed_loop.c`` with its assembly check's margin rows summed by ``vgt_rec_margin``
-    (``csrc/vgt_rec_loop.c``). The symbolic libraries compile the file itself (their cache keys
-    hash it), so the copy leaves them as they are; each margin's sign is the same (a zero entry
-    adds a zero product, and the check comes after the state is found finite). Should the line
-    change, the file itself is compiled (the dense check, the same results; the test fails)."""
-    original = _DRIVERS / "closed_loop.c"
-    text = original.read_text()
-    if not driver_adaptable(text):
-        return original
-    include = _INCLUDE
-    text = text.replace(_MARGIN_LINE, _MARGIN_CALL)
-    text = text.replace(include, include + "\n" + _MARGIN_DECLARATION.rstrip("\n"), 1)
-    copy = workdir / "closed_loop_rec.c"
-    copy.write_text(text)
-    return copy
+#: The macro naming the function that sums the margin rows of the drivers' assembly check
+#: (``check_state`` in ``closed_loop.c``): here ``vgt_rec_margin`` (``csrc/vgt_rec_loop.c``), over
+#: the nonzero entries of the rows a run bound (``vgt_rec_bind_run``), else over every entry. The
+#: symbolic libraries compile ``closed_loop.c`` without it: the dense loop, as written there. Each
+#: margin's sign is the same either way (a zero entry adds a zero product, and the check comes after
+#: the state is found finite).
+_MARGIN_ROW = "-DVGT_MARGIN_ROW=vgt_rec_margin"
 
 
 def _compile(compiler: str, workdir: Path) -> Path:
@@ -111,24 +87,24 @@ def _compile(compiler: str, workdir: Path) -> Path:
     generator.generate(str(workdir) + os.sep)
     (workdir / "layout.c").write_text(interface.layout_source())
     library = workdir / "library.so"
-    command = [compiler, *_CFLAGS, "-I", str(_CSRC), "-I", str(_DRIVERS), "-I", str(workdir), "-o", str(library)]
-    command += [str(workdir / f"{_GENERATED}.c"), str(_CSRC / "vgt_rec.c"), str(_CSRC / "vgt_rec_loop.c")]
-    drivers = [_driver_copy(workdir) if p.name == "closed_loop.c" else p for p in sorted(_DRIVERS.glob("*.c"))]
-    command += [str(workdir / "layout.c"), *(str(p) for p in drivers), "-lm"]
+    command = [compiler, *_CFLAGS, _MARGIN_ROW, "-I", str(_CSRC), "-I", str(_DRIVERS), "-I", str(workdir)]
+    command += ["-o", str(library), str(workdir / f"{_GENERATED}.c"), str(_CSRC / "vgt_rec.c")]
+    command += [str(_CSRC / "vgt_rec_loop.c"), str(workdir / "layout.c")]
+    command += [*(str(p) for p in sorted(_DRIVERS.glob("*.c"))), "-lm"]
     failure = ""
     for attempt in (command[:1] + ["-fopenmp"] + command[1:], command):  # the GA's threads, when OpenMP is there
-        done = compiled._run(compiler, attempt)
+        done = compiling._run(compiler, attempt)
         if done.returncode == 0 and library.is_file():
             return library
-        failure = compiled._compiler_failure(compiler, done)
-    raise compiled._Unavailable(failure)
+        failure = compiling._compiler_failure(compiler, done)
+    raise _Unavailable(failure)
 
 
 def _metadata_ok(meta: Path, library: Path, key: str) -> bool:
     try:
-        data = json.loads(compiled._read_private(meta, 1 << 16))
-        size, digest = compiled._sha256(library)
-    except (compiled._Damaged, OSError, ValueError):
+        data = json.loads(library_cache._read_private(meta, 1 << 16))
+        size, digest = library_cache._sha256(library)
+    except (_Damaged, OSError, ValueError):
         return False
     return bool(data.get("key") == key and data.get("size") == size and data.get("sha256") == digest)
 
@@ -138,7 +114,7 @@ def _build(folder: Path, key: str, compiler: str) -> None:
     workdir = Path(tempfile.mkdtemp(dir=folder, prefix=f".build-{os.getpid()}-"))
     try:
         built = _compile(compiler, workdir)
-        size, digest = compiled._sha256(built)
+        size, digest = library_cache._sha256(built)
         text = json.dumps({"key": key, "model": "recursive", "size": size, "sha256": digest}, indent=1)
         (workdir / "meta.json").write_text(text)
         os.replace(built, library)
@@ -154,25 +130,25 @@ def load_library() -> tuple[Any, Any]:
     Raises :class:`~vgtarm.model.compiled.BackendError` with one line when it cannot be had (no
     compiler, a refused cache folder, a failing compile)."""
     with _LOCK:
-        compiler = compiled.find_compiler()
+        compiler = compiling.find_compiler()
         if compiler is None:
-            raise compiled.BackendError("the recursive model needs a C compiler (cc, gcc or clang, or $CC)")
-        folder = compiled.cache_dir()
+            raise BackendError("the recursive model needs a C compiler (cc, gcc or clang, or $CC)")
+        folder = library_cache.cache_dir()
         try:
-            compiled._check_folder(folder)
+            library_cache._check_folder(folder)
             key = cache_key(compiler)
             library, meta = folder / f"vgtarm_rec_{key}.so", folder / f"vgtarm_rec_{key}.json"
             if not _metadata_ok(meta, library, key):
-                with compiled._build_lock(folder):
+                with build_lock._build_lock(folder):
                     if not _metadata_ok(meta, library, key):
                         for path in (meta, library):
                             with contextlib.suppress(FileNotFoundError):
                                 path.unlink()
                         _build(folder, key, compiler)
                 if not _metadata_ok(meta, library, key):
-                    raise compiled._Unavailable("the recursive model's library failed its checks after a rebuild")
-        except compiled._Unavailable as exc:
-            raise compiled.BackendError(f"cannot build the recursive model: {exc}") from None
+                    raise _Unavailable("the recursive model's library failed its checks after a rebuild")
+        except _Unavailable as exc:
+            raise BackendError(f"cannot build the recursive model: {exc}") from None
         ffi = _ffi()
         _PATH.append(library.resolve())
         return ffi, ffi.dlopen(str(library.resolve()))
@@ -191,7 +167,5 @@ def loop_library() -> Any:
     out = interface.ffi().new("long[]", len(interface.layout_fields()))
     library.vgt_layout(out)
     if list(out) != interface.python_layout():
-        raise compiled.BackendError(
-            "the recursive model's loop library lays out the interface's structures unlike cffi"
-        )
+        raise BackendError("the recursive model's loop library lays out the interface's structures unlike cffi")
     return library

@@ -259,7 +259,7 @@ int vgt_rec_bind_run(const double *Kp, const double *Kv, int n, const double *G,
     return 0;
 }
 
-/* The driver's margin row `row` of G (closed_loop.c's check_state, in this library's copy):
+/* The driver's margin row `row` of G (closed_loop.c's check_state, built with -DVGT_MARGIN_ROW):
  * margin + G[row] . q over the nonzero entries of bound rows, else over every entry. */
 double vgt_rec_margin(const double *G, int nj, int row, double margin, const double *q) {
     const double *g = G + (size_t)nj * row;

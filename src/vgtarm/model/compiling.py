@@ -1,0 +1,126 @@
+"""How the model's generated C becomes a shared library: the compiler, its flags and its commands.
+
+:func:`_compile` generates the C of every model function (CasADi) and compiles it with the drivers
+of ``csrc/`` into one library; its source and flags are the build recipe the cache key hashes
+(:func:`_recipe`). Every compiler command runs under :mod:`vgtarm.compiler` (a process group that
+dies with vgtarm, a time limit); a command that cannot run, fails, runs past its limit or writes
+nothing raises :class:`~.library_errors._Unavailable` with one line. :mod:`.build_process` runs
+:func:`_compile` in a process of its own; the recursive model's library
+(:mod:`vgtarm.model.recursive.library`) runs its commands with :func:`_run` too.
+"""
+
+from __future__ import annotations
+
+import inspect
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import casadi as ca
+
+from .. import compiler as compilers
+from ..errors import shown
+from . import budget, interface
+from .backends import _GENERATED_NAME, Signature, build_functions
+from .definition import PAPER, Definition
+from .library_errors import _Unavailable
+
+#: The drivers compiled into every library (``closed_loop.c``, ``ga.c``, ``batch.c``) and their headers.
+_CSRC = Path(__file__).resolve().parent / "csrc"
+_CFLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off")
+#: Flags of a stack's generated functions, compiled apart before the link with the drivers (built
+#: with :data:`_CFLAGS`): its straight-line code is ten times the paper robot's (17 MB of C for six
+#: modules, 12.6 MB with common-subexpression elimination), and GCC's -O2 spent 4 min 19 s on it
+#: where -O1 took 1 min 22 s (measured on this 2-core machine; 77 s with the elimination). Neither
+#: changes a floating-point result: no contraction, no fast math.
+_STACK_GENERATED_CFLAGS = ("-O1", "-fPIC", "-ffp-contract=off")
+#: Default limit (s) of one compiler command (:mod:`vgtarm.compiler`, before
+#: ``$VGTARM_COMPILER_TIME_LIMIT``): the build process sets it from its model's estimate
+#: (:func:`compile_limit`); the recursive model's library (a few seconds) keeps this one.
+_COMPILE_TIMEOUT = budget.COMPILER_LIMIT_FLOOR
+
+
+def find_compiler() -> str | None:
+    """The C compiler to use: ``$CC``, else ``cc``, ``gcc`` or ``clang`` on the PATH."""
+    candidates = [os.environ["CC"]] if os.environ.get("CC") else ["cc", "gcc", "clang"]
+    for name in candidates:
+        found = shutil.which(name)
+        if found:
+            return found
+    return None
+
+
+def _compiler_failure(compiler: str, done: subprocess.CompletedProcess[str]) -> str:
+    ending = compilers.ending(done.returncode)
+    return f"the C compiler {shown(compiler, 80)} failed ({ending}): {compilers.first_error(done)}"
+
+
+def compile_limit(definition: Definition = PAPER) -> float:
+    """The limit (s) of one compiler command building ``definition``: ``$VGTARM_COMPILER_TIME_LIMIT``,
+    else a generous multiple of the estimated compile (:func:`~vgtarm.model.budget.compiler_limit`).
+
+    Raises:
+        ConfigError: the variable is set but not a number of seconds > 0.
+    """
+    return compilers.time_limit(budget.compiler_limit(budget.estimate(definition)))
+
+
+def _run(compiler: str, command: list[str]) -> subprocess.CompletedProcess[str]:
+    """Run one compiler command under its time limit, in a process group of its own that dies with
+    this process (:func:`vgtarm.compiler.run`), and return what it did; :class:`_Unavailable` when
+    it cannot run, runs past the limit, or exits 0 without writing its output (``-o``)."""
+    try:
+        done = compilers.run(command, limit=_COMPILE_TIMEOUT)
+    except compilers.CompilerError as exc:
+        raise _Unavailable(str(exc)) from None
+    if done.returncode == 0 and compilers.wrote_nothing(command):
+        raise _Unavailable(f"the C compiler {shown(compiler, 80)} exited 0 but wrote no {compilers.product(command)}")
+    return done
+
+
+def _run_compiler(compiler: str, command: list[str]) -> None:
+    """Run one compiler command; :class:`_Unavailable` with the first error line when it fails."""
+    done = _run(compiler, command)
+    if done.returncode != 0:
+        raise _Unavailable(_compiler_failure(compiler, done))
+
+
+def _compile(compiler: str, workdir: Path, definition: Definition = PAPER) -> tuple[Path, dict[str, Signature]]:
+    """Generate C for every model function into ``workdir`` and compile it with the drivers.
+
+    Returns the library (inside ``workdir``) and the functions' signatures; raises
+    :class:`_Unavailable` when the compiler cannot run or fails. The cache tests replace this
+    function to copy a prebuilt library instead, so that the checks around it run for real
+    without a 10-20 s compile each.
+    """
+    built = build_functions(definition)
+    generator = ca.CodeGenerator(f"{_GENERATED_NAME}.c", {"with_header": False})
+    for f in built.values():
+        generator.add(f)
+    generator.generate(str(workdir) + os.sep)
+    (workdir / "layout.c").write_text(interface.layout_source())
+    sources = [str(workdir / f"{_GENERATED_NAME}.c"), str(workdir / "layout.c")]
+    sources += [str(path) for path in sorted(_CSRC.glob("*.c"))]
+    library = workdir / "library.so"
+    if definition != PAPER:  # a stack: its generated code compiled apart (_STACK_GENERATED_CFLAGS)
+        generated = workdir / f"{_GENERATED_NAME}.o"
+        _run_compiler(compiler, [compiler, *_STACK_GENERATED_CFLAGS, "-c", "-o", str(generated), sources[0]])
+        if not generated.is_file():
+            raise _Unavailable(f"the C compiler {shown(compiler, 80)} wrote no object file")
+        sources[0] = str(generated)
+    base = [compiler, *_CFLAGS, "-I", str(_CSRC), "-o", str(library), *sources, "-lm"]
+    failure = ""
+    for command in (base[:1] + ["-fopenmp"] + base[1:], base):
+        done = _run(compiler, command)
+        if done.returncode == 0 and library.is_file():
+            return library, {key: Signature.of(f) for key, f in built.items()}
+        failure = _compiler_failure(compiler, done)
+    raise _Unavailable(failure)
+
+
+def _recipe() -> bytes:
+    """How this module turns the generated C into a library: the source of :func:`_compile` and
+    every flag it uses (the rest of this module finds and runs the compiler; it is not hashed)."""
+    flags = (_CFLAGS, _STACK_GENERATED_CFLAGS, _GENERATED_NAME)
+    return inspect.getsource(_compile).encode() + repr(flags).encode()
