@@ -731,7 +731,7 @@ def test_random_command_lines_succeed_or_fail_with_one_line(
         (["describe", "--config", ""], "configuration file .: is a folder, not a file"),  # argparse: Path("") is "."
         (["ik", "--path", "far.csv"], "line 2: x,y,z column 'x' is 1e+300 m, expected a coordinate within +-1000 m"),
         (["ik", "--path", "close.csv"], "only 1e-300 s after 0.0 (line 2); samples must be at least 1e-06 s apart"),
-        (["ik", "--path", "path.csv", "--dt", "1e-9"], "dt must be >= 1e-06 s, got 1e-09"),
+        (["ik", "--path", "path.csv", "--dt", "1e-9"], "dt = 1e-09: expected a finite number >= 1e-06 (s)"),
         (["ik", "--path", "path.csv", "--dt", "x" * 10_000], "got 'xxxxxxxx"),
         (["study", "init", ""], "FILE .: is a folder; give a file name"),
     ],

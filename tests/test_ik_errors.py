@@ -51,12 +51,13 @@ def test_unknown_rates_mode_and_option(robot):
 @pytest.mark.parametrize(
     ("options", "message"),
     [
-        ({"margin": 0.0}, "margin must be a finite"),
-        ({"margin": -1e-3}, "margin must be"),
-        ({"max_iterations": 0}, "max_iterations must be an integer >= 1"),
-        ({"initial_guess": [0.3] * 6}, "initial_guess must be 7 finite joint values"),
+        ({"margin": 0.0}, r"^margin = 0\.0: expected a finite number > 0 \(m\)$"),
+        ({"margin": -1e-3}, r"^margin = -0\.001: expected a finite number > 0"),
+        ({"max_iterations": 0}, "^max_iterations = 0: expected a whole number >= 1$"),
+        ({"initial_guess": [0.3] * 6}, r"^initial_guess\.shape = \(6,\): expected \(7,\)$"),
+        ({"initial_guess": [0.3] * 6 + [float("nan")]}, r"^initial_guess\[6\] = nan: expected a finite number$"),
         ({"initial_guess": [0.22, 0.3, 0.46, 0.3, 0.3, 0.3, 0.0]}, "cannot be assembled"),
-        ({"fallback": "yes"}, "fallback must be True or False"),
+        ({"fallback": "yes"}, "^fallback = 'yes': expected True or False$"),
     ],
 )
 def test_bad_option_values(robot, options, message):

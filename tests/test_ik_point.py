@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from vgtarm.app.cli.command import main
+from vgtarm.errors import InputError
 from vgtarm.ik import PointSolution, solve_point
 from vgtarm.ik.records import csv_columns
 
@@ -110,6 +111,20 @@ def test_bad_or_unreachable_points_give_one_line(tmp_path, capsys, args, words):
     for word in words:
         assert word in err
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("point", "message"),
+    [
+        ([0.0, 0.0], r"^point\.shape = \(2,\): expected \(3,\)$"),
+        ([0.0, np.nan, 0.66], r"^point\[1\] = nan: expected a finite number$"),
+        ([True, False, True], r"^point = \[True, False, True\]: expected an array of numbers$"),
+        ([0.0, 0.0, 2e3], r"^point = \[0\.0, 0\.0, 2000\.0\]: expected coordinates x, y, z within \+-1000 \(m\)$"),
+    ],
+)
+def test_a_bad_point_is_refused_naming_it(robot, point, message):
+    with pytest.raises(InputError, match=message):
+        solve_point(robot, point)
 
 
 def test_cli_point_with_a_rotation(capsys, robot):

@@ -350,7 +350,7 @@ def _set(path: tuple[Any, ...], value: Any) -> dict[str, Any]:
         (("modules",), {"b": 1}, "field 'modules'"),
         (("modules", 1, "d"), 0.15, "field 'module2.d' = 0.15: expected d < b = 0.15"),
         (("modules", 0, "d"), 0.2, "field 'module1.d' = 0.2: expected d < b"),
-        (("modules", 1, "plane"), math.nan, "field 'module2.plane' = nan: expected a finite angle"),
+        (("modules", 1, "plane"), math.nan, "field 'module2.plane' = nan: expected a number in [-360, 360] (degrees)"),
         (("modules", 0, "plane"), "90", "field 'module1.plane' = '90': expected a number"),
         (("modules", 0, "plane"), math.inf, "field 'module1.plane' = inf"),
         (

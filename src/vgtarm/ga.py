@@ -43,11 +43,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from numbers import Integral, Real
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from . import checks
 from .errors import InputError, VgtarmError, refuse_masked, shown
 
 __all__ = [
@@ -73,12 +73,9 @@ _MAX_BITS = 32
 #: keep a mistyped value from allocating the machine's memory or running for days).
 _MAX_POPULATION = 1_000_000
 _MAX_GENERATIONS = 1_000_000
-#: Largest seed accepted wherever a seed enters vgtarm (this GA's ``seed``, a run's ``seed`` in
-#: :func:`vgtarm.simulation.simulate`, a study's ``seeds`` and ``random.seed``, the command line's
-#: ``--seed``): seeds are whole numbers from 0 to 2**63 - 1. NumPy's generators take any whole
-#: number >= 0, but a run's seed is stored as a 64-bit signed integer (a study's results table), so
-#: a larger one would run and fail only when stored.
-MAX_SEED = 2**63 - 1
+#: Largest seed accepted wherever a seed enters vgtarm, 2**63 - 1 (:data:`vgtarm.checks.MAX_SEED`,
+#: where every seed is checked: a run's seed is stored as a 64-bit signed integer).
+MAX_SEED = checks.MAX_SEED
 
 
 # ---------------------------------------------------------------------------------------------
@@ -86,33 +83,11 @@ MAX_SEED = 2**63 - 1
 # ---------------------------------------------------------------------------------------------
 
 
-def _check_int(name: str, value: object, minimum: int, maximum: int | None = None) -> int:
-    """Return ``value`` as an int after checking ``minimum <= value <= maximum``."""
-    if isinstance(value, bool) or not isinstance(value, Integral):
-        raise InputError(f"`{name}` must be an integer, got {value!r}")
-    number = int(value)
-    if number < minimum or (maximum is not None and number > maximum):
-        upper = "" if maximum is None else f" and <= {maximum}"
-        raise InputError(f"`{name}` must be >= {minimum}{upper}, got {number}")
-    return number
-
-
-def _check_probability(name: str, value: object) -> float:
-    """Return ``value`` as a float after checking it is a probability in ``[0, 1]``."""
-    if isinstance(value, bool) or not isinstance(value, Real):
-        raise InputError(f"`{name}` must be a real number in [0, 1], got {value!r}")
-    number = float(value)
-    if not 0.0 <= number <= 1.0:
-        raise InputError(f"`{name}` must be in [0, 1], got {number}")
-    return number
-
-
 def check_seed(value: object, name: str, error: type[VgtarmError] = InputError) -> int:
     """``value`` as a seed: a whole number from 0 to :data:`MAX_SEED`, else one ``error`` line
-    naming ``name``, showing the value and the accepted range (booleans are refused)."""
-    if isinstance(value, bool) or not isinstance(value, Integral) or not 0 <= int(value) <= MAX_SEED:
-        raise error(f"{name} = {shown(value)}: expected a whole number from 0 to 2**63 - 1 = {MAX_SEED}")
-    return int(value)
+    naming ``name``, showing the value and the accepted range (booleans are refused);
+    :func:`vgtarm.checks.seed` under the name its callers know."""
+    return checks.seed(name, value, error=error)
 
 
 def _as_rng(seed: object, name: str = "seed") -> np.random.Generator:
@@ -122,42 +97,21 @@ def _as_rng(seed: object, name: str = "seed") -> np.random.Generator:
         return seed
     if seed is None:
         return np.random.default_rng()
-    if isinstance(seed, bool) or not isinstance(seed, Integral) or not 0 <= int(seed) <= MAX_SEED:
-        raise InputError(
-            f"`{name}` must be a whole number from 0 to 2**63 - 1 = {MAX_SEED}, a numpy Generator or None,"
-            f" got {shown(seed)}"
-        )
-    return np.random.default_rng(int(seed))
-
-
-def _numbers(name: str, value: object) -> NDArray[np.float64]:
-    """``value`` as a float64 array; strings, objects, ``None`` and masked arrays with masked entries
-    are refused, not converted."""
-    refuse_masked(value, f"`{name}`")
-    try:
-        arr = np.asarray(value)
-    except (TypeError, ValueError, OverflowError):  # ragged nested lists
-        raise InputError(f"`{name}` must be an array of numbers, got {shown(value)}") from None
-    if arr.dtype.kind not in "iuf":
-        raise InputError(f"`{name}` must be an array of numbers, got {shown(value)}")
-    return arr.astype(np.float64, copy=False)
+    return np.random.default_rng(checks.seed(name, seed, expected=f"{checks.SEED_RANGE}, a numpy Generator or None"))
 
 
 def _check_bounds(lower: ArrayLike, upper: ArrayLike) -> tuple[NDArray[np.float64], ...]:
     """Validate gene bounds: 1-D, same non-zero length, finite, ``lower <= upper``."""
-    lo = _numbers("lower", lower)
-    hi = _numbers("upper", upper)
-    for name, arr in (("lower", lo), ("upper", hi)):
-        if arr.ndim != 1 or arr.size == 0:
-            raise InputError(f"`{name}` must be a non-empty 1-D array, got shape {arr.shape}")
-        if not np.all(np.isfinite(arr)):
-            raise InputError(f"`{name}` must be finite, got {arr}")
+    lo = checks.finite_array("lower", lower, (None,))
+    hi = checks.finite_array("upper", upper, (None,))
+    if lo.size == 0:
+        checks.refuse("lower", lower, "at least one gene's bound")
     if lo.shape != hi.shape:
-        raise InputError(f"`lower` and `upper` must have the same shape, got {lo.shape} and {hi.shape}")
+        checks.refuse("upper.shape", hi.shape, f"{lo.shape}, the shape of lower")
     bad = np.flatnonzero(lo > hi)
     if bad.size:
         i = int(bad[0])
-        raise InputError(f"`lower` must be <= `upper` element-wise, got lower[{i}]={lo[i]} > upper[{i}]={hi[i]}")
+        checks.refuse(f"lower[{i}]", lo[i], f"at most upper[{i}] = {hi[i]!r}")
     if not np.all(np.isfinite(hi - lo)):
         raise InputError("`upper - lower` must be finite (bounds too far apart)")
     return lo, hi
@@ -168,8 +122,12 @@ def _check_bits(name: str, bits: ArrayLike) -> NDArray[np.uint8]:
     arr = np.asarray(bits)
     if arr.dtype == np.bool_:
         return arr.astype(np.uint8)
-    if arr.dtype.kind not in "iuf" or not np.all((arr == 0) | (arr == 1)):
-        raise InputError(f"`{name}` must hold only 0 and 1")
+    if arr.dtype.kind not in "iuf":
+        checks.refuse(name, bits, "an array of 0 and 1")
+    bad = np.argwhere((arr != 0) & (arr != 1))
+    if bad.size:
+        index = tuple(int(i) for i in bad[0])
+        checks.refuse(f"{name}[{', '.join(map(str, index))}]" if index else name, arr[index], "0 or 1")
     return arr.astype(np.uint8, copy=False)
 
 
@@ -205,14 +163,14 @@ class GAOptions:
     stall_generations: int | None = None
 
     def __post_init__(self) -> None:
-        _check_int("n_bits", self.n_bits, 1, _MAX_BITS)
-        population = _check_int("population_size", self.population_size, 2, _MAX_POPULATION)
-        _check_int("max_generations", self.max_generations, 0, _MAX_GENERATIONS)
-        _check_probability("crossover_probability", self.crossover_probability)
-        _check_probability("mutation_probability", self.mutation_probability)
-        _check_int("elite_count", self.elite_count, 0, population - 1)
+        checks.whole("n_bits", self.n_bits, 1, _MAX_BITS)
+        population = checks.whole("population_size", self.population_size, 2, _MAX_POPULATION)
+        checks.whole("max_generations", self.max_generations, 0, _MAX_GENERATIONS)
+        checks.probability("crossover_probability", self.crossover_probability)
+        checks.probability("mutation_probability", self.mutation_probability)
+        checks.whole("elite_count", self.elite_count, 0, population - 1)
         if self.stall_generations is not None:
-            _check_int("stall_generations", self.stall_generations, 1)
+            checks.whole("stall_generations", self.stall_generations, 1)
 
 
 @dataclass(frozen=True)
@@ -285,7 +243,7 @@ def decode(bits: ArrayLike, lower: ArrayLike, upper: ArrayLike, n_bits: int = 8)
     Returns:
         (..., n_genes) float64 gene values.
     """
-    n_bits = _check_int("n_bits", n_bits, 1, _MAX_BITS)
+    n_bits = checks.whole("n_bits", n_bits, 1, _MAX_BITS)
     lo, hi = _check_bounds(lower, upper)
     arr = _check_bits("bits", bits)
     expected = lo.shape[0] * n_bits
@@ -329,14 +287,12 @@ def encode(values: ArrayLike, lower: ArrayLike, upper: ArrayLike, n_bits: int = 
     Returns:
         (..., n_genes * n_bits) uint8 array of 0 and 1, most significant bit first.
     """
-    n_bits = _check_int("n_bits", n_bits, 1, _MAX_BITS)
+    n_bits = checks.whole("n_bits", n_bits, 1, _MAX_BITS)
     lo, hi = _check_bounds(lower, upper)
-    arr = _numbers("values", values)
+    arr = checks.number_array("values", values)
     if arr.ndim < 1 or arr.shape[-1] != lo.shape[0]:
         raise InputError(f"`values` must have shape (..., {lo.shape[0]}), got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise InputError("`values` must be finite")
-    return _encode(arr, lo, hi, n_bits)
+    return _encode(checks.finite_array("values", arr), lo, hi, n_bits)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -359,7 +315,7 @@ def rank_expectations(costs: ArrayLike, n: int) -> NDArray[np.float64]:
     Returns:
         (P,) float64 expectations, non-negative, summing to ``n`` and non-increasing in cost.
     """
-    n = _check_int("n", n, 0)
+    n = checks.whole("n", n, 0)
     arr = np.asarray(costs, dtype=np.float64)
     if arr.ndim != 1 or arr.size == 0:
         raise InputError(f"`costs` must be a non-empty 1-D array, got shape {arr.shape}")
@@ -398,7 +354,7 @@ def stochastic_universal_sampling(
     Returns:
         (n,) indices into the population in ascending order; shuffle them before pairing.
     """
-    n = _check_int("n", n, 0)
+    n = checks.whole("n", n, 0)
     arr = np.asarray(expectations, dtype=np.float64)
     if arr.ndim != 1 or arr.size == 0:
         raise InputError(f"`expectations` must be a non-empty 1-D array, got shape {arr.shape}")
@@ -438,7 +394,7 @@ def uniform_crossover(
     Returns:
         (P, L) uint8 children; the input is not modified.
     """
-    probability = _check_probability("probability", probability)
+    probability = checks.probability("probability", probability)
     arr = _check_bits("parents", parents)
     if arr.ndim != 2:
         raise InputError(f"`parents` must be a 2-D array (P, L), got shape {arr.shape}")
@@ -481,7 +437,7 @@ def bit_flip_mutation(bits: ArrayLike, probability: float, rng: np.random.Genera
     Returns:
         uint8 array of the same shape; the input is not modified.
     """
-    probability = _check_probability("probability", probability)
+    probability = checks.probability("probability", probability)
     arr = _check_bits("bits", bits)
     return _mutate(arr, probability, _as_rng(rng, "rng"))
 
@@ -551,7 +507,7 @@ def _initial_population(
     if initial is None:
         seeded = np.empty((0, length), dtype=np.uint8)
     else:
-        values = _numbers("initial", initial)
+        values = checks.number_array("initial", initial)
         if values.ndim == 1:
             values = values[None, :]
         if values.ndim != 2 or values.shape[1] != n_genes:
@@ -560,9 +516,7 @@ def _initial_population(
             raise InputError(
                 f"`initial` must have at most population_size={options.population_size} rows, got {values.shape[0]}"
             )
-        if not np.all(np.isfinite(values)):
-            raise InputError("`initial` must be finite")
-        seeded = _encode(values, lower, upper, options.n_bits)
+        seeded = _encode(checks.finite_array("initial", values), lower, upper, options.n_bits)
     n_random = options.population_size - seeded.shape[0]
     return np.concatenate([seeded, _random_bits(rng, n_random, length)])
 

@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline
 
+from . import checks
 from .errors import PathError, cut, refuse_masked, shown
 from .fileio import read_text_limited
 from .kinds import found_columns
@@ -83,7 +84,7 @@ class TipPath:
         t = _frozen_array("t", self.t)
         if t.ndim != 1 or t.shape[0] < 2:
             raise PathError(f"t must have shape (N,) with N >= 2, got shape {t.shape}")
-        _require_finite("t", t)
+        checks.finite_array("t", t, error=PathError)
         n = t.shape[0]
         for field in ("position", "velocity", "acceleration", "jerk"):
             if field == "jerk" and self.jerk is None:
@@ -91,7 +92,7 @@ class TipPath:
             values = _frozen_array(field, getattr(self, field))
             if values.shape != (n, 3):
                 raise PathError(f"{field} must have shape ({n}, 3) to match t, got shape {values.shape}")
-            _require_finite(field, values)
+            checks.finite_array(field, values, error=PathError)
             object.__setattr__(self, field, values)
         step = (t[-1] - t[0]) / (n - 1)
         if not step > 0.0:
@@ -146,10 +147,10 @@ def case1(
     Returns:
         A :class:`TipPath` named ``"case1"`` with analytic velocity and acceleration.
     """
-    dt = _check_dt(dt)
+    dt = checks.number("dt", dt, minimum=MIN_DT, unit="s", error=PathError)
     for field, value in (("x0", x0), ("y0", y0), ("z0", z0), ("ax", ax), ("ay", ay), ("az", az)):
-        _check_finite_scalar(field, value)
-    duration = _check_positive("duration", duration)
+        checks.number(field, value, unit="m", error=PathError)
+    duration = checks.positive("duration", duration, "s", error=PathError)
     t = _sample_times(0.0, duration, dt, "duration")
     sin_t, cos_t = np.sin(t), np.cos(t)
     # Z uses sin(2t) cos(2t) = sin(4t) / 2.
@@ -185,7 +186,7 @@ def case2(
     Returns:
         A :class:`TipPath` named ``"case2"``.
     """
-    dt = _check_dt(dt)
+    dt = checks.number("dt", dt, minimum=MIN_DT, unit="s", error=PathError)
     points = _as_points("corners", corners)
     spans = _as_float_array("durations", durations)
     if spans.shape != (points.shape[0] - 1,):
@@ -194,8 +195,7 @@ def case2(
             f"{points.shape[0]} corners, got shape {spans.shape}"
         )
     for i, span in enumerate(spans):
-        if not (math.isfinite(span) and span > 0.0):
-            raise PathError(f"durations[{i}] must be finite and > 0, got {float(span)!r}")
+        checks.positive(f"durations[{i}]", span, "s", error=PathError)
     times = np.concatenate(([0.0], np.cumsum(spans)))
     return waypoints(times, points, dt, blend="cubic", name="case2")
 
@@ -229,10 +229,8 @@ def waypoints(
     Returns:
         A :class:`TipPath` with the exact derivatives of the chosen blend.
     """
-    sampler = _BLENDS.get(blend) if isinstance(blend, str) else None
-    if sampler is None:
-        raise PathError(f"blend must be one of {sorted(_BLENDS)}, got {blend!r}")
-    dt = _check_dt(dt)
+    sampler = _BLENDS[checks.choice("blend", blend, sorted(_BLENDS), error=PathError)]
+    dt = checks.number("dt", dt, minimum=MIN_DT, unit="s", error=PathError)
     knots, pts = _check_samples(times, points, "times", "points", lambda i: f"index {i}")
     t = _sample_times(knots[0], knots[-1] - knots[0], dt, "times[-1] - times[0]")
     position, velocity, acceleration, jerk = sampler(knots, pts, t, dt)
@@ -408,7 +406,7 @@ def _fit_spline(
                 "pass dt to choose the output sampling period"
             )
         dt = float(step)
-    dt = _check_dt(dt)
+    dt = checks.number("dt", dt, minimum=MIN_DT, unit="s", error=PathError)
     t = _sample_times(times[0], times[-1] - times[0], dt, f"{field}[-1] - {field}[0]")
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is found below, as a non-finite value
         spline = CubicSpline(times, points, axis=0, bc_type="not-a-knot")
@@ -566,43 +564,6 @@ def _frozen_array(field: str, value: object) -> FloatArray:
     array = _as_float_array(field, value)
     array.flags.writeable = False
     return array
-
-
-def _require_finite(field: str, values: FloatArray) -> None:
-    """Raise PathError naming the first non-finite entry of ``values``."""
-    bad = np.argwhere(~np.isfinite(values))
-    if bad.size:
-        index = tuple(int(i) for i in bad[0])
-        raise PathError(f"{field}{list(index)} is {float(values[index])!r}, must be finite")
-
-
-def _check_finite_scalar(field: str, value: object) -> float:
-    """``value`` as a finite float, else PathError naming ``field`` (text is refused, not converted)."""
-    if isinstance(value, str | bytes | bool):
-        raise PathError(f"{field} must be a real number, got {shown(value)}")
-    try:
-        number = float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError, OverflowError):
-        raise PathError(f"{field} must be a real number, got {shown(value)}") from None
-    if not math.isfinite(number):
-        raise PathError(f"{field} must be finite, got {number!r}")
-    return number
-
-
-def _check_positive(field: str, value: object) -> float:
-    """``value`` as a finite float > 0, else PathError naming ``field``."""
-    number = _check_finite_scalar(field, value)
-    if number <= 0.0:
-        raise PathError(f"{field} must be > 0, got {number!r}")
-    return number
-
-
-def _check_dt(dt: object) -> float:
-    """The sampling period as a finite float >= :data:`MIN_DT`, s."""
-    period = _check_positive("dt", dt)
-    if period < MIN_DT:
-        raise PathError(f"dt must be >= {MIN_DT:g} s, got {period!r}")
-    return period
 
 
 def _sample_times(start: float, duration: float, dt: float, field: str) -> FloatArray:

@@ -41,6 +41,7 @@ from multiprocessing.connection import Connection
 from types import FrameType
 from typing import Any, TypeVar
 
+from .. import checks
 from ..machine import usable_cpus
 from ..model.parameters import RobotParameters
 from ..model.robot import Robot, definition_of
@@ -85,8 +86,7 @@ class Workers:
     (see the module's notes on Ctrl-C and orphans)."""
 
     def __init__(self, count: int, parameters: RobotParameters | Stack, backend: str = "compiled") -> None:
-        if not (isinstance(count, int) and count >= 1):
-            raise ValueError(f"count = {count!r}: expected a whole number of workers >= 1")
+        checks.whole("count", count, 1, unit="workers", error=ValueError)
         self.count, self.parameters, self.backend = count, parameters, backend
         self._executor: ProcessPoolExecutor | None = None
         self._thread: threading.Thread | None = None

@@ -130,21 +130,6 @@ class Gains:
         return int(self.Kp.shape[0])
 
 
-def real_number(name: str, value: object, expected: str, *, minimum: float = 0.0, strict: bool = True) -> float:
-    """``value`` as a finite float ``> minimum`` (``>=`` unless ``strict``), else one
-    :class:`InputError` line naming ``name`` and what was ``expected``. Strings, ``None`` and
-    booleans are refused, not converted."""
-    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
-        raise InputError(f"{name} = {shown(value)}: expected {expected}")
-    try:
-        number = float(value)
-    except OverflowError:  # an int beyond any float
-        raise InputError(f"{name} = {shown(value)}: expected {expected}") from None
-    if not (np.isfinite(number) and (number > minimum if strict else number >= minimum)):
-        raise InputError(f"{name} = {shown(value)}: expected {expected}")
-    return number
-
-
 def check_within(gains: Gains, kp_bounds: tuple[float, float], kv_bounds: tuple[float, float]) -> None:
     """Raise :class:`InputError` naming the first element of ``gains`` outside its bounds."""
     for label, matrix, (lo, hi) in (("Kp", gains.Kp, kp_bounds), ("Kv", gains.Kv, kv_bounds)):

@@ -38,7 +38,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import InputError, shown
+from .. import checks
+from ..errors import InputError
 from ..model.compiled import cache_dir
 
 Array = NDArray[np.float64]
@@ -106,13 +107,9 @@ def admitted_interval(
     Raises:
         InputError: no eigenvalue is admitted, or the admitted set is not one interval.
     """
-    for label, value, ok in (
-        ("kv", kv, kv > 0),
-        ("radius", radius, 0 < radius < 1),
-        ("model_error", model_error, 0 <= model_error < 1),
-    ):
-        if not (np.isfinite(value) and ok):
-            raise InputError(f"{label} = {shown(value)}: out of range for the admission test")
+    checks.positive("kv", kv, "1/s")
+    checks.number("radius", radius, above=0, below=1)
+    checks.number("model_error", model_error, minimum=0, below=1)
 
     def inside(lams: Array) -> NDArray[np.bool_]:  # the scalar loops of all of them at once (batched eigenvalues)
         return _scalar_radii(lams, kv, dt, velocity_filter, model_error) < radius
@@ -225,14 +222,10 @@ def _table_file(args: tuple[object, ...]) -> Path | None:
 def _damping_table(
     step: float, count: int, dt: float, velocity_filter: float | None, model_error: float, radius: float
 ) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    for label, value, ok in (
-        ("step", step, step > 0),
-        ("count", count, 1 <= count <= 10_000),
-        ("radius", radius, 0 < radius < 1),
-        ("model_error", model_error, 0 <= model_error < 1),
-    ):
-        if not (np.isfinite(value) and ok):
-            raise InputError(f"{label} = {shown(value)}: out of range for the damping table")
+    checks.positive("step", step, "1/s")
+    checks.whole("count", count, 1, 10_000)
+    checks.number("radius", radius, above=0, below=1)
+    checks.number("model_error", model_error, minimum=0, below=1)
     grid = np.geomspace(TABLE_SCAN[0], TABLE_SCAN[1], int(TABLE_SCAN[2]))
     kvs = np.arange(count) * step
     # every grid point of every damping in one batch, then all the edges bisected together: each

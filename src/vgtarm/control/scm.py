@@ -27,12 +27,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .. import checks
 from ..errors import InputError, shown
 from ..ga import GAOptions, GAResult, decode, encode, minimize
 from ..model.closedloop import PREDICTIONS
 from ..model.parameters import N_JOINTS
 from ..model.robot import Robot
-from .gains import Gains, check_within, real_number
+from .gains import Gains, check_within
 from .law import commanded_acceleration
 from .safety import DAMPING_STEPS, admitted_interval, damping_table
 
@@ -139,54 +140,30 @@ class SwitchingControl:
     def __post_init__(self) -> None:
         if not isinstance(self.fixed, Gains):
             raise InputError(f"fixed = {shown(self.fixed)}: expected Gains (use SwitchingControl.with_gains)")
-        real_number("threshold", self.threshold, "a positive tip error (m)")
-        for label, pair in (("kp_bounds", self.kp_bounds), ("kv_bounds", self.kv_bounds)):
-            if isinstance(pair, str | bytes) or not hasattr(pair, "__len__") or len(pair) != 2:
-                raise InputError(f"{label} = {shown(pair)}: expected finite (min, max) with min < max")
-            expected = "finite (min, max) with min < max"
-            lo, hi = (real_number(label, x, expected, strict=False, minimum=-np.inf) for x in pair)
-            if not lo < hi:
-                raise InputError(f"{label} = {shown(pair)}: expected finite (min, max) with min < max")
+        checks.positive("threshold", self.threshold, "m")
+        checks.interval("kp_bounds", self.kp_bounds, unit="1/s^2")
+        checks.interval("kv_bounds", self.kv_bounds, unit="1/s")
         check_within(self.fixed, self.kp_bounds, self.kv_bounds)
         if not isinstance(self.ga, GAOptions):
             raise InputError(f"ga = {shown(self.ga)}: expected a vgtarm.ga.GAOptions")
-        whole = isinstance(self.horizon, int | np.integer) and not isinstance(self.horizon, bool)
-        if not (whole and 1 <= self.horizon <= MAX_HORIZON):
-            raise InputError(
-                f"horizon = {shown(self.horizon)}: expected a whole number of control periods in [1, {MAX_HORIZON}]"
-            )
-        real_number("exact_above", self.exact_above, "a joint-error norm >= 0 (m, rad; 0 = never)", strict=False)
-        if not isinstance(self.prediction, str) or self.prediction not in PREDICTIONS:
-            raise InputError(f"prediction = {shown(self.prediction)}: expected one of {list(PREDICTIONS)}")
-        if not isinstance(self.variant, str) or self.variant not in VARIANTS:
-            raise InputError(f"variant = {shown(self.variant)}: expected one of {list(VARIANTS)}")
-        error = real_number("model_error", self.model_error, "a relative mass error in [0, 1)", strict=False)
-        if not error < 1.0:
-            raise InputError(f"model_error = {shown(self.model_error)}: expected a relative mass error in [0, 1)")
-        radius = real_number("stability_radius", self.stability_radius, "a pole radius in (0, 1)")
-        if not radius < 1.0:
-            raise InputError(f"stability_radius = {shown(self.stability_radius)}: expected a pole radius in (0, 1)")
-        if not isinstance(self.damping, str) or self.damping not in DAMPINGS:
-            raise InputError(f"damping = {shown(self.damping)}: expected one of {list(DAMPINGS)}")
-        box = self.stiffness_box
-        if not (isinstance(box, int | np.integer) and not isinstance(box, bool) and 1 <= box <= 100):
-            raise InputError(f"stiffness_box = {shown(box)}: expected a whole number in [1, 100]")
+        checks.whole("horizon", self.horizon, 1, MAX_HORIZON, unit="control periods")
+        checks.number("exact_above", self.exact_above, minimum=0, unit="m, rad; 0 = never")
+        checks.choice("prediction", self.prediction, PREDICTIONS)
+        checks.choice("variant", self.variant, VARIANTS)
+        checks.number("model_error", self.model_error, minimum=0, below=1)
+        checks.number("stability_radius", self.stability_radius, above=0, below=1)
+        checks.choice("damping", self.damping, DAMPINGS)
+        checks.whole("stiffness_box", self.stiffness_box, 1, 100)
         if self.hold is not None:
-            whole = isinstance(self.hold, int | np.integer) and not isinstance(self.hold, bool)
-            if not (whole and 1 <= self.hold <= self.horizon):
-                raise InputError(
-                    f"hold = {shown(self.hold)}: expected a whole number of control periods in [1, {self.horizon}]"
-                    " (the horizon) or None"
-                )
+            expected = f"a whole number of control periods from 1 to {self.horizon} (the horizon) or None"
+            checks.whole("hold", self.hold, 1, self.horizon, expected=expected)
         if self.watch_from is not None:
-            whole = isinstance(self.watch_from, int | np.integer) and not isinstance(self.watch_from, bool)
-            if not (whole and 1 <= self.watch_from <= MAX_HORIZON):
-                raise InputError(
-                    f"watch_from = {shown(self.watch_from)}: expected a whole number of control periods in"
-                    f" [1, {MAX_HORIZON}] (from the hold on: never) or None (never drop a held set)"
-                )
-        if self.switch_on is not None and self.switch_on not in SWITCH_ON:
-            raise InputError(f"switch_on = {shown(self.switch_on)}: expected one of {list(SWITCH_ON)} or None")
+            expected = (
+                f"a whole number of control periods from 1 to {MAX_HORIZON:,} (from the hold on: never) or None"
+                " (never drop a held set)"
+            )
+            checks.whole("watch_from", self.watch_from, 1, MAX_HORIZON, expected=expected)
+        checks.choice("switch_on", self.switch_on, (*SWITCH_ON, None))
         if self.variant == "paper" and (self.hold not in (None, 1) or self.switch_on not in (None, "true")):
             raise InputError(
                 f"hold = {shown(self.hold)}, switch_on = {shown(self.switch_on)}: the paper's variant holds a"

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import checks
 from ..errors import InputError
 from ..model.parameters import N_JOINTS
 from .effort import CRITERIA, DEFAULT_JOINT_LIMIT_WEIGHT, DEFAULT_TOOL_FORCE_SPEED
@@ -17,11 +17,24 @@ from .problem import DEFAULT_MARGIN
 #: The fast solver's ``coarse_step`` on the paper's robot (m).
 COARSE_STEP = 0.02
 #: The paper robot's reach: the distance from the base to its tip at home (m). A robot that reaches
-#: farther gets the case paths scaled by its reach over this (:func:`vgtarm.app.cases.path_placement`)
+#: farther gets the case paths scaled by its reach over this (:func:`vgtarm.experiment.cases.path_placement`)
 #: and a ``coarse_step`` scaled alike (:func:`default_coarse_step`).
 PAPER_REACH = 0.66
 #: Reaches within this of :data:`PAPER_REACH` (m) count as the paper robot's (the case paths' rule).
 SAME_REACH = 1e-9
+#: The options that are numbers > 0, with their units (``""``: a ratio, or a tolerance of mixed units).
+_POSITIVE = {
+    "margin": "m",
+    "tol_primal": "",
+    "tol_stationarity": "",
+    "max_step": "m, rad",
+    "coarse_step": "m",
+    "reference_ftol": "",
+    "accept_primal": "",
+    "accept_stationarity": "",
+    "joint_limit_weight": "",
+    "tool_force_speed": "m/s",
+}
 
 
 def default_coarse_step(reach: float) -> float:
@@ -138,45 +151,24 @@ class IKOptions:
         if unknown:
             raise InputError(f"unknown inverse-kinematics option {unknown[0]!r}; valid options are {', '.join(valid)}")
         values = dict(options)
-        for name in ("margin", "tol_primal", "tol_stationarity", "max_step", "coarse_step", "reference_ftol"):
+        for name, unit in _POSITIVE.items():
             if name in values and not (name == "coarse_step" and values[name] is None):
-                values[name] = _positive(name, values[name])
-        for name in ("accept_primal", "accept_stationarity", "joint_limit_weight", "tool_force_speed"):
-            if name in values:
-                values[name] = _positive(name, values[name])
-        if "criterion" in values and values["criterion"] not in CRITERIA:
-            raise InputError(f"criterion must be one of {', '.join(CRITERIA)}, got {values['criterion']!r}")
+                values[name] = checks.positive(name, values[name], unit)
+        if "criterion" in values:
+            checks.choice("criterion", values["criterion"], CRITERIA)
         if "tool_force" in values:
-            force = values["tool_force"]
-            if isinstance(force, bool) or not isinstance(force, int | float | np.floating | np.integer):
-                raise InputError(f"tool_force must be a force >= 0 (N), got {force!r}")
-            if not (math.isfinite(float(force)) and float(force) >= 0):
-                raise InputError(f"tool_force must be a finite force >= 0 (N), got {force!r}")
-            values["tool_force"] = float(force)
+            values["tool_force"] = checks.number("tool_force", values["tool_force"], minimum=0, unit="N")
         if values.get("criterion", "joint_limits") == "joint_limits":
             given = sorted({"joint_limit_weight", "tool_force", "tool_force_speed"} & set(values))
             if given:
                 raise InputError(f"{given[0]} applies to criterion='effort' only; criterion is 'joint_limits'")
         for name in ("max_iterations", "reference_maxiter"):
             if name in values:
-                value = values[name]
-                if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
-                    raise InputError(f"{name} must be an integer >= 1, got {value!r}")
-                values[name] = int(value)
-        if "fallback" in values and not isinstance(values["fallback"], bool | np.bool_):
-            raise InputError(f"fallback must be True or False, got {values['fallback']!r}")
+                values[name] = checks.whole(name, values[name], 1)
+        if "fallback" in values:
+            checks.flag("fallback", values["fallback"])
         if values.get("initial_guess") is not None:
-            try:
-                guess = np.array(values["initial_guess"], dtype=float)
-            except (TypeError, ValueError):
-                raise InputError(
-                    f"initial_guess must be {n_joints} joint values, got {values['initial_guess']!r}"
-                ) from None
-            if guess.shape != (n_joints,) or not np.isfinite(guess).all():
-                raise InputError(
-                    f"initial_guess must be {n_joints} finite joint values, got {values['initial_guess']!r}"
-                )
-            values["initial_guess"] = guess
+            values["initial_guess"] = checks.finite_array("initial_guess", values["initial_guess"], (n_joints,)).copy()
         return cls(**values)
 
     @property
@@ -199,12 +191,3 @@ class IKOptions:
     def tolerances(self) -> Tolerances:
         """Acceptance thresholds of the per-sample verification."""
         return Tolerances(primal=self.accept_primal, stationarity=self.accept_stationarity)
-
-
-def _positive(name: str, value: object) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
-        raise InputError(f"{name} must be a positive number, got {value!r}")
-    number = float(value)
-    if not (math.isfinite(number) and number > 0):
-        raise InputError(f"{name} must be a finite number > 0, got {value!r}")
-    return number

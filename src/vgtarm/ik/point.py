@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import InputError, UnreachableError, shown
+from .. import checks
+from ..errors import UnreachableError
 from ..model.robot import Robot
 from ..paths import MAX_COORDINATE, TipPath
 from . import reference
@@ -51,6 +52,8 @@ class PointSolution:
         message: one line: what was solved, or why not.
         joint_names: the robot's joint names, in the order of ``q``.
         wall_time_s: wall-clock time of the solve (s).
+        robot: the :class:`~vgtarm.Robot` it was solved for (None if unknown). Not pickled (a robot
+            holds its compiled library): a solution sent to another process keeps ``joint_names``.
     """
 
     point: Array
@@ -65,6 +68,11 @@ class PointSolution:
     message: str
     joint_names: tuple[str, ...]
     wall_time_s: float
+    robot: Robot | None = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        """The pickled state: everything but :attr:`robot` (its compiled library does not pickle)."""
+        return {**self.__dict__, "robot": None}
 
     @property
     def closest_limit(self) -> tuple[int, str, float]:
@@ -74,14 +82,9 @@ class PointSolution:
 
 
 def _as_point(point: object) -> Array:
-    try:
-        p = np.array(point, dtype=float)
-    except (TypeError, ValueError):
-        raise InputError(f"point {shown(point)}: expected three numbers x, y, z (m)") from None
-    if p.shape != (3,) or not np.isfinite(p).all():
-        raise InputError(f"point {shown(point)}: expected three finite numbers x, y, z (m)")
+    p = checks.finite_array("point", point, (3,)).copy()
     if np.abs(p).max() > MAX_COORDINATE:
-        raise InputError(f"point {shown(p.tolist())}: expected coordinates within +-{MAX_COORDINATE:g} m")
+        checks.refuse("point", p.tolist(), f"coordinates x, y, z within +-{MAX_COORDINATE:g} (m)")
     return p
 
 
@@ -166,7 +169,7 @@ def _solution(
     message: str,
     started: float,
 ) -> PointSolution:
-    low, high = robot.parameters.lower, robot.parameters.upper
+    low, high = robot.joint_limits()
     margins = np.stack([q - low, high - q], axis=1)
     phi = float(IKProblem.from_parameters(robot.parameters).phi(q))
     for array in (p, q, margins):
@@ -184,4 +187,5 @@ def _solution(
         message=message,
         joint_names=robot.joint_names,
         wall_time_s=time.perf_counter() - started,
+        robot=robot,
     )

@@ -3,7 +3,7 @@
 ``min Phi(q) = (1/n) sum_i ((q_i - q_i*) / (q_i,max - q_i,min))^2`` with ``q* `` the middle of the
 joint range and ``n`` the number of joints (7 for the paper's robot, any for a stack), subject to
 the task's equality constraints (tip point, optionally the
-orientation), the joint limits ``q_min <= q <= q_max`` and assemblability with a margin: the
+orientation), the joint limits ``lower <= q <= upper`` and assemblability with a margin: the
 triangle inequalities of the truss are linear in ``q`` (:func:`vgtarm.model.assembly.linear_form`), and
 every sample must satisfy ``G q + h >= margin``. Rows that the joint limits already imply with
 that margin are dropped, so the active-set systems stay small (for the reference robot only the two
@@ -24,12 +24,12 @@ The working arrays of a batch of inverse-kinematics samples (primal, dual, activ
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import checks
 from ..errors import InputError
 from ..model.assembly import TRIANGLE_INEQUALITIES
 from ..model.parameters import JOINT_NAMES, N_JOINTS, RobotParameters
@@ -73,7 +73,7 @@ class IKProblem:
     Attributes:
         lower, upper: ``(n,)`` joint limits (m, rad).
         centre: ``(n,)`` middle of each range ``q*``.
-        weight: ``(n,)`` diagonal of the constant Hessian of ``Phi``: ``2 / (n (q_max - q_min)^2)``.
+        weight: ``(n,)`` diagonal of the constant Hessian of ``Phi``: ``2 / (n (upper - lower)^2)``.
         G, h: ``(k, n)``, ``(k,)`` kept triangle rows; the constraint is ``G q + h >= margin``.
         G_all, h_all: ``(6 m, n)``, ``(6 m,)`` every triangle row of the ``m`` modules (margins
             ``G_all q + h_all``), used to keep iterates assemblable.
@@ -113,11 +113,8 @@ class IKProblem:
 
         ``joint_limit_weight`` multiplies ``Phi`` (the effort criterion's weight of eq. 12; 1 for eq. 12 alone).
         """
-        if isinstance(margin, bool) or not isinstance(margin, int | float) or not math.isfinite(margin) or margin <= 0:
-            raise InputError(
-                f"margin must be a finite length > 0 (m), got {margin!r} (at zero margin the truss is flat and "
-                "its kinematics are not differentiable)"
-            )
+        expected = "a finite number > 0 (m; at zero margin the truss is flat and its kinematics are not differentiable)"
+        margin = checks.positive("margin", margin, expected=expected)
         lower, upper = parameters.lower, parameters.upper
         G_all, h_all = parameters.margin_form()
         n = lower.shape[0]

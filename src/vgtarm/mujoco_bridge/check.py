@@ -6,8 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError, shown
-from ..ga import check_seed
+from .. import checks
 from ..model.robot import Robot
 from .export import DIGITS
 from .model import MujocoRobot
@@ -45,9 +44,8 @@ def cross_validate(
     paper's robot or any stack) over ``n`` random assemblable states with random velocities
     (joint speeds up to 0.05 m/s and 0.5 rad/s), efforts (about 20 N) and tip forces (about
     10 N). ``n`` is at most :data:`MAX_STATES`."""
-    if isinstance(n, bool) or not isinstance(n, int | np.integer) or not 1 <= n <= MAX_STATES:
-        raise InputError(f"n = {shown(n)}: expected a number of states in [1, {MAX_STATES:,}]")
-    seed = check_seed(seed, "seed")  # 0 to 2**63 - 1, as every seed of vgtarm
+    n = checks.whole("n", n, 1, MAX_STATES, unit="states")
+    seed = checks.seed("seed", seed)  # 0 to 2**63 - 1, as every seed of vgtarm
     mj = bridge or MujocoRobot(robot, digits=digits)
     rng = np.random.default_rng(seed)
     worst: dict[str, float] = {}

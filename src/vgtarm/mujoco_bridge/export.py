@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .. import checks
 from ..errors import InputError, escape, shown
 from ..model.parameters import Body, RobotParameters
 from ..model.robot import Robot
@@ -236,22 +237,12 @@ def _check_export(
 ) -> None:
     if not isinstance(robot, Robot):
         raise InputError(f"robot = {shown(robot)}: expected a vgtarm.Robot (see vgtarm.load_robot)")
-    for name, value, low, high in (
-        ("timestep", timestep, 0.0, MAX_TIMESTEP),
-        ("solver_tolerance", solver_tolerance, 0.0, 1.0),
-        ("leg_mass", leg_mass, MJ_MINVAL, math.inf),
-        ("leg_inertia", leg_inertia, MJ_MINVAL, math.inf),
-    ):
-        real = isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
-        if not (real and math.isfinite(float(value)) and low < float(value) <= high):  # type: ignore[arg-type]
-            bound = f"<= {high:g}" if math.isfinite(high) else "finite"
-            raise InputError(f"{name} = {shown(value)}: expected a number > {low:g} and {bound}")
-    whole = isinstance(digits, int | np.integer) and not isinstance(digits, bool)
-    if not (whole and MIN_DIGITS <= digits <= MAX_DIGITS):  # type: ignore[operator]
-        raise InputError(
-            f"digits = {shown(digits)}: expected a whole number of significant digits "
-            f"from {MIN_DIGITS} to {MAX_DIGITS} ({MAX_DIGITS}: every number as it is)"
-        )
+    checks.number("timestep", timestep, above=0, maximum=MAX_TIMESTEP, unit="s")
+    checks.number("solver_tolerance", solver_tolerance, above=0, maximum=1)
+    checks.number("leg_mass", leg_mass, above=MJ_MINVAL, unit="kg")
+    checks.number("leg_inertia", leg_inertia, above=MJ_MINVAL, unit="kg m^2")
+    digits_unit = f"significant digits; {MAX_DIGITS}: every number as it is"
+    checks.whole("digits", digits, MIN_DIGITS, MAX_DIGITS, unit=digits_unit)
 
 
 #: Colours of the scene (RGBA): the legs ``s`` and ``v``, the diagonals ``p``, the platforms,

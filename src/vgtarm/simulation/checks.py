@@ -15,13 +15,13 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ..checks import number as check_number
 from ..errors import InputError, VgtarmError, escape, shown
 from ..model.factors import MODEL_FACTOR_RANGE
 from ..model.parameters import RobotParameters
@@ -121,15 +121,11 @@ def limit_tolerance(plant: Robot, value: Any) -> float:
     that a run stopped that far outside the limits is still inside the accepted joint range."""
     low, high = plant.joint_range()
     largest = float(min((plant.parameters.lower - low).min(), (high - plant.parameters.upper).min()))
-    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
-        raise InputError(f"limit_tolerance = {shown(value)}: expected a distance in (0, {largest:.6g}] (m, rad)")
-    number = float(value)
-    if not (math.isfinite(number) and 0.0 < number <= largest):
-        raise InputError(
-            f"limit_tolerance = {shown(number)}: expected a distance in (0, {largest:.6g}] (m, rad) outside the "
-            "joint limits at which a run is stopped (nan or inf would never stop a diverging run)"
-        )
-    return number
+    expected = (
+        f"a distance in (0, {largest:.6g}] (m, rad) outside the joint limits at which a run is stopped (nan or inf"
+        " would never stop a diverging run)"
+    )
+    return check_number("limit_tolerance", value, above=0, maximum=largest, expected=expected)
 
 
 def arguments(plant: Any, controller_model: Any, metadata: Any, progress: Any) -> None:

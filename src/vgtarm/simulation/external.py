@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import InputError
+from .. import checks
 
 Array = NDArray[np.float64]
 
@@ -53,13 +53,9 @@ class ExternalForce:
     eta: tuple[float, float, float] = (5.0, 5.0, 5.0)
 
     def __post_init__(self) -> None:
-        if not (np.isfinite(self.cutting_force) and self.cutting_force >= 0):
-            raise InputError(f"cutting_force = {self.cutting_force!r}: expected a force >= 0 (N)")
-        if not (np.isfinite(self.cutting_speed) and self.cutting_speed >= 0):
-            raise InputError(f"cutting_speed = {self.cutting_speed!r}: expected a speed >= 0 (m/s)")
-        eta = np.asarray(self.eta, dtype=float)
-        if eta.shape != (3,) or not (np.isfinite(eta).all() and (eta >= 0).all()):
-            raise InputError(f"eta = {self.eta!r}: expected three bounds >= 0 (N)")
+        checks.number("cutting_force", self.cutting_force, minimum=0, unit="N")
+        checks.number("cutting_speed", self.cutting_speed, minimum=0, unit="m/s")
+        checks.vector("eta", self.eta, 3, minimum=0, unit="N")
 
     @classmethod
     def none(cls) -> ExternalForce:

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import checks
 from ..errors import InputError, shown
 from ..model.parameters import JOINT_UNITS
 
@@ -108,19 +109,6 @@ class Sensing:
         }
 
 
-def _number(name: str, value: object, *, minimum: float = 0.0, strict: bool = False) -> float:
-    if isinstance(value, str | bytes | bool):  # a number given as text is a mistake, not a number
-        raise InputError(f"{name} = {shown(value)}: expected a number")
-    try:
-        number = float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError, OverflowError):
-        raise InputError(f"{name} = {shown(value)}: expected a number") from None
-    if not math.isfinite(number) or number < minimum or (strict and number == minimum):
-        relation = ">" if strict else ">="
-        raise InputError(f"{name} = {value!r}: expected a finite number {relation} {minimum:g}")
-    return number
-
-
 def _observer_gain(observer: str, observer_gain: float | None, dt: float) -> float:
     """K_O (1/s) of the momentum observer: positive and at most 1/dt (default 0.5/dt); 0 without it."""
     if observer != "momentum":
@@ -129,12 +117,10 @@ def _observer_gain(observer: str, observer_gain: float | None, dt: float) -> flo
         return 0.0
     if observer_gain is None:
         observer_gain = DEFAULT_OBSERVER_GAIN_DT / dt
-    gain = _number("observer_gain", observer_gain, strict=True)
+    gain = checks.positive("observer_gain", observer_gain, "1/s")
     if gain * dt > 1.0:
-        raise InputError(
-            f"observer_gain = {observer_gain!r}: expected at most 1/dt = {1.0 / dt:g} 1/s "
-            "(the estimate's time constant must be at least one control period)"
-        )
+        expected = f"at most 1/dt = {1.0 / dt:g} 1/s (the estimate's time constant must be at least one control period)"
+        checks.refuse("observer_gain", observer_gain, expected)
     return gain
 
 
@@ -167,30 +153,26 @@ def sensing_settings(
 
     ``units`` are the robot's joint units (``m``: a leg, whose encoder has ``encoder_resolution``;
     ``rad``: a twist, ``twist_resolution``, refused on a robot without a twist)."""
-    if observer not in OBSERVERS:
-        raise InputError(f"observer = {observer!r}: expected one of {list(OBSERVERS)}")
-    if not isinstance(force_sensor, bool | np.bool_):
-        raise InputError(f"force_sensor = {force_sensor!r}: expected True or False")
+    checks.choice("observer", observer, OBSERVERS)
+    checks.flag("force_sensor", force_sensor)
     if force_sensor and observer != "none":
         raise InputError(f"force_sensor = True with observer = {observer!r}: choose one way to cancel the tool force")
     gain = _observer_gain(observer, observer_gain, dt)
-    legs = _number("encoder_resolution", encoder_resolution)
+    legs = checks.number("encoder_resolution", encoder_resolution, minimum=0, unit="m")
     check_twist_resolution(units, twist_resolution)
     twist = DEFAULT_TWIST_RESOLUTION if twist_resolution is None and legs > 0 else twist_resolution or 0.0
-    twist = _number("twist_resolution", twist)
+    twist = checks.number("twist_resolution", twist, minimum=0, unit="rad")
     for label, step, largest, unit in (
         ("encoder_resolution", legs, MAX_LEG_RESOLUTION, "m"),
         ("twist_resolution", twist, MAX_TWIST_RESOLUTION, "rad"),
     ):
         if step > largest:
-            raise InputError(f"{label} = {step!r}: expected an encoder step of at most {largest:g} {unit}")
-    noise = _number("velocity_noise", velocity_noise)
+            checks.refuse(label, step, f"an encoder step of at most {largest:g} {unit}")
+    noise = checks.number("velocity_noise", velocity_noise, minimum=0, unit="m/s, rad/s")
     if noise > MAX_VELOCITY_NOISE:
-        raise InputError(
-            f"velocity_noise = {velocity_noise!r}: expected a standard deviation of at most {MAX_VELOCITY_NOISE:g} "
-            "(m/s, rad/s) on each differenced velocity"
-        )
-    cutoff = _number("velocity_filter_hz", velocity_filter_hz, strict=True)
+        expected = f"a standard deviation of at most {MAX_VELOCITY_NOISE:g} (m/s, rad/s) on each differenced velocity"
+        checks.refuse("velocity_noise", velocity_noise, expected)
+    cutoff = checks.positive("velocity_filter_hz", velocity_filter_hz, "Hz")
     resolution = np.array([legs if unit == "m" else twist for unit in units])
     bandwidth, gains = _estimator(estimator, estimator_bandwidth_hz, dt, resolution, noise)
     return Sensing(
@@ -212,8 +194,7 @@ def _estimator(
     estimator: str, bandwidth_hz: float | None, dt: float, resolution: NDArray[np.float64], noise: float
 ) -> tuple[float, tuple[float, float, float]]:
     """The Kalman estimator's bandwidth (Hz) and gains; 0 and zeros with the differences."""
-    if estimator not in ESTIMATORS:
-        raise InputError(f"estimator = {shown(estimator)}: expected one of {list(ESTIMATORS)}")
+    checks.choice("estimator", estimator, ESTIMATORS)
     if estimator == "difference":
         if bandwidth_hz is not None:
             raise InputError(f"estimator_bandwidth_hz = {bandwidth_hz!r}: only used with estimator = 'kalman'")
@@ -229,10 +210,8 @@ def _estimator(
             "positions, not differenced velocities)"
         )
     bandwidth = DEFAULT_ESTIMATOR_BANDWIDTH_HZ if bandwidth_hz is None else bandwidth_hz
-    bandwidth = _number("estimator_bandwidth_hz", bandwidth, strict=True)
+    bandwidth = checks.positive("estimator_bandwidth_hz", bandwidth, "Hz")
     if bandwidth * dt > 0.25:
-        raise InputError(
-            f"estimator_bandwidth_hz = {bandwidth_hz!r}: expected at most 0.25/dt = {0.25 / dt:g} Hz "
-            "(a quarter of the sampling rate)"
-        )
+        expected = f"at most 0.25/dt = {0.25 / dt:g} Hz (a quarter of the sampling rate)"
+        checks.refuse("estimator_bandwidth_hz", bandwidth, expected)
     return bandwidth, kalman_gains(dt, bandwidth)

@@ -1,5 +1,6 @@
 """Option types and options shared by the ``vgtarm`` commands (argparse ``type=`` callables that
-refuse a bad value with argparse's own one-line message)."""
+refuse a bad value with argparse's own one-line message: ``argument --fps: expected a finite
+number > 0, got -1.0``, the refusals of :mod:`vgtarm.checks` with argparse naming the option)."""
 
 from __future__ import annotations
 
@@ -7,8 +8,7 @@ import argparse
 from collections.abc import Callable
 from pathlib import Path
 
-import numpy as np
-
+from ... import checks
 from ...errors import shown
 
 
@@ -40,36 +40,33 @@ def register_numbers(parser: argparse.ArgumentParser) -> None:
     parser.register("type", int, whole_number)
 
 
+def _read(parse: Callable[[str], float], text: str) -> object:
+    """``parse(text)``, or ``text`` itself if it is no number (then refused by the check, which shows it)."""
+    try:
+        return parse(text)
+    except ValueError:
+        return text
+
+
 def positive_int(text: str) -> int:
-    value = whole_number(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text}")
-    return value
+    """An option's whole number >= 1."""
+    return checks.whole("", _read(whole_number, text), 1, error=argparse.ArgumentTypeError)
 
 
 def non_negative_int(text: str) -> int:
-    value = whole_number(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text}")
-    return value
+    """An option's whole number >= 0."""
+    return checks.whole("", _read(whole_number, text), 0, error=argparse.ArgumentTypeError)
 
 
 def seed_number(text: str) -> int:
-    """``--seed``: a whole number from 0 to 2**63 - 1 (:data:`vgtarm.ga.MAX_SEED`, the range of every
-    seed: a run's seed is stored as a 64-bit integer)."""
-    from ...ga import MAX_SEED
-
-    value = whole_number(text)
-    if not 0 <= value <= MAX_SEED:
-        raise argparse.ArgumentTypeError(f"expected a whole number from 0 to 2**63 - 1 = {MAX_SEED}, got {text}")
-    return value
+    """``--seed``: a whole number from 0 to 2**63 - 1 (:data:`vgtarm.checks.MAX_SEED`, the range of
+    every seed: a run's seed is stored as a 64-bit integer)."""
+    return checks.seed("", _read(whole_number, text), error=argparse.ArgumentTypeError)
 
 
 def positive_float(text: str) -> float:
-    value = number(text)
-    if not (np.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text}")
-    return value
+    """An option's finite number > 0."""
+    return checks.positive("", _read(number, text), error=argparse.ArgumentTypeError)
 
 
 def add_config(parser: argparse.ArgumentParser) -> None:
@@ -105,13 +102,10 @@ def joint_gains(text: str, option: str, joint_names: tuple[str, ...]) -> float |
 
 
 def positive_int_at_most(largest: int, what: str) -> Callable[[str], int]:
-    """An option type: a whole number from 1 to ``largest``, refused as "expected at most
-    {largest} {what}" above it."""
+    """An option type: a whole number from 1 to ``largest`` counting ``what`` (refused as "expected
+    a whole number from 1 to {largest} ({what})")."""
 
     def parse(text: str) -> int:
-        value = positive_int(text)
-        if value > largest:
-            raise argparse.ArgumentTypeError(f"expected at most {largest:,} {what}, got {text}")
-        return value
+        return checks.whole("", _read(whole_number, text), 1, largest, unit=what, error=argparse.ArgumentTypeError)
 
     return parse

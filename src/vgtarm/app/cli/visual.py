@@ -7,7 +7,6 @@ imageio-ffmpeg (the ``viz`` extra) are imported only when a command needs them.
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 from typing import Any
 
@@ -15,20 +14,10 @@ from ...errors import InputError, escape
 from ...fileio import atomic_folder, check_output_file, check_output_folder, placements, read_bytes_limited
 from ...model.parameters import JOINT_NAMES, ROBOT_FILE_LIMIT
 from ...model.robot import load_robot
-from .options import add_model, number
+from .options import add_model, positive_float
 
 #: Picture formats of ``vgtarm draw``.
 PICTURE_FORMATS = (".png", ".svg", ".pdf")
-
-
-def _positive(text: str) -> float:
-    try:
-        value = number(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text}")
-    return value
 
 
 def _config(parser: argparse.ArgumentParser) -> None:
@@ -160,11 +149,11 @@ def add_parsers(sub: Any) -> None:
         "run_dir", type=Path, metavar="RUN_DIR", help="a folder written by simulate --out or reproduce"
     )
     animate.add_argument("--out", type=Path, required=True, metavar="FILE", help="video file: .mp4 or .gif")
-    animate.add_argument("--fps", type=_positive, default=25.0, help="frames per second of video (default 25)")
+    animate.add_argument("--fps", type=positive_float, default=25.0, help="frames per second of video (default 25)")
     animate.add_argument(
-        "--speed", type=_positive, default=1.0, help="simulated seconds per second of video (default 1)"
+        "--speed", type=positive_float, default=1.0, help="simulated seconds per second of video (default 1)"
     )
-    animate.add_argument("--dpi", type=_positive, default=100.0, help="resolution; 100 gives 1280 x 640 (default)")
+    animate.add_argument("--dpi", type=positive_float, default=100.0, help="resolution; 100 gives 1280 x 640 (default)")
     animate.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     _config(animate)
     animate.set_defaults(run=cmd_animate)

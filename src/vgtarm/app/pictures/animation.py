@@ -20,7 +20,6 @@ Pillow alone, is the fallback when that package is missing.
 
 from __future__ import annotations
 
-import math
 import os
 import subprocess
 import tempfile
@@ -33,6 +32,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from numpy.typing import ArrayLike, NDArray
 
+from ... import checks
 from ...errors import InputError, cut, escape
 from ...fileio import atomic_path
 from ...markup import mpl_text
@@ -91,9 +91,8 @@ def _round_half_up(x: ArrayLike) -> NDArray[np.int64]:
 
 def frame_plan(result: SimulationResult, *, fps: float = 25.0, speed: float = 1.0) -> FramePlan:
     """The frames of an animation of ``result`` at ``fps`` frames per second and ``speed``."""
-    for name, value in (("fps", fps), ("speed", speed)):
-        if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
-            raise InputError(f"{name} = {value!r}: expected a positive finite number")
+    checks.positive("fps", fps, "frames per second of video")
+    checks.positive("speed", speed, "simulated seconds per second of video")
     n = result.completed
     if n < 1:
         raise InputError("the run has no completed sample to animate")
@@ -379,8 +378,7 @@ def render_animation(
     path = Path(out)
     if path.suffix.lower() not in FORMATS:
         raise InputError(f"out = {str(path)!r}: expected a file name ending in one of {list(FORMATS)}")
-    if not (isinstance(dpi, int | float) and math.isfinite(dpi) and 0 < dpi <= MAX_DPI):
-        raise InputError(f"dpi = {dpi!r}: expected a positive number at most {MAX_DPI:g}")
+    checks.positive("dpi", dpi, maximum=MAX_DPI)
     check_same_robot(robot, result)
     plan = frame_plan(result, fps=fps, speed=speed)
     area = (FIGURE_SIZE[0] * dpi) * (FIGURE_SIZE[1] * dpi)  # pixels a frame

@@ -35,6 +35,7 @@ from matplotlib.ticker import MaxNLocator
 from mpl_toolkits.mplot3d.axes3d import Axes3D
 from numpy.typing import NDArray
 
+from ... import checks
 from ...errors import InputError
 from ...fileio import atomic_path
 from ...markup import mpl_text
@@ -419,8 +420,7 @@ def save_figure(fig: Figure, path: str | os.PathLike[str], *, dpi: float = 150) 
     supported = sorted(fig.canvas.get_supported_filetypes())
     if fmt not in supported:
         raise InputError(f"path = {str(out)!r}: unknown image suffix {out.suffix!r}, expected one of {supported}")
-    if not (np.isfinite(dpi) and dpi > 0):
-        raise InputError(f"dpi = {dpi!r}: expected a positive number")
+    checks.positive("dpi", dpi)
     out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(out) as temporary:
         fig.savefig(temporary, dpi=dpi, format=fmt)

@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ... import errors
+from ... import checks, errors
 from ...errors import InputError
 from ...fileio import atomic_write_text
 from ...markup import html_text, md_cell, md_text, plotly_text
@@ -125,8 +125,7 @@ def decimate_min_max(t: ArrayLike, y: ArrayLike, max_points: int = MAX_POINTS) -
     ta, ya = np.asarray(t, dtype=float), np.asarray(y, dtype=float)
     if ta.shape != ya.shape or ta.ndim != 1:
         raise InputError(f"t and y must be 1-D of one length, got shapes {ta.shape} and {ya.shape}")
-    if not (isinstance(max_points, int) and max_points >= 4):
-        raise InputError(f"max_points = {max_points!r}: expected a whole number >= 4")
+    checks.whole("max_points", max_points, 4)
     n = len(ya)
     if n <= max_points:
         return np.arange(n)

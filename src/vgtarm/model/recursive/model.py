@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ... import checks
 from ...errors import AssemblyError, InputError, shown
 from ...machine import PROBE_ROWS, split_rows
 from ..assembly import TRIANGLE_INEQUALITIES
@@ -63,8 +64,8 @@ class RecursiveModel:
     def __init__(self, stack: Stack, *, gravity: ArrayLike | None = None, threads: int | None = 1) -> None:
         if not isinstance(stack, Stack):
             raise InputError(f"stack = {shown(stack)}: expected a Stack (see vgtarm.model.stack.load_stack)")
-        if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
-            raise InputError(f"threads = {shown(threads)}: expected a number of threads >= 1, or None (the machine's)")
+        if threads is not None:
+            threads = checks.whole("threads", threads, 1, expected="a number of threads >= 1, or None (the machine's)")
         self.stack = stack
         #: Threads a batch runs on (:func:`vgtarm.machine.split_rows`): 1, the default, the calling
         #: thread alone; ``None`` as many as :func:`vgtarm.machine.batch_threads` gives (the
