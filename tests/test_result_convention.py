@@ -125,3 +125,161 @@ def test_records_become_strict_json_alike_for_runs_and_studies():
     record = {"a": np.float64("nan"), "b": np.arange(3), "c": (np.int8(2), float("inf")), "d": {"e": np.float32(0.5)}}
     text = json.dumps(json_value(record), allow_nan=False)
     assert json.loads(text) == {"a": None, "b": [0, 1, 2], "c": [2, None], "d": {"e": 0.5}}
+
+
+# -- inverse kinematics with check=False ---------------------------------------------------------
+
+
+def _outward(robot, dt=2e-2):
+    """From the home tip straight out along x by 0.45 m in 1 s: out of reach about halfway."""
+    home = robot.tip_position(robot.parameters.home)
+    return vgtarm.paths.waypoints([0.0, 1.0], [home, home + [0.45, 0.0, 0.0]], dt=dt, name="outward")
+
+
+def _head(path, n):
+    """The first ``n`` samples of ``path`` as a path of their own."""
+    jerk = None if path.jerk is None else path.jerk[:n]
+    return vgtarm.paths.TipPath(
+        path.name, path.t[:n], path.position[:n], path.velocity[:n], path.acceleration[:n], jerk
+    )
+
+
+def _assert_rows_are(partial, reference, n):
+    """The first ``n`` rows of ``partial`` are ``reference``'s, bit for bit, and the rest are blank."""
+    for name in ("q", "qd", "qdd"):
+        np.testing.assert_array_equal(getattr(partial, name)[:n], getattr(reference, name), err_msg=name)
+        assert np.isnan(getattr(partial, name)[n:]).all(), name
+    for name, value in vars(reference.samples).items():
+        if isinstance(value, np.ndarray):
+            np.testing.assert_array_equal(getattr(partial.samples, name)[:n], value, err_msg=name)
+    assert not partial.samples.success[n:].any()
+    assert partial.samples.method[n] == "unreachable" and set(partial.samples.method[n + 1 :]) <= {"not solved"}
+
+
+@pytest.mark.parametrize("rates", ["exact", "finite_difference"])
+def test_ik_check_false_returns_the_reachable_prefix_bit_for_bit(robot, rates):
+    path = _outward(robot)
+    with pytest.raises(vgtarm.UnreachableError) as info:
+        robot.inverse_kinematics(path, rates=rates)
+    partial = robot.inverse_kinematics(path, rates=rates, check=False)
+    assert (partial.success, partial.status, partial.message) == (False, "unreachable", str(info.value))
+    n = partial.completed
+    assert partial.message.startswith(f"sample {n} at t = ") and 2 <= n < len(path)
+    assert len(partial) == len(path) and partial.t is path.t and partial.position is path.position
+    prefix = robot.inverse_kinematics(_head(path, n), rates=rates)  # check=True: every sample reached
+    assert prefix.success and prefix.completed == n
+    _assert_rows_are(partial, prefix, n)
+    assert partial.work["n_iterations"] > prefix.work["n_iterations"]  # both solves counted
+    assert partial.plot() is not None  # the blank rows leave gaps
+
+
+def test_ik_check_false_with_the_first_sample_out_of_reach_has_no_rows(robot):
+    home = robot.tip_position(robot.parameters.home)
+    path = vgtarm.paths.waypoints([0.0, 0.05], [home + [0.5, 0.0, 0.0], home + [0.5, 0.01, 0.0]], dt=1e-2)
+    partial = vgtarm.inverse_kinematics(robot, path, check=False)
+    assert partial.status == "unreachable" and partial.completed == 0 and partial.message.startswith("sample 0 ")
+    assert np.isnan(partial.q).all() and not partial.samples.success.any()
+    assert list(partial.samples.method) == ["unreachable"] + ["not solved"] * (len(path) - 1)
+
+
+def test_ik_check_false_cuts_a_planar_path_at_its_first_point_off_the_plane():
+    """Off the plane is found before anything is solved: the farthest point is raised for, the first
+    one ends a result; the samples before it are solved alone."""
+    from .test_ik_planar import EXAMPLES
+
+    planar = vgtarm.load_robot(EXAMPLES / "planar_module.toml")
+    tip = planar.tip_position(planar.parameters.home)
+    t = np.linspace(0.0, 0.5, 51)
+    zero = np.zeros_like(t)
+    position = tip + np.column_stack([np.maximum(t - 0.3, 0.0) * 0.01, 0.02 * t**2, zero])
+    velocity = np.column_stack([np.where(t > 0.3, 0.01, 0.0), 0.04 * t, zero])
+    acceleration = np.column_stack([zero, np.full_like(t, 0.04), zero])
+    path = vgtarm.paths.TipPath("leaving", t, position, velocity, acceleration)
+    with pytest.raises(vgtarm.UnreachableError, match=r"^path 'leaving': sample 50 \(t = 0\.5 s\)"):
+        planar.inverse_kinematics(path)
+    partial = planar.inverse_kinematics(path, check=False)
+    assert partial.status == "unreachable" and partial.message.startswith("path 'leaving': sample 31 (t = 0.31 s)")
+    assert partial.completed == 31 and partial.task_space == "tip (u2, u3) in its plane"
+    _assert_rows_are(partial, planar.inverse_kinematics(_head(path, 31)), 31)
+
+
+@pytest.mark.parametrize("check", [1, "no", None])
+def test_ik_check_must_be_a_boolean(robot, check):
+    with pytest.raises(vgtarm.InputError, match="check = .*: expected True or False"):
+        robot.inverse_kinematics(vgtarm.paths.case1(dt=1e-2, duration=0.05), check=check)
+
+
+# -- the robot and the path a result came from ------------------------------------------------------
+
+
+def test_results_hold_the_robot_and_path_they_came_from_and_pickle_without_the_robot(robot):
+    import pickle
+
+    from vgtarm.simulation.reference import JointReference
+
+    path = vgtarm.paths.case1(dt=1e-3, duration=0.1)
+    ik = robot.inverse_kinematics(path)
+    assert ik.robot is robot and ik.path is path
+    assert (ik.robot_name, ik.path_name, ik.robot_fingerprint) == (robot.parameters.name, "case1", robot.fingerprint)
+    sent = pickle.loads(pickle.dumps(ik))  # to another process: the names stay, the robot does not
+    assert sent.robot is None and sent.robot_name == ik.robot_name and sent.path_name == ik.path_name
+    np.testing.assert_array_equal(sent.q, ik.q)
+    np.testing.assert_array_equal(sent.path.position, path.position)
+    reference = JointReference.of(ik)
+    assert (reference.name, reference.robot, reference.robot_fingerprint) == ("case1", ik.robot_name, robot.fingerprint)
+    assert JointReference.of(sent).robot == ik.robot_name
+
+    run = simulate(robot, ik, CFC)
+    assert run.robot is robot and isinstance(run.reference, JointReference)
+    np.testing.assert_array_equal(run.reference.q, run.q_desired)
+    moved = pickle.loads(pickle.dumps(run))
+    assert moved.robot is None and moved.summary() == run.summary()
+    np.testing.assert_array_equal(moved.reference.q, run.reference.q)
+
+    point = vgtarm.solve_point(robot, [0.01, 0.0, 0.65])
+    assert point.robot is robot and pickle.loads(pickle.dumps(point)).robot is None
+
+
+# -- a study's result -------------------------------------------------------------------------------
+
+
+def _study(failed=False, lost=()):
+    from pathlib import Path
+
+    from vgtarm.study.runner import StudyRun
+
+    rows = [
+        {"id": f"p{i}", "controller": "cfc", "error": "", "success": True, "message": "completed",
+         "max_tip_error_m": 1e-4 * (i + 1)}
+        for i in range(4)
+    ]  # fmt: skip
+    if failed:
+        rows[2].update(success=False, error="SimulationError", message="diverged at t = 0.1000 s")
+    return StudyRun(rows, 4 + len(lost), 1, 3, int(failed), tuple(lost), 2.5, Path("out"))
+
+
+def test_a_study_says_how_it_ended():
+    done = _study()
+    assert (done.success, done.status, done.wall_time_s) == (True, "completed", 2.5)
+    assert done.message == "4 runs: 1 already stored, 3 run now, 0 failed, 0 lost"
+    failed = _study(failed=True)
+    assert (failed.success, failed.status) == (False, "runs_failed")
+    assert failed.message.endswith("(first failed: p2: diverged at t = 0.1000 s)")
+    lost = _study(lost=("p9",))
+    assert (lost.success, lost.status) == (False, "incomplete") and "run the study again" in lost.message
+
+
+def test_a_study_becomes_a_dataframe_and_a_plot():
+    pandas = pytest.importorskip("pandas")
+    study = _study(failed=True)
+    frame = study.to_dataframe()
+    assert isinstance(frame, pandas.DataFrame) and list(frame["id"]) == ["p0", "p1", "p2", "p3"]
+    assert list(frame.columns) == list(study.rows[0])
+    ax = Figure().add_subplot()
+    assert study.plot(ax) is ax
+    runs, crosses = ax.lines  # the successful runs, then the failed one
+    np.testing.assert_array_equal(runs.get_xdata(), [0, 1, 3])
+    np.testing.assert_allclose(runs.get_ydata(), [0.1, 0.2, 0.4])  # mm
+    np.testing.assert_array_equal(crosses.get_xdata(), [2])
+    with pytest.raises(vgtarm.InputError, match="column = 'error': expected a figure of the study's table"):
+        study.plot(column="error")

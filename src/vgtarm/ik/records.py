@@ -16,6 +16,8 @@ from numpy.typing import NDArray
 from ..errors import InputError, shown
 from ..fileio import atomic_open
 from ..model.parameters import JOINT_NAMES
+from ..model.robot import Robot
+from ..paths import TipPath
 
 Array = NDArray[np.float64]
 
@@ -91,19 +93,26 @@ class IKResult:
         margin: assembly margin used (m).
         lower, upper: ``(n,)`` joint limits.
         wall_time_s: wall-clock time of the solve (s).
-        success: every sample succeeded (``status`` ``"completed"``; else ``"unverified"``: some
-            samples reached their target without their optimality conditions verified).
+        success: every sample succeeded (``status`` ``"completed"``).
         message: a one-line summary (which samples failed, if any).
         work: the solver's work counters (``n_iterations``, ``n_evaluations``, ``n_converged``,
-            ``wall_time_s``; see :class:`vgtarm.ik.SolverResult`), before any fallback.
-        robot: name of the robot the reference was solved for ("" if unknown).
+            ``wall_time_s``; see :class:`vgtarm.ik.SolverResult`), before any fallback (summed
+            over both solves of a path cut at an unreachable sample, see ``check``).
+        robot_name: name of the robot the reference was solved for ("" if unknown).
         robot_fingerprint: :attr:`vgtarm.Robot.fingerprint` of that robot's parameters, so a
             simulation of another robot can say so ("" if unknown).
         joint_names: the robot's joint names, in the order of the columns of ``q``.
-        path: the name of the desired path (:attr:`vgtarm.paths.TipPath.name`; "" if unknown).
+        path_name: the name of the desired path (:attr:`vgtarm.paths.TipPath.name`; "" if unknown).
         task_space: the tip coordinates the task constrained: ``"tip (u1, u2, u3)"`` (with
             ``" and orientation"`` for the pose task), or for a robot whose tip moves in a plane or a
             line the reduced task (:mod:`vgtarm.ik.taskspace`), e.g. ``"tip (u2, u3) in its plane"``.
+        status: how the solve ended: ``"completed"`` (every sample solved and verified),
+            ``"unverified"`` (every sample reached, some without their optimality conditions
+            verified) or ``"unreachable"`` (``inverse_kinematics(..., check=False)`` on a path with
+            a sample out of reach: the rows from that sample on are NaN, see :attr:`completed`).
+        robot: the :class:`~vgtarm.Robot` it was solved for (None if unknown). Not pickled (a robot
+            holds its compiled library): a result sent to another process keeps the names only.
+        path: the desired :class:`~vgtarm.paths.TipPath` (None if unknown).
     """
 
     t: Array
@@ -125,21 +134,32 @@ class IKResult:
     success: bool
     message: str
     work: Mapping[str, float] = field(default_factory=dict)
-    robot: str = ""
+    robot_name: str = ""
     robot_fingerprint: str = ""
-
     joint_names: tuple[str, ...] = JOINT_NAMES
-    path: str = ""
+    path_name: str = ""
     task_space: str = ""
+    status: str = ""
+    robot: Robot | None = None
+    path: TipPath | None = None
+
+    def __post_init__(self) -> None:
+        if not self.status:  # not given: what success says (an unreachable path is said by the solve)
+            object.__setattr__(self, "status", "completed" if self.success else "unverified")
+
+    def __getstate__(self) -> dict[str, Any]:
+        """The pickled state: everything but :attr:`robot` (its compiled library does not pickle)."""
+        return {**self.__dict__, "robot": None}
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
 
     @property
-    def status(self) -> str:
-        """``"completed"`` when every sample succeeded, else ``"unverified"`` (an unreachable sample
-        raises :class:`~vgtarm.errors.UnreachableError` instead of giving a result)."""
-        return "completed" if self.success else "unverified"
+    def completed(self) -> int:
+        """Number of samples solved: all of them, or those before the unreachable one (status
+        ``"unreachable"``; the rows from it on are NaN)."""
+        finite = np.isfinite(self.q).all(axis=1)
+        return len(self) if finite.all() else int(np.argmin(finite))
 
     def to_dataframe(self) -> Any:
         """The reference as a :class:`pandas.DataFrame`, one row per sample and the columns of the

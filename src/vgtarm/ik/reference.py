@@ -77,7 +77,7 @@ def _minimize(
     equality: _Model | None,
     options: IKOptions,
 ) -> OptimizeResult:
-    """Run SLSQP in the scaled joints ``u = (q - q*) / (q_max - q_min)`` and return ``q``.
+    """Run SLSQP in the scaled joints ``u = (q - q*) / (upper - lower)`` and return ``q``.
 
     In ``u`` the cost ``Phi = |u|^2 / n`` is isotropic (in ``q`` the twist joint's curvature is
     2000 times smaller than the legs', which slows SLSQP's quasi-Newton updates considerably);

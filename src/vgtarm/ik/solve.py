@@ -93,25 +93,38 @@ def _start_for(state: BatchState, i: int, q_start: Array) -> Array:
     return np.asarray(state.q[left[-1] if left.size else solved[0]])
 
 
-def _closest_or_raise(problem: IKProblem, task: Task, i: int, starts: list[Array], options: IKOptions) -> Array:
-    """The feasible ``q`` closest to sample ``i``'s target; :class:`UnreachableError` if it misses by more
-    than :data:`REACH_TOLERANCE`."""
+def _closest(
+    problem: IKProblem, task: Task, i: int, starts: list[Array], options: IKOptions
+) -> tuple[Array, str | None]:
+    """The feasible ``q`` closest to sample ``i``'s target, and None, or why the sample cannot be reached
+    (it misses by more than :data:`REACH_TOLERANCE`)."""
     q, r = reference.closest(problem, task, i, starts, options)
     position = float(np.linalg.norm(r[:3]))
     orientation = float(np.arcsin(min(1.0, float(np.linalg.norm(r[3:]))))) if task.m == 6 else 0.0
     if max(position, orientation) <= REACH_TOLERANCE:
-        return q
+        return q, None
     x = ", ".join(f"{v:.6g}" for v in task.position[i])
     extra = f" and orientation error {orientation:.3g} rad" if task.m == 6 else ""
-    raise UnreachableError(
+    return q, (
         f"sample {i} at t = {task.t[i]:.6g} s cannot be reached: target tip point ({x}) m; the smallest position "
         f"residual reached within the joint limits and the assembly margin ({problem.margin:g} m) is "
         f"{position:.3g} m{extra}"
     )
 
 
-def _recover(problem: IKProblem, task: Task, state: BatchState, q_start: Array, options: IKOptions) -> None:
-    """Re-solve unconverged samples with the reference solver (in time order); raise for unreachable ones.
+@dataclass(frozen=True)
+class _Cut:
+    """Where a solve with ``check=False`` stops: the first unreachable sample, and why."""
+
+    sample: int
+    message: str
+
+
+def _recover(
+    problem: IKProblem, task: Task, state: BatchState, q_start: Array, options: IKOptions, check: bool = True
+) -> _Cut | None:
+    """Re-solve unconverged samples with the reference solver (in time order); raise for the first
+    unreachable one (with ``check``), or stop there and return it.
 
     Each failed sample is re-solved from its nearest solved neighbour, else from the feasible pose
     closest to its target (which may lie on another branch of solutions). A sample that is
@@ -131,18 +144,27 @@ def _recover(problem: IKProblem, task: Task, state: BatchState, q_start: Array, 
                     break
             if attempt == 0:
                 # From the closest feasible pose (which may lie on another branch of solutions).
-                start = state.q[i] = _closest_or_raise(problem, task, i, [start, q_start], options)
+                q, unreachable = _closest(problem, task, i, [start, q_start], options)
+                if unreachable is not None:
+                    if check:
+                        raise UnreachableError(unreachable)
+                    return _Cut(i, unreachable)  # the state is left as it is: the caller solves again
+                start = state.q[i] = q
     reference.finish(problem, task, state, failed)
+    return None
 
 
 def _hold_orientation(
-    robot: Robot, path: TipPath, solver: Solver, problem: IKProblem, q_start: Array, options: IKOptions
-) -> Array:
-    """Orientation ``(3, 3)`` of the free-orientation optimum at the first sample."""
+    robot: Robot, path: TipPath, solver: Solver, problem: IKProblem, q_start: Array, options: IKOptions, check: bool
+) -> Array | _Cut:
+    """Orientation ``(3, 3)`` of the free-orientation optimum at the first sample (without ``check``,
+    the cut at sample 0 when it cannot be reached)."""
     first = _task(robot, path, None).subset(np.array([0], dtype=np.intp))
     state = _checked(solver(problem, first, q_start, options), first).state
     if not state.converged[0]:
-        _recover(problem, first, state, q_start, options)
+        cut = _recover(problem, first, state, q_start, options, check)
+        if cut is not None:
+            return cut
     _, rotation = first.forward(state.q[:1])
     return np.asarray(rotation[0].reshape(3, 3))
 
@@ -154,6 +176,7 @@ def inverse_kinematics(
     solver: str = "fast",
     rates: str = "exact",
     pose: object = None,
+    check: bool = True,
     **options: Any,
 ) -> IKResult:
     """Joint reference ``q, qd, qdd`` of a desired tip path by redundancy resolution (paper eq. 12).
@@ -173,36 +196,54 @@ def inverse_kinematics(
             optimum at the first sample, held constant), a rotation ``(3, 3)`` or ``(N, 3, 3)``,
             or an :class:`~vgtarm.ik.pose.OrientationPath` with the target's angular velocity
             and acceleration (needed for exact rates of a changing orientation).
+        check: raise :class:`UnreachableError` for a sample out of reach (the default). With False
+            the result is returned instead: ``success`` False, ``status`` ``"unreachable"``, its
+            ``message`` naming the first sample out of reach (in time order), its rows before that
+            sample solved and its rows from it on NaN (as :func:`vgtarm.simulate` returns a failed
+            run; :attr:`IKResult.completed` counts the rows solved). What "before" means: the
+            solve is not a march along the path that could stop at the failure, but a batched one
+            of the whole path, coarse to fine, whose values at a sample depend in their last bits
+            on the samples after it. So the samples before the first one out of reach are solved
+            again as a path of their own: those rows are bit for bit what ``check=True`` returns
+            for that reachable prefix (``samples`` included), whatever follows it; ``work`` and
+            ``wall_time_s`` count both solves. With ``rates="finite_difference"`` the last solved
+            sample takes the one-sided difference, as at the end of any path (a single solved
+            sample has NaN rates).
         **options: See :class:`~vgtarm.ik.options.IKOptions` (``margin``, ``initial_guess``,
             tolerances, ``fallback``, ...).
 
     Returns:
-        An :class:`IKResult` with ``.q``, ``.qd``, ``.qdd`` ``(N, n)`` and the per-sample record.
+        An :class:`IKResult` with ``.q``, ``.qd``, ``.qdd`` ``(N, n)`` and the per-sample record;
+        it holds the ``robot`` and the ``path`` it was solved for.
 
     Raises:
         PathError: ``path`` is not a :class:`vgtarm.paths.TipPath`, or has a point farther than
             :data:`vgtarm.paths.MAX_COORDINATE` (1 km) from the base.
         InputError: Unknown solver, rate mode or option, or a bad option value or pose; an
-            ``initial_guess`` outside :meth:`vgtarm.Robot.joint_range`; ``robot`` not a Robot.
+            ``initial_guess`` outside :meth:`vgtarm.Robot.joint_range`; ``robot`` not a Robot;
+            ``check`` not True or False.
+        UnreachableError: A sample cannot be reached within the limits and the assembly margin
+            (with ``check``); the message names its time, the target point and the smallest
+            residual reached.
 
     A result whose joint rates or accelerations are not finite (rows far too close in time)
     has ``success`` False and says so in ``message``.
-        UnreachableError: A sample cannot be reached within the limits and the assembly margin;
-            the message names its time, the target point and the smallest residual reached.
     """
     # NumPy's BLAS on one thread, as in vgtarm.simulate: the batched solves of a long arm (matrices of
     # a hundred-odd rows, one LAPACK call each) are too small for threads to pay, and OpenBLAS's
     # threads then spin on the cores the work needs: the 50-module arm's case 1 took 421 s wall
     # (235 s CPU) on the 2 shared cores with them, 45 s wall (30 s CPU) without them
     with blas_on_one_thread():
-        return _inverse_kinematics(robot, path, solver=solver, rates=rates, pose=pose, **options)
+        return _inverse_kinematics(robot, path, solver=solver, rates=rates, pose=pose, check=check, **options)
 
 
 def _inverse_kinematics(
-    robot: Robot, path: TipPath, *, solver: str, rates: str, pose: object, **options: Any
+    robot: Robot, path: TipPath, *, solver: str, rates: str, pose: object, check: bool, **options: Any
 ) -> IKResult:
     """:func:`inverse_kinematics` (its BLAS limited to one thread)."""
     started = time.perf_counter()
+    if not isinstance(check, bool):
+        raise InputError(f"check = {shown(check)}: expected True or False")
     if not isinstance(path, TipPath):
         raise PathError(f"path must be a vgtarm.paths.TipPath (see vgtarm.paths), got {type(path).__name__}")
     if not isinstance(robot, Robot):
@@ -230,43 +271,71 @@ def _inverse_kinematics(
     q_start = _check_start(
         robot, problem, robot.parameters.home if settings.initial_guess is None else settings.initial_guess
     )
-    space = None
+    space, cut = None, None
     if robot.is_stack and np.linalg.matrix_rank(robot.tip_jacobian(q_start), tol=1e-9) < 3:
-        space = reduced_task(robot, path, q_start, pose)
+        space, cut = _reduced_task(robot, path, q_start, pose, check)
     n = len(path)
     check_memory(
         memory_estimate(n, pose is not None),
         f"path {shown(path.name)}: {n:,} samples of inverse kinematics",
         "give a larger dt or a shorter path",
     )
-    target = None
+    target, kind = None, "position" if pose is None else "pose"
     if pose is not None:
+        unknown = False  # pose="hold" and its first sample out of reach (check=False): no orientation
         if isinstance(pose, str) and pose == HOLD:
-            pose = _hold_orientation(robot, path, solve, problem, q_start, settings)
+            held = _hold_orientation(robot, path, solve, problem, q_start, settings, check)
+            if isinstance(held, _Cut):
+                cut, pose, unknown = held, np.eye(3), True  # nothing is solved: the identity only stands in
+            else:
+                pose = held
         elif isinstance(pose, str):
             raise InputError(f"pose must be None, {HOLD!r}, rotation matrices or an OrientationPath, got {pose!r}")
         target = orientation_target(pose, n, rates == "exact")
+        if unknown:  # nothing is solved, and no orientation is desired
+            target = replace(target, rotation=np.full_like(target.rotation, np.nan))
     terms = effort_terms(robot, path, settings.tool_force, settings.tool_force_speed) if effort else None
-    task = _task(robot, path, target, terms, space)
-    solved = _checked(solve(problem, task, q_start, settings), task)
-    state = solved.state
-    _recover(problem, task, state, q_start, settings)
+    whole = _task(robot, path, target, terms, space)
+    task = whole if cut is None else whole.subset(np.arange(cut.sample, dtype=np.intp))
+    work: dict[str, float] = {}
+    while True:
+        solved = _solve(solve, problem, task, q_start, settings)
+        work = {key: work.get(key, 0) + value for key, value in solved.counters.items()}
+        state = solved.state
+        found = _recover(problem, task, state, q_start, settings, check)
+        if found is None:
+            break
+        # check=False and a sample out of reach: the samples before it are solved again, alone (the
+        # values of a batched solve of the whole path also depend, in their last bits, on what follows)
+        cut, task = found, whole.subset(np.arange(found.sample, dtype=np.intp))
+    solved_target = target  # the samples solved: before the cut
+    if cut is not None and target is not None:
+        solved_target = replace(target, rotation=target.rotation[: cut.sample])
     if rates == "exact":
         rate_modes.exact(problem, task, state, np.flatnonzero(~state.rates_ready))
         qd, qdd = state.qd, state.qdd
-    else:
+    elif len(state.q) >= 2:
         qd, qdd = rate_modes.finite_difference(state.q, path.dt)
-    check = kkt.verify(problem, state, settings.tolerances)
-    samples = _samples(problem, task, state, check, target)
-    result = _result(path, state, qd, qdd, samples, target, problem, name, rates, task.kind, started)
+    else:  # a single solved sample (before the unreachable one) has no difference
+        qd, qdd = np.full_like(state.q, np.nan), np.full_like(state.q, np.nan)
+    verification = kkt.verify(problem, state, settings.tolerances)
+    samples = _samples(problem, task, state, verification, solved_target)
+    q = state.q
+    if cut is not None:
+        q, qd, qdd, samples = _cut_at(cut, n, q, qd, qdd, samples)
+    result = _result(path, q, qd, qdd, samples, target, problem, name, rates, kind, started)
+    if cut is not None:
+        result = replace(result, success=False, status="unreachable", message=cut.message)
     return replace(
         result,
-        task_space=TASK_FULL[task.kind] if space is None else space.label,
-        work=solved.counters,
-        robot=robot.parameters.name,
+        task_space=TASK_FULL[kind] if space is None else space.label,
+        work=work,
+        robot_name=robot.parameters.name,
         robot_fingerprint=robot.fingerprint,
         joint_names=robot.joint_names,
-        path=path.name,
+        path_name=path.name,
+        robot=robot,
+        path=path,
     )
 
 
@@ -274,10 +343,58 @@ def _inverse_kinematics(
 TASK_FULL = MappingProxyType({"position": "tip (u1, u2, u3)", "pose": "tip (u1, u2, u3) and orientation"})
 
 
+def _solve(solve: Solver, problem: IKProblem, task: Task, q_start: Array, settings: IKOptions) -> SolverResult:
+    """``solve`` of ``task``, checked; a task of no samples (the first is out of reach) is not solved."""
+    if len(task):
+        return _checked(solve(problem, task, q_start, settings), task)
+    n_inequalities = 2 * problem.n + problem.n_triangle
+    state = BatchState.empty(0, task.m, n_inequalities, problem.n, task.effort is not None)
+    return SolverResult(state=state, n_iterations=0, n_evaluations=0, n_converged=0, wall_time_s=0.0)
+
+
+#: :attr:`IKSamples.method` of the unreachable sample where a solve with ``check=False`` stops, and of the
+#: samples after it.
+UNREACHABLE, NOT_SOLVED = "unreachable", "not solved"
+
+
+def _cut_at(
+    cut: _Cut, n: int, q: Array, qd: Array, qdd: Array, samples: IKSamples
+) -> tuple[Array, Array, Array, IKSamples]:
+    """The arrays of the samples before ``cut`` grown to the path's ``n`` rows: NaN after them (False,
+    0 or :data:`NOT_SOLVED`); the method of the unreachable sample is :data:`UNREACHABLE`."""
+
+    def grown(values: NDArray[Any], fill: object) -> NDArray[Any]:
+        out = np.full((n, *values.shape[1:]), fill, dtype=values.dtype)
+        out[: len(values)] = values
+        out.flags.writeable = False
+        return out
+
+    fills = {"success": False, "active": False, "iterations": 0, "method": NOT_SOLVED}
+    grown_samples: dict[str, Any] = {
+        key: grown(value, fills.get(key, np.nan)) if isinstance(value, np.ndarray) else value
+        for key, value in vars(samples).items()
+    }
+    method = grown_samples["method"]
+    method.flags.writeable = True
+    method[cut.sample] = UNREACHABLE
+    method.flags.writeable = False
+    return grown(q, np.nan), grown(qd, np.nan), grown(qdd, np.nan), IKSamples(**grown_samples)
+
+
 def reduced_task(robot: Robot, path: TipPath, q_start: Array, pose: object = None) -> TaskSpace:
     """The plane or line of a robot whose tip Jacobian at ``q_start`` has rank < 3 (:mod:`.taskspace`),
     checked against the path: a point off it (by more than :data:`REACH_TOLERANCE`) cannot be reached
-    (:class:`UnreachableError`; :func:`vgtarm.ik.solve_point` then gives the closest configuration)."""
+    (:class:`UnreachableError`, naming the farthest; :func:`vgtarm.ik.solve_point` then gives the
+    closest configuration)."""
+    space, _ = _reduced_task(robot, path, q_start, pose, True)
+    return space
+
+
+def _reduced_task(
+    robot: Robot, path: TipPath, q_start: Array, pose: object, check: bool
+) -> tuple[TaskSpace, _Cut | None]:
+    """:func:`reduced_task`; without ``check``, the first point off the plane or line is returned as the
+    cut instead of raised for."""
     space = task_space(robot, q_start)
     name = shown(robot.parameters.name)
     if space is None:  # rank 3 elsewhere: task_space raised for the singular start; defensive
@@ -288,16 +405,20 @@ def reduced_task(robot: Robot, path: TipPath, q_start: Array, pose: object = Non
             "target needs a tip that moves in three directions: leave pose out"
         )
     off = space.distance(path.position)
-    worst = int(np.argmax(off)) if off.size else 0
-    if off.size and off[worst] > REACH_TOLERANCE:
-        where = "plane" if space.rank == 2 else "line"
-        raise UnreachableError(
-            f"path {shown(path.name)}: sample {worst} (t = {path.t[worst]:.6g} s) at "
-            f"{shown(np.round(path.position[worst], 12).tolist())} m is {off[worst]:.3g} m off the {where} the tip of "
-            f"robot {name} moves in (task: {space.label}, through {shown(np.round(space.origin, 12).tolist())} m); "
-            f"expected every point in that {where} (the case paths are placed there)"
-        )
-    return space
+    outside = np.flatnonzero(off > REACH_TOLERANCE)
+    if not outside.size:
+        return space, None
+    i = int(np.argmax(off)) if check else int(outside[0])  # with check: the farthest, as ever; else the first
+    where = "plane" if space.rank == 2 else "line"
+    message = (
+        f"path {shown(path.name)}: sample {i} (t = {path.t[i]:.6g} s) at "
+        f"{shown(np.round(path.position[i], 12).tolist())} m is {off[i]:.3g} m off the {where} the tip of "
+        f"robot {name} moves in (task: {space.label}, through {shown(np.round(space.origin, 12).tolist())} m); "
+        f"expected every point in that {where} (the case paths are placed there)"
+    )
+    if check:
+        raise UnreachableError(message)
+    return space, _Cut(i, message)
 
 
 def _checked(result: object, task: Task) -> SolverResult:
@@ -339,7 +460,7 @@ def _samples(
 
 def _result(
     path: TipPath,
-    state: BatchState,
+    q: Array,
     qd: Array,
     qdd: Array,
     samples: IKSamples,
@@ -366,11 +487,11 @@ def _result(
         )
     else:
         message = f"all {len(path)} samples solved and verified"
-    for array in (state.q, qd, qdd):
+    for array in (q, qd, qdd):
         array.flags.writeable = False
     return IKResult(
         t=path.t,
-        q=state.q,
+        q=q,
         qd=qd,
         qdd=qdd,
         position=path.position,

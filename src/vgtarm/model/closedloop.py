@@ -104,7 +104,11 @@ class LoopSettings:
 
 
 class LoopArrays:
-    """The input and output arrays of one run, kept alive while C holds pointers to them."""
+    """The input and output arrays of one run, kept alive while C holds pointers to them.
+
+    ``inputs`` holds the input arrays by the names of the fields of ``vgt_run`` (``vgtarm.h``),
+    where the joint limits ``lower`` and ``upper`` are ``q_min`` and ``q_max``.
+    """
 
     def __init__(
         self,
@@ -118,8 +122,8 @@ class LoopArrays:
         p_ctrl: Array,
         G: Array,
         h: Array,
-        q_min: Array,
-        q_max: Array,
+        lower: Array,
+        upper: Array,
         q0: Array,
         qd0: Array,
         resolution: Array | None = None,
@@ -142,8 +146,8 @@ class LoopArrays:
                 p_ctrl=p_ctrl,
                 G=G,
                 h=h,
-                q_min=q_min,
-                q_max=q_max,
+                q_min=lower,
+                q_max=upper,
                 resolution=np.zeros(n_joints) if resolution is None else resolution,
                 velocity_noise=np.zeros((n, n_joints)) if velocity_noise is None else velocity_noise,
                 tool_force_expected=np.zeros((n, 3)) if tool_force_expected is None else tool_force_expected,

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from importlib import resources
@@ -89,19 +90,28 @@ class Body:
         return np.array(self.inertia, dtype=float)
 
 
+#: The warning of a deprecated name of the joint limits (RobotParameters, Stack).
+_RENAMED = "{old} is deprecated: the joint limits are named lower and upper (arrays, m and rad); use .{new}"
+
+
 @dataclass(frozen=True)
 class RobotParameters:
     """Everything that defines one manipulator. Build with :func:`load_parameters`.
 
     Attributes are plain tuples (immutable, hashable); NumPy views are given by properties.
     ``dataclasses.replace`` re-runs the validation, so a modified copy is checked too.
+
+    The joint limits are ``limits``, one ``(min, max)`` pair per joint in the order of
+    :data:`JOINT_NAMES` (m, rad), as the file's ``[limits]`` table and a stack module's
+    ``limits`` give them; :attr:`lower` and :attr:`upper` are the same as arrays, the names used
+    everywhere (:meth:`vgtarm.Robot.joint_limits`, the IK results, :class:`~vgtarm.model.stack.Stack`).
+    ``q_min`` and ``q_max`` are deprecated aliases of them (tuples).
     """
 
     name: str
     modules: tuple[ModuleGeometry, ModuleGeometry]
     h1: float
-    q_min: tuple[float, ...]
-    q_max: tuple[float, ...]
+    limits: tuple[tuple[float, float], ...]
     q_home: tuple[float, ...]
     bodies: tuple[Body, Body, Body]
     viscous: tuple[float, ...]
@@ -123,13 +133,25 @@ class RobotParameters:
 
     @property
     def lower(self) -> NDArray[np.float64]:
-        """Lower joint limits, (7,)."""
-        return np.array(self.q_min)
+        """Lower joint limits, (7,) (m, rad)."""
+        return np.array([pair[0] for pair in self.limits])
 
     @property
     def upper(self) -> NDArray[np.float64]:
-        """Upper joint limits, (7,)."""
-        return np.array(self.q_max)
+        """Upper joint limits, (7,) (m, rad)."""
+        return np.array([pair[1] for pair in self.limits])
+
+    @property
+    def q_min(self) -> tuple[float, ...]:
+        """Deprecated: the lower joint limits as a tuple; use :attr:`lower` (or :attr:`limits`)."""
+        warnings.warn(_RENAMED.format(old="q_min", new="lower"), DeprecationWarning, stacklevel=2)
+        return tuple(pair[0] for pair in self.limits)
+
+    @property
+    def q_max(self) -> tuple[float, ...]:
+        """Deprecated: the upper joint limits as a tuple; use :attr:`upper` (or :attr:`limits`)."""
+        warnings.warn(_RENAMED.format(old="q_max", new="upper"), DeprecationWarning, stacklevel=2)
+        return tuple(pair[1] for pair in self.limits)
 
     @property
     def home(self) -> NDArray[np.float64]:
@@ -248,11 +270,10 @@ def parameters_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> 
         )
     limits = data["limits"]
     reader.keys(limits, "limits", required=set(JOINT_NAMES))
-    q_min, q_max = [], []
+    pairs = []
     for name in JOINT_NAMES:
         pair = reader.vector(limits[name], f"limits.{name}", 2, "[min, max]")
-        q_min.append(pair[0])
-        q_max.append(pair[1])
+        pairs.append((pair[0], pair[1]))
     home = data["home"]
     reader.keys(home, "home", required={"q"})
     bodies_table = data["bodies"]
@@ -288,8 +309,7 @@ def parameters_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> 
         name=name,
         modules=(modules[0], modules[1]),
         h1=reader.number(geometry["h1"], "geometry.h1"),
-        q_min=tuple(q_min),
-        q_max=tuple(q_max),
+        limits=tuple(pairs),
         q_home=tuple(reader.vector(home["q"], "home.q", N_JOINTS, "one value per joint")),
         bodies=(bodies[0], bodies[1], bodies[2]),
         viscous=tuple(reader.vector(friction["viscous"], "friction.viscous", N_JOINTS, "one value per joint")),
@@ -374,9 +394,11 @@ def _check_types(p: RobotParameters) -> None:
     scalars = {"geometry.h1": p.h1}
     for k, module in enumerate(modules, start=1):
         scalars.update({f"geometry.module{k}.b": module.b, f"geometry.module{k}.d": module.d})
+    limits = p.limits
+    if not (isinstance(limits, tuple | list) and len(limits) == N_JOINTS):
+        _fail(p, "limits", limits, f"{N_JOINTS} [min, max] pairs")
     vectors: dict[str, tuple[object, int]] = {
-        "limits (q_min)": (p.q_min, N_JOINTS),
-        "limits (q_max)": (p.q_max, N_JOINTS),
+        **{f"limits.{name}": (pair, 2) for name, pair in zip(JOINT_NAMES, limits, strict=True)},
         "home.q": (p.q_home, N_JOINTS),
         "friction.viscous": (p.viscous, N_JOINTS),
         "environment.gravity": (p.gravity, 3),
@@ -417,10 +439,10 @@ def _validate(p: RobotParameters) -> None:
             )
     if not (math.isfinite(p.h1) and 0.0 <= p.h1 <= MAX_LENGTH):
         _fail(p, "geometry.h1", p.h1, f"a length in [0, {MAX_LENGTH:g}] (m)")
-    if not (len(p.q_min) == len(p.q_max) == len(p.q_home) == N_JOINTS):
-        _fail(p, "limits", (p.q_min, p.q_max), "seven [min, max] pairs")
+    if not (len(p.limits) == len(p.q_home) == N_JOINTS):
+        _fail(p, "limits", p.limits, "seven [min, max] pairs")
     for i, name in enumerate(JOINT_NAMES):
-        lo, hi = p.q_min[i], p.q_max[i]
+        lo, hi = p.limits[i]
         if not _finite([lo, hi], MAX_LENGTH):
             _fail(p, f"limits.{name}", [lo, hi], f"finite limits within +-{MAX_LENGTH:g} (m, rad)")
         if not lo < hi:
@@ -430,8 +452,9 @@ def _validate(p: RobotParameters) -> None:
     if not _finite(p.q_home):
         _fail(p, "home.q", list(p.q_home), "finite joint values")
     for i, name in enumerate(JOINT_NAMES):
-        if not p.q_min[i] <= p.q_home[i] <= p.q_max[i]:
-            _fail(p, f"home.q[{i}] ({name})", p.q_home[i], f"a value inside the limits [{p.q_min[i]}, {p.q_max[i]}]")
+        lo, hi = p.limits[i]
+        if not lo <= p.q_home[i] <= hi:
+            _fail(p, f"home.q[{i}] ({name})", p.q_home[i], f"a value inside the limits [{lo}, {hi}]")
     margins = triangle_margins(np.array(p.q_home), p.b, p.d)
     if not (margins > 0.0).all():
         row = int(np.argmin(margins))

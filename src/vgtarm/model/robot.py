@@ -516,15 +516,19 @@ class Robot:
             body_angular=body_ang.reshape(shape + (len(self.body_names), 3)),
         )
 
-    def inverse_kinematics(self, path: Any, **options: Any) -> Any:
-        """Convenience for :func:`vgtarm.ik.inverse_kinematics` ``(self, path, **options)``.
+    def inverse_kinematics(self, path: Any, *, check: bool = True, **options: Any) -> Any:
+        """Convenience for :func:`vgtarm.ik.inverse_kinematics` ``(self, path, check=check, **options)``.
+
+        ``check`` (default True) raises :class:`~vgtarm.errors.UnreachableError` for a sample out
+        of reach; with False the result is returned with ``status`` ``"unreachable"`` and its rows
+        solved up to that sample (see :func:`vgtarm.ik.inverse_kinematics`).
 
         The model layer does not depend on inverse kinematics: the ``ik`` package is imported
         only when this method is called (``import vgtarm.model`` never loads it).
         """
         from ..ik import inverse_kinematics  # the one upward reference, resolved at call time
 
-        return inverse_kinematics(self, path, **options)
+        return inverse_kinematics(self, path, check=check, **options)
 
     # -- dynamics ----------------------------------------------------------------------------
 

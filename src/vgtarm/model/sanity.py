@@ -10,9 +10,9 @@ beyond them are never a real configuration: with legs of 1e20 m the tip lands 6 
 1e300 m every product overflows to NaN, and a twist of 1e20 rad has lost every digit of its
 angle. The public methods therefore refuse joint values outside
 
-- lengths (joints in metres): ``[max(0, q_min - w), q_max + w]`` with
-  ``w = SANE_WIDENING * (q_max - q_min)``;
-- angles (joints in radians): ``[q_min - t, q_max + t]`` with ``t = SANE_TURNS`` full turns.
+- lengths (joints in metres): ``[max(0, lower - w), upper + w]`` with
+  ``w = SANE_WIDENING * (upper - lower)`` (``lower``, ``upper``: the joint limits);
+- angles (joints in radians): ``[lower - t, upper + t]`` with ``t = SANE_TURNS`` full turns.
 
 For the reference robot that is legs in ``[0, 1.76]`` m (limits 0.22..0.36 m; ``[0, 2.06]`` m for
 the diagonals, limits 0.30..0.46 m) and a twist within about +-6286 rad. The twist gets turns
@@ -335,10 +335,10 @@ def check_joint_range(
     """
     if inside(q, *bounds):
         return
-    q_min, q_max = parameters.q_min, parameters.q_max
+    lower, upper = parameters.lower, parameters.upper
 
     def limits(j: int) -> str:
-        return f", far beyond its limits [{q_min[j]:.6g}, {q_max[j]:.6g}] (not a configuration of this robot)"
+        return f", far beyond its limits [{lower[j]:.6g}, {upper[j]:.6g}] (not a configuration of this robot)"
 
     names, units = tuple(parameters.joint_names), tuple(parameters.joint_units)
     check_input(q, where, bounds, names, units, raw=raw, explain=limits)

@@ -81,7 +81,8 @@ class PythonLoop:
         inputs = arrays.inputs
         if not (inputs["G"] @ q + inputs["h"] > 0).all():
             return NOT_ASSEMBLABLE
-        if (q < inputs["q_min"] - s.limit_tolerance).any() or (q > inputs["q_max"] + s.limit_tolerance).any():
+        lower, upper = inputs["q_min"], inputs["q_max"]  # the joint limits, by vgt_run's names
+        if (q < lower - s.limit_tolerance).any() or (q > upper + s.limit_tolerance).any():
             return OUTSIDE_LIMITS
         return DONE
 

@@ -90,7 +90,7 @@ class JointReference:
     def of(cls, source: HasJointReference, name: str | None = None) -> JointReference:
         """Wrap an IK result (or any object with ``t``, ``q``, ``qd``, ``qdd``).
 
-        ``name`` defaults to the IK result's desired path's name (``path``), else ``"reference"``.
+        ``name`` defaults to the IK result's desired path's name (``path_name``), else ``"reference"``.
 
         An IK result also gives its desired tip path (``position``) and the robot it was solved
         for, which the simulator checks against the plant.
@@ -111,9 +111,9 @@ class JointReference:
             _array(source.qd, "qd"),
             _array(source.qdd, "qdd"),
             rates=str(rates),
-            name=name if name is not None else str(getattr(source, "path", "") or "reference"),
+            name=name if name is not None else _name_of(source, "path") or "reference",
             tip=None if position is None else _array(position, "tip"),
-            robot=str(getattr(source, "robot", "")),
+            robot=_name_of(source, "robot"),
             robot_fingerprint=str(getattr(source, "robot_fingerprint", "")),
         )
 
@@ -127,6 +127,15 @@ class JointReference:
             qdd=self.qdd[:n],
             tip=None if self.tip is None else self.tip[:n],
         )
+
+
+def _name_of(source: object, what: str) -> str:
+    """The name of the ``robot`` or ``path`` an IK result was solved for (its ``robot_name``,
+    ``path_name``; a record of one's own may give the name as ``robot``, ``path``); "" if none."""
+    name = getattr(source, f"{what}_name", None)
+    if name is None:
+        name = getattr(source, what, "")
+    return name if isinstance(name, str) else ""
 
 
 def _array(value: object, label: str) -> Array:

@@ -8,7 +8,7 @@ import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -18,6 +18,10 @@ from ..fileio import atomic_folder, atomic_write_text, check_input_folder, json_
 from ..kinds import found_columns
 from ..markup import html_table
 from ..model.parameters import JOINT_NAMES
+
+if TYPE_CHECKING:
+    from ..model.robot import Robot
+    from .reference import JointReference
 
 Array = NDArray[np.float64]
 
@@ -65,6 +69,12 @@ class SimulationResult:
     estimated external joint efforts the controller subtracted; with realistic sensing,
     ``tip_error_measured`` (N,) m is the tip error the controller saw, ``|P(q_d) - P(q_meas)|``
     (``tip_error`` is always the true one). Both are None otherwise.
+
+    Where it came from: ``robot``, the simulated :class:`~vgtarm.Robot` (the plant), and
+    ``reference``, the :class:`~vgtarm.simulation.reference.JointReference` it followed (an IK
+    result given as the reference, wrapped); None for a run read back by :meth:`load`. The robot
+    is not pickled (it holds its compiled library): a run sent to another process keeps its
+    names in :attr:`metadata` (``plant``, ``reference``).
     """
 
     t: Array
@@ -87,6 +97,12 @@ class SimulationResult:
     effort_estimate: Array | None = None
     tip_error_measured: Array | None = None
     status: str = "completed"
+    robot: Robot | None = None
+    reference: JointReference | None = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        """The pickled state: everything but :attr:`robot` (its compiled library does not pickle)."""
+        return {**self.__dict__, "robot": None}
 
     @property
     def dt(self) -> float:

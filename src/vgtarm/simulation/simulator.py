@@ -256,6 +256,8 @@ class Run:
             tip_error_measured=(
                 _measured_tip_error(self.job.model, arrays, self.tip_d, mode) if self.sensing.active else None
             ),
+            robot=self.plant,
+            reference=ref,
         )
 
     def _drops(self, outcome: Outcome) -> dict[str, Any]:
@@ -506,8 +508,8 @@ def loop_arrays(
         p_ctrl=model.parameter_vector,
         G=G,
         h=h,
-        q_min=plant.parameters.lower,
-        q_max=plant.parameters.upper,
+        lower=plant.parameters.lower,
+        upper=plant.parameters.upper,
         q0=q0,
         qd0=qd0,
         resolution=resolution,

@@ -35,11 +35,12 @@ from multiprocessing import resource_tracker
 from pathlib import Path
 from typing import Any
 
+from .. import checks
 from ..errors import InputError, cut, shown
 from ..machine import usable_cpus
-from ..markup import html_table
+from ..markup import html_table, mpl_text
 from .spec import Point, Study, Value
-from .store import Store
+from .store import Store, table_columns
 
 #: ``execute(inputs, files) -> (summary, error)``: error "" for a successful run.
 Execute = Callable[[Mapping[str, Value], Mapping[str, str]], tuple[dict[str, Any], str]]
@@ -60,7 +61,20 @@ SHOWN_ROWS = 50
 
 @dataclass(frozen=True)
 class StudyRun:
-    """What :func:`run_study` did: the table's rows, counts and the wall time (s)."""
+    """What :func:`run_study` did: the table's rows, counts and the wall time (s).
+
+    Attributes:
+        rows: the results table, one row (a dict of column to value) per stored run, in the
+            study's order: ``id``, the inputs, ``error`` and the run's summary figures.
+        points: the study's points; ``skipped`` of them were stored before, ``executed`` run now.
+        failed: stored runs whose ``success`` is False (a divergence, an unreachable path, ...).
+        lost: ids of the points whose worker died: not stored, run again by the next call.
+        wall_time_s: wall-clock time of the call (s).
+        folder: the results folder.
+
+    How it ended, as the other results say it (:attr:`success`, :attr:`status`, :attr:`message`),
+    and the table as a DataFrame (:meth:`to_dataframe`) and a plot (:meth:`plot`).
+    """
 
     rows: list[dict[str, Any]]
     points: int
@@ -70,6 +84,73 @@ class StudyRun:
     lost: tuple[str, ...]
     wall_time_s: float
     folder: Path
+
+    @property
+    def success(self) -> bool:
+        """Every point of the study is stored and its run succeeded."""
+        return self.failed == 0 and not self.lost
+
+    @property
+    def status(self) -> str:
+        """``"completed"`` (every run stored and successful), ``"incomplete"`` (runs lost with their
+        workers: call again to finish them) or ``"runs_failed"`` (every run stored, some failed)."""
+        if self.lost:
+            return "incomplete"
+        return "runs_failed" if self.failed else "completed"
+
+    @property
+    def message(self) -> str:
+        """One line: the counts, and the first failed run's id and message if any."""
+        line = (
+            f"{self.points} runs: {self.skipped} already stored, {self.executed} run now, {self.failed} failed, "
+            f"{len(self.lost)} lost"
+        )
+        failed = next((row for row in self.rows if not row.get("success")), None)
+        if failed is not None:
+            line += f" (first failed: {failed.get('id')}: {failed.get('message') or failed.get('error')})"
+        if self.lost:
+            line += "; run the study again to finish the lost runs"
+        return line
+
+    def to_dataframe(self) -> Any:
+        """The results table as a :class:`pandas.DataFrame`, one row per stored run and the columns of
+        ``results.csv`` (``id``, the inputs, ``error``, the summary figures; None where a run has no
+        such figure). Needs pandas (``pip install "vgtarm[dataframe]"``)."""
+        try:
+            import pandas
+        except ImportError:
+            raise ImportError('to_dataframe() needs pandas: pip install "vgtarm[dataframe]"') from None
+        return pandas.DataFrame(self.rows, columns=table_columns(self.rows))
+
+    def plot(self, ax: Any = None, column: str = "max_tip_error_m") -> Any:
+        """``column`` of every stored run against its place in the study, into ``ax`` (a new figure's
+        axes when None); returns the axes. A figure in metres is shown in mm; failed runs are marked
+        with crosses (with their figure up to the failure, where they have one).
+
+        Raises :class:`InputError` for a column that is not a figure of the table, naming those that are.
+        """
+        numbers = [
+            c for c in table_columns(self.rows) if any(_number(row.get(c)) for row in self.rows) and c != "success"
+        ]
+        if column not in numbers:
+            raise InputError(f"column = {shown(column)}: expected a figure of the study's table: {', '.join(numbers)}")
+        if ax is None:
+            from matplotlib.figure import Figure
+
+            ax = Figure(figsize=(6.0, 3.0), layout="constrained").add_subplot()
+        scale, unit = (1e3, " (mm)") if column.endswith("_m") else (1.0, "")
+        values = [float(row[column]) * scale if _number(row.get(column)) else float("nan") for row in self.rows]
+        ok = [bool(row.get("success")) for row in self.rows]
+        for wanted, marker, label in ((True, "o", "run"), (False, "x", "failed")):
+            picked = [(i, v) for i, (v, good) in enumerate(zip(values, ok, strict=True)) if good == wanted]
+            if picked:
+                x, y = zip(*picked, strict=True)
+                ax.plot(x, y, marker, markersize=4, linestyle="none", label=label)
+        ax.set_xlabel("run (in the study's order)")
+        ax.set_ylabel(mpl_text(column) + unit)
+        if not all(ok):
+            ax.legend(fontsize="small")
+        return ax
 
     def _repr_html_(self) -> str:
         """The study in a notebook: its counts, and its table (the first :data:`SHOWN_ROWS` rows;
@@ -88,6 +169,10 @@ class StudyRun:
             f"{self.failed} failed, {len(self.lost)} lost, {self.wall_time_s:.1f} s{more}"
         )
         return html_table(columns, rows, caption=caption)
+
+
+def _number(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
 
 
 def check_study(study: Study, check: Check) -> list[Point]:
@@ -124,8 +209,8 @@ def run_study(
             local cluster of ``workers`` processes (default: one per core), one thread each.
         progress: show a progress bar (runs done, failed, time left).
     """
-    if workers is not None and not (isinstance(workers, int) and workers >= 1):
-        raise InputError(f"workers = {workers!r}: expected a whole number >= 1")
+    if workers is not None:
+        checks.whole("workers", workers, 1)
     start = time.perf_counter()
     address = None if scheduler is None else scheduler_address(scheduler)
     store = Store(out)

@@ -146,11 +146,9 @@ def describe_stack(stack: Stack) -> int:
         twist = "" if module.twist is None else f", then twist psi{k + 1} (height {module.twist.height:g} m)"
         print(f"module {k:<3} b = {module.b:g} m, d = {module.d:g} m, plane {module.plane:g} deg{twist}")
     print("joints     name   min        max        home")
+    lower, upper = stack.lower, stack.upper
     for i, name in enumerate(stack.joint_names):
-        print(
-            f"           {name:<6} {stack.q_min[i]:<10.6g} {stack.q_max[i]:<10.6g} {home[i]:.10g} "
-            f"{stack.joint_units[i]}"
-        )
+        print(f"           {name:<6} {lower[i]:<10.6g} {upper[i]:<10.6g} {home[i]:.10g} {stack.joint_units[i]}")
     for name, body in zip(stack.body_names, stack.bodies, strict=True):
         print(f"body       {name:<13} mass {body.mass:g} kg, com {_vector(body.com)} m")
     print(f"tool       {_vector(stack.tool)} m from the last mount point")

@@ -44,8 +44,8 @@ with a :class:`~vgtarm.errors.ConfigError` of one line naming the module and the
 
 from __future__ import annotations
 
-import math
 import os
+import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -54,22 +54,23 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import NDArray
 
+from ... import checks
 from ...errors import ConfigError, cut, shown
 from ...fileio import parse_toml, read_text_limited
 from ...kinds import other_toml
 from ..assembly import TRIANGLE_INEQUALITIES, linear_form
 from ..factors import model_factor
 from ..parameters import (
+    _RENAMED,
     _SOURCE_LENGTH,
     MAX_FRICTION,
     MAX_GRAVITY,
     MAX_LENGTH,
+    MAX_MASS,
     NAME_LENGTH,
     ROBOT_FILE_LIMIT,
     Body,
     RobotParameters,
-    _finite,
-    _is_real,
     _Reader,
     check_body,
     fail_field,
@@ -235,12 +236,14 @@ class Stack:
 
     @property
     def q_min(self) -> tuple[float, ...]:
-        """Lower joint limits as a tuple (as :attr:`RobotParameters.q_min`)."""
+        """Deprecated: the lower joint limits as a tuple; use :attr:`lower`."""
+        warnings.warn(_RENAMED.format(old="q_min", new="lower"), DeprecationWarning, stacklevel=2)
         return tuple(float(x) for x in self.lower)
 
     @property
     def q_max(self) -> tuple[float, ...]:
-        """Upper joint limits as a tuple."""
+        """Deprecated: the upper joint limits as a tuple; use :attr:`upper`."""
+        warnings.warn(_RENAMED.format(old="q_max", new="upper"), DeprecationWarning, stacklevel=2)
         return tuple(float(x) for x in self.upper)
 
     @property
@@ -490,8 +493,9 @@ def _read_twist(reader: _Reader, entry: object, where: str, k: int) -> Twist:
 # -- validation ----------------------------------------------------------------------------
 
 
-def _numbers(values: object, n: int) -> bool:
-    return isinstance(values, tuple | list) and len(values) == n and all(_is_real(x) for x in values)
+def _field(source: str, where: str) -> str:
+    """How a refusal names the field ``where`` of the file ``source`` (as :func:`fail_field` does)."""
+    return f"{cut(str(source), _SOURCE_LENGTH)}: field '{where}'"
 
 
 def _validate(stack: Stack) -> None:
@@ -511,38 +515,28 @@ def _validate(stack: Stack) -> None:
     if not isinstance(stack.end_effector, Body):
         fail_field(source, "end_effector", stack.end_effector, "a Body")
     _check_body(source, "end_effector", stack.end_effector)
-    if not (_numbers(stack.tool, 3) and _finite(stack.tool, MAX_LENGTH)):
-        fail_field(source, "end_effector.tool", stack.tool, f"a point [x, y, z] within +-{MAX_LENGTH:g} (m)")
-    if not (_numbers(stack.gravity, 3) and _finite(stack.gravity, MAX_GRAVITY)):
-        fail_field(
-            source, "environment.gravity", stack.gravity, f"a 3-vector with entries within +-{MAX_GRAVITY:g} (m/s^2)"
-        )
+    tool = _field(source, "end_effector.tool")
+    checks.vector(tool, stack.tool, 3, minimum=-MAX_LENGTH, maximum=MAX_LENGTH, unit="m", error=ConfigError)
+    gravity = _field(source, "environment.gravity")
+    checks.vector(gravity, stack.gravity, 3, minimum=-MAX_GRAVITY, maximum=MAX_GRAVITY, unit="m/s^2", error=ConfigError)
 
 
 def _check_body(source: str, where: str, body: Body) -> None:
-    if not (_is_real(body.mass) and _numbers(body.com, 3)):
-        fail_field(source, where, body, "a body with a mass (kg) and a centre of mass [x, y, z] (m)")
+    checks.number(_field(source, f"{where}.mass"), body.mass, above=0, maximum=MAX_MASS, unit="kg", error=ConfigError)
+    com = _field(source, f"{where}.com")
+    checks.vector(com, body.com, 3, minimum=-MAX_LENGTH, maximum=MAX_LENGTH, unit="m", error=ConfigError)
     rows = body.inertia
-    if not (isinstance(rows, tuple | list) and len(rows) == 3 and all(_numbers(row, 3) for row in rows)):
+    if not (isinstance(rows, tuple | list) and len(rows) == 3):
         fail_field(source, f"{where}.inertia", rows, "a 3x3 matrix: three rows of three numbers")
+    for i, row in enumerate(rows):
+        checks.vector(_field(source, f"{where}.inertia[{i}]"), row, 3, unit="kg m^2", error=ConfigError)
     check_body(source, where, body)
-
-
-def _check_range(source: str, where: str, pair: object, positive: bool) -> None:
-    if not (_numbers(pair, 2) and _finite(pair, MAX_LENGTH)):  # type: ignore[arg-type]
-        fail_field(source, where, pair, f"[min, max] with finite values within +-{MAX_LENGTH:g}")
-    pair = cast(tuple[float, float], pair)
-    if not pair[0] < pair[1]:
-        fail_field(source, where, pair, "[min, max] with min < max (the range is inverted or empty)")
-    if positive and pair[0] <= 0.0:
-        fail_field(source, where, pair, "[min, max] with a positive minimum length (m)")
 
 
 def _validate_module(source: str, module: StackModule, where: str) -> None:
     for attr in ("b", "d"):
-        value = getattr(module, attr)
-        if not (_is_real(value) and math.isfinite(value) and 0.0 < value <= MAX_LENGTH):
-            fail_field(source, f"{where}.{attr}", value, f"a positive length <= {MAX_LENGTH:g} (m)")
+        name = _field(source, f"{where}.{attr}")
+        checks.number(name, getattr(module, attr), above=0, maximum=MAX_LENGTH, unit="m", error=ConfigError)
     if module.d >= module.b:
         fail_field(
             source,
@@ -550,14 +544,14 @@ def _validate_module(source: str, module: StackModule, where: str) -> None:
             module.d,
             f"d < b = {module.b} (the module is a trapezoid, platform narrower than base)",
         )
-    if not (_is_real(module.plane) and math.isfinite(module.plane) and abs(module.plane) <= MAX_PLANE):
-        fail_field(source, f"{where}.plane", module.plane, f"a finite angle within +-{MAX_PLANE:g} (degrees)")
+    plane = _field(source, f"{where}.plane")
+    checks.number(plane, module.plane, minimum=-MAX_PLANE, maximum=MAX_PLANE, unit="degrees", error=ConfigError)
     if not (isinstance(module.limits, tuple | list) and len(module.limits) == 3):
         fail_field(source, f"{where}.limits", module.limits, "three [min, max] pairs (s, v, p)")
     for leg, pair in zip(LEG_NAMES, module.limits, strict=True):
-        _check_range(source, f"{where}.limits.{leg}", pair, positive=True)
-    if not (_numbers(module.home, 3) and _finite(module.home)):
-        fail_field(source, f"{where}.home", module.home, "three finite leg lengths [s, v, p] (m)")
+        limits = _field(source, f"{where}.limits.{leg}")
+        checks.interval(limits, pair, above=0, maximum=MAX_LENGTH, unit="m", error=ConfigError)
+    checks.vector(_field(source, f"{where}.home"), module.home, 3, unit="m", error=ConfigError)
     for i, leg in enumerate(LEG_NAMES):
         lo, hi = module.limits[i]
         if not lo <= module.home[i] <= hi:
@@ -571,8 +565,8 @@ def _validate_module(source: str, module: StackModule, where: str) -> None:
             module.home,
             f"legs that can be assembled; '{TRIANGLE_INEQUALITIES[row]}' fails (margin {margins[row]:.6g} m)",
         )
-    if not (_numbers(module.viscous, 3) and all(math.isfinite(c) and 0.0 <= c <= MAX_FRICTION for c in module.viscous)):
-        fail_field(source, f"{where}.viscous", module.viscous, f"three coefficients in [0, {MAX_FRICTION:g}] (N s/m)")
+    viscous = _field(source, f"{where}.viscous")
+    checks.vector(viscous, module.viscous, 3, minimum=0, maximum=MAX_FRICTION, unit="N s/m", error=ConfigError)
     if not isinstance(module.platform, Body):
         fail_field(source, f"{where}.platform", module.platform, "a Body")
     _check_body(source, f"{where}.platform", module.platform)
@@ -583,14 +577,15 @@ def _validate_module(source: str, module: StackModule, where: str) -> None:
 def _validate_twist(source: str, twist: Twist, where: str) -> None:
     if not isinstance(twist, Twist):
         fail_field(source, where, twist, "a Twist or None")
-    if not (_is_real(twist.height) and math.isfinite(twist.height) and 0.0 <= twist.height <= MAX_LENGTH):
-        fail_field(source, f"{where}.height", twist.height, f"a length in [0, {MAX_LENGTH:g}] (m)")
-    _check_range(source, f"{where}.limits", twist.limits, positive=False)
-    lo, hi = twist.limits
-    if not (_is_real(twist.home) and lo <= twist.home <= hi):
-        fail_field(source, f"{where}.home", twist.home, f"an angle inside the limits [{lo}, {hi}] (rad)")
-    if not (_is_real(twist.viscous) and math.isfinite(twist.viscous) and 0.0 <= twist.viscous <= MAX_FRICTION):
-        fail_field(source, f"{where}.viscous", twist.viscous, f"a coefficient in [0, {MAX_FRICTION:g}] (N m s/rad)")
+    height = _field(source, f"{where}.height")
+    checks.number(height, twist.height, minimum=0, maximum=MAX_LENGTH, unit="m", error=ConfigError)
+    limits = _field(source, f"{where}.limits")
+    lo, hi = checks.interval(
+        limits, twist.limits, minimum=-MAX_LENGTH, maximum=MAX_LENGTH, unit="rad", error=ConfigError
+    )
+    checks.number(_field(source, f"{where}.home"), twist.home, minimum=lo, maximum=hi, unit="rad", error=ConfigError)
+    viscous = _field(source, f"{where}.viscous")
+    checks.number(viscous, twist.viscous, minimum=0, maximum=MAX_FRICTION, unit="N m s/rad", error=ConfigError)
     if twist.body is not None:
         if not isinstance(twist.body, Body):
             fail_field(source, f"{where}.body", twist.body, "a Body or None")
@@ -614,13 +609,13 @@ def stack_from_parameters(parameters: RobotParameters) -> Stack:
         legs = range(3 * k, 3 * k + 3)
         twist = None
         if k == 1:
-            twist = Twist(height=p.h1, limits=(p.q_min[6], p.q_max[6]), home=p.q_home[6], viscous=p.viscous[6])
+            twist = Twist(height=p.h1, limits=(p.limits[6][0], p.limits[6][1]), home=p.q_home[6], viscous=p.viscous[6])
         modules.append(
             StackModule(
                 b=p.modules[k].b,
                 d=p.modules[k].d,
                 plane=plane,
-                limits=tuple((p.q_min[i], p.q_max[i]) for i in legs),  # type: ignore[arg-type]
+                limits=tuple((p.limits[i][0], p.limits[i][1]) for i in legs),  # type: ignore[arg-type]
                 home=tuple(p.q_home[i] for i in legs),  # type: ignore[arg-type]
                 platform=p.bodies[k],
                 viscous=tuple(p.viscous[i] for i in legs),  # type: ignore[arg-type]
