@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 
 import vgtarm
-from vgtarm.app.cases import case_study, joint_reference
 from vgtarm.control import SwitchingControl
+from vgtarm.experiment.cases import case_study, joint_reference
 from vgtarm.export import CompiledExport, export_controller, simulate_exported
 from vgtarm.export.galoop import FLAGS, ExportedGA
 from vgtarm.model.closedloop import ClosedLoopDriver

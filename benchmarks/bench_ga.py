@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 import vgtarm
-from vgtarm.app.cases import case_study, joint_reference, run_case
+from vgtarm.experiment.cases import case_study, joint_reference, run_case
 from vgtarm.model import closedloop
 from vgtarm.model.closedloop import ClosedLoopDriver, ga_threads
 from vgtarm.simulation import engines

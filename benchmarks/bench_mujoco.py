@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 
 import vgtarm
-from vgtarm.app.cases import case_study, joint_reference
+from vgtarm.experiment.cases import case_study, joint_reference
 from vgtarm.simulation import JointReference, simulate
 
 from .common import Row, best_time, print_table

@@ -53,8 +53,8 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 import vgtarm
-from vgtarm.app.cases import case_path, case_study, joint_reference, run_case
-from vgtarm.app.presets import preset_options
+from vgtarm.experiment.cases import case_path, case_study, joint_reference, run_case
+from vgtarm.experiment.presets import preset_options
 from vgtarm.ik.effort import (
     DEFAULT_JOINT_LIMIT_WEIGHT,
     DEFAULT_TOOL_FORCE_SPEED,

@@ -20,7 +20,7 @@ the last). Figures, all in this process and run:
   twist, bodies of the same masses and inertias;
 - the growth exponent ``a`` of ``y ~ n^a`` between 10 and 50 modules;
 - **control** (:func:`control_figures`): the inverse kinematics of the whole case-1 path (placed
-  and scaled to the arm, :func:`vgtarm.app.cases.case_path`; the fast solver with exact rates) and
+  and scaled to the arm, :func:`vgtarm.experiment.cases.case_path`; the fast solver with exact rates) and
   computed force control of it in the compiled closed loop, on the recursive model at 6, 10 and 50
   modules, beside the symbolic library at 6 modules where the cache holds it; the loop's speed as
   simulated time over wall time (real-time factor). On the recursive model each run is timed
@@ -224,7 +224,7 @@ CFC_REPEATS = 3
 def _cfc_times(robots: dict[str, Any], reference: Any) -> dict[str, Any]:
     """CFC of ``reference`` (case 1's gains) on each robot, alternating, :data:`CFC_REPEATS` times:
     the best wall and CPU seconds of each and its last result."""
-    from vgtarm.app.cases import run_case
+    from vgtarm.experiment.cases import run_case
 
     best: dict[str, Any] = {name: [math.inf, math.inf, None] for name in robots}
     for _ in range(CFC_REPEATS):
@@ -299,7 +299,7 @@ def _timed_row(k: int, n: int, robots: dict[str, Any], reference: Any, ik: tuple
 
 def _control_row(k: int, model: str) -> dict[str, float]:
     """IK of case 1 and CFC of it on ``family(k)`` with ``model``: wall and CPU seconds, real-time factor."""
-    from vgtarm.app.cases import case_path
+    from vgtarm.experiment.cases import case_path
     from vgtarm.simulation.reference import JointReference
 
     stack = family(k)

@@ -25,11 +25,11 @@ from pathlib import Path
 import numpy as np
 
 import vgtarm
-from vgtarm.app.cases import joint_reference, run_case
 from vgtarm.app.pool import default_workers
 from vgtarm.app.reports import html as html_report
 from vgtarm.app.reports.beyond import beyond_figure, run_beyond
 from vgtarm.app.reports.reproduce import draw_figure, figure_plan, paper_runs
+from vgtarm.experiment.cases import joint_reference, run_case
 from vgtarm.simulation.result import _csv
 
 from .common import Row, print_table

@@ -10,7 +10,7 @@ from __future__ import annotations
 import time
 
 import vgtarm
-from vgtarm.app.cases import joint_reference, run_case
+from vgtarm.experiment.cases import joint_reference, run_case
 from vgtarm.model.compiled import InterpretedBackend, build_functions
 from vgtarm.simulation import JointReference
 

@@ -19,9 +19,9 @@ the twists' heights high at home. ``family(2)`` is the paper's robot as a stack 
   apart, not timed) and of the library;
 - batched **forward kinematics** and **forward dynamics** through the compiled library, per sample;
 - the **inverse kinematics** of the case-1 path placed on the robot
-  (:func:`vgtarm.app.cases.joint_reference`: fast solver, exact rates; 6,284 samples), per
+  (:func:`vgtarm.experiment.cases.joint_reference`: fast solver, exact rates; 6,284 samples), per
   sample. One module alone has a tip moving in a plane: its IK is refused, so it has no IK or CFC;
-- one **computed-force-control run of case 1** (:func:`vgtarm.app.cases.run_case`, 6.283 s
+- one **computed-force-control run of case 1** (:func:`vgtarm.experiment.cases.run_case`, 6.283 s
   simulated at 1 ms), with its real-time factor and maximum tip error.
 
 Every figure is printed with its ratio against ``k = 2`` measured in the same run; the paper's
@@ -58,8 +58,8 @@ import casadi as ca
 import numpy as np
 
 import vgtarm
-from vgtarm.app.cases import joint_reference, run_case
 from vgtarm.errors import VgtarmError
+from vgtarm.experiment.cases import joint_reference, run_case
 from vgtarm.model.compiled import InterpretedBackend, build_functions, get_backend
 from vgtarm.model.definition import StackDefinition
 from vgtarm.model.parameters import Body

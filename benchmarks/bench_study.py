@@ -13,8 +13,8 @@ import time
 from pathlib import Path
 
 import vgtarm
-from vgtarm.app.cases import joint_reference, run_case
 from vgtarm.app.study_points import check_point, execute_point
+from vgtarm.experiment.cases import joint_reference, run_case
 from vgtarm.study.runner import run_study
 from vgtarm.study.spec import parse_study
 

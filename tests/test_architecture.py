@@ -19,13 +19,28 @@ PACKAGE = Path(vgtarm.__file__).resolve().parent
 ROOT = "__root__"
 #: Layers from the bottom up; a module may import its own layer and the layers below.
 LAYERS: tuple[frozenset[str], ...] = (
-    frozenset({"errors", "fileio", "kinds", "memory", "markup", "machine", "progress", "version", "compiler"}),
+    frozenset(
+        {
+            "errors",
+            "checks",
+            "fileio",
+            "kinds",
+            "memory",
+            "markup",
+            "machine",
+            "progress",
+            "version",
+            "compiler",
+            "option",
+        }
+    ),
     frozenset({"model"}),
     frozenset({"paths", "ga"}),
     frozenset({"ik"}),
     frozenset({"control"}),
     frozenset({"simulation"}),
     frozenset({"mujoco_bridge"}),
+    frozenset({"experiment"}),
     frozenset({"study", "export"}),
     frozenset({"app"}),
     frozenset({ROOT}),  # the front door: every public name, imported on first use
@@ -96,7 +111,9 @@ def _imports(module: str, path: Path) -> list[tuple[str, bool]]:
 MODULES = _modules()
 
 
-@pytest.mark.parametrize("module", sorted(m for m in MODULES if "." in m or m in {"errors", "fileio", "paths", "ga"}))
+@pytest.mark.parametrize(
+    "module", sorted(m for m in MODULES if "." in m or m in {"errors", "checks", "fileio", "paths", "ga"})
+)
 def test_no_module_imports_a_layer_above_it(module):
     own = _layer(_top(module))
     for target, _ in _imports(module, MODULES[module]):
@@ -236,11 +253,11 @@ def test_cache_key_covers_every_source_the_code_generation_reads():
 
 
 def test_cache_key_follows_the_build_recipe(monkeypatch):
-    from vgtarm.model import compiled
+    from vgtarm.model import compiling, library_cache
 
-    before = compiled._cache_key("cc")
-    monkeypatch.setattr(compiled, "_STACK_GENERATED_CFLAGS", ("-O3", "-fPIC"))
-    assert compiled._cache_key("cc") != before
+    before = library_cache._cache_key("cc")
+    monkeypatch.setattr(compiling, "_STACK_GENERATED_CFLAGS", ("-O3", "-fPIC"))
+    assert library_cache._cache_key("cc") != before
 
 
 def test_c_interface_layout_matches_the_compiler(robot):

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vgtarm.app.cases import PAPER_RESULTS, case_study, joint_reference, run_case
 from vgtarm.app.reports.reproduce import paper_runs, reproduce
+from vgtarm.experiment.cases import PAPER_RESULTS, case_study, joint_reference, run_case
 
 
 @pytest.fixture(scope="module")

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 import vgtarm
-from vgtarm.app.cases import case_study, joint_reference
 from vgtarm.errors import ConfigError, InputError
+from vgtarm.experiment.cases import case_study, joint_reference
 from vgtarm.export import CompiledExport, ExportError, command, export_controller, simulate_exported
 from vgtarm.export.controller import STRICT_FLAGS
 from vgtarm.simulation import SimulationResult, simulate

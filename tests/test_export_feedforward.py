@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import vgtarm
-from vgtarm.app.cases import case_study, joint_reference
+from vgtarm.experiment.cases import case_study, joint_reference
 from vgtarm.export import CompiledExport, export_controller, simulate_exported
 from vgtarm.simulation import simulate
 from vgtarm.simulation.external import DEFAULT_FEEDFORWARD_SPEED

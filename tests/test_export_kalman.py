@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 
 import vgtarm
-from vgtarm.app.cases import case_study, joint_reference
 from vgtarm.errors import InputError
+from vgtarm.experiment.cases import case_study, joint_reference
 from vgtarm.export import CompiledExport, command, export_controller, simulate_exported
 from vgtarm.export.controller import STRICT_FLAGS
 from vgtarm.simulation import SimulationResult, simulate

@@ -29,8 +29,8 @@ import numpy as np
 import pytest
 
 import vgtarm
-from vgtarm.app.cases import case_study
 from vgtarm.errors import escape
+from vgtarm.experiment.cases import case_study
 from vgtarm.export import export_controller
 from vgtarm.export.controller import STRICT_FLAGS
 from vgtarm.ik.records import csv_columns

@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 
 import vgtarm
-from vgtarm.app.cases import case_study, joint_reference
 from vgtarm.control import SwitchingControl
 from vgtarm.errors import InputError
+from vgtarm.experiment.cases import case_study, joint_reference
 from vgtarm.export import export_controller, simulate_exported
 from vgtarm.export.controller import STRICT_FLAGS
 from vgtarm.export.galoop import FLAGS, ExportedGA

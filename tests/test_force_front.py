@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from vgtarm.app.cli.presets import PRESETS, add_simulate_options, apply_preset, simulate_options
+from vgtarm.app.cli.presets import PRESETS, add_preset_flag, apply_preset
 from vgtarm.app.reports.force_front import by_setting, choose, pareto, setting_table
+from vgtarm.experiment.options import add_flags
 
 
 def test_pareto_keeps_exactly_the_non_dominated_points():
@@ -16,18 +17,18 @@ def test_pareto_keeps_exactly_the_non_dominated_points():
 
 def test_the_preset_sets_its_arguments_and_the_default_adds_no_option():
     parser = argparse.ArgumentParser()
-    parser.add_argument("--criterion", default="joint_limits")
-    parser.add_argument("--observer", default="none")
-    parser.add_argument("--observer-gain", type=float, default=None)
-    add_simulate_options(parser)
+    add_flags(parser)  # every declared option's flag, as vgtarm simulate has them
+    add_preset_flag(parser)
     plain = parser.parse_args([])
     apply_preset(plain)
-    assert simulate_options(plain) == {} and plain.criterion == "joint_limits"
+    assert plain.criterion == "joint_limits" and plain.estimator == "difference" and plain.observer == "none"
+    assert plain.estimator_bandwidth_hz is None and not plain.tool_force_feedforward
     low = parser.parse_args(["--preset", "low-force"])
     apply_preset(low)
     assert low.criterion == "effort" and low.observer_gain == PRESETS["low-force"]["observer_gain"]
-    bandwidth = PRESETS["low-force"]["estimator_bandwidth"]
-    assert simulate_options(low) == {"estimator": "kalman", "estimator_bandwidth_hz": bandwidth}  # no tool force
+    bandwidth = PRESETS["low-force"]["estimator_bandwidth_hz"]
+    assert low.estimator == "kalman" and low.estimator_bandwidth_hz == bandwidth
+    assert not low.tool_force_feedforward  # no tool force
 
 
 def test_an_option_given_beside_the_preset_keeps_its_value():
@@ -43,7 +44,7 @@ def test_an_option_given_beside_the_preset_keeps_its_value():
     given = parser.parse_args(["simulate", "--case", "2", "--preset", "low-force", "--observer-gain", "250"])
     apply_preset(given)
     assert given.observer_gain == 250.0 and given.estimator == "kalman"
-    assert given.kp is None and given.kv is None and not given.tool_feedforward  # no tool force: the case's gains
+    assert given.kp is None and given.kv is None and not given.tool_force_feedforward  # no tool force: the case's gains
 
 
 def _row(kp, seed, error_mm, peak, chatter, criterion="effort"):

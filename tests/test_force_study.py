@@ -6,12 +6,12 @@ from __future__ import annotations
 import pytest
 from matplotlib.figure import Figure
 
-from vgtarm.app.cases import joint_reference, run_case
-from vgtarm.app.presets import PRESETS
 from vgtarm.app.reports import force_study
 from vgtarm.app.reports.force_front import by_setting, choose
 from vgtarm.app.reports.low_force import PresetRun, run_options
 from vgtarm.errors import InputError
+from vgtarm.experiment.cases import joint_reference, run_case
+from vgtarm.experiment.presets import PRESETS
 
 
 def _row(criterion, estimator, bandwidth, k_o, kp, kv, seed, error_mm, rms, peak, chatter):
@@ -57,7 +57,7 @@ def test_the_shipped_front_picks_the_low_force_preset():
     low = PRESETS["low-force"]
     assert chosen.value("criterion") == low["criterion"] and chosen.value("estimator") == low["estimator"]
     for key, preset_key in (
-        ("estimator_bandwidth_hz", "estimator_bandwidth"),
+        ("estimator_bandwidth_hz", "estimator_bandwidth_hz"),
         ("observer_gain", "observer_gain"),
         ("kp", "kp"),
         ("kv", "kv"),
@@ -79,7 +79,7 @@ def test_the_shipped_preset_point_is_todays_run(robot):
         if r["seed"] == "0"
         and r["criterion"] == "effort"
         and r["estimator"] == "kalman"
-        and float(r["estimator_bandwidth_hz"]) == low["estimator_bandwidth"]
+        and float(r["estimator_bandwidth_hz"]) == low["estimator_bandwidth_hz"]
         and float(r["observer_gain"]) == low["observer_gain"]
         and float(r["kp"]) == low["kp"]
         and float(r["kv"]) == low["kv"]

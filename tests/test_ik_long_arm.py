@@ -20,7 +20,7 @@ from scipy.linalg import null_space
 from scipy.optimize import minimize
 
 import vgtarm
-from vgtarm.app.cases import case_path
+from vgtarm.experiment.cases import case_path
 from vgtarm.ik import newton
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"

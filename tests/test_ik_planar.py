@@ -18,7 +18,7 @@ from scipy.optimize import minimize
 
 import vgtarm
 from vgtarm import paths
-from vgtarm.app.cases import PAPER_HOME_TIP, PathPlacement, case_path, case_study, path_placement
+from vgtarm.experiment.cases import PAPER_HOME_TIP, PathPlacement, case_path, case_study, path_placement
 from vgtarm.ik import SOLVERS
 from vgtarm.ik.options import IKOptions
 from vgtarm.ik.problem import IKProblem

@@ -21,10 +21,10 @@ import numpy as np
 import pytest
 
 import vgtarm
-from vgtarm.app.cases import joint_reference
 from vgtarm.control import ComputedForceControl
+from vgtarm.experiment.cases import joint_reference
 from vgtarm.memory import LIMIT_VARIABLE, check_memory, memory_limit, size_text
-from vgtarm.model import compiled
+from vgtarm.model import backends, compiled
 from vgtarm.model.closedloop import ClosedLoopDriver, LoopArrays, LoopSettings
 from vgtarm.simulation import JointReference, simulate
 from vgtarm.simulation.simulator import MAX_SUBSTEPS, loop_arrays
@@ -124,7 +124,7 @@ def test_a_huge_batch_is_evaluated_in_chunks_with_the_same_numbers(robot, monkey
     sig = robot.backend.signature("bias_forces")
     assert len(sig.nnz_in) == len(inputs)
     whole = robot.backend.evaluate("bias_forces", inputs, n)
-    monkeypatch.setattr(compiled, "BATCH_CHUNK", 100)
+    monkeypatch.setattr(backends, "BATCH_CHUNK", 100)
     chunked = robot.backend.evaluate("bias_forces", inputs, n)
     for a, b in zip(whole, chunked, strict=True):
         np.testing.assert_array_equal(a, b)
@@ -141,7 +141,7 @@ def test_a_huge_batch_in_the_interpreter_is_evaluated_in_chunks_with_the_same_nu
     q = robot.parameters.home + rng.uniform(-0.01, 0.01, size=(n, 7))
     inputs = [q, rng.normal(size=(n, 7)), robot.parameter_vector]
     whole = backend.evaluate("bias_forces", inputs, n)
-    monkeypatch.setattr(compiled, "INTERPRETED_CHUNK", 10)
+    monkeypatch.setattr(backends, "INTERPRETED_CHUNK", 10)
     chunked = backend.evaluate("bias_forces", inputs, n)
     np.testing.assert_array_equal(whole[0], chunked[0])
     np.testing.assert_array_equal(
@@ -188,7 +188,7 @@ def test_animations_too_large_are_refused_before_anything_is_drawn(robot, tmp_pa
     still = JointReference(t, np.tile(robot.parameters.home, (50, 1)), np.zeros((50, 7)), np.zeros((50, 7)))
     result = simulate(robot, still, CFC)
     out = tmp_path / "a.gif"
-    with pytest.raises(vgtarm.InputError, match=r"^dpi = 1000000.0: expected a positive number at most 1000$"):
+    with pytest.raises(vgtarm.InputError, match=r"^dpi = 1000000.0: expected a number in \(0, 1000\]$"):
         render_animation(robot, result, out, dpi=1e6, progress=False)
     with pytest.raises(vgtarm.InputError, match=r"^fps = 1000000000.0 at speed = 1e-09 makes 4.9e\+16 frames"):
         frame_plan(result, fps=1e9, speed=1e-9)
@@ -225,14 +225,18 @@ def test_cli_refuses_what_will_not_fit_with_one_line_and_writes_nothing(tmp_path
         f" memory needed, more than the 50 MB set by {LIMIT_VARIABLE}; give a larger --dt or a shorter path\n"
     )
     done = _cli("ik", "--path", str(path), "--dt", "1e-9", "-o", str(out))
-    assert done.returncode == 1 and done.stderr.count("\n") == 1 and "dt must be >=" in done.stderr
+    assert (
+        done.returncode == 1
+        and done.stderr.count("\n") == 1
+        and "dt = 1e-09: expected a finite number >= 1e-06 (s)" in done.stderr
+    )
     done = _cli("describe", "--config", "/dev/zero")  # an endless device: refused before it is opened
     assert done.returncode == 1 and done.stderr.count("\n") == 1 and "is a character device" in done.stderr
     done = _cli("simulate", "--case", "1", "--substeps", "1000000000", "--out", str(tmp_path / "run"))
     assert done.returncode == 2 and "Traceback" not in done.stderr
     assert done.stderr.splitlines()[-1] == (
-        "vgtarm simulate: error: argument --substeps: expected at most 1,000,000 steps per control period,"
-        " got 1000000000"
+        "vgtarm simulate: error: argument --substeps: expected a whole number from 1 to 1,000,000 (steps per"
+        " control period), got 1000000000"
     )
     assert sorted(p.name for p in tmp_path.iterdir()) == ["path.csv"]
 

@@ -10,7 +10,6 @@ import pytest
 
 from vgtarm.app.cli import presets as cli_presets
 from vgtarm.app.cli.command import main
-from vgtarm.app.presets import PRESETS, preset_options
 from vgtarm.app.reports.low_force import (
     PresetRun,
     low_force_runs,
@@ -20,6 +19,7 @@ from vgtarm.app.reports.low_force import (
 )
 from vgtarm.app.reports.runs import paper_runs
 from vgtarm.errors import InputError
+from vgtarm.experiment.presets import PRESETS, preset_options
 
 DURATION = "0.06"
 
@@ -30,7 +30,7 @@ def test_the_command_line_and_reproduce_read_the_same_preset():
     low = PRESETS["low-force"]
     assert ik == {"criterion": low["criterion"], "tool_force": 20.0}
     assert options["observer_gain"] == low["observer_gain"]
-    assert options["estimator_bandwidth_hz"] == low["estimator_bandwidth"]
+    assert options["estimator_bandwidth_hz"] == low["estimator_bandwidth_hz"]
     with pytest.raises(InputError, match="preset = 'fast': expected one of"):
         preset_options("fast", tool_force=0.0)
 

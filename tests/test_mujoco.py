@@ -130,7 +130,7 @@ def test_export_command_writes_a_model_mujoco_loads(tmp_path, capsys):
 
 
 def _short(robot, number, samples):
-    from vgtarm.app.cases import joint_reference
+    from vgtarm.experiment.cases import joint_reference
     from vgtarm.simulation import JointReference
 
     ref = joint_reference(robot, number)
@@ -148,7 +148,7 @@ def test_closed_loop_on_the_mujoco_plant_tracks_like_ours_and_is_deterministic(r
     the integrators' own error, because MuJoCo steps its tree coordinates and we our joints: at
     most about ``T h max|qdd| / 2`` = 1.9e-6 m for each Euler here (T = 0.3 s, h = 1 ms,
     |qdd| <= 12.5 m/s^2), measured 1.6e-7 m between the two (RK4: 2e-12 m)."""
-    from vgtarm.app.cases import case_study
+    from vgtarm.experiment.cases import case_study
     from vgtarm.simulation import simulate
 
     ref = _short(robot, 1, 300)
@@ -172,7 +172,7 @@ def test_explicit_euler_on_mujoco_differs_from_ours_by_a_first_order_integration
     """Halving the step halves the joints' difference between the explicit-Euler runs on MuJoCo
     and on our plant (measured 1.57e-7 m, then 7.8e-8 m): a first-order integration error, which
     vanishes with the step, and no difference of the models, which would not."""
-    from vgtarm.app.cases import case_study
+    from vgtarm.experiment.cases import case_study
     from vgtarm.simulation import simulate
 
     ref = _short(robot, 1, 300)

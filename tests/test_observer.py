@@ -198,7 +198,7 @@ def test_observer_stays_stable_with_encoders_and_a_wrong_model(robot):
         ({"observer": "kalman"}, "observer = 'kalman': expected one of"),
         ({"observer": "momentum", "force_sensor": True}, "choose one way"),
         ({"encoder_resolution": -1e-6}, "encoder_resolution = -1e-06"),
-        ({"velocity_noise": "loud"}, "velocity_noise = 'loud': expected a number"),
+        ({"velocity_noise": "loud"}, "velocity_noise = 'loud': expected a standard deviation >= 0"),
         ({"velocity_noise": 5.0}, "velocity_noise = 5.0: expected a standard deviation of at most 1"),
     ],
 )
@@ -209,8 +209,8 @@ def test_bad_observer_and_sensing_arguments_are_one_clear_line(robot, kwargs, me
 
 
 def test_report_section_beyond_the_paper(robot, tmp_path):
-    from vgtarm.app.cases import joint_reference
     from vgtarm.app.reports.beyond import beyond_figure, beyond_runs, beyond_section, run_beyond
+    from vgtarm.experiment.cases import joint_reference
 
     full = joint_reference(robot, 2)
     keep = slice(0, 401)

@@ -396,7 +396,7 @@ def test_a_bad_output_folder_fails_before_the_run(tmp_path, capsys, monkeypatch,
     def no_run(*args, **kwargs):
         raise AssertionError("the run started although the output path is bad")
 
-    monkeypatch.setattr("vgtarm.app.cases.run_case", no_run)
+    monkeypatch.setattr("vgtarm.experiment.cases.run_case", no_run)
     out = tmp_path / "out"
     if kind == "file":
         out.write_text("a file")

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from benchmarks.bench_path_wide import difference_matrices, leg_rms, node_functions, to_samples
-from vgtarm.app.cases import case_path, joint_reference
+from vgtarm.experiment.cases import case_path, joint_reference
 
 from .conftest import assert_close, random_configurations
 

@@ -110,7 +110,7 @@ def _both(path: Path) -> tuple[vgtarm.Robot, vgtarm.Robot]:
 
 
 def test_inverse_kinematics_and_closed_loop_equal_the_symbolic_model() -> None:
-    from vgtarm.app.cases import joint_reference, run_case
+    from vgtarm.experiment.cases import joint_reference, run_case
 
     symbolic, recursive = _both(EXAMPLES / "six_modules.toml")
     expected, actual = joint_reference(symbolic, 1), joint_reference(recursive, 1)
@@ -182,7 +182,7 @@ def test_switching_control_with_the_compiled_ga_equals_the_symbolic_model() -> N
     activates at every sample above the threshold: dozens of times in 0.1 s; the safe default holds
     its sets and activates a few times), its predictions through the adapters: the same activations
     and run as the symbolic model."""
-    from vgtarm.app.cases import joint_reference, run_case
+    from vgtarm.experiment.cases import joint_reference, run_case
 
     symbolic, recursive = _both(EXAMPLES / "six_modules.toml")
     reference = joint_reference(symbolic, 2, duration=0.1)

@@ -21,11 +21,11 @@ import numpy as np
 import pytest
 
 from tests.test_interrupt import ENDS_WITHIN, _alive_in_group, _assert_interrupted, _Command, warm  # noqa: F401
-from vgtarm.app.cases import joint_reference
 from vgtarm.app.pool import Inline, Workers
 from vgtarm.app.reports.beyond import ENCODER_RESOLUTION, beyond_runs
 from vgtarm.app.reports.reproduce import RunSpec, _beyond_run, reproduce
 from vgtarm.errors import InputError
+from vgtarm.experiment.cases import joint_reference
 from vgtarm.simulation.result import GAActivation, _csv
 from vgtarm.study.store import TIMING_COLUMNS
 
@@ -139,7 +139,7 @@ def test_workers_build_a_stacks_robot_and_make_its_runs_bit_for_bit(tmp_path):
     from functools import partial
 
     from vgtarm import load_robot
-    from vgtarm.app.cases import run_case
+    from vgtarm.experiment.cases import run_case
 
     six = load_robot(Path(__file__).resolve().parents[1] / "examples" / "six_modules.toml")
     reference = joint_reference(six, 1, duration=0.1)

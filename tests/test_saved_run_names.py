@@ -23,7 +23,7 @@ def test_a_python_run_keeps_its_path_name_in_the_report(robot, tmp_path):
 
 
 def test_a_case_run_still_shows_its_number(robot):
-    from vgtarm.app.cases import joint_reference, run_case, truncate_reference
+    from vgtarm.experiment.cases import joint_reference, run_case, truncate_reference
 
     run = run_case(robot, 1, reference=truncate_reference(joint_reference(robot, 1), 0.01))
     spec = spec_of(run)

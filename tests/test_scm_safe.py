@@ -17,11 +17,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from vgtarm.app.cases import case_study, joint_reference, run_case
 from vgtarm.control import SwitchingControl
 from vgtarm.control.safety import admitted_interval, damping_table, loop_matrix, spectral_radius
 from vgtarm.control.scm import dropped_at
 from vgtarm.errors import InputError, SimulationError
+from vgtarm.experiment.cases import case_study, joint_reference, run_case
 from vgtarm.model.closedloop import ClosedLoopDriver, LoopSettings
 from vgtarm.model.compiled import CompiledBackend
 from vgtarm.simulation import simulate
@@ -446,7 +446,7 @@ def test_the_library_default_is_the_safe_variant():
     the paper's is there by name."""
     import inspect
 
-    from vgtarm.app.cases import run_path
+    from vgtarm.experiment.cases import run_path
 
     assert SwitchingControl.with_gains(5000.0, 300.0).variant == "safe"
     assert case_study(2).controller("scm").variant == "safe"
@@ -467,7 +467,10 @@ def test_the_library_default_is_the_safe_variant():
             r"--scm-hold 21: expected at most the GA's horizon \(--horizon 20\)",
         ),
         (["--controller", "scm", "--horizon", "4", "--scm-hold", "5"], r"\(--horizon 4\)"),
-        (["--controller", "scm", "--scm-hold", "0"], "argument --scm-hold: expected a whole number >= 1, got 0"),
+        (
+            ["--controller", "scm", "--scm-hold", "0"],
+            r"argument --scm-hold: expected a whole number of control periods from 1 to the horizon .*, got 0$",
+        ),
         (["--controller", "scm", "--scm-hold", "x"], "argument --scm-hold"),
         (["--controller", "scm", "--scm-switch-on", "estimated"], "argument --scm-switch-on: invalid choice"),
     ],
@@ -510,7 +513,7 @@ def test_studies_pass_the_scm_options_to_the_safe_variant_only():
     """``scm_hold`` and ``scm_switch_on`` are study parameters: checked, given to the safe points'
     controller (a sweep over the variant runs the paper's points without them), repeated by the
     points' ``vgtarm simulate`` command, and left out of the ids at their defaults."""
-    from vgtarm.app.study_points import _controller, simulate_command
+    from vgtarm.app.study_points import experiment_of, simulate_command
     from vgtarm.errors import ConfigError
     from vgtarm.study import parse_study
     from vgtarm.study.spec import point_id_of
@@ -520,9 +523,9 @@ def test_studies_pass_the_scm_options_to_the_safe_variant_only():
         "grid": {"controller": "scm", "scm_variant": ["safe", "paper"], "scm_hold": 4, "scm_switch_on": "true"},
     }
     safe, paper = sorted(parse_study(data).points(), key=lambda p: p.inputs["scm_variant"] != "safe")
-    controller = _controller(safe.inputs, 7)
+    controller = experiment_of(safe.inputs, {}).controller(7)
     assert (controller.hold_periods, controller.measured_switching) == (4, False)
-    assert _controller(paper.inputs, 7).hold_periods == 1
+    assert experiment_of(paper.inputs, {}).controller(7).hold_periods == 1
     command = simulate_command(safe.inputs)
     assert command[command.index("--scm-hold") + 1] == "4" and "--scm-switch-on" in command
     assert "--scm-hold" not in simulate_command(paper.inputs)

@@ -11,9 +11,9 @@ import pytest
 
 import vgtarm
 from vgtarm import paths
-from vgtarm.app.cases import PAPER_HOME_TIP, case_path, case_study, joint_reference, path_placement, run_case
 from vgtarm.app.cli.command import main
 from vgtarm.errors import ConfigError
+from vgtarm.experiment.cases import PAPER_HOME_TIP, case_path, case_study, joint_reference, path_placement, run_case
 from vgtarm.model.stack import StackModel
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"

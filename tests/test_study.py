@@ -305,10 +305,17 @@ def test_simulator_options_are_checked_before_any_run(tmp_path: Path, capsys: py
     assert "observer" in Scenario.option_names()  # a study parameter found from the scenario's fields
     study_file = tmp_path / "bad.toml"
     study_file.write_text('[study]\ncase = 1\nduration = 0.05\n[grid]\nobserver = ["none", "kalman"]\n')
-    assert len(load_study(study_file).points()) == 2  # a string: the schema cannot know the choices
+    with pytest.raises(ConfigError, match=r"grid\.observer = 'kalman': expected one of \['none', 'momentum'\]"):
+        load_study(study_file)  # the scenario's declaration of the option has its choices
     assert main(["study", "run", str(study_file), "--out", str(tmp_path / "out"), "-q"]) == 1
     err = capsys.readouterr().err
     assert "kalman" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()  # refused before any run
+    study_file.write_text('[study]\ncase = 1\nduration = 0.05\n[grid]\nobserver = "momentum"\nobserver_gain = 5e3\n')
+    assert len(load_study(study_file).points()) == 1  # in the declared bounds: at most 1/dt is the simulator's check
+    assert main(["study", "run", str(study_file), "--out", str(tmp_path / "out"), "-q"]) == 1
+    err = capsys.readouterr().err
+    assert "observer_gain = 5000.0: expected at most 1/dt" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "out").exists()  # the simulator's own check ran before any run
 
 
@@ -338,9 +345,9 @@ def test_report_statistics_and_figures(local_run: Any) -> None:
 
 def test_reproduce_seeds_section_matches_single_runs(tmp_path: Path) -> None:
     from vgtarm import load_robot
-    from vgtarm.app.cases import joint_reference, run_case
     from vgtarm.app.reports.reproduce import RunSpec
     from vgtarm.app.reports.seeds import seed_rows, seed_section
+    from vgtarm.experiment.cases import joint_reference, run_case
 
     specs = [RunSpec(1, "cfc", True, "exact")]
     section = seed_section(tmp_path / "seeds", 3, specs)
@@ -383,6 +390,8 @@ def test_a_study_runs_on_a_stack_of_modules_and_its_rows_are_reproduced(tmp_path
     out = tmp_path / "again"
     assert main([*simulate_command(record["inputs"], study_folder=tmp_path), "--out", str(out), "-q"]) == 0
     again = json.loads((out / "summary.json").read_text())
+    robots = [summary["experiment"].pop("robot") for summary in (again, record["summary"])]
+    assert robots[0]["name"] == robots[1]["name"] and robots[1]["source"] == "study robot file six_modules.toml"
     assert {k: v for k, v in again.items() if k not in TIMING_COLUMNS} == {
         k: v for k, v in record["summary"].items() if k not in TIMING_COLUMNS
-    }
+    }  # where the robot was read aside (the study ships its text to the workers)

@@ -133,7 +133,7 @@ def test_simulate_refuses_a_weight_without_the_effort_criterion(tmp_path: Path, 
         ('criterion = "effort"\njoint_limit_weight = -1.0', "grid.joint_limit_weight = -1.0: expected a weight > 0"),
         ('criterion = "effort"\njoint_limit_weight = 0', "grid.joint_limit_weight = 0: expected a weight > 0"),
         ("joint_limit_weight = 0.3", "grid.joint_limit_weight: applies to criterion = 'effort' only"),
-        ('criterion = ["effort"]\nestimator = 3', "grid.estimator = 3: expected a string"),
+        ('criterion = ["effort"]\nestimator = 3', "grid.estimator = 3: expected one of ['difference', 'kalman']"),
     ],
 )
 def test_bad_criterion_values_are_refused_before_any_run(

@@ -81,7 +81,7 @@ def test_the_feedforward_removes_the_steady_error_of_the_cutting_force(robot):
 
 
 def test_the_expected_force_is_the_effort_criterions(robot):
-    from vgtarm.app.cases import case_path
+    from vgtarm.experiment.cases import case_path
     from vgtarm.ik.effort import expected_tool_force
 
     path = case_path(robot, 2, 1e-3)
@@ -142,9 +142,9 @@ def test_the_low_force_preset_feeds_the_cutting_force_forward_only_with_the_tool
     import argparse
 
     from vgtarm.app.cli import presets as cli_presets
-    from vgtarm.app.presets import PRESETS, preset_options
+    from vgtarm.experiment.presets import PRESETS, preset_options
 
-    assert PRESETS["low-force"]["tool_feedforward"] is True
+    assert PRESETS["low-force"]["tool_force_feedforward"] is True
     _, with_force = preset_options("low-force", tool_force=20.0)
     _, without = preset_options("low-force", tool_force=0.0)
     assert with_force["tool_force_feedforward"] is True and "tool_force_feedforward" not in without
@@ -152,11 +152,10 @@ def test_the_low_force_preset_feeds_the_cutting_force_forward_only_with_the_tool
         args = argparse.Namespace(
             preset="low-force",
             external_force=external_force,
-            tool_feedforward=False,
+            tool_force_feedforward=False,
             tool_force_speed=None,
             estimator="difference",
-            estimator_bandwidth=None,
+            estimator_bandwidth_hz=None,
         )
         cli_presets.apply_preset(args)
-        options = cli_presets.simulate_options(args)
-        assert options.get("tool_force_feedforward", False) is external_force
+        assert args.tool_force_feedforward is external_force

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import vgtarm
 from vgtarm import paths
-from vgtarm.app.cases import case_study
+from vgtarm.experiment.cases import case_study
 from vgtarm.simulation import SimulationResult, simulate
 
 #: Length of the short runs (s): case 1's path cut after its start transient.

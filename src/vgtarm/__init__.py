@@ -21,7 +21,6 @@ from .version import __version__ as __version__
 
 if TYPE_CHECKING:  # the names as static type checkers and editors see them
     from . import control, export, ga, ik, model, mujoco_bridge, paths, simulation, study
-    from .app.cases import case_study, run_case
     from .app.library import run_study
     from .app.pictures.plotting import (
         comparison_figure,
@@ -42,6 +41,8 @@ if TYPE_CHECKING:  # the names as static type checkers and editors see them
         UnreachableError,
         VgtarmError,
     )
+    from .experiment import PRESETS, Experiment
+    from .experiment.cases import case_study, run_case
     from .export import export_controller
     from .ga import GAOptions
     from .ik import IKOptions, IKResult, OrientationPath, PointSolution, inverse_kinematics, solve_point
@@ -113,9 +114,12 @@ _SOURCES: dict[str, tuple[str, str]] = {
             "simulate",
         )
     },
+    # one run as a record (every option declared once), the presets
+    "Experiment": ("experiment", "Experiment"),
+    "PRESETS": ("experiment", "PRESETS"),
     # the paper's case studies, studies of many runs, the report
-    "case_study": ("app.cases", "case_study"),
-    "run_case": ("app.cases", "run_case"),
+    "case_study": ("experiment.cases", "case_study"),
+    "run_case": ("experiment.cases", "run_case"),
     "Study": ("study", "Study"),
     "load_study": ("study", "load_study"),
     "run_study": ("app.library", "run_study"),
@@ -145,6 +149,7 @@ __all__ = [
     "BiasAccelerations",
     "ComputedForceControl",
     "ConfigError",
+    "Experiment",
     "ExternalForce",
     "ForwardKinematics",
     "GAOptions",
@@ -155,6 +160,7 @@ __all__ = [
     "JOINT_NAMES",
     "JointReference",
     "OrientationPath",
+    "PRESETS",
     "PathError",
     "PointSolution",
     "Robot",

@@ -10,13 +10,11 @@ in every worker, which imports it by name.
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import os
 import tempfile
 import tomllib
 from collections.abc import Mapping
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -26,61 +24,59 @@ from .. import (
     mujoco_bridge,  # noqa: F401  (registers the MuJoCo plant, in workers too)
     paths,
 )
-from ..control import ComputedForceControl, SwitchingControl
 from ..errors import InputError
-from ..ga import GAOptions
-from ..model.parameters import RobotParameters
-from ..model.robot import Robot, load_robot, robot_from_dict
-from ..simulation import JointReference, simulate
-from ..simulation.external import ExternalForce
-from ..study.spec import Value, simulate_options
-from .cases import case_path, case_study, path_placement, task_metadata, truncate_reference
+from ..experiment import Experiment
+from ..experiment.cases import case_path, case_study
+from ..experiment.options import all_options
+from ..experiment.record import robot_of_text
+from ..model.robot import Robot, load_robot
+from ..simulation import JointReference
+from ..study.spec import Value
 
 Inputs = Mapping[str, Value]
 
 
-@functools.cache
-def _robot(robot_text: str | None) -> Robot:
-    """The study's robot (the reference robot when ``robot_text`` is None), built once per process."""
-    if robot_text is None:
-        return load_robot()
-    return robot_from_dict(tomllib.loads(robot_text), source="<study robot file>")
+def _robot(robot_text: str | None, name: object = None) -> Robot:
+    """The study's robot (the reference robot when ``robot_text`` is None), built once per process;
+    ``name``: the study's robot file, as it gives it (the run's record says where the robot was read)."""
+    return load_robot() if robot_text is None else robot_of_text(robot_text, f"study robot file {name}")
 
 
-@functools.lru_cache(maxsize=16)
-def _reference(
-    robot_text: str | None,
-    case: int | None,
-    path_text: str | None,
-    dt: float,
-    rates: str,
-    duration: float | None,
-    criterion: tuple[tuple[str, Any], ...] = (),
-) -> JointReference:
-    """The joint reference of a case or of a path file's text, cut to ``duration``; ``criterion``: the
-    inverse kinematics' criterion options (:func:`_criterion`; none: eq. 12); cached."""
-    robot = _robot(robot_text)
-    if case is not None:
-        desired = case_path(robot, case, dt)  # placed on a stack at its home tip, scaled to its reach
-        name = f"case {case}"
-    else:
-        assert path_text is not None
-        desired = _path_of(path_text, dt)
-        name = desired.name
-    ik = robot.inverse_kinematics(desired, solver="fast", rates=rates, **dict(criterion))
-    reference = JointReference.of(ik, name=name)
-    return reference if duration is None else truncate_reference(reference, duration)
+def experiment_of(inputs: Inputs, files: Mapping[str, str]) -> Experiment:
+    """The experiment of a study point: its robot (the study's file, shipped as text), its case or
+    path file, its ``dt`` and every option of its inputs (:mod:`vgtarm.experiment.options`)."""
+    options = {key: value for key, value in inputs.items() if key in all_options()}
+    options.update(rates=str(inputs["rates"]), duration=inputs["duration"])
+    robot = _robot(files.get("robot"), inputs.get("robot"))
+    dt = float(inputs["dt"])  # type: ignore[arg-type]
+    if inputs["case"] is not None:
+        return Experiment(case=int(inputs["case"]), robot=robot, dt=dt, options=options)
+    return Experiment(path=_path_of(files["path"], dt), robot=robot, dt=dt, options=options)
 
 
-def _criterion(inputs: Inputs) -> tuple[tuple[str, Any], ...]:
-    """The inverse kinematics' options of the point's ``criterion`` as ``vgtarm simulate --criterion``
-    gives them: none for eq. 12; for the effort criterion its joint-limit weight and the expected
-    cutting force (the point's ``cutting_force`` with the tool force, else 0)."""
-    if inputs.get("criterion", "joint_limits") == "joint_limits":
-        return ()
-    force = float(inputs["cutting_force"]) if inputs["external_force"] else 0.0  # type: ignore[arg-type]
-    weight = float(inputs["joint_limit_weight"])  # type: ignore[arg-type]
-    return (("criterion", str(inputs["criterion"])), ("joint_limit_weight", weight), ("tool_force", force))
+#: The joint references a worker has built: the inverse kinematics of a path is the same for every
+#: seed and controller of a study, so it is solved once per process.
+_REFERENCES: dict[tuple[Any, ...], JointReference] = {}
+
+
+def _reference(experiment: Experiment, files: Mapping[str, str]) -> JointReference:
+    """The experiment's joint reference, cached by what it depends on (robot, path, sampling, rates,
+    duration, criterion)."""
+    o = experiment.options
+    key = (
+        files.get("robot"),
+        experiment.case,
+        files.get("path"),
+        experiment.dt,
+        o["rates"],
+        o["duration"],
+        tuple(sorted(experiment.ik_options().items())),
+    )
+    if key not in _REFERENCES:
+        if len(_REFERENCES) >= 16:
+            _REFERENCES.pop(next(iter(_REFERENCES)))
+        _REFERENCES[key] = experiment.reference()
+    return _REFERENCES[key]
 
 
 def _path_of(text: str, dt: float) -> paths.TipPath:
@@ -95,86 +91,6 @@ def _path_of(text: str, dt: float) -> paths.TipPath:
         os.unlink(name)
 
 
-def _controller(inputs: Inputs, n_joints: int) -> ComputedForceControl | SwitchingControl:
-    case = case_study(int(inputs["case"] or 1))  # path files use case 1's gains unless given
-    kp = _number(inputs["kp"], case.kp)
-    kv = _number(inputs["kv"], case.kv)
-    if inputs["controller"] == "cfc":
-        return ComputedForceControl.with_gains(kp, kv, n_joints)
-    if inputs["controller"] == "scm":
-        return SwitchingControl.with_gains(
-            kp,
-            kv,
-            n_joints,
-            threshold=_number(inputs["threshold"], case.threshold),
-            kp_bounds=(case.kp_bounds[0], _number(inputs["kp_max"], case.kp_bounds[1])),
-            kv_bounds=(case.kv_bounds[0], _number(inputs["kv_max"], case.kv_bounds[1])),
-            horizon=int(inputs["horizon"]),  # type: ignore[arg-type]
-            prediction=inputs["prediction"],
-            variant=inputs["scm_variant"],
-            **_safe_options(inputs),
-            ga=GAOptions(population_size=int(inputs["ga_population"]), max_generations=int(inputs["ga_generations"])),  # type: ignore[arg-type]
-        )
-    raise InputError(f"controller = {inputs['controller']!r}: expected one of ['cfc', 'scm']")
-
-
-def _safe_options(inputs: Inputs) -> dict[str, Any]:
-    """``scm_hold`` and ``scm_switch_on`` as options of the safe variant (a study that sweeps the
-    variant runs the paper's points without them: it holds a set for its sample only)."""
-    if inputs["scm_variant"] != "safe":
-        return {}
-    return {"hold": inputs.get("scm_hold"), "switch_on": inputs.get("scm_switch_on")}
-
-
-def _number(value: Value, default: float | tuple[float, ...]) -> float | tuple[float, ...]:
-    return default if value is None else float(value)
-
-
-def _external(inputs: Inputs) -> ExternalForce | None:
-    if not inputs["external_force"]:
-        return None
-    case = case_study(int(inputs["case"] or 1))
-    eta = float(inputs["disturbance"])  # type: ignore[arg-type]
-    return replace(case.external_force, cutting_force=float(inputs["cutting_force"]), eta=(eta, eta, eta))  # type: ignore[arg-type]
-
-
-def _model(robot: Robot, inputs: Inputs) -> RobotParameters | None:
-    factors = (inputs["model_mass"], inputs["model_inertia"], inputs["model_friction"])
-    if factors == (1.0, 1.0, 1.0):
-        return None  # the plant's own parameters, as `vgtarm simulate` without --model-*
-    mass, inertia, friction = (float(f) for f in factors)  # type: ignore[arg-type]
-    return robot.parameters.scaled(mass=mass, inertia=inertia, friction=friction)
-
-
-def _options(inputs: Inputs) -> dict[str, Any]:
-    """The inputs that are options of the installed simulation's Scenario."""
-    return {k: inputs[k] for k in simulate_options() if k in inputs}
-
-
-def _metadata(robot: Robot, inputs: Inputs) -> dict[str, Any]:
-    gains = _gains_metadata(inputs, robot.n_joints)
-    if inputs.get("criterion", "joint_limits") != "joint_limits":  # as `vgtarm simulate --criterion` records it
-        gains["ik_criterion"] = inputs["criterion"]
-    if inputs["case"] is None:
-        return {"path": inputs["path"], **gains, **task_metadata(robot)}  # as run_path records it
-    placement = path_placement(robot)  # a case path on another robot than the paper's: where and how large
-    return {
-        "case": inputs["case"],
-        "case_title": case_study(int(inputs["case"])).title,
-        **(placement.metadata() if placement is not None else {}),
-        **gains,
-    }
-
-
-def _gains_metadata(inputs: Inputs, n_joints: int) -> dict[str, Any]:
-    """``kp`` and ``kv`` per joint when the point gives either, as ``vgtarm simulate --kp/--kv`` records them."""
-    if inputs.get("kp") is None and inputs.get("kv") is None:
-        return {}
-    case = case_study(int(inputs["case"] or 1))
-    kp, kv = _number(inputs["kp"], case.kp), _number(inputs["kv"], case.kv)
-    return {"kp": [float(kp)] * n_joints, "kv": [float(kv)] * n_joints}  # type: ignore[arg-type]
-
-
 def execute_point(inputs: Inputs, files: Mapping[str, str]) -> tuple[dict[str, Any], str]:
     """Run one point; returns ``(summary, error)``: the run's ``summary()`` and "" when it completes,
     else the summary up to the failure (or ``success``/``message`` only) and the error's type name.
@@ -185,28 +101,9 @@ def execute_point(inputs: Inputs, files: Mapping[str, str]) -> tuple[dict[str, A
     from ..errors import SimulationError
 
     try:
-        robot = _robot(files.get("robot"))
-        reference = _reference(
-            files.get("robot"),
-            inputs["case"],
-            files.get("path"),
-            float(inputs["dt"]),  # type: ignore[arg-type]
-            str(inputs["rates"]),
-            None if inputs["duration"] is None else float(inputs["duration"]),
-            _criterion(inputs),
-        )
-        result = simulate(
-            robot,
-            reference,
-            _controller(inputs, robot.n_joints),
-            controller_model=_model(robot, inputs),
-            external_force=_external(inputs),
-            integrator=str(inputs["integrator"]),
-            substeps=int(inputs["substeps"]),  # type: ignore[arg-type]
-            seed=int(inputs["seed"]),  # type: ignore[arg-type]
-            metadata=_metadata(robot, inputs),
-            **_options(inputs),
-        )
+        experiment = experiment_of(inputs, files)
+        path = {} if inputs["case"] is not None else {"path": inputs["path"]}  # the file's name, as given
+        result = experiment.run(reference=_reference(experiment, files), metadata=path)
         return result.summary(), ""
     except SimulationError as exc:
         partial = exc.result.summary() if exc.result is not None else {}  # type: ignore[attr-defined]
@@ -225,7 +122,7 @@ def check_point(inputs: Inputs, files: Mapping[str, str]) -> None:
     from ..errors import ConfigError
 
     try:
-        robot = _robot(files.get("robot"))
+        robot = _robot(files.get("robot"), inputs.get("robot"))
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"study.robot = {inputs['robot']!r}: TOML syntax error: {exc}") from None
     dt = float(inputs["dt"])  # type: ignore[arg-type]
@@ -236,59 +133,15 @@ def check_point(inputs: Inputs, files: Mapping[str, str]) -> None:
             case_path(robot, int(inputs["case"]), dt)  # type: ignore[arg-type]
         except paths.PathError as exc:
             raise ConfigError(f"study.dt = {dt!r}: case {inputs['case']}'s path cannot be sampled: {exc}") from None
-    n_joints = len(robot.parameters.home)
+    experiment = experiment_of(inputs, files)
     q = np.tile(np.asarray(robot.parameters.home, dtype=float), (3, 1))
     still = JointReference(np.arange(3.0) * dt, q, np.zeros_like(q), np.zeros_like(q), name="check")
-    assert still.q.shape[1] == n_joints
-    simulate(
-        robot,
-        still,
-        _controller(inputs, robot.n_joints),
-        controller_model=_model(robot, inputs),
-        external_force=_external(inputs),
-        integrator=str(inputs["integrator"]),
-        substeps=int(inputs["substeps"]),  # type: ignore[arg-type]
-        seed=int(inputs["seed"]),  # type: ignore[arg-type]
-        **_options(inputs),
-    )
+    experiment.run(reference=still)
 
 
-#: ``vgtarm simulate`` flags of the inputs it can express (the rest must be at their defaults).
-_FLAGS = {
-    "controller": "--controller",
-    "integrator": "--integrator",
-    "substeps": "--substeps",
-    "seed": "--seed",
-    "rates": "--rates",
-    "horizon": "--horizon",
-    "scm_variant": "--scm-variant",
-    "scm_hold": "--scm-hold",
-    "scm_switch_on": "--scm-switch-on",
-    "duration": "--duration",
-    "model_mass": "--model-mass",
-    "model_inertia": "--model-inertia",
-    "model_friction": "--model-friction",
-    "observer": "--observer",
-    "observer_gain": "--observer-gain",
-    "encoder_resolution": "--encoder-resolution",
-    "velocity_noise": "--velocity-noise",
-    "velocity_filter_hz": "--velocity-filter",
-    "plant_engine": "--plant",
-}
-#: Flags given only when the input is away from its default (the command lines of before stay as they were).
-_OPTIONAL_FLAGS = {
-    "criterion": "--criterion",
-    "joint_limit_weight": "--joint-limit-weight",
-    "estimator": "--estimator",
-    "estimator_bandwidth_hz": "--estimator-bandwidth",
-    "tool_force_speed": "--tool-force-speed",
-}
-_SWITCHES = {
-    "external_force": "--external-force",
-    "force_sensor": "--force-sensor",
-    "tool_force_feedforward": "--tool-feedforward",
-}
-_STUDY_ONLY = {"kp": None, "kv": None, "threshold": None, "kp_max": None, "kv_max": None, "path": None, "dt": 1e-3}
+#: The study's inputs that are no option of an experiment, and their defaults (``vgtarm simulate``
+#: has no flag for them: ``--path`` takes a file, ``dt`` is the case's).
+_STUDY_ONLY: dict[str, Value] = {"path": None, "dt": 1e-3}
 
 
 def _gain_flag_repeats(inputs: Inputs, key: str) -> bool:
@@ -302,40 +155,52 @@ def _gain_flag_repeats(inputs: Inputs, key: str) -> bool:
     return inputs.get(f"{key}_max") is None and float(inputs[key]) <= bound  # type: ignore[arg-type]
 
 
+def _applies(key: str, inputs: Inputs) -> bool:
+    """Whether the option ``key`` applies to the point: the option it needs (its declaration's
+    ``needs``) applies and has the value it needs (``scm_hold``: the safe variant of the switching
+    method; ``horizon``: the switching method); the velocity filter: with sensing."""
+    if key == "velocity_filter_hz":  # it filters differenced velocities: a run without sensing has none
+        return bool(inputs.get("encoder_resolution") or inputs.get("velocity_noise"))
+    needs = all_options()[key].needs
+    if needs is None:
+        return True
+    other, value = needs
+    return inputs.get(other, all_options()[other].default) == value and _applies(other, inputs)
+
+
+def _flag(key: str, value: Value, inputs: Inputs) -> list[str]:
+    """The ``vgtarm simulate`` arguments of the input ``key``: its declared flag when the value is away
+    from its default and applies; none else; InputError when simulate has no flag for it."""
+    option = all_options().get(key)
+    default = _STUDY_ONLY[key] if option is None else option.default
+    if value == default or value is None or not _applies(key, inputs):
+        return []
+    if option is None or not option.cli_flag:
+        raise InputError(f"{key} = {value!r}: `vgtarm simulate` has no flag for it (only its default)")
+    if option.kind is bool:
+        return [option.cli_flag]
+    return [option.cli_flag, repr(value) if isinstance(value, float) else str(value)]
+
+
 def simulate_command(inputs: Inputs, *, study_folder: str | Path | None = None) -> list[str]:
-    """The ``vgtarm simulate`` arguments that re-run a point (its summary is the row's, timings aside).
+    """The ``vgtarm simulate`` arguments that re-run a point (its summary is the row's, timings aside):
+    each input away from its default by its declared flag (:mod:`vgtarm.experiment.options`).
 
     Raises InputError naming an input that ``vgtarm simulate`` has no flag for, when it is not at
     its default (gains beyond the GA's bounds, GA sizes, tool-force magnitudes, a path file, another
     ``dt``).
     """
-    from ..study.spec import all_parameters
-
-    defaults: dict[str, Value] = {k: p.default for k, p in all_parameters().items()}
-    defaults.update(_STUDY_ONLY)
     args = ["simulate", "--case", str(inputs["case"])]
     for key, value in inputs.items():
         if key in ("case", "robot"):
             continue
-        if key in ("kp", "kv") and value is not None and _gain_flag_repeats(inputs, key):
-            args += [f"--{key}", repr(float(value))]
-        elif key in _FLAGS:
-            safe = (inputs["controller"], inputs["scm_variant"]) == ("scm", "safe")
-            if key in ("scm_hold", "scm_switch_on") and not safe:
-                continue  # options of the safe variant only, which the run did not use
-            if key in ("horizon", "scm_variant") and inputs["controller"] != "scm":
-                continue  # options of the switching method (simulate refuses them with another controller)
-            if key == "velocity_filter_hz" and not (inputs.get("encoder_resolution") or inputs.get("velocity_noise")):
-                continue  # it filters differenced velocities: a run without sensing has none (refused there)
-            if value is not None:
-                args += [_FLAGS[key], str(value) if not isinstance(value, float) else repr(value)]
-        elif key in _OPTIONAL_FLAGS:
-            if value != defaults.get(key):
-                args += [_OPTIONAL_FLAGS[key], str(value) if not isinstance(value, float) else repr(value)]
-        elif key in _SWITCHES:
-            args += [_SWITCHES[key]] if value else []
-        elif value != defaults.get(key, value):
-            raise InputError(f"{key} = {value!r}: `vgtarm simulate` has no flag for it (only its default)")
+        if key in ("kp", "kv"):
+            if value is not None and _gain_flag_repeats(inputs, key):
+                args += [f"--{key}", repr(float(value))]
+            elif value is not None:
+                raise InputError(f"{key} = {value!r}: `vgtarm simulate` has no flag for it (only its default)")
+            continue
+        args += _flag(key, value, inputs)
     if inputs.get("robot") is not None:
         args += ["--config", str(Path(study_folder or ".") / str(inputs["robot"]))]
     return args

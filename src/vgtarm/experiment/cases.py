@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import paths
+from .. import checks, paths
 from ..control import ComputedForceControl, SwitchingControl
 from ..errors import InputError, shown
 from ..ga import GAOptions
@@ -313,10 +313,7 @@ def truncate_reference(reference: JointReference, duration: float) -> JointRefer
     The reference of the whole path is computed first and then cut, so a run on the first
     ``duration`` seconds follows exactly the start of the full run's reference.
     """
-    if isinstance(duration, bool) or not isinstance(duration, int | float | np.integer | np.floating):
-        raise InputError(f"duration = {shown(duration)}: expected a time > 0 (s)")
-    if not (np.isfinite(duration) and duration > 0):
-        raise InputError(f"duration = {duration!r}: expected a time > 0 (s)")
+    checks.positive("duration", duration, "s")
     t = reference.t
     n = max(2, int(np.count_nonzero(t - t[0] <= duration + 1e-6 * reference.dt)))
     return reference.head(n)

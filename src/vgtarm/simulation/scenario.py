@@ -8,14 +8,16 @@ says exactly what it was. Options that need the plant or the reference (the obse
 gain needs the control period, the encoder steps the robot's joint units, the initial state and
 the limit tolerance the robot's joint range) are resolved with them in the simulator.
 
-A new option is one field here, one check in :meth:`Scenario.__post_init__` (or where it meets
-the plant) and one use in the simulator.
+A new option is one field here, declared with :func:`vgtarm.option.option` (its kind, default,
+bounds, unit and help: checked when the record is built), and its use in the simulator; the
+command line's flag (``vgtarm simulate``), the study file's parameter and the presets' key follow
+from the declaration. A check that needs two options or the plant stays in
+:meth:`Scenario.__post_init__` or where it meets the plant.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any
@@ -23,12 +25,22 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError, shown
-from ..ga import check_seed
+from ..ga import MAX_SEED
 from ..model.parameters import RobotParameters
 from ..model.robot import Robot
 from ..model.stack import Stack
+from ..option import ID_ALWAYS, Option, check_declared, declared, option
 from .external import DEFAULT_FEEDFORWARD_SPEED, ExternalForce
-from .sensing import DEFAULT_VELOCITY_FILTER_HZ, ESTIMATORS, OBSERVERS
+from .sensing import (
+    DEFAULT_ESTIMATOR_BANDWIDTH_HZ,
+    DEFAULT_OBSERVER_GAIN_DT,
+    DEFAULT_VELOCITY_FILTER_HZ,
+    ESTIMATORS,
+    MAX_LEG_RESOLUTION,
+    MAX_TWIST_RESOLUTION,
+    MAX_VELOCITY_NOISE,
+    OBSERVERS,
+)
 
 #: Integrators by name.
 INTEGRATORS: dict[str, str] = {
@@ -68,24 +80,138 @@ class Scenario:
 
     external_force: ExternalForce = field(default_factory=ExternalForce.none)
     controller_model: RobotParameters | Stack | Robot | None = None
-    integrator: str = "euler"
-    substeps: int = 1
-    seed: int = 0
+    integrator: str = option(
+        "euler",
+        str,
+        f"one of {sorted(INTEGRATORS)}",
+        choices=tuple(sorted(INTEGRATORS)),
+        help="plant integrator (default: euler, the paper's)",
+        in_id=ID_ALWAYS,
+    )
+    substeps: int = option(
+        1,
+        int,
+        f"a whole number from 1 to {MAX_SUBSTEPS:,} (steps per control period)",
+        low=1,
+        high=MAX_SUBSTEPS,
+        help=f"integration steps per control period (1 to {MAX_SUBSTEPS:,})",
+        in_id=ID_ALWAYS,
+    )
+    seed: int = option(
+        0,
+        int,
+        f"a whole number from 0 to 2**63 - 1 = {MAX_SEED}",
+        low=0,
+        high=MAX_SEED,
+        help="seed of the disturbance and the GA (default 0; 0 to 2**63 - 1)",
+        study=False,  # a study gives its seeds apart (``seeds``)
+    )
     initial_state: tuple[Any, Any] | None = None
-    limit_tolerance: float = 0.05
-    observer: str = "none"
-    observer_gain: float | None = None
-    force_sensor: bool = False
-    encoder_resolution: float = 0.0
-    twist_resolution: float | None = None
-    velocity_noise: float = 0.0
-    velocity_filter_hz: float = DEFAULT_VELOCITY_FILTER_HZ
-    plant_engine: str = MODEL_ENGINE
-    transient_s: float = 0.2
-    estimator: str = "difference"
-    estimator_bandwidth_hz: float | None = None
-    tool_force_feedforward: bool = False
-    tool_force_speed: float | None = None
+    limit_tolerance: float = option(
+        0.05,
+        float,
+        "a distance > 0 (m, rad), at most a tenth of the smallest joint range",
+        low=0.0,
+        strict=True,
+        flag="",
+        deferred=True,  # the bound is the robot's: checked where the run meets the plant
+    )
+    observer: str = option(
+        "none",
+        str,
+        f"one of {list(OBSERVERS)}",
+        choices=OBSERVERS,
+        help="momentum: cancel the external efforts estimated by a generalised-momentum observer",
+    )
+    observer_gain: float | None = option(
+        None,
+        float,
+        "a finite number > 0 (1/s), at most 1/dt",
+        low=0.0,
+        strict=True,
+        metavar="K",
+        needs=("observer", "momentum"),
+        help=f"with --observer momentum: its gain K_O in 1/s (default {DEFAULT_OBSERVER_GAIN_DT:g}/dt; at most 1/dt)",
+    )
+    force_sensor: bool = option(
+        False, bool, "True or False", help="feed the tool force measured one period late forward"
+    )
+    encoder_resolution: float = option(
+        0.0,
+        float,
+        f"an encoder step >= 0 (m), at most {MAX_LEG_RESOLUTION:g} m",
+        low=0.0,
+        metavar="R",
+        help="encoder step of the legs in m (e.g. 1e-6); the twist gets a 20-bit encoder",
+    )
+    twist_resolution: float | None = option(
+        None, float, f"an encoder step > 0 (rad), at most {MAX_TWIST_RESOLUTION:g} rad", low=0.0, flag=""
+    )
+    velocity_noise: float = option(
+        0.0,
+        float,
+        f"a standard deviation >= 0 (m/s, rad/s), at most {MAX_VELOCITY_NOISE:g}",
+        low=0.0,
+        metavar="S",
+        help="standard deviation of Gaussian noise on each differenced velocity (m/s, rad/s)",
+    )
+    velocity_filter_hz: float = option(
+        DEFAULT_VELOCITY_FILTER_HZ,
+        float,
+        "a cut-off > 0 (Hz)",
+        low=0.0,
+        strict=True,
+        flag="--velocity-filter",
+        metavar="HZ",
+        help=f"cut-off of the velocity filter with sensing (default {DEFAULT_VELOCITY_FILTER_HZ:g} Hz)",
+    )
+    plant_engine: str = option(
+        MODEL_ENGINE,
+        str,
+        "a name of a plant engine ('model', 'mujoco' or one registered)",
+        flag="--plant",
+        metavar="{model,mujoco}",
+        help="what integrates the robot: our model (default) or MuJoCo on the exported MJCF (vgtarm[mujoco])",
+    )
+    transient_s: float = option(0.2, float, "a duration >= 0 (s)", low=0.0, flag="")
+    estimator: str = option(
+        "difference",
+        str,
+        f"one of {list(ESTIMATORS)}",
+        choices=ESTIMATORS,
+        help="with encoders: velocities from differences through the filter (default), or a Kalman filter "
+        "with the controller model's dynamics (and, with the observer, the disturbance) as its process model",
+    )
+    estimator_bandwidth_hz: float | None = option(
+        None,
+        float,
+        "a finite number > 0 (Hz), at most 0.25/dt",
+        low=0.0,
+        strict=True,
+        flag="--estimator-bandwidth",
+        metavar="HZ",
+        needs=("estimator", "kalman"),
+        help=f"--estimator kalman: its bandwidth (default {DEFAULT_ESTIMATOR_BANDWIDTH_HZ:g} Hz, at most 1/(4 dt))",
+    )
+    tool_force_feedforward: bool = option(
+        False,
+        bool,
+        "True or False",
+        flag="--tool-feedforward",
+        help="with --external-force: feed the expected cutting force (its model along the reference's tip "
+        "velocity) forward through J_P^T; the observer and the Kalman estimator estimate the rest",
+    )
+    tool_force_speed: float | None = option(
+        None,
+        float,
+        "a speed > 0 (m/s)",
+        low=0.0,
+        strict=True,
+        metavar="V",
+        needs=("tool_force_feedforward", True),
+        help="--tool-feedforward: speed in m/s over which the expected force is smoothed where the tool starts, "
+        f"turns or stops (default {DEFAULT_FEEDFORWARD_SPEED:g})",
+    )
 
     def __post_init__(self) -> None:
         if self.external_force is None:  # the keyword form's default
@@ -98,45 +224,15 @@ class Scenario:
             raise InputError(
                 f"controller_model = {shown(self.controller_model)}: expected None, a Robot, RobotParameters or a Stack"
             )
-        for label, value in (("integrator", self.integrator), ("plant_engine", self.plant_engine)):
-            if not isinstance(value, str):
-                raise InputError(f"{label} = {shown(value)}: expected a name (str)")
-        if self.integrator not in INTEGRATORS:
-            raise InputError(f"integrator = {self.integrator!r}: expected one of {sorted(INTEGRATORS)}")
-        if not (isinstance(self.substeps, int) and not isinstance(self.substeps, bool)):
-            raise InputError(f"substeps = {shown(self.substeps)}: expected a whole number from 1 to {MAX_SUBSTEPS:,}")
-        if not 1 <= self.substeps <= MAX_SUBSTEPS:
-            raise InputError(f"substeps = {shown(self.substeps)}: expected a whole number from 1 to {MAX_SUBSTEPS:,}")
-        check_seed(self.seed, "seed")  # 0 to 2**63 - 1: the seed is stored as a 64-bit integer
-        if self.observer not in OBSERVERS:
-            raise InputError(f"observer = {self.observer!r}: expected one of {list(OBSERVERS)}")
-        if not isinstance(self.estimator, str) or self.estimator not in ESTIMATORS:
-            raise InputError(f"estimator = {shown(self.estimator)}: expected one of {list(ESTIMATORS)}")
+        check_declared(self)  # each option's kind, bounds and choices (vgtarm.option)
         self._check_feedforward()
-        transient = self.transient_s
-        if (
-            isinstance(transient, bool)
-            or not isinstance(transient, int | float | np.integer | np.floating)
-            or not (math.isfinite(transient) and transient >= 0)
-        ):
-            raise InputError(f"transient_s = {shown(transient)}: expected a duration >= 0 (s)")
 
     def _check_feedforward(self) -> None:
         feedforward, speed = self.tool_force_feedforward, self.tool_force_speed
-        if not isinstance(feedforward, bool | np.bool_):
-            raise InputError(f"tool_force_feedforward = {shown(feedforward)}: expected True or False")
-        if speed is not None:
-            if not feedforward:
-                raise InputError(
-                    f"tool_force_speed = {shown(speed)} without tool_force_feedforward: "
-                    "it smooths the force fed forward"
-                )
-            if (
-                isinstance(speed, bool)
-                or not isinstance(speed, int | float | np.integer | np.floating)
-                or not (math.isfinite(speed) and speed > 0)
-            ):
-                raise InputError(f"tool_force_speed = {shown(speed)}: expected a speed > 0 (m/s)")
+        if speed is not None and not feedforward:
+            raise InputError(
+                f"tool_force_speed = {shown(speed)} without tool_force_feedforward: it smooths the force fed forward"
+            )
         if not feedforward:
             return
         if not self.external_force.cutting:
@@ -177,6 +273,11 @@ class Scenario:
                 " (or metadata, progress)"
             )
         return cls(**options)
+
+    @classmethod
+    def options(cls) -> dict[str, Option]:
+        """The scalar options of a run, declared once (:mod:`vgtarm.option`), by name, in order."""
+        return declared(cls)
 
     @classmethod
     def option_names(cls) -> tuple[str, ...]:

@@ -26,146 +26,69 @@ there (observer, observer_gain, force_sensor, encoder_resolution, velocity_noise
 
 from __future__ import annotations
 
-import dataclasses
 import difflib
 import hashlib
 import itertools
 import json
 import math
 import tempfile
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..control.scm import MAX_HORIZON, SWITCH_ON
 from ..errors import ConfigError, VgtarmError, cut, shown
+from ..experiment.options import IK_OPTIONS, scenario_names, study_options
 from ..fileio import parse_toml, read_text_limited
 from ..ga import MAX_SEED, check_seed
-from ..ik.effort import CRITERIA, DEFAULT_JOINT_LIMIT_WEIGHT
 from ..kinds import other_toml
 from ..model.parameters import ROBOT_FILE_LIMIT
 from ..model.robot import robot_parameters_from_dict
+from ..option import ID_ALWAYS, Option, Value
 from ..paths import CSV_FILE_LIMIT, MIN_DT, from_csv
-from ..simulation.scenario import INTEGRATORS, MAX_SUBSTEPS, Scenario
 
-Value = bool | int | float | str | None
+#: One run input of a study: an option of the experiment, declared once (:mod:`vgtarm.option`).
+Parameter = Option
 
-
-@dataclass(frozen=True)
-class Parameter:
-    """One run input: its type, default (None: the case's value) and a check of its value."""
-
-    kind: type
-    default: Value
-    expected: str
-    check: Callable[[Any], bool] = field(default=lambda v: True, repr=False)
-    choices: tuple[str, ...] = ()
-
-
-def _positive(v: float) -> bool:
-    return math.isfinite(v) and v > 0
-
-
-def _non_negative(v: float) -> bool:
-    return math.isfinite(v) and v >= 0
-
-
-#: The study's own parameters (what a ``vgtarm simulate`` run can vary, and the gains).
+#: The study's own parameters (the experiment's options and the integrator: the controller, gains, GA,
+#: tool force, controller-model errors); those of the first studies always count in a point's id.
 PARAMETERS: dict[str, Parameter] = {
-    "controller": Parameter(str, "cfc", "one of ['cfc', 'scm']", choices=("cfc", "scm")),
-    "kp": Parameter(float, None, "a gain > 0 (1/s^2; default: the case's)", _positive),
-    "kv": Parameter(float, None, "a gain > 0 (1/s; default: the case's)", _positive),
-    "threshold": Parameter(float, None, "a tip error > 0 (m; SCM; default: the case's)", _positive),
-    "horizon": Parameter(int, 20, "a whole number >= 1 (control periods; SCM)", lambda v: v >= 1),
-    "scm_variant": Parameter(str, "safe", "one of ['paper', 'safe'] (SCM)", choices=("paper", "safe")),
-    "scm_hold": Parameter(
-        int,
-        None,
-        "a whole number of control periods from 1 to the horizon (safe SCM; default half the horizon)",
-        lambda v: 1 <= v <= MAX_HORIZON,
-    ),
-    "scm_switch_on": Parameter(
-        str, None, f"one of {list(SWITCH_ON)} (safe SCM; default 'measured')", choices=SWITCH_ON
-    ),
-    "prediction": Parameter(
-        str, "quadratic", "one of ['exact', 'linear', 'quadratic']", choices=("exact", "linear", "quadratic")
-    ),
-    "kp_max": Parameter(float, None, "an upper GA bound > 0 (1/s^2; default: the case's)", _positive),
-    "kv_max": Parameter(float, None, "an upper GA bound > 0 (1/s; default: the case's)", _positive),
-    "ga_population": Parameter(int, 50, "a whole number >= 2", lambda v: v >= 2),
-    "ga_generations": Parameter(int, 50, "a whole number >= 0", lambda v: v >= 0),
-    "external_force": Parameter(bool, False, "true or false"),
-    "cutting_force": Parameter(float, 20.0, "a force >= 0 (N)", _non_negative),
-    "disturbance": Parameter(float, 5.0, "a bound >= 0 (N, each axis)", _non_negative),
-    "model_mass": Parameter(float, 1.0, "a factor > 0", _positive),
-    "model_inertia": Parameter(float, 1.0, "a factor > 0", _positive),
-    "model_friction": Parameter(float, 1.0, "a factor > 0", _positive),
-    "integrator": Parameter(str, "euler", f"one of {sorted(INTEGRATORS)}", choices=tuple(sorted(INTEGRATORS))),
-    "substeps": Parameter(int, 1, f"a whole number from 1 to {MAX_SUBSTEPS:,}", lambda v: 1 <= v <= MAX_SUBSTEPS),
+    name: o
+    for name, o in study_options().items()
+    if name not in scenario_names() and o not in IK_OPTIONS or o.in_id == ID_ALWAYS
 }
 
 #: The reference's redundancy criterion (issue 22): eq. 12 (``"joint_limits"``, the paper's) or the static
 #: actuator efforts (``"effort"``, with the expected cutting force when the point has the tool force), and
 #: the joint-limit weight of the effort criterion. Like the simulator's options they count in a point's id
 #: only when set or away from their default, so the ids of studies written before stay as they were.
-IK_PARAMETERS: dict[str, Parameter] = {
-    "criterion": Parameter(str, "joint_limits", f"one of {list(CRITERIA)}", choices=CRITERIA),
-    "joint_limit_weight": Parameter(
-        float, DEFAULT_JOINT_LIMIT_WEIGHT, "a weight > 0 (of eq. 12 in the effort criterion)", _positive
-    ),
-}
+IK_PARAMETERS: dict[str, Parameter] = {o.name: o for o in IK_OPTIONS}
 
-#: Fields of the simulation's :class:`~vgtarm.simulation.Scenario` that the study sets itself.
-_MANAGED = {
-    "controller_model",
-    "external_force",
-    "integrator",
-    "substeps",
-    "seed",
-    "initial_state",
-}
+
+def _positive(v: float) -> bool:
+    return math.isfinite(v) and v > 0
 
 
 def simulate_options() -> dict[str, Parameter]:
-    """The scalar options of the installed simulation's :class:`~vgtarm.simulation.Scenario` that
-    the study passes through.
-
-    Found from the record's fields, so options added to the simulator (observer, sensing, ...)
-    become study parameters without a change here. The type comes from the default (``None``: a
-    number).
-    """
-    found: dict[str, Parameter] = {}
-    for f in dataclasses.fields(Scenario):
-        if f.name in _MANAGED or f.default is dataclasses.MISSING:
-            continue
-        default = f.default
-        if isinstance(default, bool):
-            found[f.name] = Parameter(bool, default, "true or false")
-        elif isinstance(default, int | float) or default is None:
-            kind: type = int if isinstance(default, int) else float
-            found[f.name] = Parameter(kind, default, "a number" if kind is float else "a whole number")
-        elif isinstance(default, str):
-            found[f.name] = Parameter(str, default, "a string")
-    return found
+    """The options of the simulation's :class:`~vgtarm.simulation.Scenario` a study passes through
+    (every declared one but the integrator, its substeps and the seed, which the study sets itself)."""
+    return {name: o for name, o in study_options().items() if name in scenario_names() and name not in PARAMETERS}
 
 
 def all_parameters() -> dict[str, Parameter]:
-    """:data:`PARAMETERS`, :data:`IK_PARAMETERS` and :func:`simulate_options`."""
-    return {**PARAMETERS, **IK_PARAMETERS, **simulate_options()}
+    """Every parameter a study may set, in the order of a point's inputs
+    (:func:`vgtarm.experiment.options.study_options`)."""
+    return study_options()
 
 
 def optional_defaults() -> dict[str, Value]:
     """The parameters that count in a point's id only when set or away from these defaults."""
-    return {k: p.default for k, p in {**IK_PARAMETERS, **simulate_options()}.items()}
+    return {k: p.default for k, p in study_options().items() if p.in_id != ID_ALWAYS}
 
 
 _STUDY_KEYS = ("name", "case", "path", "duration", "dt", "rates", "robot", "seeds")
-#: Parameters added after studies were run: they count in a point's id only away from their
-#: default, so the ids of existing studies stay.
-_LATER_PARAMETERS = frozenset({"scm_hold", "scm_switch_on"})
 _RATES = ("exact", "finite_difference")
 _DISTRIBUTIONS = ("uniform", "log_uniform", "normal", "integers", "choice")
 #: Largest study file read (bytes).
@@ -236,9 +159,8 @@ def point_id_of(inputs: Mapping[str, Value], files: Mapping[str, str], *, explic
     Options passed through to the simulator count only when set explicitly or away from their
     default, so an option added to the simulator later does not change existing ids.
     """
-    own = (set(PARAMETERS) - _LATER_PARAMETERS) | set(_STUDY_KEYS) | {"seed"}
+    own = {k for k, p in PARAMETERS.items() if p.in_id == ID_ALWAYS} | set(_STUDY_KEYS) | {"seed"}
     defaults = optional_defaults()
-    defaults.update({k: PARAMETERS[k].default for k in _LATER_PARAMETERS})
     keyed = {
         k: v
         for k, v in inputs.items()
@@ -506,7 +428,7 @@ def _check_value(where: str, value: object, p: Parameter) -> Value:
         converted = value
     if p.choices and converted not in p.choices:
         raise bad
-    if not p.check(converted):
+    if not p.accepts(converted):
         raise bad
     return converted
 

@@ -13,15 +13,13 @@ import os
 import re
 import select
 import sys
-from collections.abc import Callable, Sequence
-from dataclasses import replace
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
 
 from ... import paths, progress
-from ...control.scm import MAX_HORIZON, SWITCH_ON
 from ...errors import (
     MESSAGE_LENGTH,
     ConfigError,
@@ -34,6 +32,9 @@ from ...errors import (
     escape,
     shown,
 )
+from ...experiment import Experiment
+from ...experiment.options import add_flags as add_option_flags
+from ...experiment.options import all_options
 from ...fileio import (
     atomic_folder,
     atomic_write_text,
@@ -43,7 +44,7 @@ from ...fileio import (
     read_text_limited,
 )
 from ...ik import CSV_COLUMNS, write_csv
-from ...model.parameters import JOINT_NAMES, JOINT_UNITS, ROBOT_FILE_LIMIT, RobotParameters
+from ...model.parameters import JOINT_NAMES, JOINT_UNITS, ROBOT_FILE_LIMIT
 from ...model.robot import Robot, load_robot
 from ...paths import TipPath as DesiredPath
 from ...version import __version__
@@ -60,11 +61,9 @@ from .options import (
     positive_int,
     positive_int_at_most,
     register_numbers,
-    seed_number,
 )
 
 if TYPE_CHECKING:
-    from ...model.stack import Stack
     from ...simulation.result import SimulationResult
 
 #: A gain of ``--kp`` or ``--kv``: one for every joint, one per joint, or None (the case's).
@@ -93,9 +92,10 @@ def cmd_describe(args: argparse.Namespace) -> int:
         print(f"module {k}   b = {module.b:g} m, d = {module.d:g} m")
     print(f"twist part h1 = {p.h1:g} m")
     print("joints     name   min        max        home")
+    lower, upper = p.lower, p.upper
     for i, name in enumerate(JOINT_NAMES):
         unit = JOINT_UNITS[i]
-        print(f"           {name:<6} {p.q_min[i]:<10.6g} {p.q_max[i]:<10.6g} {home[i]:.10g} {unit}")
+        print(f"           {name:<6} {lower[i]:<10.6g} {upper[i]:<10.6g} {home[i]:.10g} {unit}")
     for body in p.bodies:
         print(f"body       {body.name:<13} mass {body.mass:g} kg, com {_format_vector(body.com)} m")
     print(f"friction   {_format_vector(p.viscous)} (N s/m; N m s/rad for psi3)")
@@ -151,7 +151,7 @@ def _simulate(args: argparse.Namespace) -> int:
 
     from ...simulation.result import RUN_FILES
 
-    scm_options = _check_simulate_options(args)
+    _check_simulate_options(args)
     inputs = [args.config, args.path]
     if args.out is not None:
         check_output_folder(args.out, "--out", inputs=inputs, owned=RUN_FILES)  # before the work
@@ -159,10 +159,9 @@ def _simulate(args: argparse.Namespace) -> int:
     robot = load_robot(args.config)
     robot_text = _robot_text(args.config)
     gains = _simulate_gains(args, robot)
-    if args.plant == "mujoco":
+    if args.plant_engine == "mujoco":
         from ... import mujoco_bridge  # noqa: F401  (registers the MuJoCo plant)
-    model = robot.parameters.scaled(mass=args.model_mass, inertia=args.model_inertia, friction=args.model_friction)
-    exact_model = (args.model_mass, args.model_inertia, args.model_friction) == (1.0, 1.0, 1.0)
+    experiment = _experiment(args, robot, desired, gains)
     label = f"case {args.case}" if desired is None else escape(desired.name)
     with (
         tqdm(total=100, desc=f"{label} {args.controller}", unit="%", disable=args.quiet, leave=False) as bar,
@@ -172,15 +171,13 @@ def _simulate(args: argparse.Namespace) -> int:
         def progress(done: int, total: int) -> None:
             bar.update(round(100 * done / total) - bar.n)
 
-        options = _run_options(args, scm_options, None if exact_model else model, gains, progress)
+        path_file = None if desired is None else {"path_file": str(args.path)}
         try:
-            result = _run(args, robot, desired, options)
+            result = experiment.run(progress=progress, metadata=path_file)
         except SimulationError as exc:
             if args.out is not None and exc.result is not None:
                 raise _partial_results_saved(args.out, inputs, exc, robot_text) from exc
             raise
-    if args.criterion != "joint_limits":  # recorded in summary.json; the paper's runs stay as they were
-        result = replace(result, metadata={**result.metadata, "ik_criterion": args.criterion})
     _print_summary(result.summary())
     if args.out is not None:
         _save_run(args.out, inputs, result, robot_text)
@@ -210,64 +207,16 @@ def _simulate_gains(args: argparse.Namespace, robot: Robot) -> tuple[_Gain, _Gai
     return kp, kv
 
 
-def _run_options(
-    args: argparse.Namespace,
-    scm_options: dict[str, Any],
-    controller_model: RobotParameters | Stack | None,
-    gains: tuple[_Gain, _Gain],
-    progress: Callable[[int, int], None],
-) -> dict[str, Any]:
-    """The options of :func:`~vgtarm.app.cases.run_case` and :func:`~vgtarm.app.cases.run_path` for
-    ``args`` (``controller_model`` None: the robot's own, an exact model)."""
-    kp, kv = gains
-    options: dict[str, Any] = dict(
-        controller=args.controller,
-        external_force=args.external_force,
-        integrator=args.integrator,
-        substeps=args.substeps,
-        seed=args.seed,
-        rates=args.rates,
-        horizon=args.horizon,
-        scm_variant=args.scm_variant,
-        scm_options=scm_options,
-        controller_model=controller_model,
-        progress=progress,
-        observer=args.observer,
-        observer_gain=args.observer_gain,
-        force_sensor=args.force_sensor,
-        encoder_resolution=args.encoder_resolution,
-        velocity_noise=args.velocity_noise,
-        velocity_filter_hz=args.velocity_filter,
-        plant_engine=args.plant,
-        kp=kp,
-        kv=kv,
-        **presets.simulate_options(args),
-    )
-    return options
-
-
-def _run(
-    args: argparse.Namespace, robot: Robot, desired: DesiredPath | None, options: dict[str, Any]
-) -> SimulationResult:
-    """The run of ``--case`` or of ``desired`` (``--path``), whose reference is its inverse
-    kinematics, cut to ``--duration``."""
-    from ...simulation import JointReference
-    from ..cases import joint_reference, run_case, run_path, truncate_reference
-
-    if desired is not None:
-        ik = robot.inverse_kinematics(desired, rates=args.rates, **_criterion(args))
-        reference = JointReference.of(ik, name=desired.name)
-        if args.duration is not None:
-            reference = truncate_reference(reference, args.duration)
-        return run_path(robot, desired, reference=reference, metadata={"path_file": str(args.path)}, **options)
-    return run_case(
-        robot,
-        args.case,
-        reference=None
-        if args.duration is None and args.criterion == "joint_limits"
-        else joint_reference(robot, args.case, rates=args.rates, duration=args.duration, **_criterion(args)),
-        **options,
-    )
+def _experiment(
+    args: argparse.Namespace, robot: Robot, desired: DesiredPath | None, gains: tuple[_Gain, _Gain]
+) -> Experiment:
+    """The experiment of ``vgtarm simulate``'s arguments (a preset's settings already in ``args``):
+    ``--case`` or the path ``desired`` on ``robot``, every declared option's flag, the gains."""
+    options = {name: getattr(args, name) for name in all_options() if hasattr(args, name)}
+    options.update(kp=gains[0], kv=gains[1])
+    if args.case is not None:
+        return Experiment(case=args.case, robot=robot, preset=args.preset, options=options)
+    return Experiment(path=desired, robot=robot, preset=args.preset, options=options)
 
 
 def _partial_results_saved(
@@ -395,9 +344,9 @@ def _unused_options(args: argparse.Namespace) -> None:
             f"{typed}: {'options' if len(keys) > 1 else 'an option'} of the switching method; expected --controller"
             f" scm (--controller {args.controller} does not use {'them' if len(keys) > 1 else 'it'})"
         )
-    if presets.given(args, "velocity_filter") and not (args.encoder_resolution or args.velocity_noise):
+    if presets.given(args, "velocity_filter_hz") and not (args.encoder_resolution or args.velocity_noise):
         raise InputError(
-            f"--velocity-filter {shown(args.velocity_filter)}: filters the velocities differenced from encoders; "
+            f"--velocity-filter {shown(args.velocity_filter_hz)}: filters the velocities differenced from encoders; "
             "expected --encoder-resolution or --velocity-noise (without them the controller sees the true velocities)"
         )
 
@@ -406,7 +355,7 @@ def _check_scm_gains(
     args: argparse.Namespace, n_joints: int, kp: float | tuple[float, ...] | None, kv: float | tuple[float, ...] | None
 ) -> None:
     """Refuse, naming ``--kp``/``--kv``, gains the switching method cannot start from."""
-    from ..cases import PATH_GAINS_CASE, case_study
+    from ...experiment.cases import PATH_GAINS_CASE, case_study
 
     case = case_study(args.case or PATH_GAINS_CASE).with_gains(kp, kv)
     try:
@@ -461,68 +410,6 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
-def _add_run_options(parser: argparse.ArgumentParser) -> None:
-    from ...simulation import INTEGRATORS
-    from ...simulation.simulator import MAX_SUBSTEPS
-
-    substeps = positive_int_at_most(MAX_SUBSTEPS, "steps per control period")
-    parser.add_argument(
-        "--integrator",
-        choices=sorted(INTEGRATORS),
-        default="euler",
-        help="plant integrator (default: euler, the paper's)",
-    )
-    parser.add_argument(
-        "--substeps", type=substeps, default=1, help=f"integration steps per control period (1 to {MAX_SUBSTEPS:,})"
-    )
-    parser.add_argument(
-        "--seed", type=seed_number, default=0, help="seed of the disturbance and the GA (default 0; 0 to 2**63 - 1)"
-    )
-    parser.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
-
-
-def _add_observer_options(parser: argparse.ArgumentParser) -> None:
-    from ...simulation.sensing import DEFAULT_OBSERVER_GAIN_DT, DEFAULT_VELOCITY_FILTER_HZ, OBSERVERS
-
-    parser.add_argument(
-        "--observer",
-        choices=OBSERVERS,
-        default="none",
-        help="momentum: cancel the external efforts estimated by a generalised-momentum observer",
-    )
-    parser.add_argument(
-        "--observer-gain",
-        type=float,
-        default=None,
-        metavar="K",
-        help=f"with --observer momentum: its gain K_O in 1/s (default {DEFAULT_OBSERVER_GAIN_DT:g}/dt; at most 1/dt)",
-    )
-    parser.add_argument(
-        "--force-sensor", action="store_true", help="feed the tool force measured one period late forward"
-    )
-    parser.add_argument(
-        "--encoder-resolution",
-        type=float,
-        default=0.0,
-        metavar="R",
-        help="encoder step of the legs in m (e.g. 1e-6); the twist gets a 20-bit encoder",
-    )
-    parser.add_argument(
-        "--velocity-noise",
-        type=float,
-        default=0.0,
-        metavar="S",
-        help="standard deviation of Gaussian noise on each differenced velocity (m/s, rad/s)",
-    )
-    parser.add_argument(
-        "--velocity-filter",
-        type=float,
-        default=DEFAULT_VELOCITY_FILTER_HZ,
-        metavar="HZ",
-        help=f"cut-off of the velocity filter with sensing (default {DEFAULT_VELOCITY_FILTER_HZ:g} Hz)",
-    )
-
-
 def _ik_path(args: argparse.Namespace) -> DesiredPath:
     """The desired path of ``vgtarm ik``: ``--case 1|2`` or ``--path FILE``, sampled at ``--dt``."""
     dt = None
@@ -562,6 +449,8 @@ def _criterion(args: argparse.Namespace) -> dict[str, Any]:
     case's cutting force when ``--external-force`` is given)."""
     force = getattr(args, "tool_force", None)
     weight = getattr(args, "joint_limit_weight", None)
+    if hasattr(args, presets.GIVEN) and not presets.given(args, "joint_limit_weight"):
+        weight = None  # simulate's flag holds the declared default: only a typed weight counts
     if args.criterion == "joint_limits":  # a --tool-force is refused by the options, with its reason
         if weight is not None:
             raise InputError(f"--joint-limit-weight {weight!r}: applies to --criterion effort only")
@@ -627,7 +516,7 @@ def cmd_ik(args: argparse.Namespace) -> int:
     _check_ik_memory(args, path)
     robot = load_robot(args.config)
     if args.case is not None and robot.is_stack:  # the case paths placed on the robot (app/cases.py)
-        from ..cases import path_placement
+        from ...experiment.cases import path_placement
 
         placement = path_placement(robot)
         path = path if placement is None else placement.apply(path)
@@ -692,7 +581,7 @@ def _ik_one_point(args: argparse.Namespace, sample: tuple[float, np.ndarray], ro
         atomic_write_text(args.output, ",".join(csv_columns(robot.joint_names)) + "\n" + line + "\n")
     source = f"the one row of --path {escape(str(args.path))}" if args.point is None else "--point"
     print(f"point      {_format_vector(solution.point, 10)} m, from {source}")
-    from ..cases import reduced_space
+    from ...experiment.cases import reduced_space
 
     space = reduced_space(robot)  # a robot whose tip moves in a plane or a line: that reduced task
     tip_task = "tip position" if space is None else f"{space.label} (its tip cannot leave it)"
@@ -740,8 +629,8 @@ def _add_flags(parser: argparse.ArgumentParser, flags: Sequence[_Flag]) -> None:
         parser.add_argument(*names, **settings)
 
 
-#: ``vgtarm simulate``'s own flags up to the observer's: the path, the gains, the controller and
-#: the switching method, the reference's criterion, the controller model's errors, the duration.
+#: ``vgtarm simulate``'s flags before the options of the experiment (declared once, in
+#: :mod:`vgtarm.experiment.options` and on the scenario's fields): the path and the gains.
 _SIMULATE_FLAGS: tuple[_Flag, ...] = (
     (("--case",), dict(type=int, choices=(1, 2), default=None, help="the paper's case study 1 or 2")),
     (
@@ -765,99 +654,10 @@ _SIMULATE_FLAGS: tuple[_Flag, ...] = (
         )
         for name, what in (("kp", "stiffness Kp (N/m, N m/rad)"), ("kv", "damping Kv (N s/m, N m s/rad)"))
     ),
-    (
-        ("--controller",),
-        dict(choices=("cfc", "scm"), default="cfc", help="computed force control or the GA switching method"),
-    ),
-    (
-        ("--external-force",),
-        dict(action="store_true", help="cutting force (20 N) and disturbance (5 N) on the tool"),
-    ),
-    (
-        ("--rates",),
-        dict(
-            choices=("exact", "finite_difference"),
-            default="exact",
-            help="how the reference rates are computed (default: exact)",
-        ),
-    ),
-    (
-        ("--criterion",),
-        dict(
-            choices=("joint_limits", "effort"),
-            default="joint_limits",
-            help="redundancy criterion of the reference: eq. 12 (default) or the static actuator efforts",
-        ),
-    ),
-    (
-        ("--joint-limit-weight",),
-        dict(
-            type=positive_float,
-            default=None,
-            metavar="W",
-            help="--criterion effort: the weight of eq. 12's joint-limit cost beside the efforts (default 0.5)",
-        ),
-    ),
-    (
-        ("--horizon",),
-        dict(type=positive_int, default=20, help="GA fitness prediction horizon in control periods (default 20)"),
-    ),
-    (
-        ("--scm-variant",),
-        dict(
-            choices=("paper", "safe"),
-            default="safe",
-            help="switching method: the paper's GA, or safe (gains admitted on the discrete loop first; default)",
-        ),
-    ),
-    (
-        ("--scm-hold",),
-        dict(
-            type=positive_int_at_most(MAX_HORIZON, "control periods"),
-            default=None,
-            metavar="N",
-            help="--scm-variant safe: control periods an admitted gain set is held from its switch, unless the error "
-            "it sees rises above its value at the switch (1 to the horizon; default half the horizon)",
-        ),
-    ),
-    (
-        ("--scm-switch-on",),
-        dict(
-            choices=SWITCH_ON,
-            default=None,
-            help="--scm-variant safe: the tip error the threshold is tested on: measured (the controller model's tip "
-            "at the encoder readings; default) or true (the plant's, as the paper's variant)",
-        ),
-    ),
-    *(
-        (
-            (f"--model-{name}",),
-            dict(
-                type=positive_float,
-                default=1.0,
-                metavar="FACTOR",
-                help=f"scale the controller model's {name} (a wrong model; default 1)",
-            ),
-        )
-        for name in ("mass", "inertia", "friction")
-    ),
-    (
-        ("--duration",),
-        dict(type=positive_float, default=None, metavar="S", help="run only the first S seconds of the path"),
-    ),
 )
 
-#: ``vgtarm simulate``'s flags after the estimator's and the presets': what integrates the robot,
-#: where the results go.
-_SIMULATE_PLANT_AND_OUTPUT_FLAGS: tuple[_Flag, ...] = (
-    (
-        ("--plant",),
-        dict(
-            choices=("model", "mujoco"),
-            default="model",
-            help="what integrates the robot: our model (default) or MuJoCo on the exported MJCF (vgtarm[mujoco])",
-        ),
-    ),
+#: ``vgtarm simulate``'s flags after the options: where the results go.
+_SIMULATE_OUTPUT_FLAGS: tuple[_Flag, ...] = (
     (
         ("--out",),
         dict(type=Path, default=None, metavar="DIR", help="write summary.json, the time series and a figure here"),
@@ -947,10 +747,10 @@ def _add_simulate_parser(sub: argparse._SubParsersAction) -> None:
     plant and the output, a run's and the robot's; then what the user typed is recorded."""
     simulate = sub.add_parser("simulate", help="run one of the paper's case studies or your own path")
     _add_flags(simulate, _SIMULATE_FLAGS)
-    _add_observer_options(simulate)
-    presets.add_simulate_options(simulate)
-    _add_flags(simulate, _SIMULATE_PLANT_AND_OUTPUT_FLAGS)
-    _add_run_options(simulate)
+    add_option_flags(simulate)  # every declared option of an experiment that has a flag
+    presets.add_preset_flag(simulate)
+    _add_flags(simulate, _SIMULATE_OUTPUT_FLAGS)
+    simulate.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     add_config(simulate)
     presets.record_given(simulate)  # every option added: what the user typed, for the preset and the checks
     simulate.set_defaults(run=cmd_simulate)
@@ -996,7 +796,8 @@ def _add_reproduce_parser(sub: argparse._SubParsersAction) -> None:
         ),
     )
     _add_flags(again, flags)
-    _add_run_options(again)
+    add_option_flags(again, ("integrator", "substeps", "seed"))
+    again.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     add_config(again)
     again.set_defaults(run=cmd_reproduce)
 

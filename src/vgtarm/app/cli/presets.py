@@ -1,14 +1,13 @@
-"""The state estimator's and the tool-force feedforward's options and the named low-force preset of
-``vgtarm simulate`` (issue 22).
+"""``vgtarm simulate --preset``: the flag, the preset's settings filled into the parsed arguments,
+and what the user typed.
 
-Kept apart from the command-line module: :func:`add_simulate_options` adds ``--estimator``,
-``--estimator-bandwidth``, ``--tool-feedforward``, ``--tool-force-speed`` and ``--preset`` to a
-parser, :func:`apply_preset` fills a preset's settings into the parsed arguments (those the user did
-not type, known from :func:`record_given`: what argparse took from the command line, not a comparison
-with the defaults), :func:`named` says which values a refusal's message holds came from the preset, and
-:func:`simulate_options` gives the scenario's options.
-The presets themselves are defined once, in :mod:`vgtarm.app.presets` (``vgtarm reproduce`` runs
-them too); their choice and the measured front are in ``docs/control.md``.
+:func:`add_preset_flag` adds ``--preset`` to a parser, :func:`apply_preset` fills a preset's settings
+into the parsed arguments (those the user did not type, known from :func:`record_given`: what argparse
+took from the command line, not a comparison with the defaults; which settings apply beside the
+user's options is :func:`vgtarm.experiment.presets.applied_settings`'s rule), and :func:`named` says
+which values a refusal's message holds came from the preset. The presets themselves are defined once,
+in :mod:`vgtarm.experiment.presets` (``vgtarm reproduce`` runs them too); their choice and the
+measured front are in ``docs/control.md``.
 """
 
 from __future__ import annotations
@@ -19,9 +18,8 @@ from contextlib import contextmanager
 from typing import Any
 
 from ...errors import InputError
-from ...simulation.external import DEFAULT_FEEDFORWARD_SPEED
-from ...simulation.sensing import DEFAULT_ESTIMATOR_BANDWIDTH_HZ, ESTIMATORS
-from ..presets import NEEDS, NOT_WITH_FORCE_SENSOR, PRESETS, WITH_CFC, WITH_TOOL_FORCE, preset_text
+from ...experiment.options import all_options
+from ...experiment.presets import PRESETS, applied_settings, preset_text
 
 #: Preset arguments that the command line takes as text (a gain for every joint or one per joint).
 GAIN_TEXT = frozenset({"kp", "kv"})
@@ -33,46 +31,16 @@ APPLIED = "preset_applied"
 __all__ = [
     "GIVEN",
     "PRESETS",
-    "add_simulate_options",
+    "add_preset_flag",
     "apply_preset",
     "given",
     "named",
     "record_given",
-    "simulate_options",
 ]
 
 
-def add_simulate_options(parser: argparse.ArgumentParser) -> None:
-    """``--estimator``, ``--estimator-bandwidth``, the feedforward's options and ``--preset`` on ``parser``."""
-
-    parser.add_argument(
-        "--estimator",
-        choices=ESTIMATORS,
-        default="difference",
-        help="with encoders: velocities from differences through the filter (default), or a Kalman filter "
-        "with the controller model's dynamics (and, with the observer, the disturbance) as its process model",
-    )
-    parser.add_argument(
-        "--estimator-bandwidth",
-        type=float,
-        default=None,
-        metavar="HZ",
-        help=f"--estimator kalman: its bandwidth (default {DEFAULT_ESTIMATOR_BANDWIDTH_HZ:g} Hz, at most 1/(4 dt))",
-    )
-    parser.add_argument(
-        "--tool-feedforward",
-        action="store_true",
-        help="with --external-force: feed the expected cutting force (its model along the reference's tip "
-        "velocity) forward through J_P^T; the observer and the Kalman estimator estimate the rest",
-    )
-    parser.add_argument(
-        "--tool-force-speed",
-        type=float,
-        default=None,
-        metavar="V",
-        help=f"--tool-feedforward: speed in m/s over which the expected force is smoothed where the tool starts, "
-        f"turns or stops (default {DEFAULT_FEEDFORWARD_SPEED:g})",
-    )
+def add_preset_flag(parser: argparse.ArgumentParser) -> None:
+    """``--preset`` on ``parser``."""
     parser.add_argument(
         "--preset",
         choices=sorted(PRESETS),
@@ -116,33 +84,21 @@ def given(args: argparse.Namespace, key: str) -> bool:
     return key in getattr(args, GIVEN, frozenset())
 
 
-def _applies(key: str, args: argparse.Namespace) -> bool:
-    """Whether the preset's argument ``key`` applies beside what ``args`` holds so far."""
-    if key in WITH_TOOL_FORCE and not getattr(args, "external_force", False):
-        return False  # as preset_options: the feedforward and its gains only with the tool force
-    if key in WITH_CFC and getattr(args, "controller", "cfc") != "cfc":
-        return False  # chosen on computed force control's front; the switching method starts from the case's
-    if key in NOT_WITH_FORCE_SENSOR and getattr(args, "force_sensor", False):
-        return False  # the user's force sensor cancels the tool force instead
-    if key in NEEDS:
-        other, value = NEEDS[key]
-        return bool(getattr(args, other, None) == value)
-    return True
-
-
 def apply_preset(args: argparse.Namespace) -> None:
     """Set the arguments of ``args.preset`` (none: nothing changes), recorded in ``args``'s
     :data:`APPLIED`. An option the user typed keeps the user's value (``--preset low-force --kp
     10000``: the preset's other settings with that gain; ``--observer none``: no observer, and so
     none of its gain), known from :data:`GIVEN` (:func:`record_given`; without it, every argument
-    of the preset is set); a setting that needs what the user replaced gives way (:func:`_applies`)."""
+    of the preset is set); a setting that needs what the user replaced gives way
+    (:func:`vgtarm.experiment.presets.applies`)."""
     name = getattr(args, "preset", None) or ""
     applied: dict[str, Any] = {}
-    for key, value in PRESETS.get(name, {}).items():
-        if given(args, key) or not _applies(key, args):
-            continue
-        setattr(args, key, repr(value) if key in GAIN_TEXT else value)
-        applied[key] = value
+    if name:
+        values = {key: getattr(args, key) for key in all_options() if hasattr(args, key)}
+        typed = {key: values[key] for key in values if given(args, key)}
+        for key, value in applied_settings(name, typed, values).items():
+            setattr(args, key, repr(value) if key in GAIN_TEXT else value)
+            applied[key] = value
     setattr(args, APPLIED, applied)
 
 
@@ -152,7 +108,8 @@ def _settings_text(applied: dict[str, Any]) -> str:
     def value_text(value: Any) -> str:
         return "" if value is True else f" {value:g}" if isinstance(value, float) else f" {value}"
 
-    return ", ".join(f"--{key.replace('_', '-')}{value_text(value)}" for key, value in applied.items())
+    options = all_options()
+    return ", ".join(f"{options[key].cli_flag or '--' + key}{value_text(value)}" for key, value in applied.items())
 
 
 @contextmanager
@@ -174,14 +131,3 @@ def named(args: argparse.Namespace) -> Iterator[None]:
         if not applied:
             raise
         raise InputError(f"with --preset {preset}, which set {_settings_text(applied)}: {exc}") from None
-
-
-def simulate_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The scenario options of the estimator and feedforward arguments (none with the defaults: the
-    runs of before)."""
-    options: dict[str, Any] = {}
-    if not (args.estimator == "difference" and args.estimator_bandwidth is None):
-        options.update(estimator=args.estimator, estimator_bandwidth_hz=args.estimator_bandwidth)
-    if getattr(args, "tool_feedforward", False) or getattr(args, "tool_force_speed", None) is not None:
-        options.update(tool_force_feedforward=bool(args.tool_feedforward), tool_force_speed=args.tool_force_speed)
-    return options

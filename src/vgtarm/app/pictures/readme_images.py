@@ -19,9 +19,9 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
+from ...experiment.cases import run_case
 from ...fileio import atomic_path
 from ...model.robot import Robot, load_robot
-from ..cases import run_case
 from .animation import animation_frame
 from .drawing import pose_figure
 

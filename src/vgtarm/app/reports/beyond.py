@@ -21,10 +21,10 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ...errors import SimulationError
+from ...experiment.cases import case_study, run_case
 from ...markup import md_cell, md_text
 from ...model.robot import Robot
 from ...simulation import ExternalForce, JointReference, SimulationResult, simulate
-from ..cases import case_study, run_case
 from ..pictures.plotting import save_figure
 from . import safe_study
 from .runs import folder_cell, mm

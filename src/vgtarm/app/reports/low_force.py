@@ -1,6 +1,6 @@
 """The low-force preset as rows of ``vgtarm reproduce``'s section beyond the paper (issue 22).
 
-The preset (:data:`vgtarm.app.presets.PRESETS`, the one definition ``vgtarm simulate --preset`` reads
+The preset (:data:`vgtarm.experiment.presets.PRESETS`, the one definition ``vgtarm simulate --preset`` reads
 too) runs on case 1 and on case 2 with the tool force, with the section's realistic sensing
 (1 um leg encoders, a controller model 10 % heavy; the Kalman estimator needs encoders) and the
 paper runs' seed, beside CFC + observer with the same sensing: case 2's is the section's own run,
@@ -16,11 +16,11 @@ from pathlib import Path
 from typing import Any
 
 from ...errors import SimulationError
+from ...experiment.cases import case_study, joint_reference, run_case
+from ...experiment.presets import preset_options, preset_text
 from ...markup import md_cell, md_code
 from ...model.robot import Robot
 from ...simulation import SimulationResult
-from ..cases import case_study, joint_reference, run_case
-from ..presets import preset_options, preset_text
 from .beyond import ENCODER_RESOLUTION, MODEL_MASS
 from .runs import folder_cell, mm
 

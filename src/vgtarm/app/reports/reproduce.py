@@ -20,14 +20,15 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from ...errors import ConfigError, InputError, shown
+from ... import checks
+from ...errors import ConfigError
+from ...experiment.cases import case_study, joint_reference, run_case
 from ...fileio import atomic_folder, atomic_write_text, read_text_limited
 from ...markup import md_cell, md_code, md_text
 from ...model.parameters import ROBOT_FILE_LIMIT
 from ...model.robot import Robot
 from ...simulation import JointReference, SimulationResult
 from ...simulation.result import MODE_GA, ROBOT_COPY
-from ..cases import case_study, joint_reference, run_case
 from ..pictures.plotting import plot_efforts, plot_path_3d, plot_tip_error, save_figure
 from ..pool import Inline, Workers
 from . import force_study
@@ -92,8 +93,7 @@ def reproduce(
     that replaces an earlier reproduction whole when everything is written; an error or Ctrl-C
     leaves the earlier folder as it was. A folder holding files vgtarm did not write is refused."""
     start = time.perf_counter()
-    if not (isinstance(workers, int) and not isinstance(workers, bool) and workers >= 1):
-        raise InputError(f"workers = {shown(workers)}: expected a whole number of processes >= 1")
+    checks.whole("workers", workers, 1, unit="processes")
     robot_text = None if config is None else read_text_limited(config, ROBOT_FILE_LIMIT, "config", error=ConfigError)
     with atomic_folder(out, "out", inputs=[config], owned=REPRODUCE_FILES) as folder:
         if robot_text is not None:  # animate and report find the runs' robot by it

@@ -11,8 +11,8 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from ...experiment.cases import PAPER_RESULTS
 from ...markup import md_link, md_text
-from ..cases import PAPER_RESULTS
 
 
 @dataclass(frozen=True)

@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from ...errors import InputError
-from ..cases import PAPER_RESULTS
+from ... import checks
+from ...experiment.cases import PAPER_RESULTS
 from ..study_points import check_point, execute_point
 from .runs import RunSpec
 
@@ -35,8 +35,7 @@ def seed_rows(
     from ...study.runner import run_study
     from ...study.spec import parse_study
 
-    if not (isinstance(seeds, int) and 1 <= seeds <= MAX_SEEDS):
-        raise InputError(f"seeds = {seeds!r}: expected a whole number from 1 to {MAX_SEEDS:,}")
+    checks.whole("seeds", seeds, 1, MAX_SEEDS)
     rows: list[dict[str, Any]] = []
     for case, rates in sorted({(s.case, s.rates) for s in specs}):
         chosen = [s for s in specs if (s.case, s.rates) == (case, rates)]
