@@ -242,19 +242,7 @@ def _inverse_kinematics(
 ) -> IKResult:
     """:func:`inverse_kinematics` (its BLAS limited to one thread)."""
     started = time.perf_counter()
-    if not isinstance(check, bool):
-        raise InputError(f"check = {shown(check)}: expected True or False")
-    if not isinstance(path, TipPath):
-        raise PathError(f"path must be a vgtarm.paths.TipPath (see vgtarm.paths), got {type(path).__name__}")
-    if not isinstance(robot, Robot):
-        raise InputError(f"robot must be a vgtarm.Robot (see vgtarm.load_robot), got {type(robot).__name__}")
-    far = np.flatnonzero(np.abs(path.position).max(axis=1) > MAX_COORDINATE)
-    if far.size:  # not a target of this arm, and the continuation towards it would never end
-        i = int(far[0])
-        raise PathError(
-            f"path {shown(path.name)}: sample {i} (t = {path.t[i]:.6g} s) is at {shown(path.position[i].tolist())} m;"
-            f" expected coordinates within +-{MAX_COORDINATE:g} m"
-        )
+    _check_call(robot, path, check)
     name, solve = get_solver(solver)
     if rates not in rate_modes.RATE_MODES:
         raise InputError(f"unknown rates mode {rates!r}; valid modes are {', '.join(rate_modes.RATE_MODES)}")
@@ -280,20 +268,8 @@ def _inverse_kinematics(
         f"path {shown(path.name)}: {n:,} samples of inverse kinematics",
         "give a larger dt or a shorter path",
     )
-    target, kind = None, "position" if pose is None else "pose"
-    if pose is not None:
-        unknown = False  # pose="hold" and its first sample out of reach (check=False): no orientation
-        if isinstance(pose, str) and pose == HOLD:
-            held = _hold_orientation(robot, path, solve, problem, q_start, settings, check)
-            if isinstance(held, _Cut):
-                cut, pose, unknown = held, np.eye(3), True  # nothing is solved: the identity only stands in
-            else:
-                pose = held
-        elif isinstance(pose, str):
-            raise InputError(f"pose must be None, {HOLD!r}, rotation matrices or an OrientationPath, got {pose!r}")
-        target = orientation_target(pose, n, rates == "exact")
-        if unknown:  # nothing is solved, and no orientation is desired
-            target = replace(target, rotation=np.full_like(target.rotation, np.nan))
+    kind = "position" if pose is None else "pose"
+    target, cut = _pose_target(robot, path, pose, rates, (solve, problem, q_start, settings), check, cut)
     terms = effort_terms(robot, path, settings.tool_force, settings.tool_force_speed) if effort else None
     whole = _task(robot, path, target, terms, space)
     task = whole if cut is None else whole.subset(np.arange(cut.sample, dtype=np.intp))
@@ -311,13 +287,7 @@ def _inverse_kinematics(
     solved_target = target  # the samples solved: before the cut
     if cut is not None and target is not None:
         solved_target = replace(target, rotation=target.rotation[: cut.sample])
-    if rates == "exact":
-        rate_modes.exact(problem, task, state, np.flatnonzero(~state.rates_ready))
-        qd, qdd = state.qd, state.qdd
-    elif len(state.q) >= 2:
-        qd, qdd = rate_modes.finite_difference(state.q, path.dt)
-    else:  # a single solved sample (before the unreachable one) has no difference
-        qd, qdd = np.full_like(state.q, np.nan), np.full_like(state.q, np.nan)
+    qd, qdd = _rates(problem, task, state, rates, path.dt)
     verification = kkt.verify(problem, state, settings.tolerances)
     samples = _samples(problem, task, state, verification, solved_target)
     q = state.q
@@ -341,6 +311,64 @@ def _inverse_kinematics(
 
 #: :attr:`IKResult.task_space` of the full tasks.
 TASK_FULL = MappingProxyType({"position": "tip (u1, u2, u3)", "pose": "tip (u1, u2, u3) and orientation"})
+
+
+def _check_call(robot: object, path: object, check: object) -> None:
+    """Refuse, in one line, a call of :func:`inverse_kinematics` whose robot, path or ``check`` is
+    not one, or whose path holds a point no arm reaches (the continuation towards it would never end)."""
+    if not isinstance(check, bool):
+        raise InputError(f"check = {shown(check)}: expected True or False")
+    if not isinstance(path, TipPath):
+        raise PathError(f"path must be a vgtarm.paths.TipPath (see vgtarm.paths), got {type(path).__name__}")
+    if not isinstance(robot, Robot):
+        raise InputError(f"robot must be a vgtarm.Robot (see vgtarm.load_robot), got {type(robot).__name__}")
+    far = np.flatnonzero(np.abs(path.position).max(axis=1) > MAX_COORDINATE)
+    if far.size:
+        i = int(far[0])
+        raise PathError(
+            f"path {shown(path.name)}: sample {i} (t = {path.t[i]:.6g} s) is at {shown(path.position[i].tolist())} m;"
+            f" expected coordinates within +-{MAX_COORDINATE:g} m"
+        )
+
+
+def _pose_target(
+    robot: Robot,
+    path: TipPath,
+    pose: object,
+    rates: str,
+    solving: tuple[Solver, IKProblem, Array, IKOptions],
+    check: bool,
+    cut: Any,
+) -> tuple[OrientationTarget | None, Any]:
+    """The desired orientation of ``pose`` (None: the tip position only) and the cut of an
+    unreachable path: ``pose="hold"`` whose first sample is out of reach (``check=False``) solves
+    nothing and desires no orientation. ``solving``: ``(solve, problem, q_start, settings)``."""
+    if pose is None:
+        return None, cut
+    unknown = False
+    if isinstance(pose, str) and pose == HOLD:
+        held = _hold_orientation(robot, path, *solving, check)
+        if isinstance(held, _Cut):
+            cut, pose, unknown = held, np.eye(3), True  # nothing is solved: the identity only stands in
+        else:
+            pose = held
+    elif isinstance(pose, str):
+        raise InputError(f"pose must be None, {HOLD!r}, rotation matrices or an OrientationPath, got {pose!r}")
+    target = orientation_target(pose, len(path), rates == "exact")
+    if unknown:  # nothing is solved, and no orientation is desired
+        target = replace(target, rotation=np.full_like(target.rotation, np.nan))
+    return target, cut
+
+
+def _rates(problem: IKProblem, task: Task, state: BatchState, rates: str, dt: float) -> tuple[Array, Array]:
+    """The joint rates of the solved samples: exact, or finite differences (NaN for a single sample
+    solved before an unreachable one)."""
+    if rates == "exact":
+        rate_modes.exact(problem, task, state, np.flatnonzero(~state.rates_ready))
+        return state.qd, state.qdd
+    if len(state.q) >= 2:
+        return rate_modes.finite_difference(state.q, dt)
+    return np.full_like(state.q, np.nan), np.full_like(state.q, np.nan)
 
 
 def _solve(solve: Solver, problem: IKProblem, task: Task, q_start: Array, settings: IKOptions) -> SolverResult:
