@@ -65,9 +65,6 @@ OBSERVERS = ("none", "momentum")
 SWITCHING = (None, "safe", "paper")
 #: The GA of switching control, copied when it is exported.
 GA_FILES = ("vgtc_ga.h", "vgtc_ga.c", "vgtc_switching.h", "vgtc_switching.c", "ga_timing.c")
-#: The simulation's GA (every operation of an activation), copied beside them when the GA is
-#: exported: ``vgtc_ga.c`` includes it.
-SHARED_GA_HEADER = SHARED_HEADER.parent / "vgt_ga.h"
 #: A C file that any C99 compiler compiles with :data:`STRICT_FLAGS`: :func:`probe_compiler`'s.
 _PROBE_SOURCE = "int vgtc_probe(void);\nint vgtc_probe(void) { return 0; }\n"
 #: CasADi's template code leaves parameters unused; the generated file says so to the compiler.
@@ -422,7 +419,7 @@ def _write(folder: Path, export: _Export) -> None:
 #: What the GA adds to the build files when it is exported: ``(file, text, replacement)``.
 _GA_BUILD_EDITS = (
     ("Makefile", "vgtc_defaults.o", "vgtc_defaults.o vgtc_ga.o vgtc_switching.o"),
-    ("Makefile", "vgt_control.h", "vgt_control.h vgt_ga.h vgtc_ga.h vgtc_switching.h"),
+    ("Makefile", "vgt_control.h", "vgt_control.h vgtc_ga.h vgtc_switching.h"),
     ("Makefile", "all: libvgtc.a replay rt_loop", "all: libvgtc.a replay rt_loop ga_timing"),
     (  # the GA wants its fmaf as an instruction and its lane loops vectorised
         "Makefile",
@@ -443,15 +440,13 @@ _GA_BUILD_EDITS = (
 
 def _copy_sources(folder: Path, ga: bool) -> None:
     """The hand-written files (:data:`COPIED`; with ``ga``, :data:`GA_FILES` too, and the build
-    files gain them: :data:`_GA_BUILD_EDITS`) and the shared headers (with ``ga``, the GA's too:
-    :data:`SHARED_GA_HEADER`), into ``folder``."""
+    files gain them: :data:`_GA_BUILD_EDITS`) and the shared header, into ``folder``."""
     for name in COPIED + (GA_FILES if ga else ()):
         shutil.copyfile(TEMPLATE_DIR / name, folder / name)
     if ga:  # the library's sources gain the GA
         for name, old, new in _GA_BUILD_EDITS:
             (folder / name).write_text((folder / name).read_text().replace(old, new))
-    for shared in (SHARED_HEADER, *((SHARED_GA_HEADER,) if ga else ())):
-        shutil.copyfile(shared, folder / shared.name)
+    shutil.copyfile(SHARED_HEADER, folder / SHARED_HEADER.name)
 
 
 def _config_header(
