@@ -581,7 +581,7 @@ def test_damaged_study_files_fail_with_one_line(data: bytes) -> None:
         (
             "[study]\ncase = 1\n[random]\ndraws = 2\n"
             "horizon = {integers = [-9223372036854775808, 9223372036854775807]}\n",
-            r"random\.horizon \(draw \d\) = -?\d+: expected a whole number >= 1",
+            r"random\.horizon \(draw \d\) = -?\d+: expected a whole number from 1 to 10,000 \(control periods; SCM\)",
         ),
         ('[study]\npath = "/dev/zero"\n', r"study\.path: file /dev/zero: is a character device; expected a regular"),
         ('[study]\ncase = 1\nrobot = "' + "r" * 5000 + '"\n', r"more characters"),

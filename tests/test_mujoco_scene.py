@@ -151,7 +151,7 @@ def test_the_exact_file_is_the_model_mujoco_builds_from_the_spec():
 @pytest.mark.parametrize("digits", [5, 18, 10.0, True])
 def test_a_bad_digit_count_is_refused_in_one_line(robot, digits):
     with pytest.raises(
-        vgtarm.InputError, match=r"^digits = .*: expected a whole number of significant digits from 6 to 17"
+        vgtarm.InputError, match=r"^digits = .*: expected a whole number from 6 to 17 \(significant digits"
     ):
         to_mjcf(robot, digits=digits)
 

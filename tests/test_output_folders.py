@@ -437,12 +437,12 @@ def test_a_users_file_added_during_simulate_is_kept_and_the_line_names_where_the
 ):
     """The folder was checked before the run; a file the user adds to it afterwards (while the run
     computes, or while its files are written) is kept, and the run goes beside it."""
-    from vgtarm.app import cases
     from vgtarm.app.pictures import plotting as plotting
+    from vgtarm.experiment import record
 
     out = tmp_path / "run"
     assert main([*SHORT, "--out", str(out)]) == 0
-    patched, name = (cases, "run_case") if when == "during the run" else (plotting, "save_figure")
+    patched, name = (record, "simulate") if when == "during the run" else (plotting, "save_figure")
     original = getattr(patched, name)
 
     def user_writes_notes(*args, **kwargs):
@@ -468,12 +468,12 @@ def test_the_line_saying_where_the_run_went_reaches_the_terminal(tmp_path):
     out = tmp_path / "run"
     assert main([*SHORT, "--out", str(out)]) == 0
     script = (
-        "import sys\nfrom vgtarm.app import cases\nfrom vgtarm.app.cli.command import main\n"
-        "run_case = cases.run_case\n"
+        "import sys\nfrom vgtarm.experiment import record\nfrom vgtarm.app.cli.command import main\n"
+        "simulate = record.simulate\n"
         "def with_notes(*args, **kwargs):\n"
         "    open(sys.argv[1] + '/NOTES.txt', 'w').write('mine')\n"
-        "    return run_case(*args, **kwargs)\n"
-        f"cases.run_case = with_notes\nsys.exit(main({SHORT!r} + ['--out', sys.argv[1]]))\n"
+        "    return simulate(*args, **kwargs)\n"
+        f"record.simulate = with_notes\nsys.exit(main({SHORT!r} + ['--out', sys.argv[1]]))\n"
     )
     done = subprocess.run([sys.executable, "-c", script, str(out)], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr

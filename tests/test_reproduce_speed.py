@@ -90,7 +90,7 @@ def test_a_reproduction_by_two_workers_is_the_one_made_here(robot, tmp_path):
     assert list(serial.results) == list(parallel.results) == specs
     assert parallel.results[specs[1]].activations, "the GA ran"
     _same_folder_but_times(tmp_path / "serial", tmp_path / "parallel")
-    with pytest.raises(InputError, match=r"^workers = 0: expected a whole number of processes >= 1$"):
+    with pytest.raises(InputError, match=r"^workers = 0: expected a whole number >= 1 \(processes\)$"):
         reproduce(robot, tmp_path / "none", runs=specs, workers=0)
     assert not (tmp_path / "none").exists()
 
