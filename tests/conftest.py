@@ -11,6 +11,27 @@ from vgtarm._entry import single_threaded_blas
 
 single_threaded_blas()  # as the vgtarm command does, before NumPy is imported
 
+
+def _one_thread_per_worker() -> None:
+    """Under ``pytest -n N`` with N workers filling the CPUs, each worker (and every command a test
+    starts, which inherits the variable) runs the compiled GA and the model's batches on
+    ``CPUs // N`` threads, as ``vgtarm``'s own worker processes do (``app/pool.py``, study
+    workers: ``VGTARM_THREADS=1``). Two GA threads a worker on the two cores of CI made the GA's
+    runs 2 to 20 times slower (its OpenMP threads wait for a core the other worker holds). The
+    threads' results are tested bit for bit against one thread where the count is set explicitly
+    (``test_threads.py``, ``test_ga_compiled.py``); a ``VGTARM_THREADS`` already set is kept."""
+    workers = os.environ.get("PYTEST_XDIST_WORKER_COUNT", "")
+    if not workers.isdigit() or int(workers) < 2 or os.environ.get("VGTARM_THREADS", "").strip():
+        return
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cpus = os.cpu_count() or 1
+    os.environ["VGTARM_THREADS"] = str(max(1, cpus // int(workers)))
+
+
+_one_thread_per_worker()
+
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 

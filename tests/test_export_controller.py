@@ -82,6 +82,28 @@ def exports(robot: vgtarm.Robot, tmp_path_factory: pytest.TempPathFactory) -> di
 
 
 @pytest.fixture(scope="module")
+def compiled(exports: dict[str, Path]) -> dict[str, CompiledExport]:
+    """Each export compiled once for the runs through it (and the refusal of other options)."""
+    return {name: CompiledExport(folder) for name, folder in exports.items()}
+
+
+@pytest.fixture(scope="module")
+def strict_builds(exports: dict[str, Path], tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-def]
+    """``build(compiler, name)``: the export ``name`` built with make under the strict flags, once per
+    compiler and export; the tests only read the builds."""
+    flags = " ".join(f for f in STRICT_FLAGS if f != "-ffp-contract=off")
+    made: dict[tuple[str, str], Path] = {}
+
+    def build(compiler: str, name: str) -> Path:
+        if (compiler, name) not in made:
+            where = tmp_path_factory.mktemp(f"strict-{compiler}")
+            made[compiler, name] = _make(exports[name], where, compiler, flags)
+        return made[compiler, name]
+
+    return build
+
+
+@pytest.fixture(scope="module")
 def simulated(robot: vgtarm.Robot, reference) -> dict[str, SimulationResult]:  # type: ignore[no-untyped-def]
     return {
         name: simulate(robot, reference, CASE.controller("cfc"), external_force=CASE.external_force, **options)
@@ -90,11 +112,9 @@ def simulated(robot: vgtarm.Robot, reference) -> dict[str, SimulationResult]:  #
 
 
 @pytest.mark.parametrize("name", list(RUNS))
-def test_closed_through_the_export_equals_simulate(name, robot, reference, exports, simulated):  # type: ignore[no-untyped-def]
+def test_closed_through_the_export_equals_simulate(name, robot, reference, compiled, simulated):  # type: ignore[no-untyped-def]
     """Case 2 with the tool force closed through the exported, compiled controller: the same run."""
-    mine = simulate_exported(
-        CompiledExport(exports[name]), robot, reference, external_force=CASE.external_force, **RUNS[name]
-    )
+    mine = simulate_exported(compiled[name], robot, reference, external_force=CASE.external_force, **RUNS[name])
     theirs = simulated[name]
     assert np.abs(mine.effort - theirs.effort).max() <= 1e-12
     np.testing.assert_array_equal(mine.effort, theirs.effort)  # the same arithmetic: bit for bit
@@ -103,9 +123,9 @@ def test_closed_through_the_export_equals_simulate(name, robot, reference, expor
         np.testing.assert_array_equal(mine.effort_estimate, theirs.effort_estimate)
 
 
-def test_a_run_with_other_options_than_the_export_is_refused(robot, reference, exports):  # type: ignore[no-untyped-def]
+def test_a_run_with_other_options_than_the_export_is_refused(robot, reference, compiled):  # type: ignore[no-untyped-def]
     with pytest.raises(InputError, match="observer_gain_per_s"):
-        simulate_exported(exports["observer"], robot, reference, observer="momentum", observer_gain=300.0)
+        simulate_exported(compiled["observer"], robot, reference, observer="momentum", observer_gain=300.0)
 
 
 def _compilers() -> list:  # type: ignore[type-arg]
@@ -183,13 +203,13 @@ def _replay(  # type: ignore[no-untyped-def]
 
 
 @pytest.mark.parametrize("compiler", _compilers())
-def test_builds_strict_and_replay_equals_the_simulation(compiler, exports, simulated, reference, tmp_path):  # type: ignore[no-untyped-def]
+def test_builds_strict_and_replay_equals_the_simulation(compiler, strict_builds, simulated, reference, tmp_path):  # type: ignore[no-untyped-def]
     """make with -std=c99 -Wall -Wextra -Werror -pedantic -O2: no warning; replay of the
     simulation's measurements gives its efforts and estimates bit for bit."""
     for name in ("observer", "observer, encoders"):
         where = tmp_path / name.replace(" ", "_").replace(",", "")
         where.mkdir()
-        build = _make(exports[name], where, compiler, " ".join(f for f in STRICT_FLAGS if f != "-ffp-contract=off"))
+        build = strict_builds(compiler, name)
         table = _replay(build, simulated[name], reference, where, force_sensor=False)
         n = simulated[name].q.shape[1]
         np.testing.assert_array_equal(table[:, 1 : 1 + n], simulated[name].effort)
@@ -219,10 +239,10 @@ def test_clean_under_address_and_undefined_behaviour_sanitizers(exports, simulat
         assert "step time" in timing.stdout
 
 
-def test_the_library_uses_only_libm_and_string_functions(exports, tmp_path):  # type: ignore[no-untyped-def]
-    """No heap, no I/O, no other dependency: the controller's objects import nothing else."""
-    build = _make(exports["observer"], tmp_path, "gcc", "-std=c99 -O2")
-    assert_imports_only_allowed(build)
+def test_the_library_uses_only_libm_and_string_functions(strict_builds):  # type: ignore[no-untyped-def]
+    """No heap, no I/O, no other dependency: the controller's objects import nothing else (the
+    library as gcc builds it at -O2, with the strict flags' warnings, which change no code)."""
+    assert_imports_only_allowed(strict_builds("gcc", "observer"))
 
 
 def _nothing_left(parent: Path, name: str) -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import subprocess
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -49,6 +50,20 @@ def reference(robot: vgtarm.Robot):  # type: ignore[no-untyped-def]
     return joint_reference(robot, 2, duration=0.4)
 
 
+@pytest.fixture(scope="module")
+def momentum_export(robot: vgtarm.Robot, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The export with the momentum observer and measured velocities (``RUNS["measured velocities"]``),
+    made once: its closed run, its replay and the step's refusal of a non-finite force all read it."""
+    options = _options(robot, "measured velocities")
+    return export_controller(robot, tmp_path_factory.mktemp("momentum") / "x", kp=CASE.kp, kv=CASE.kv, **options).folder
+
+
+@pytest.fixture(scope="module")
+def momentum_build(momentum_export: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """That export built once with make (gcc, ``-std=c99 -O2``); the tests only read it."""
+    return _make(momentum_export, tmp_path_factory.mktemp("momentum_build"), "gcc", "-std=c99 -O2")
+
+
 def _options(robot: vgtarm.Robot, name: str) -> dict[str, Any]:
     options = dict(RUNS[name])
     mass = options.pop("model_mass", None)
@@ -62,9 +77,12 @@ def _simulate(robot, reference, options, **extra):  # type: ignore[no-untyped-de
 
 
 @pytest.mark.parametrize("name", list(RUNS))
-def test_closed_through_the_export_with_the_feedforward_equals_simulate(name, robot, reference, tmp_path):  # type: ignore[no-untyped-def]
+def test_closed_through_the_export_with_the_feedforward_equals_simulate(name, robot, reference, tmp_path, request):  # type: ignore[no-untyped-def]
     options = _options(robot, name)
-    folder = export_controller(robot, tmp_path / "x", kp=CASE.kp, kv=CASE.kv, **options).folder
+    if name == "measured velocities":  # the shared export of these options
+        folder = request.getfixturevalue("momentum_export")
+    else:
+        folder = export_controller(robot, tmp_path / "x", kp=CASE.kp, kv=CASE.kv, **options).folder
     theirs = _simulate(robot, reference, options, tool_force_feedforward=True)
     mine = simulate_exported(
         CompiledExport(folder),
@@ -85,12 +103,11 @@ def test_closed_through_the_export_with_the_feedforward_equals_simulate(name, ro
         assert np.abs(plain.effort - mine.effort).max() > 0.5
 
 
-def test_replay_feeds_the_reference_files_expected_force_forward(robot, reference, tmp_path):  # type: ignore[no-untyped-def]
+def test_replay_feeds_the_reference_files_expected_force_forward(robot, reference, momentum_build, tmp_path):  # type: ignore[no-untyped-def]
     """replay with three more columns in reference.csv, the expected tool force: the efforts of the
     simulation with the feedforward, from its own measurements (measured velocities)."""
     options = _options(robot, "measured velocities")
-    folder = export_controller(robot, tmp_path / "x", kp=CASE.kp, kv=CASE.kv, **options).folder
-    build = _make(folder, tmp_path / "build", "gcc", "-std=c99 -O2")
+    build = momentum_build
     theirs = _simulate(robot, reference, options, tool_force_feedforward=True)
     # the expected force as simulate computes it: the cutting model along the desired tip velocity
     f_exp = CASE.external_force.expected(robot.tip_velocity(reference.q, reference.qd)[0], DEFAULT_FEEDFORWARD_SPEED)
@@ -121,18 +138,19 @@ def test_switching_control_with_the_feedforward_equals_simulate(robot, reference
     assert np.abs(without.effort - theirs.effort).max() > 0.5
 
 
-def test_a_non_finite_expected_force_is_refused_by_the_step(robot, tmp_path):  # type: ignore[no-untyped-def]
-    """vgtc_step_feedforward refuses a NaN in f_exp (VGTC_NOT_FINITE) and leaves zero efforts."""
-    folder = export_controller(robot, tmp_path / "x", kp=CASE.kp, kv=CASE.kv, observer="momentum").folder
-    build = _make(folder, tmp_path / "build", "gcc", "-std=c99 -O2")
-    driver = build / "driver.c"
+def test_a_non_finite_expected_force_is_refused_by_the_step(momentum_build, tmp_path):  # type: ignore[no-untyped-def]
+    """vgtc_step_feedforward refuses a NaN in f_exp (VGTC_NOT_FINITE) and leaves zero efforts
+    (the export of ``observer="momentum"`` and the case's gains, its library built with gcc)."""
+    build = momentum_build
+    driver = tmp_path / "driver.c"  # beside the shared build, which stays as make left it
     driver.write_text(_DRIVER)
     subprocess.run(
-        ["gcc", "-std=c99", "-O2", "-ffp-contract=off", "-o", "driver", "driver.c", "libvgtc.a", "-lm"],
-        cwd=build,
+        ["gcc", "-std=c99", "-O2", "-ffp-contract=off", f"-I{build}", "-o", "driver", "driver.c",
+         str(build / "libvgtc.a"), "-lm"],
+        cwd=tmp_path,
         check=True,
-    )
-    done = subprocess.run([str(build / "driver")], capture_output=True, text=True, check=True)
+    )  # fmt: skip
+    done = subprocess.run([str(tmp_path / "driver")], capture_output=True, text=True, check=True)
     assert done.stdout.split() == ["ok", "refused", "zeros"]
 
 

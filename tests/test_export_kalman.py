@@ -57,15 +57,21 @@ def folder(robot, model, tmp_path_factory) -> Path:  # type: ignore[no-untyped-d
 
 
 @pytest.fixture(scope="module")
+def compiled(folder: Path) -> CompiledExport:
+    """The export compiled once for the runs through it (the refusals are checked before any step)."""
+    return CompiledExport(folder)
+
+
+@pytest.fixture(scope="module")
 def simulated(robot, model, reference) -> SimulationResult:  # type: ignore[no-untyped-def]
     return simulate(
         robot, reference, CASE.controller("cfc"), external_force=CASE.external_force, controller_model=model, **OPTIONS
     )
 
 
-def test_closed_through_the_export_equals_simulate_bit_for_bit(robot, model, reference, folder, simulated):  # type: ignore[no-untyped-def]
+def test_closed_through_the_export_equals_simulate_bit_for_bit(robot, model, reference, compiled, simulated):  # type: ignore[no-untyped-def]
     mine = simulate_exported(
-        CompiledExport(folder), robot, reference, external_force=CASE.external_force, controller_model=model, **OPTIONS
+        compiled, robot, reference, external_force=CASE.external_force, controller_model=model, **OPTIONS
     )
     np.testing.assert_array_equal(mine.effort, simulated.effort)
     np.testing.assert_array_equal(mine.q, simulated.q)
@@ -94,12 +100,12 @@ def test_the_gains_are_the_simulations_as_exact_doubles(folder):  # type: ignore
     assert "Kalman filter, 60 Hz" in (folder / "README.md").read_text()
 
 
-def test_a_run_with_another_estimator_or_bandwidth_is_refused(robot, model, reference, folder):  # type: ignore[no-untyped-def]
+def test_a_run_with_another_estimator_or_bandwidth_is_refused(robot, model, reference, compiled):  # type: ignore[no-untyped-def]
     options = {**OPTIONS, "controller_model": model}
     with pytest.raises(InputError, match="kalman_gain"):
-        simulate_exported(folder, robot, reference, estimator_bandwidth_hz=90.0, **options)
+        simulate_exported(compiled, robot, reference, estimator_bandwidth_hz=90.0, **options)
     with pytest.raises(InputError, match="estimator"):
-        simulate_exported(folder, robot, reference, **{**options, "estimator": "difference"})
+        simulate_exported(compiled, robot, reference, **{**options, "estimator": "difference"})
 
 
 @pytest.mark.parametrize("compiler", _compilers())
