@@ -135,12 +135,23 @@ def test_drive_reports_progress_and_marks_every_sample(robot):
     _same_run(simulate(robot, ref, CFC), simulate(robot, ref, CFC, progress=lambda *_: None))
 
 
-def test_simulate_documents_every_field_of_the_scenario():
-    """A new scenario field is one field, one check, one use, and one line of simulate's docstring."""
+def test_the_scenario_documents_every_field_and_simulate_points_to_it():
+    """A new scenario field is one field, one check, one use, and one entry of the Scenario's
+    attributes; simulate's docstring sends its reader there instead of repeating them."""
     import inspect
+    import re
 
-    doc = inspect.getdoc(simulate) or ""
-    assert [f for f in Scenario.option_names() if f"``{f}``" not in doc] == []
+    doc = inspect.getdoc(Scenario) or ""
+    attributes = doc.split("Attributes:", 1)[1]
+    # each entry: indented names, comma-separated, before the colon that opens its text
+    documented = {
+        name.strip()
+        for line in attributes.splitlines()
+        if (entry := re.match(r"^    ([a-z_0-9, ]+):", line))
+        for name in entry.group(1).split(",")
+    }
+    assert [f for f in Scenario.option_names() if f not in documented] == []
+    assert ":class:`~vgtarm.simulation.Scenario`" in (inspect.getdoc(simulate) or "")
 
 
 def test_the_record_names_the_feedforward_speed_used():

@@ -31,6 +31,7 @@ from ..experiment.options import all_options
 from ..experiment.record import robot_of_text
 from ..model.robot import Robot, load_robot
 from ..simulation import JointReference
+from ..simulation.scenario import senses
 from ..study.spec import Value
 
 Inputs = Mapping[str, Value]
@@ -160,7 +161,7 @@ def _applies(key: str, inputs: Inputs) -> bool:
     ``needs``) applies and has the value it needs (``scm_hold``: the safe variant of the switching
     method; ``horizon``: the switching method); the velocity filter: with sensing."""
     if key == "velocity_filter_hz":  # it filters differenced velocities: a run without sensing has none
-        return bool(inputs.get("encoder_resolution") or inputs.get("velocity_noise"))
+        return senses(inputs)
     needs = all_options()[key].needs
     if needs is None:
         return True

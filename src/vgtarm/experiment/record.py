@@ -109,7 +109,7 @@ class Experiment:
         self.scenario_options()  # the scenario's own checks (two options together), before any work
 
     def __getattr__(self, name: str) -> Any:
-        """An option's value by its name (``experiment.observer_gain``)."""
+        """An option's value by its name (``experiment.seed``)."""
         options = self.__dict__.get("options")
         if options is not None and name in options:
             return options[name]

@@ -21,7 +21,8 @@ twist angle would be free and the optimum not unique.
 mean, zero: ``f = -F0 v |v|^2 / (|v|^2 + v_s^2)^(3/2)`` along the desired tip velocity ``v``
 (:func:`vgtarm.simulation.external.expected_cutting_force`, the feed-forward's formula). The cutting
 force the plant applies switches on at a small speed (``ExternalForce.cutting_speed``); the expected
-force is smoothed over ``v_s`` (option ``tool_force_speed``, 3 cm/s by default) so that the
+force is smoothed over ``v_s`` (the smoothing speed of
+:class:`~vgtarm.ik.IKOptions`, 3 cm/s by default) so that the
 optimum, and with it the reference, moves smoothly at the rest-to-rest corners of a path, and it
 grows with the cube of the speed from rest, so the optimum's rate is zero where the path rests: the
 reference starts at rest with the path (``docs/control.md``, "A reference that starts at rest").

@@ -12,7 +12,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -441,23 +441,58 @@ def _ga_arrays(
     }
 
 
+class GASearchOptions(Protocol):
+    """The settings of the GA's search the compiled GA reads (:class:`vgtarm.ga.GAOptions`)."""
+
+    @property
+    def n_bits(self) -> int: ...
+    @property
+    def population_size(self) -> int: ...
+    @property
+    def max_generations(self) -> int: ...
+    @property
+    def crossover_probability(self) -> float: ...
+    @property
+    def mutation_probability(self) -> float: ...
+    @property
+    def elite_count(self) -> int: ...
+
+
+class SwitchingRecord(Protocol):
+    """What the compiled GA reads of switching control's record (:class:`vgtarm.control.SwitchingControl`):
+    the GA's settings, the prediction, and the genes' bounds and seeded rows."""
+
+    @property
+    def ga(self) -> GASearchOptions: ...
+    @property
+    def horizon(self) -> int: ...
+    @property
+    def prediction(self) -> str: ...
+    @property
+    def exact_above(self) -> float: ...
+
+    def bounds(self) -> tuple[Array, Array]: ...
+
+    def initial_bits(self) -> NDArray[np.uint8]: ...
+
+
 class CompiledGA:
     """The switching method's genetic algorithm in C (``csrc/ga.c``), bound to one run.
 
     Args:
         driver: the compiled loop of the backend.
+        switching: the switching method's record (:class:`vgtarm.control.SwitchingControl`): its
+            GA's settings (``ga``), ``horizon`` (control periods), ``prediction`` (``"exact"``,
+            ``"linear"`` or ``"quadratic"``, see ``csrc/ga.c``; ``"quadratic"`` needs the tip
+            Hessian), ``exact_above`` (joint-error norm above which a candidate is predicted
+            exactly; 0: never), the genes' ``bounds()`` (``Kp`` then ``Kv``, row by row) and
+            ``initial_bits()`` (0/1 rows that start the first population).
         dt: control period (s).
-        lower, upper: ``(n_genes,)`` gene bounds (``Kp`` then ``Kv``, row by row).
-        initial_bits: ``(k, n_genes * n_bits)`` 0/1 rows that start the first population.
-        n_bits, population, generations, elite, p_crossover, p_mutation: the GA's settings.
-        horizon: prediction horizon (control periods).
-        prediction: ``"exact"``, ``"linear"`` or ``"quadratic"`` (see ``csrc/ga.c``).
-        exact_above: joint-error norm above which a candidate is predicted exactly (0: never).
         p_ctrl: the controller's parameter vector.
-        q_d, qd_d, qdd_d: ``(N, n)`` joint reference; ``tip_d`` ``(N, 3)`` desired tip.
-        quadratic: whether the prediction needs the tip Hessian. The tip offsets ``tip_d - P^(q_d)``
-            and the model's tip Jacobian and Hessian at ``q_d`` are computed in C, row by row, the
-            first time an activation's window needs them (``ensure_rows`` in ``csrc/ga.c``).
+        reference: ``q_d, qd_d, qdd_d`` ``(N, n)`` joint reference and ``tip_d`` ``(N, 3)`` desired
+            tip. The tip offsets ``tip_d - P^(q_d)`` and the model's tip Jacobian and Hessian at
+            ``q_d`` are computed in C, row by row, the first time an activation's window needs them
+            (``ensure_rows`` in ``csrc/ga.c``).
         threads: threads that predict a generation's candidates (default :func:`ga_threads`);
             any count gives the same activation bit for bit.
         safe: ``(kv, lo, hi)`` for the safe variant of switching control (``Kp`` symmetrised, ``Kv
@@ -471,58 +506,47 @@ class CompiledGA:
     def __init__(
         self,
         driver: ClosedLoopDriver,
+        switching: SwitchingRecord,
         *,
         dt: float,
-        lower: Array,
-        upper: Array,
-        initial_bits: NDArray[np.uint8],
-        n_bits: int,
-        population: int,
-        generations: int,
-        elite: int,
-        p_crossover: float,
-        p_mutation: float,
-        horizon: int,
-        prediction: str,
-        exact_above: float,
         p_ctrl: Array,
-        q_d: Array,
-        qd_d: Array,
-        qdd_d: Array,
-        tip_d: Array,
-        quadratic: bool,
+        reference: dict[str, Array],
         threads: int | None = None,
         safe: tuple[float, float, float] | None = None,
         damping: tuple[float, tuple[float, ...], tuple[float, ...]] | None = None,
     ) -> None:
+        prediction = switching.prediction
         if prediction not in PREDICTIONS:
             raise ValueError(f"prediction = {prediction!r}: expected one of {sorted(PREDICTIONS)}")
         self.driver = driver
-        n, n_joints = np.shape(q_d)
+        n, n_joints = np.shape(reference["q_d"])
+        lower, upper = switching.bounds()
         n_genes = len(lower)
+        options = switching.ga
         self.n_joints, self.n_genes, self.n = n_joints, n_genes, n
-        self.horizon = horizon
-        words = bit_words(n_genes * n_bits)
-        reference = dict(q_d=q_d, qd_d=qd_d, qdd_d=qdd_d, tip_d=tip_d)
-        self._arrays = _ga_arrays(lower, upper, p_ctrl, reference, quadratic)
+        self.horizon = switching.horizon
+        words = bit_words(n_genes * options.n_bits)
+        quadratic = prediction == "quadratic"
+        rows = {name: reference[name] for name in ("q_d", "qd_d", "qdd_d", "tip_d")}
+        self._arrays = _ga_arrays(lower, upper, p_ctrl, rows, quadratic)
         self._ready = np.zeros(n, dtype=np.uint8)  # rows whose tip derivatives ga.c has computed
-        self._initial = pack_bits(np.atleast_2d(initial_bits), words)
+        self._initial = pack_bits(np.atleast_2d(switching.initial_bits()), words)
         self._settings = ffi().new("vgt_settings *", {"n_joints": n_joints, "dt": dt})
         self._ga = ffi().new(
             "vgt_ga_settings *",
             {
                 "n_genes": n_genes,
-                "n_bits": n_bits,
+                "n_bits": options.n_bits,
                 "words": words,
-                "population": population,
-                "generations": generations,
-                "elite": elite,
+                "population": options.population_size,
+                "generations": options.max_generations,
+                "elite": options.elite_count,
                 "n_seeded": len(self._initial),
                 "prediction": PREDICTIONS[prediction],
-                "p_crossover": p_crossover,
-                "p_mutation": p_mutation,
-                "horizon": horizon,
-                "exact_above": exact_above,
+                "p_crossover": options.crossover_probability,
+                "p_mutation": options.mutation_probability,
+                "horizon": switching.horizon,
+                "exact_above": switching.exact_above,
                 "threads": ga_threads() if threads is None else threads,
                 **({"safe": 1, "safe_kv": safe[0], "safe_lo": safe[1], "safe_hi": safe[2]} if safe is not None else {}),
             },

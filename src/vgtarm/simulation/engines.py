@@ -322,29 +322,12 @@ def compiled_ga(
             )
         safe = (float(controller.fixed.Kv[0, 0]), lo, hi)
         damping = controller.damping_table(dt, settings.velocity_filter if settings and sensing else None)
-    lower, upper = controller.bounds()
-    options = controller.ga
     return CompiledGA(
         loop,
+        controller,
         dt=dt,
-        lower=lower,
-        upper=upper,
-        initial_bits=controller.initial_bits(),
-        n_bits=options.n_bits,
-        population=options.population_size,
-        generations=options.max_generations,
-        elite=options.elite_count,
-        p_crossover=options.crossover_probability,
-        p_mutation=options.mutation_probability,
-        horizon=controller.horizon,
-        prediction=controller.prediction,
-        exact_above=controller.exact_above,
         p_ctrl=model.parameter_vector,
-        q_d=inp["q_d"],
-        qd_d=inp["qd_d"],
-        qdd_d=inp["qdd_d"],
-        tip_d=inp["tip_d"],
-        quadratic=controller.prediction == "quadratic",
+        reference=inp,
         safe=safe,
         damping=damping,
         # the safe variant's GA runs at about 6 % of the samples (its sets are held): a second thread

@@ -11,7 +11,7 @@ from .. import checks
 
 Array = NDArray[np.float64]
 
-#: Default smoothing speed (m/s) of the expected cutting force fed forward (``tool_force_speed``):
+#: Default smoothing speed (m/s) of the expected cutting force fed forward (a Scenario option):
 #: measured choice in docs/control.md ("A reference that starts at rest, and the preset's loop").
 DEFAULT_FEEDFORWARD_SPEED = 0.003
 

@@ -57,25 +57,44 @@ MODEL_ENGINE = "model"
 
 @dataclass(frozen=True)
 class Scenario:
-    """The options of one closed-loop run (see :func:`vgtarm.simulation.simulate` for each).
+    """The options of one closed-loop run (:func:`vgtarm.simulation.simulate` takes it, or its fields
+    as keywords). Each option is declared on its field (:func:`vgtarm.option.option`: kind,
+    default, bounds with the unit, help), checked here when the record is built.
 
     Attributes:
         external_force: the tool force (default: none).
         controller_model: the controller's parameters (default: the plant's, an exact model).
-        integrator: a name of :data:`INTEGRATORS`; ``substeps`` integration steps per period.
-        seed: seeds the disturbance, the sensor noise and the genetic algorithm.
-        initial_state: ``(q0, qd0)``; default: at rest at ``q_d(0)``.
+        integrator, substeps: a name of :data:`INTEGRATORS`; integration steps per control period.
+        seed: seeds the disturbance, the sensor noise and the genetic algorithm; the same seed gives
+            the same run.
+        initial_state: ``(q0, qd0)``; default: at rest at ``q_d(0)`` (the paper's start).
         limit_tolerance: distance (m, rad) outside a joint limit at which the run is stopped.
-        observer, observer_gain, force_sensor: how the controller cancels the tool force.
-        encoder_resolution, twist_resolution, velocity_noise, velocity_filter_hz: realistic sensing.
-        estimator, estimator_bandwidth_hz: how velocities (and the observer's disturbance) are
-            estimated with encoders: ``"difference"`` (default) or ``"kalman"`` (docs/control.md).
-        plant_engine: ``"model"`` or a registered engine (``"mujoco"``).
+        plant_engine: ``"model"`` (our equations: the compiled loop or its NumPy twin) or a
+            registered engine, such as ``"mujoco"`` after ``import vgtarm.mujoco_bridge``: the
+            exported MJCF model stepped by MuJoCo (``vgtarm[mujoco]``).
+        observer, observer_gain: ``"none"`` or ``"momentum"``: computed force control subtracts the
+            estimate of a generalised-momentum disturbance observer with gain K_O (1/s, default
+            0.5/dt; the estimate follows the external efforts as ``1 - exp(-K_O t)``; at most 1/dt;
+            refused without the observer).
+        force_sensor: instead, feed the tool force measured one period late forward through
+            ``J_P^T`` (exclusive with ``observer``).
+        encoder_resolution, twist_resolution, velocity_noise, velocity_filter_hz: encoder step of
+            the legs (m); with it, or with ``velocity_noise``, the controller sees quantised joints
+            and velocities from their differences, filtered at ``velocity_filter_hz`` (first order,
+            default 100 Hz; the observer takes the unfiltered differences) with Gaussian noise of
+            ``velocity_noise`` (m/s, rad/s) on each difference, seeded from ``seed``.
+            ``twist_resolution`` (rad) defaults to a 20-bit encoder (2 pi / 2^20) when encoders are
+            on.
+        estimator, estimator_bandwidth_hz: ``"difference"`` (differenced, filtered encoder counts,
+            the default) or ``"kalman"`` (a Kalman filter on the encoder positions with the
+            controller model as its process model, tuned by the bandwidth, default 60 Hz; needs
+            encoders; docs/control.md).
         transient_s: start transient excluded from the "after transient" figures (s).
-        tool_force_feedforward: feed the expected cutting force (``ExternalForce.expected`` along
-            the reference's tip velocity, smoothed over ``tool_force_speed`` m/s, default
-            :data:`~.external.DEFAULT_FEEDFORWARD_SPEED`) forward through ``J_P^T``; the observer and
-            the Kalman estimator then estimate only the rest (docs/control.md).
+        tool_force_feedforward, tool_force_speed: feed the expected cutting force
+            (``ExternalForce.expected`` along the reference's tip velocity, smoothed over
+            ``tool_force_speed`` m/s, default :data:`~.external.DEFAULT_FEEDFORWARD_SPEED`) forward
+            through ``J_P^T``; the observer and the Kalman estimator then estimate only the rest
+            (needs the cutting force; exclusive with ``force_sensor``; docs/control.md).
     """
 
     external_force: ExternalForce = field(default_factory=ExternalForce.none)
@@ -145,7 +164,13 @@ class Scenario:
         help="encoder step of the legs in m (e.g. 1e-6); the twist gets a 20-bit encoder",
     )
     twist_resolution: float | None = option(
-        None, float, f"an encoder step > 0 (rad), at most {MAX_TWIST_RESOLUTION:g} rad", low=0.0, flag=""
+        None,
+        float,
+        f"an encoder step > 0 (rad), at most {MAX_TWIST_RESOLUTION:g} rad",
+        low=0.0,
+        flag="",  # vgtarm simulate gives the twist a 20-bit encoder; vgtarm export controller takes it
+        metavar="RAD",
+        help="encoder step of the twist in rad (default with --encoder-resolution: a 20-bit encoder)",
     )
     velocity_noise: float = option(
         0.0,
@@ -330,6 +355,13 @@ class Scenario:
         if isinstance(state, list):
             values["initial_state"] = tuple(np.asarray(part, dtype=float) for part in state)
         return cls(**values, controller_model=controller_model)
+
+
+def senses(values: Mapping[str, Any]) -> bool:
+    """Whether the options ``values`` (by name, as a Scenario's fields) give the controller
+    measured rather than true joint states: encoders on the legs or noise on the velocities. The
+    velocity filter applies only then (:attr:`~.sensing.Sensing.active` of the resolved run)."""
+    return bool(values.get("encoder_resolution") or values.get("velocity_noise"))
 
 
 def _model_name(model: RobotParameters | Stack | Robot) -> str:

@@ -8,8 +8,10 @@ the gain.
 
 from __future__ import annotations
 
+import inspect
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -87,6 +89,17 @@ class Sensing:
     def loop_observer(self) -> str:
         """The loop's observer code name (``vgt_observer``): none, momentum or force."""
         return "force" if self.force_sensor else self.observer
+
+    def loop_fields(self) -> dict[str, Any]:
+        """These settings as the compiled loop's settings name them (``LoopSettings``' fields)."""
+        return {
+            "observer": self.loop_observer,
+            "observer_gain": self.observer_gain,
+            "sensing": self.active,
+            "velocity_filter": self.velocity_filter,
+            "estimator": self.estimator,
+            "kalman_gain": self.kalman_gain,
+        }
 
     def metadata(self) -> dict[str, object]:
         """Summary entries of these settings."""
@@ -188,6 +201,17 @@ def sensing_settings(
         estimator_bandwidth_hz=bandwidth,
         kalman_gain=gains,
     )
+
+
+#: The options a run's sensing is made of (:func:`sensing_settings`' arguments after the units and
+#: the period), read by name from a record by :func:`sensing_of`.
+SENSING_OPTIONS = tuple(inspect.signature(sensing_settings).parameters)[2:]
+
+
+def sensing_of(units: tuple[str, ...], dt: float, record: object) -> Sensing:
+    """:func:`sensing_settings` with each of :data:`SENSING_OPTIONS` read from ``record`` (a
+    :class:`~vgtarm.simulation.Scenario`, or any record that names them alike)."""
+    return sensing_settings(units, dt, **{name: getattr(record, name) for name in SENSING_OPTIONS})
 
 
 def _estimator(

@@ -52,7 +52,7 @@ from .engines import PLANT_ENGINES, Job, RawActivation, check_plant_engine, engi
 from .reference import HasJointReference, JointReference
 from .result import MODE_FIXED, MODE_GA, MODE_NOT_RUN, GAActivation, SimulationResult
 from .scenario import INTEGRATORS, MAX_SUBSTEPS, Scenario
-from .sensing import Sensing, sensing_settings
+from .sensing import Sensing, sensing_of
 
 __all__ = [
     "INTEGRATORS",
@@ -136,39 +136,10 @@ def simulate(
         plant: the simulated robot (its parameters are the truth).
         reference: joint reference ``t``, ``q``, ``qd``, ``qdd`` (an IK result works).
         controller: :class:`ComputedForceControl` or :class:`SwitchingControl`.
-        scenario: what the run is beside these (:class:`~vgtarm.simulation.Scenario`); or give
-            its fields as keywords (``options``), which build it:
-
-            - ``controller_model``: the controller's parameters (default: the plant's, an exact model);
-            - ``external_force``: tool force (default: none);
-            - ``integrator``: a name of :data:`INTEGRATORS`; ``substeps`` integration steps per period;
-            - ``seed``: seeds the disturbance, the sensor noise and the genetic algorithm; the same
-              seed gives the same run;
-            - ``initial_state``: ``(q0, qd0)``; default: at rest at ``q_d(0)`` (the paper's start);
-            - ``limit_tolerance``: distance (m, rad) outside a joint limit at which the run is stopped;
-            - ``plant_engine``: ``"model"`` (our equations: the compiled loop or its NumPy twin) or a
-              registered engine, such as ``"mujoco"`` after ``import vgtarm.mujoco_bridge``: the
-              exported MJCF model stepped by MuJoCo (``vgtarm[mujoco]``);
-            - ``observer``: ``"none"`` or ``"momentum"``: computed force control subtracts the
-              estimate of a generalised-momentum disturbance observer with gain ``observer_gain``
-              (K_O, 1/s, default 0.5/dt; the estimate follows the external efforts as
-              ``1 - exp(-K_O t)``; at most 1/dt; refused without the observer);
-            - ``force_sensor``: instead, feed the tool force measured one period late forward
-              through ``J_P^T`` (exclusive with ``observer``);
-            - ``encoder_resolution``: encoder step of the legs (m); with it, or with
-              ``velocity_noise``, the controller sees quantised joints and velocities from their
-              differences, filtered at ``velocity_filter_hz`` (first order, default 100 Hz; the
-              observer takes the unfiltered differences) with Gaussian noise of ``velocity_noise``
-              (m/s, rad/s) on each difference, seeded from ``seed``. ``twist_resolution`` (rad)
-              defaults to a 20-bit encoder (2 pi / 2^20) when encoders are on;
-            - ``estimator``: ``"difference"`` (differenced, filtered encoder counts) or ``"kalman"``
-              (a Kalman filter on the encoder positions with the controller model as its process
-              model, tuned by ``estimator_bandwidth_hz``, default 60 Hz; needs encoders);
-            - ``transient_s``: length of the start transient excluded from the "after transient" figures;
-            - ``tool_force_feedforward``: feed the expected cutting force (its model along the
-              reference's tip velocity, smoothed over ``tool_force_speed`` m/s) forward through
-              ``J_P^T``; the observer and the Kalman estimator take it as known and estimate the rest
-              (needs the cutting force; exclusive with ``force_sensor``).
+        scenario: what the run is beside these (:class:`~vgtarm.simulation.Scenario`: the tool
+            force, the controller's model, the integrator, the seed, the sensing and estimation, the
+            feedforward); or give its fields as keywords (``options``), which build it. Each field,
+            its unit, bounds and default are declared once, on :class:`~vgtarm.simulation.Scenario`.
         metadata: extra entries for the summary (case name, ...).
         progress: called as ``progress(samples_done, samples_total)`` now and then.
         check: raise when the run fails (the default); with False, a failed run is returned as it
@@ -353,19 +324,7 @@ def prepare(
 
 def _sensing(plant: Robot, dt: float, scenario: Scenario) -> Sensing:
     """What the controller measures and estimates in ``scenario``, at the control period ``dt`` (s)."""
-    return sensing_settings(
-        plant.joint_units,
-        dt,
-        scenario.observer,
-        scenario.observer_gain,
-        scenario.force_sensor,
-        scenario.encoder_resolution,
-        scenario.twist_resolution,
-        scenario.velocity_noise,
-        scenario.velocity_filter_hz,
-        scenario.estimator,
-        scenario.estimator_bandwidth_hz,
-    )
+    return sensing_of(plant.joint_units, dt, scenario)
 
 
 def _run_arrays(
@@ -418,12 +377,7 @@ def _loop_settings(
         cutting_speed=external.cutting_speed,
         threshold=controller.threshold if isinstance(controller, SwitchingControl) else 0.0,
         limit_tolerance=checks.limit_tolerance(plant, scenario.limit_tolerance),
-        observer=sensing.loop_observer,
-        observer_gain=sensing.observer_gain,
-        sensing=sensing.active,
-        velocity_filter=sensing.velocity_filter,
-        estimator=sensing.estimator,
-        kalman_gain=sensing.kalman_gain,
+        **sensing.loop_fields(),
         threshold_measured=isinstance(controller, SwitchingControl) and controller.measured_switching,
         tool_feedforward=bool(scenario.tool_force_feedforward),
     )

@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
-EXAMPLE = """\
+import re
+import textwrap
+
+from ..experiment.options import study_options
+
+_HEAD = """\
 # A vgtarm study: computed force control (CFC) against the switching method (SCM) with the tool
 # force, over seeds and a controller model whose masses are off by up to 10 %.
 # Run it with `vgtarm study run THIS_FILE --out DIR` and read it with `vgtarm study report DIR`.
@@ -19,16 +24,9 @@ rates = "exact"         # reference rates: "exact" or "finite_difference" (the p
 seeds = 4               # seeds 0..3 of the disturbance and the GA; or [0, 7, 9]; or {start = 10, count = 4}
 
 # Every combination of the values below is run (a single value is a list of one).
-# Parameters: controller ("cfc" | "scm"), kp, kv (gains, default the case's), threshold (m, SCM),
-# horizon (control periods, SCM), scm_variant ("safe" | "paper", SCM), prediction ("quadratic" |
-# "linear" | "exact"), kp_max, kv_max (upper GA bounds), ga_population, ga_generations, external_force (true | false),
-# cutting_force (N), disturbance (N per axis), model_mass, model_inertia, model_friction
-# (factors on the controller's model), integrator ("euler" | "semi_implicit_euler" | "rk4"),
-# substeps, and the simulator's own options where it has them (observer = "momentum",
-# observer_gain, force_sensor, encoder_resolution, velocity_noise, estimator ("difference" |
-# "kalman", with encoders), estimator_bandwidth_hz, plant_engine = "mujoco" for the MuJoCo plant
-# with vgtarm[mujoco], ...), and the reference's redundancy criterion ("joint_limits", eq. 12, |
-# "effort": the actuator forces) with joint_limit_weight (effort criterion only).
+"""
+
+_TAIL = """\
 [grid]
 controller = ["cfc", "scm"]
 external_force = true
@@ -41,3 +39,24 @@ draws = 2
 seed = 0                # seed of the draws
 model_mass = {uniform = [0.9, 1.1]}
 """
+
+
+def _parameters() -> str:
+    """The comment naming every parameter a study takes, each with what it expects, from the
+    options' declarations (:func:`vgtarm.experiment.options.study_options`)."""
+    lines = ["# Parameters (a grid's or a draw's): each with what it takes."]
+    for name, declared in study_options().items():
+        expected = _as_toml(declared.expected)
+        lines += textwrap.wrap(f"{name}: {expected}", width=100, initial_indent="#   ", subsequent_indent="#       ")
+    return "\n".join(lines) + "\n\n"
+
+
+def _as_toml(expected: str) -> str:
+    """A declaration's expected text as a TOML file spells its values: ``["a", "b"]`` for Python's
+    ``['a', 'b']``, ``true or false`` for ``True or False``."""
+    expected = expected.replace("True or False", "true or false")
+    return re.sub(r"\[([^\]]*)\]", lambda m: "[" + m.group(1).replace("'", '"') + "]", expected)
+
+
+#: The example file: a study of both controllers, with every parameter named in its comments.
+EXAMPLE = _HEAD + _parameters() + _TAIL

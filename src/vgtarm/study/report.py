@@ -24,6 +24,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from ..errors import InputError
+from ..experiment.options import study_options
 from ..fileio import atomic_path, atomic_write_text
 from ..markup import md_cell, md_code, mpl_text
 from .store import FIGURE_FILES, Store, read_table
@@ -36,7 +37,17 @@ FIGURES = (
     ("peak_force_n", "peak force (N)", 1.0),
 )
 MODEL_FACTORS = ("model_mass", "model_inertia", "model_friction")
-GAIN_INPUTS = ("kp", "kv", "threshold", "horizon", "kp_max", "kv_max", "observer_gain")
+
+
+def numeric_inputs() -> tuple[str, ...]:
+    """The study's numeric parameters other than the model factors, in declaration order
+    (:func:`vgtarm.experiment.options.study_options`): each that varies gets a figure of the
+    maximum tip error against it."""
+    return tuple(
+        name
+        for name, declared in study_options().items()
+        if declared.kind in (int, float) and name not in MODEL_FACTORS
+    )
 
 
 def group_statistics(rows: Sequence[dict[str, Any]], column: str, by: str = "controller") -> dict[str, dict[str, Any]]:
@@ -156,7 +167,9 @@ def write_report(folder: str | Path) -> Path:
         (f"Maximum tip error against {c} (controller model error)", f"study_error_vs_{c}.png", c)
         for c in varied(rows, MODEL_FACTORS)
     ]
-    figures += [(f"Maximum tip error against {c}", f"study_error_vs_{c}.png", c) for c in varied(rows, GAIN_INPUTS)]
+    figures += [
+        (f"Maximum tip error against {c}", f"study_error_vs_{c}.png", c) for c in varied(rows, numeric_inputs())
+    ]
     keep = {name for _, name, _ in figures}
     store = Store(where)
     store.claim("report.md", *sorted(keep))  # before anything is written: never over a user's file

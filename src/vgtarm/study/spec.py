@@ -20,8 +20,8 @@ Parameters: :data:`PARAMETERS` (controller, gains, GA, tool force, controller-mo
 integrator), :data:`IK_PARAMETERS` (the reference's redundancy criterion and its joint-limit
 weight; a point of eq. 12 has the weight's default, so a grid of both criteria runs eq. 12 once)
 and every scalar option of the simulation's :class:`~vgtarm.simulation.Scenario` not listed
-there (observer, observer_gain, force_sensor, encoder_resolution, velocity_noise, estimator,
-... whatever the installed simulator accepts), passed to it unchanged.
+there, passed to it unchanged: each declared once, where it is a field
+(:func:`vgtarm.experiment.options.study_options` lists them all).
 """
 
 from __future__ import annotations

@@ -47,6 +47,7 @@ from ...ik import CSV_COLUMNS, write_csv
 from ...model.parameters import JOINT_NAMES, JOINT_UNITS, ROBOT_FILE_LIMIT
 from ...model.robot import Robot, load_robot
 from ...paths import TipPath as DesiredPath
+from ...simulation.scenario import senses
 from ...version import __version__
 from . import mujoco as cli_mujoco
 from . import presets
@@ -344,7 +345,7 @@ def _unused_options(args: argparse.Namespace) -> None:
             f"{typed}: {'options' if len(keys) > 1 else 'an option'} of the switching method; expected --controller"
             f" scm (--controller {args.controller} does not use {'them' if len(keys) > 1 else 'it'})"
         )
-    if presets.given(args, "velocity_filter_hz") and not (args.encoder_resolution or args.velocity_noise):
+    if presets.given(args, "velocity_filter_hz") and not senses(vars(args)):
         raise InputError(
             f"--velocity-filter {shown(args.velocity_filter_hz)}: filters the velocities differenced from encoders; "
             "expected --encoder-resolution or --velocity-noise (without them the controller sees the true velocities)"
