@@ -23,6 +23,7 @@ from pathlib import Path
 
 import vgtarm
 from vgtarm.export import export_controller
+from vgtarm.simulation import Scenario
 
 _NOISE = Path(__file__).parent / "csrc" / "machine_noise.c"
 _LINE = re.compile(r"^(jitter|step time)\s+(.*)\((\d+) samples\)")
@@ -55,7 +56,7 @@ def run() -> dict[str, dict[str, float]]:
     robot = vgtarm.load_robot()
     compiler = os.environ.get("CC", "cc")
     with tempfile.TemporaryDirectory(prefix="vgtc-bench-") as scratch:
-        folder = export_controller(robot, Path(scratch) / "controller", observer="momentum").folder
+        folder = export_controller(robot, Path(scratch) / "controller", scenario=Scenario(observer="momentum")).folder
         subprocess.run(["make", "-s", f"CC={compiler}", "rt_loop"], cwd=folder, check=True, capture_output=True)
 
         def rt_loop(*args: str) -> str:
@@ -97,10 +98,12 @@ def _kalman(
     folder = export_controller(
         robot,
         scratch / "kalman",
-        observer="momentum",
-        encoder_resolution=1e-6,
-        estimator="kalman",
-        controller_model=robot.parameters.scaled(mass=1.1),
+        scenario=Scenario(
+            observer="momentum",
+            encoder_resolution=1e-6,
+            estimator="kalman",
+            controller_model=robot.parameters.scaled(mass=1.1),
+        ),
     ).folder
     subprocess.run(["make", "-s", f"CC={compiler}", "rt_loop"], cwd=folder, check=True, capture_output=True)
     figures: dict[str, dict[str, float]] = {}

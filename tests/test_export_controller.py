@@ -10,6 +10,7 @@ import argparse
 import os
 import shutil
 import subprocess
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -20,16 +21,20 @@ from vgtarm.errors import ConfigError, InputError
 from vgtarm.experiment.cases import case_study, joint_reference
 from vgtarm.export import CompiledExport, ExportError, command, export_controller, simulate_exported
 from vgtarm.export.controller import STRICT_FLAGS
-from vgtarm.simulation import SimulationResult, simulate
+from vgtarm.simulation import Scenario, SimulationResult, simulate
 
 from .conftest import make
 
 CASE = case_study(2)
-#: The runs compared: the observer with perfect and with realistic sensing, the force sensor.
+#: The runs compared: the observer with perfect and with realistic sensing, the force sensor; each
+#: one scenario, which the export, simulate and the run through the export all take.
 RUNS = {
-    "observer": {"observer": "momentum"},
-    "observer, encoders": {"observer": "momentum", "encoder_resolution": 1e-6},
-    "force sensor": {"force_sensor": True},
+    name: Scenario(external_force=CASE.external_force, **options)
+    for name, options in (
+        ("observer", {"observer": "momentum"}),
+        ("observer, encoders", {"observer": "momentum", "encoder_resolution": 1e-6}),
+        ("force sensor", {"force_sensor": True}),
+    )
 }
 #: Symbols an object of the controller may take from outside: libm and the C string functions.
 ALLOWED_IMPORTS = {
@@ -75,9 +80,9 @@ def exports(robot: vgtarm.Robot, tmp_path_factory: pytest.TempPathFactory) -> di
     root = tmp_path_factory.mktemp("exports")
     return {
         name: export_controller(
-            robot, root / name.replace(" ", "_").replace(",", ""), kp=CASE.kp, kv=CASE.kv, **options
+            robot, root / name.replace(" ", "_").replace(",", ""), scenario=scenario, kp=CASE.kp, kv=CASE.kv
         ).folder
-        for name, options in RUNS.items()
+        for name, scenario in RUNS.items()
     }
 
 
@@ -105,16 +110,13 @@ def strict_builds(exports: dict[str, Path], tmp_path_factory: pytest.TempPathFac
 
 @pytest.fixture(scope="module")
 def simulated(robot: vgtarm.Robot, reference) -> dict[str, SimulationResult]:  # type: ignore[no-untyped-def]
-    return {
-        name: simulate(robot, reference, CASE.controller("cfc"), external_force=CASE.external_force, **options)
-        for name, options in RUNS.items()
-    }
+    return {name: simulate(robot, reference, CASE.controller("cfc"), scenario) for name, scenario in RUNS.items()}
 
 
 @pytest.mark.parametrize("name", list(RUNS))
 def test_closed_through_the_export_equals_simulate(name, robot, reference, compiled, simulated):  # type: ignore[no-untyped-def]
     """Case 2 with the tool force closed through the exported, compiled controller: the same run."""
-    mine = simulate_exported(compiled[name], robot, reference, external_force=CASE.external_force, **RUNS[name])
+    mine = simulate_exported(compiled[name], robot, reference, RUNS[name])
     theirs = simulated[name]
     assert np.abs(mine.effort - theirs.effort).max() <= 1e-12
     np.testing.assert_array_equal(mine.effort, theirs.effort)  # the same arithmetic: bit for bit
@@ -290,16 +292,52 @@ def test_bad_robot_and_bad_options_are_one_line(robot, tmp_path):  # type: ignor
     assert "\n" not in str(caught.value)
     for options, field in (
         ({"switching": "fast"}, "switching"),
-        ({"observer": "kalman"}, "observer"),
-        ({"observer": "momentum", "observer_gain": 5000.0}, "observer_gain"),
         ({"kp": [1.0, 2.0]}, "Kp"),
         ({"effort_max": -1.0}, "effort_max"),
     ):
         with pytest.raises(InputError, match=field) as caught:
             export_controller(robot, tmp_path / "out", **options)
         assert "\n" not in str(caught.value)
+    for fields, field in (  # the scenario's: refused when it is built, or by the export's checks
+        ({"observer": "kalman"}, "observer"),
+        ({"observer": "momentum", "observer_gain": 5000.0}, "observer_gain"),
+        ({"velocity_noise": 0.01}, "velocity_noise = 0.01: the noise of the simulated velocity sensor"),
+        ({"limit_tolerance": -1.0}, "limit_tolerance"),
+    ):
+        with pytest.raises(InputError, match=field) as caught:
+            export_controller(robot, tmp_path / "out", scenario=Scenario(**fields))
+        assert "\n" not in str(caught.value)
+    with pytest.raises(InputError, match="scenario = 'momentum': expected None or a vgtarm.simulation.Scenario"):
+        export_controller(robot, tmp_path / "out", scenario="momentum")  # type: ignore[arg-type]
     with pytest.raises(InputError, match="robot"):
         export_controller("paper", tmp_path / "out")  # type: ignore[arg-type]
+    _nothing_left(tmp_path, "out")
+
+
+def test_the_scenario_s_fields_as_keywords_are_deprecated_and_export_the_same(robot, exports, tmp_path):  # type: ignore[no-untyped-def]
+    """The keywords export_controller took before the scenario (its fields the export reads) still
+    build it, with a DeprecationWarning that points at the caller; the same folder as the scenario's."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        old = export_controller(
+            robot,
+            tmp_path / "old",
+            kp=CASE.kp,
+            kv=CASE.kv,
+            check_build=False,
+            observer="momentum",
+            encoder_resolution=1e-6,
+        ).folder
+    (warning,) = caught
+    assert warning.category is DeprecationWarning and warning.filename == __file__
+    assert "['encoder_resolution', 'observer'] are deprecated: pass them in scenario=" in str(warning.message)
+    for name in ("export.json", "vgtc_defaults.c", "vgtc_config.h", "vgtc_model.c"):
+        assert (old / name).read_bytes() == (exports["observer, encoders"] / name).read_bytes(), name
+    with pytest.raises(TypeError, match="unexpected keyword argument 'seed'"):  # not one the export reads
+        export_controller(robot, tmp_path / "out", seed=1)
+    with pytest.raises(InputError, match=r"a scenario and the options \['observer'\]") as refused:
+        export_controller(robot, tmp_path / "out", scenario=Scenario(), observer="momentum")
+    assert "\n" not in str(refused.value)
     _nothing_left(tmp_path, "out")
 
 
@@ -345,9 +383,9 @@ def test_a_stack_robot_file_exports_and_closes_the_loop_like_simulate(tmp_path):
     stack = vgtarm.load_robot(Path(__file__).resolve().parents[1] / "examples" / "paper_robot.toml")
     assert stack.is_stack
     ref = joint_reference(stack, 2, duration=0.2)
-    folder = export_controller(stack, tmp_path / "stack", kp=CASE.kp, kv=CASE.kv, observer="momentum").folder
-    options = {"external_force": CASE.external_force, "observer": "momentum"}
-    through = simulate_exported(folder, stack, ref, **options)
-    direct = simulate(stack, ref, CASE.controller("cfc"), **options)
+    scenario = Scenario(external_force=CASE.external_force, observer="momentum")
+    folder = export_controller(stack, tmp_path / "stack", scenario=scenario, kp=CASE.kp, kv=CASE.kv).folder
+    through = simulate_exported(folder, stack, ref, scenario)
+    direct = simulate(stack, ref, CASE.controller("cfc"), scenario)
     np.testing.assert_array_equal(through.effort, direct.effort)
     np.testing.assert_array_equal(through.q, direct.q)

@@ -19,7 +19,7 @@ import pytest
 import vgtarm
 from vgtarm.experiment.cases import case_study, joint_reference
 from vgtarm.export import CompiledExport, export_controller, simulate_exported
-from vgtarm.simulation import simulate
+from vgtarm.simulation import Scenario, simulate
 from vgtarm.simulation.external import DEFAULT_FEEDFORWARD_SPEED
 
 from .test_export_controller import _make, _replay
@@ -55,7 +55,8 @@ def momentum_export(robot: vgtarm.Robot, tmp_path_factory: pytest.TempPathFactor
     """The export with the momentum observer and measured velocities (``RUNS["measured velocities"]``),
     made once: its closed run, its replay and the step's refusal of a non-finite force all read it."""
     options = _options(robot, "measured velocities")
-    return export_controller(robot, tmp_path_factory.mktemp("momentum") / "x", kp=CASE.kp, kv=CASE.kv, **options).folder
+    where = tmp_path_factory.mktemp("momentum") / "x"
+    return export_controller(robot, where, scenario=Scenario(**options), kp=CASE.kp, kv=CASE.kv).folder
 
 
 @pytest.fixture(scope="module")
@@ -82,7 +83,7 @@ def test_closed_through_the_export_with_the_feedforward_equals_simulate(name, ro
     if name == "measured velocities":  # the shared export of these options
         folder = request.getfixturevalue("momentum_export")
     else:
-        folder = export_controller(robot, tmp_path / "x", kp=CASE.kp, kv=CASE.kv, **options).folder
+        folder = export_controller(robot, tmp_path / "x", scenario=Scenario(**options), kp=CASE.kp, kv=CASE.kv).folder
     theirs = _simulate(robot, reference, options, tool_force_feedforward=True)
     mine = simulate_exported(
         CompiledExport(folder),
@@ -127,7 +128,8 @@ def test_switching_control_with_the_feedforward_equals_simulate(robot, reference
     options = {"observer": "momentum", "encoder_resolution": 1e-6, "estimator": "kalman"}
     # the feedforward holds the tip within case 2's threshold: a tenth of it, so that the GA runs
     scm = dataclasses.replace(CASE, threshold=CASE.threshold / 10).controller("scm", variant="safe")
-    folder = export_controller(robot, tmp_path / "x", kp=CASE.kp, kv=CASE.kv, switching=scm, **options).folder
+    exported = Scenario(**options)  # the run's: the export reads what the controller measures and estimates
+    folder = export_controller(robot, tmp_path / "x", scenario=exported, kp=CASE.kp, kv=CASE.kv, switching=scm).folder
     kwargs = {"external_force": CASE.external_force, "tool_force_feedforward": True, **options}
     theirs = simulate(robot, reference, scm, **kwargs)
     mine = simulate_exported(folder, robot, reference, controller=scm, **kwargs)

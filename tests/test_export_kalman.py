@@ -23,7 +23,7 @@ from vgtarm.errors import InputError
 from vgtarm.experiment.cases import case_study, joint_reference
 from vgtarm.export import CompiledExport, command, export_controller, simulate_exported
 from vgtarm.export.controller import STRICT_FLAGS
-from vgtarm.simulation import SimulationResult, simulate
+from vgtarm.simulation import Scenario, SimulationResult, simulate
 from vgtarm.simulation.sensing import kalman_gains
 
 from .conftest import make
@@ -51,9 +51,16 @@ def reference(robot: vgtarm.Robot):  # type: ignore[no-untyped-def]
 
 
 @pytest.fixture(scope="module")
-def folder(robot, model, tmp_path_factory) -> Path:  # type: ignore[no-untyped-def]
+def scenario(model: vgtarm.RobotParameters) -> Scenario:
+    """The run: case 2's tool force, the controller model 10 % heavy, :data:`OPTIONS`; the export,
+    simulate and the run through the export all take it."""
+    return Scenario(external_force=CASE.external_force, controller_model=model, **OPTIONS)
+
+
+@pytest.fixture(scope="module")
+def folder(robot, scenario, tmp_path_factory) -> Path:  # type: ignore[no-untyped-def]
     root = tmp_path_factory.mktemp("kalman")
-    return export_controller(robot, root / "kalman", kp=CASE.kp, kv=CASE.kv, controller_model=model, **OPTIONS).folder
+    return export_controller(robot, root / "kalman", scenario=scenario, kp=CASE.kp, kv=CASE.kv).folder
 
 
 @pytest.fixture(scope="module")
@@ -63,16 +70,12 @@ def compiled(folder: Path) -> CompiledExport:
 
 
 @pytest.fixture(scope="module")
-def simulated(robot, model, reference) -> SimulationResult:  # type: ignore[no-untyped-def]
-    return simulate(
-        robot, reference, CASE.controller("cfc"), external_force=CASE.external_force, controller_model=model, **OPTIONS
-    )
+def simulated(robot, scenario, reference) -> SimulationResult:  # type: ignore[no-untyped-def]
+    return simulate(robot, reference, CASE.controller("cfc"), scenario)
 
 
-def test_closed_through_the_export_equals_simulate_bit_for_bit(robot, model, reference, compiled, simulated):  # type: ignore[no-untyped-def]
-    mine = simulate_exported(
-        compiled, robot, reference, external_force=CASE.external_force, controller_model=model, **OPTIONS
-    )
+def test_closed_through_the_export_equals_simulate_bit_for_bit(robot, model, scenario, reference, compiled, simulated):  # type: ignore[no-untyped-def]
+    mine = simulate_exported(compiled, robot, reference, scenario)
     np.testing.assert_array_equal(mine.effort, simulated.effort)
     np.testing.assert_array_equal(mine.q, simulated.q)
     np.testing.assert_array_equal(mine.effort_estimate, simulated.effort_estimate)
@@ -141,7 +144,7 @@ def test_bad_estimator_options_are_one_line(robot, tmp_path):  # type: ignore[no
         ({"estimator_bandwidth_hz": 60.0}, "estimator_bandwidth_hz"),  # only with the Kalman filter
     ):
         with pytest.raises(InputError, match=field) as caught:
-            export_controller(robot, tmp_path / "out", check_build=False, **options)
+            export_controller(robot, tmp_path / "out", scenario=Scenario(**options), check_build=False)
         assert "\n" not in str(caught.value)
     assert not (tmp_path / "out").exists()
 
@@ -158,18 +161,17 @@ def test_the_command_exports_the_estimator(tmp_path, capsys):  # type: ignore[no
     assert settings["kalman_gain"] == list(kalman_gains(1e-3, 120.0))
 
 
-def test_switching_control_on_the_kalman_estimate_equals_simulate(robot, model, tmp_path):  # type: ignore[no-untyped-def]
+def test_switching_control_on_the_kalman_estimate_equals_simulate(robot, scenario, tmp_path):  # type: ignore[no-untyped-def]
     """The safe variant predicts from the readings the next step would use (``vgtc_readings``),
     which with the Kalman filter is its estimate: with a threshold low enough to activate the GA
     often, the run through the export equals simulate's bit for bit."""
     scm = dataclasses.replace(CASE.controller("scm", variant="safe"), threshold=2e-5)
     reference = joint_reference(robot, 2, duration=0.4)
-    folder = export_controller(
-        robot, tmp_path / "switching", kp=CASE.kp, kv=CASE.kv, controller_model=model, switching=scm, **OPTIONS
-    ).folder
-    options = {"external_force": CASE.external_force, "controller_model": model, **OPTIONS}
-    theirs = simulate(robot, reference, scm, **options)
-    mine = simulate_exported(CompiledExport(folder), robot, reference, controller=scm, **options)
+    exported = export_controller(
+        robot, tmp_path / "switching", scenario=scenario, kp=CASE.kp, kv=CASE.kv, switching=scm
+    )
+    theirs = simulate(robot, reference, scm, scenario)
+    mine = simulate_exported(CompiledExport(exported.folder), robot, reference, scenario, controller=scm)
     assert len(theirs.activations) > 10
     assert [a.sample for a in mine.activations] == [a.sample for a in theirs.activations]
     np.testing.assert_array_equal(mine.effort, theirs.effort)

@@ -34,6 +34,7 @@ from vgtarm.experiment.cases import case_study
 from vgtarm.export import export_controller
 from vgtarm.export.controller import STRICT_FLAGS
 from vgtarm.ik.records import csv_columns
+from vgtarm.simulation import Scenario
 
 from .test_export_controller import CLANG_MISSING, measurements_header, reference_header
 
@@ -69,8 +70,9 @@ def robot() -> vgtarm.Robot:
 @pytest.fixture(scope="module")
 def export(robot: vgtarm.Robot, tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("hardening")
+    scenario = Scenario(observer="momentum")
     return export_controller(
-        robot, root / "export", kp=CASE.kp, kv=CASE.kv, observer="momentum", switching="safe", check_build=False
+        robot, root / "export", scenario=scenario, kp=CASE.kp, kv=CASE.kv, switching="safe", check_build=False
     ).folder
 
 

@@ -28,7 +28,7 @@ from vgtarm.export.galoop import FLAGS, ExportedGA
 from vgtarm.export.switching import simulator_fuses
 from vgtarm.ga import GAOptions
 from vgtarm.model.closedloop import ClosedLoopDriver
-from vgtarm.simulation import simulate
+from vgtarm.simulation import Scenario, simulate
 from vgtarm.simulation.engines import compiled_ga
 from vgtarm.simulation.simulator import loop_arrays
 
@@ -115,9 +115,10 @@ def test_closed_through_the_exported_switching_control_equals_simulate(variant, 
     """Case 2 with the tool force, switching control closed through the exported C: every effort
     sample, state and activation equals simulate's, bit for bit (within 1e-12 a fortiori)."""
     scm = _scm(variant)
-    folder = export_controller(robot, tmp_path / "x", kp=CASE.kp, kv=CASE.kv, switching=scm, **options).folder
-    theirs = simulate(robot, reference, scm, external_force=CASE.external_force, **options)
-    mine = simulate_exported(folder, robot, reference, external_force=CASE.external_force, controller=scm, **options)
+    scenario = Scenario(external_force=CASE.external_force, **options)
+    folder = export_controller(robot, tmp_path / "x", scenario=scenario, kp=CASE.kp, kv=CASE.kv, switching=scm).folder
+    theirs = simulate(robot, reference, scm, scenario)
+    mine = simulate_exported(folder, robot, reference, scenario, controller=scm)
     assert len(theirs.activations) >= 3  # the GA ran
     assert np.abs(mine.effort - theirs.effort).max() <= 1e-12
     np.testing.assert_array_equal(mine.effort, theirs.effort)

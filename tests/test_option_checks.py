@@ -98,7 +98,7 @@ EXPORT_CASES = [
         ["--config", str(EXAMPLES / "planar_module.toml"), "--twist-resolution", "1e-3"],
         "--twist-resolution 0.001: the robot has no twist joint (its 3 joints are legs, in m)",
     ),
-    (["--velocity-filter-hz", "50"], "--velocity-filter-hz 50.0: filters the velocities differenced from encoders"),
+    (["--velocity-filter", "50"], "--velocity-filter 50.0: filters the velocities differenced from encoders"),
 ]
 
 

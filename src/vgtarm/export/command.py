@@ -1,6 +1,10 @@
 """The command-line glue of ``vgtarm export controller`` (wired into the ``vgtarm`` command by the
 app layer: ``add_arguments`` on its parser, ``run`` as its action).
 
+The flags of what the controller measures and estimates are generated from the scenario's
+declarations (:data:`~.controller.EXPORTED_OPTIONS`, as ``vgtarm simulate``'s are), and what the
+user typed of them becomes the :class:`~vgtarm.simulation.Scenario` the export takes, by name.
+
 ``run`` raises :class:`~vgtarm.errors.VgtarmError` (or ``OSError``) for the command's one-line
 error; it prints only the summary of a successful export.
 """
@@ -8,6 +12,7 @@ error; it prints only the summary of a successful export.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -17,9 +22,22 @@ from ..fileio import check_output_folder, parse_toml, read_text_limited
 from ..model.parameters import ROBOT_FILE_LIMIT, RobotParameters, load_parameters
 from ..model.robot import load_robot, robot_parameters_from_dict
 from ..model.stack import Stack
+from ..option import Option
 from ..simulation.checks import model_of_plant
-from ..simulation.sensing import DEFAULT_ESTIMATOR_BANDWIDTH_HZ, DEFAULT_VELOCITY_FILTER_HZ, check_twist_resolution
-from .controller import export_controller, probe_compiler
+from ..simulation.scenario import Scenario
+from ..simulation.sensing import check_twist_resolution
+from .controller import EXPORTED_OPTIONS, checked_sensing, export_controller, probe_compiler
+
+
+def exported_options() -> dict[str, Option]:
+    """The declarations of the scenario's options an export carries (:data:`EXPORTED_OPTIONS`), by
+    name, each with a flag: its declared one, else ``--name`` (``vgtarm simulate`` has no flag for
+    the twist's encoder: it gives the twist a 20-bit encoder; the export takes it)."""
+    declared = Scenario.options()
+    return {
+        name: declared[name] if declared[name].cli_flag else dataclasses.replace(declared[name], flag=None)
+        for name in EXPORTED_OPTIONS
+    }
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -28,13 +46,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--config", type=Path, default=None, metavar="ROBOT", help="robot file (TOML; default: the paper's)"
     )
-    parser.add_argument(
-        "--observer", choices=("none", "momentum"), default="none", help="estimate of the external efforts"
-    )
-    parser.add_argument(
-        "--observer-gain", type=float, default=None, metavar="K_O", help="observer gain (1/s; default 0.5/dt)"
-    )
-    parser.add_argument("--force-sensor", action="store_true", help="feed the measured tool force forward instead")
+    options = exported_options()
+    for declaration in options.values():
+        declaration.add_to(parser)
+    parser.set_defaults(**dict.fromkeys(options))  # None: not typed, the scenario's default
     parser.add_argument(
         "--switching",
         choices=("safe", "paper"),
@@ -50,30 +65,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
             f"(default: case 2's, {default:g})",
         )
     parser.add_argument("--dt", type=float, default=1e-3, help="control period (s)")
-    parser.add_argument("--encoder-resolution", type=float, default=0.0, metavar="M", help="leg encoder step (m)")
-    parser.add_argument("--twist-resolution", type=float, default=None, metavar="RAD", help="twist encoder step (rad)")
-    parser.add_argument(
-        "--velocity-filter-hz",
-        type=float,
-        default=None,
-        metavar="HZ",
-        help=f"with encoders: the cut-off of the filter of the differenced velocities (default "
-        f"{DEFAULT_VELOCITY_FILTER_HZ:g})",
-    )
-    parser.add_argument(
-        "--estimator",
-        choices=("difference", "kalman"),
-        default="difference",
-        help="with encoders: velocities from differences through the filter (default), or the Kalman filter "
-        "with the controller model (gains computed at export)",
-    )
-    parser.add_argument(
-        "--estimator-bandwidth",
-        type=float,
-        default=None,
-        metavar="HZ",
-        help=f"--estimator kalman: its bandwidth (default {DEFAULT_ESTIMATOR_BANDWIDTH_HZ:g} Hz, at most 1/(4 dt))",
-    )
     parser.add_argument(
         "--model-config", type=Path, default=None, metavar="ROBOT", help="the controller's model (default: the robot)"
     )
@@ -88,49 +79,52 @@ def _parameters(config: Path | None) -> RobotParameters | Stack:
     return robot_parameters_from_dict(parse_toml(text, cut(str(config), 200), error=ConfigError), source=str(config))
 
 
-def _checked_options(args: argparse.Namespace) -> tuple[dict[str, Any], RobotParameters | Stack | None]:
-    """The gains given and the controller model's parameters (None: the robot's), checked with the
-    checks simulate uses (the gains as ``vgtarm simulate --kp/--kv`` reads them, the twist
-    encoder, the model against the robot) from the robot files' parameters, before any model is
-    built; an option that would be ignored (``--velocity-filter-hz`` without encoders) is refused."""
-    if args.velocity_filter_hz is not None and not args.encoder_resolution and not args.twist_resolution:
-        raise InputError(
-            f"--velocity-filter-hz {shown(args.velocity_filter_hz)}: filters the velocities differenced from "
-            "encoders; expected --encoder-resolution (without encoders the velocities are measured)"
-        )
+def _scenario(args: argparse.Namespace, model: RobotParameters | Stack | None) -> Scenario:
+    """The scenario of the export: the options of :func:`exported_options` the user typed, by name
+    (the others: the scenario's defaults), and the controller's model ``model``."""
+    typed = {name: getattr(args, name) for name in EXPORTED_OPTIONS if getattr(args, name) is not None}
+    return Scenario(**typed, controller_model=model)
+
+
+def _checked_options(args: argparse.Namespace) -> tuple[dict[str, Any], Scenario]:
+    """The gains given and the scenario, checked with the checks simulate uses (the gains as
+    ``vgtarm simulate --kp/--kv`` reads them, the twist encoder, the model against the robot, the
+    sensing as the export checks it) from the robot files' parameters, before any model is built;
+    an option that would be ignored (the velocity filter without encoders) is refused."""
     robot = _parameters(args.config)
     gains: dict[str, Any] = {
         name: gains_text(text, f"--{name}", robot.joint_names)
         for name, text in (("kp", args.kp), ("kv", args.kv))
         if text is not None
     }
-    check_twist_resolution(robot.joint_units, args.twist_resolution, "--twist-resolution")
+    twist = exported_options()["twist_resolution"]
+    check_twist_resolution(robot.joint_units, getattr(args, twist.name), twist.cli_flag)
     model = None if args.model_config is None else _parameters(args.model_config)
     if model is not None:
         model_of_plant(robot, model, f"--model-config {shown(str(args.model_config), 200)}")
-    return gains, model
+    scenario = _scenario(args, model)
+    sensing = checked_sensing(robot.joint_units, args.dt, scenario)
+    cutoff = exported_options()["velocity_filter_hz"]
+    if getattr(args, cutoff.name) is not None and not sensing.active:
+        raise InputError(
+            f"{cutoff.cli_flag} {shown(getattr(args, cutoff.name))}: filters the velocities differenced from "
+            "encoders; expected --encoder-resolution (without encoders the velocities are measured)"
+        )
+    return gains, scenario
 
 
 def run(args: argparse.Namespace) -> int:
     """Export the controller as the options say; prints the folder and what it holds."""
     check_output_folder(args.out, "--out", inputs=[args.config, args.model_config])
-    gains, model = _checked_options(args)  # before any compiler runs or any model is built
+    gains, scenario = _checked_options(args)  # before any compiler runs or any model is built
     probe_compiler()  # a broken compiler: the export's one line, before the model falls back on it
     robot = load_robot(args.config)
     done = export_controller(
         robot,
         args.out,
+        scenario=scenario,
         **gains,  # the gains given; else export_controller's, case 2's
         dt=args.dt,
-        controller_model=model,
-        observer=args.observer,
-        observer_gain=args.observer_gain,
-        force_sensor=args.force_sensor,
-        encoder_resolution=args.encoder_resolution,
-        twist_resolution=args.twist_resolution,
-        velocity_filter_hz=DEFAULT_VELOCITY_FILTER_HZ if args.velocity_filter_hz is None else args.velocity_filter_hz,
-        estimator=args.estimator,
-        estimator_bandwidth_hz=args.estimator_bandwidth,
         switching=args.switching,
     )
     settings = done.settings

@@ -24,7 +24,8 @@ import math
 import os
 import shutil
 import tempfile
-from collections.abc import Iterable, Sequence
+import warnings
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -44,7 +45,8 @@ from ..model.parameters import RobotParameters
 from ..model.robot import Robot
 from ..model.stack import Stack
 from ..simulation.checks import model_of_plant
-from ..simulation.sensing import DEFAULT_VELOCITY_FILTER_HZ, ESTIMATORS, Sensing, sensing_settings
+from ..simulation.scenario import Scenario
+from ..simulation.sensing import SENSING_OPTIONS, Sensing, sensing_of
 from .switching import GAExport, ga_export, simulator_fuses, switching_controller, switching_readme
 
 #: The hand-written files copied into every export (``csrc/`` of this package).
@@ -59,8 +61,13 @@ MODEL_FUNCTIONS = ("cfc", "tip", "id", "jac")
 KALMAN_FUNCTIONS = ("fd",)
 #: Flags the export is held to: its C must compile clean with them on gcc and clang.
 STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", "-ffp-contract=off")
-#: Values of ``observer`` (the force sensor is ``force_sensor=True``, as in simulate).
-OBSERVERS = ("none", "momentum")
+#: The scenario's options an export carries: what the controller measures and estimates
+#: (:data:`~vgtarm.simulation.sensing.SENSING_OPTIONS`) but the simulated noise on its velocities,
+#: which is the simulated sensor's, not the controller's (a scenario with noise is refused).
+EXPORTED_OPTIONS = tuple(name for name in SENSING_OPTIONS if name != "velocity_noise")
+#: The scenario's fields an export reads: :data:`EXPORTED_OPTIONS`, the controller's model and the
+#: limit tolerance (the keywords :func:`export_controller` took before it took the scenario).
+SCENARIO_FIELDS = (*EXPORTED_OPTIONS, "controller_model", "limit_tolerance")
 #: Values of ``switching`` (or a :class:`~vgtarm.control.SwitchingControl`).
 SWITCHING = (None, "safe", "paper")
 #: The GA of switching control, copied when it is exported.
@@ -104,23 +111,15 @@ def export_controller(
     robot: Robot,
     out_dir: str | os.PathLike[str],
     *,
+    scenario: Scenario | None = None,
     kp: ArrayLike = 15000.0,
     kv: ArrayLike = 600.0,
     dt: float = 1e-3,
-    controller_model: RobotParameters | Stack | Robot | None = None,
-    observer: str = "none",
-    observer_gain: float | None = None,
-    force_sensor: bool = False,
-    encoder_resolution: float = 0.0,
-    twist_resolution: float | None = None,
-    velocity_filter_hz: float = DEFAULT_VELOCITY_FILTER_HZ,
-    estimator: str = "difference",
-    estimator_bandwidth_hz: float | None = None,
-    limit_tolerance: float = 0.05,
     effort_max: ArrayLike | None = None,
     switching: str | SwitchingControl | None = None,
     check_build: bool = True,
     fused_multiply_add: bool | None = None,
+    **scenario_fields: Any,
 ) -> ExportedController:
     """Write the controller of ``robot`` as a self-contained C99 folder ``out_dir``.
 
@@ -128,6 +127,20 @@ def export_controller(
         robot: the robot the controller drives (the paper's or a stack; its joint limits and home
             pose are exported).
         out_dir: the folder to write; an existing folder is replaced whole only if vgtarm wrote it.
+        scenario: the run the controller is exported for, as :func:`vgtarm.simulation.simulate` and
+            :func:`~.loop.simulate_exported` take it (:class:`~vgtarm.simulation.Scenario`; default
+            ``Scenario()``). The export carries the scenario's options of the controller
+            (:data:`SCENARIO_FIELDS`), checked as simulate checks them: what the controller measures
+            and estimates (:data:`EXPORTED_OPTIONS`: the observer and its gain, the force sensor,
+            the encoders, the velocity filter, the estimator and its bandwidth, whose Kalman gains
+            are computed here and exported as numbers); the controller's model (default: the
+            robot's own, an exact model; its total mass, inertia and friction within
+            :data:`~vgtarm.model.factors.MODEL_FACTOR_RANGE` of the robot's); and the limit
+            tolerance, how far (m, rad) a reading may lie beyond a joint limit before the controller
+            refuses the step (>= 0). Simulated noise on the velocities is refused (the sensor's, not
+            the controller's); the other fields (the tool force, the integrator, the seed, the
+            plant, the feedforward) are the simulated run's and are not read, so one scenario serves
+            the export and the runs through it.
         kp: proportional gain of computed force control: a number (the same on every joint), n
             diagonal entries or an n x n matrix (default: case 2's, 15000 1/s^2); symmetric and
             positive definite (each gain > 0), as ``vgtarm simulate --kp`` checks it
@@ -135,25 +148,6 @@ def export_controller(
         kv: derivative gain, in the same forms and with the same check as ``kp`` (default: case 2's,
             600 1/s).
         dt: control period (s).
-        controller_model: the controller's parameters (default: the robot's own, an exact model);
-            its total mass, inertia and friction within
-            :data:`~vgtarm.model.factors.MODEL_FACTOR_RANGE` of the robot's, as simulate checks it.
-        observer: how the external efforts are estimated, as in :func:`vgtarm.simulation.simulate`
-            (``"none"`` or ``"momentum"``).
-        observer_gain: the momentum observer's gain K_O (default 0.5/dt).
-        force_sensor: measure the tip force instead of estimating it, as in simulate.
-        encoder_resolution: the encoders' resolution of the legs, as in simulate: with encoders
-            the controller rounds the readings and differences them for velocities.
-        twist_resolution: the twist encoder's resolution, as in simulate (refused on a robot
-            without a twist).
-        velocity_filter_hz: the cut-off of the velocity filter, as in simulate.
-        estimator: how the velocities are estimated from the encoders, as in simulate:
-            ``"difference"`` (differences through the filter) or ``"kalman"`` (the steady-state
-            Kalman filter with the controller model's forward dynamics; needs encoders).
-        estimator_bandwidth_hz: the Kalman filter's bandwidth, as in simulate (default 60 Hz); its
-            gains are computed here (discrete Riccati equation) and exported as numbers.
-        limit_tolerance: how far (m, rad) a reading may lie beyond a joint limit before the
-            controller refuses the step.
         effort_max: a clip of each effort (a number or n values; default none).
         switching: ``None`` (computed force control), or switching control's GA exported beside it
             (``vgtc_ga.c``, see its header): ``"safe"``, ``"paper"`` (the variants, around the fixed
@@ -165,6 +159,9 @@ def export_controller(
             :func:`~.switching.simulator_fuses`), so its activations equal the simulation's.
         check_build: compile the folder's C with :data:`STRICT_FLAGS` before putting it in place
             (``$CC``, else cc, gcc or clang); a failure raises :class:`ExportError`.
+        **scenario_fields: deprecated: the fields of :data:`SCENARIO_FIELDS` as keywords
+            (``observer="momentum"``), which build the scenario as before, with a
+            :class:`DeprecationWarning`; pass ``scenario=Scenario(...)`` instead (not both).
 
     Returns:
         The record of the folder (:class:`ExportedController`).
@@ -174,28 +171,77 @@ def export_controller(
         ExportError: no compiler or a compile that fails; nothing is left at ``out_dir`` (an
             existing folder stays as it was).
     """
-    export = _Export.checked(**locals())  # every argument by its name: checked in one place, before any work
+    chosen = _scenario(scenario, scenario_fields)
+    export = _Export.checked(  # every argument checked in one place, before any work
+        robot,
+        out_dir,
+        chosen,
+        kp=kp,
+        kv=kv,
+        dt=dt,
+        effort_max=effort_max,
+        switching=switching,
+        check_build=check_build,
+        fused_multiply_add=fused_multiply_add,
+    )
     return export.write()
 
 
-def _check_choices(
-    robot: object, switching: object, observer: str, dt: object, check_build: object, estimator: str
-) -> None:
+def _scenario(scenario: Scenario | None, fields: Mapping[str, Any]) -> Scenario:
+    """:func:`export_controller`'s scenario: ``scenario`` (None: ``Scenario()``), or the one its
+    deprecated keywords ``fields`` build (with a :class:`DeprecationWarning`); a keyword that is
+    not one of :data:`SCENARIO_FIELDS` is Python's ``TypeError``, both forms at once one line."""
+    if not fields:
+        return Scenario.of(scenario, {})  # refuses what is not a Scenario, in one line
+    unknown = sorted(set(fields) - set(SCENARIO_FIELDS))
+    if unknown:
+        raise TypeError(f"export_controller() got an unexpected keyword argument {unknown[0]!r}")
+    if scenario is not None:
+        raise InputError(
+            f"export_controller got a scenario and the options {sorted(fields)}: give them in the scenario"
+            " (scenario.replace(...))"
+        )
+    warnings.warn(
+        f"export_controller's keywords {sorted(fields)} are deprecated: pass them in "
+        "scenario=vgtarm.simulation.Scenario(...), as simulate and simulate_exported take it",
+        DeprecationWarning,
+        stacklevel=3,
+    )
+    return Scenario(**fields)
+
+
+def _check_choices(robot: object, switching: object, dt: object, check_build: object) -> None:
     """Refuse, in one line naming it, an argument of :func:`export_controller` that is not one of
-    its kinds or choices: the robot, the switching control, the observer, the period, the build
-    check, the estimator (in that order)."""
+    its kinds or choices: the robot, the switching control, the period, the build check (in that
+    order; the scenario's options are checked when it is built)."""
     if not isinstance(robot, Robot):
         raise InputError(f"robot = {shown(robot)}: expected a vgtarm.Robot (vgtarm.load_robot)")
     if not isinstance(switching, SwitchingControl) and switching not in SWITCHING:
         raise InputError(f"switching = {switching!r}: expected one of {list(SWITCHING)} or a SwitchingControl")
-    if observer not in OBSERVERS:
-        raise InputError(f"observer = {observer!r}: expected one of {list(OBSERVERS)}")
-    if not (isinstance(dt, int | float) and not isinstance(dt, bool) and math.isfinite(dt) and 0 < dt <= 1):
-        raise InputError(f"dt = {shown(dt)}: expected a control period in (0, 1] s")
+    _check_period(dt)
     if not isinstance(check_build, bool):
         raise InputError(f"check_build = {shown(check_build)}: expected True or False")
-    if estimator not in ESTIMATORS:
-        raise InputError(f"estimator = {shown(estimator)}: expected one of {list(ESTIMATORS)}")
+
+
+def _check_period(dt: object) -> None:
+    """Refuse, in one line, a control period ``dt`` that is not a number in (0, 1] s."""
+    if not (isinstance(dt, int | float) and not isinstance(dt, bool) and math.isfinite(dt) and 0 < dt <= 1):
+        raise InputError(f"dt = {shown(dt)}: expected a control period in (0, 1] s")
+
+
+def checked_sensing(units: tuple[str, ...], dt: float, scenario: Scenario) -> Sensing:
+    """What the controller of a robot with the joint ``units`` measures and estimates in
+    ``scenario`` at the period ``dt`` (s), checked as :func:`export_controller` checks it (as
+    simulate does; simulated noise on the velocities is refused: no export has it), so that a
+    command can check it before it builds the robot's model."""
+    _check_period(dt)
+    noise = scenario.velocity_noise
+    if noise != 0:
+        raise InputError(
+            f"velocity_noise = {shown(noise)}: the noise of the simulated velocity sensor, not an option of the"
+            " exported controller (expected 0)"
+        )
+    return sensing_of(units, float(dt), scenario)
 
 
 @dataclass(frozen=True)
@@ -227,20 +273,11 @@ class _Export:
         cls,
         robot: Robot,
         out_dir: str | os.PathLike[str],
+        scenario: Scenario,
         *,
         kp: ArrayLike,
         kv: ArrayLike,
         dt: float,
-        controller_model: RobotParameters | Stack | Robot | None,
-        observer: str,
-        observer_gain: float | None,
-        force_sensor: bool,
-        encoder_resolution: float,
-        twist_resolution: float | None,
-        velocity_filter_hz: float,
-        estimator: str,
-        estimator_bandwidth_hz: float | None,
-        limit_tolerance: float,
         effort_max: ArrayLike | None,
         switching: str | SwitchingControl | None,
         check_build: bool,
@@ -249,28 +286,17 @@ class _Export:
         """The export of :func:`export_controller`'s arguments (see there), each checked, in this
         order, with the checks simulate uses; :class:`~vgtarm.errors.InputError` (or
         :class:`ExportError`: no compiler) before any work."""
-        _check_choices(robot, switching, observer, dt, check_build, estimator)
+        _check_choices(robot, switching, dt, check_build)
         n = robot.n_joints
         gains = Gains.of(kp, kv, n)
         for label, matrix in (("Kp", gains.Kp), ("Kv", gains.Kv)):  # vgtarm simulate's check of --kp and --kv
             check_definite(matrix, label)
-        sensing = sensing_settings(
-            robot.joint_units,
-            float(dt),
-            observer,
-            observer_gain,
-            force_sensor,
-            encoder_resolution,
-            twist_resolution,
-            0.0,
-            velocity_filter_hz,
-            estimator,
-            estimator_bandwidth_hz,
-        )
-        model = _checked_model(robot, controller_model)
-        tolerance = float(limit_tolerance) if _is_number(limit_tolerance) else math.nan
+        sensing = checked_sensing(robot.joint_units, dt, scenario)
+        model = _checked_model(robot, scenario.controller_model)
+        given = scenario.limit_tolerance  # the controller's own check: 0 refuses any reading beyond a limit
+        tolerance = float(given) if _is_number(given) else math.nan
         if not (math.isfinite(tolerance) and tolerance >= 0):
-            raise InputError(f"limit_tolerance = {shown(limit_tolerance)}: expected a distance >= 0 (m, rad)")
+            raise InputError(f"limit_tolerance = {shown(given)}: expected a distance >= 0 (m, rad)")
         clip = _effort_max(effort_max, n)
         ga = None
         if switching is not None:
@@ -319,7 +345,21 @@ def _settings(
         "dt_s": dt,
         "Kp": gains.Kp.tolist(),
         "Kv": gains.Kv.tolist(),
-        "observer": "force" if sensing.force_sensor else sensing.observer,
+        **sensing_record(sensing),
+        "limit_tolerance": tolerance,
+        "effort_max": [None if math.isinf(v) else v for v in clip.tolist()],
+        "switching": ga.settings if ga is not None else None,
+        "casadi": str(getattr(ca, "__version__", "unknown")),
+    }
+
+
+def sensing_record(sensing: Sensing) -> dict[str, Any]:
+    """What the controller measures and estimates, as ``export.json`` records it: the observer
+    (``"force"`` for the force sensor) and its gain (1/s), the velocities (``"differenced"`` from
+    encoders or ``"measured"``), the encoder steps ``(n,)``, the velocity filter (its cut-off in Hz
+    and its pole), the estimator, its bandwidth (Hz) and its Kalman gains."""
+    return {
+        "observer": sensing.loop_observer,
         "observer_gain_per_s": sensing.observer_gain,
         "velocity": "differenced" if sensing.active else "measured",
         "resolution": sensing.resolution.tolist(),
@@ -328,11 +368,19 @@ def _settings(
         "estimator": sensing.estimator,
         "estimator_bandwidth_hz": sensing.estimator_bandwidth_hz,
         "kalman_gain": list(sensing.kalman_gain),
-        "limit_tolerance": tolerance,
-        "effort_max": [None if math.isinf(v) else v for v in clip.tolist()],
-        "switching": ga.settings if ga is not None else None,
-        "casadi": str(getattr(ca, "__version__", "unknown")),
     }
+
+
+def sensing_in_use(sensing: Sensing) -> dict[str, Any]:
+    """The entries of :func:`sensing_record` the controller's arithmetic uses, which a run closed
+    through the export must share (:func:`~.loop.simulate_exported`): the observer, its gain, the
+    velocities and the encoder steps; with encoders the estimator and its gains or the filter's pole
+    (the cut-offs in Hz only say where these numbers come from)."""
+    record = sensing_record(sensing)
+    used = ["observer", "observer_gain_per_s", "velocity", "resolution"]
+    if sensing.active:
+        used += ["estimator", "kalman_gain" if sensing.estimator == "kalman" else "velocity_filter"]
+    return {key: record[key] for key in used}
 
 
 def _is_number(value: object) -> bool:

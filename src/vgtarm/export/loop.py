@@ -37,7 +37,7 @@ from ..simulation.reference import HasJointReference
 from ..simulation.result import MODE_FIXED, MODE_GA, MODE_NOT_RUN, SimulationResult
 from ..simulation.scenario import MODEL_ENGINE, Scenario
 from ..simulation.simulator import Outcome, prepare
-from .controller import ExportError, run_compiler
+from .controller import ExportError, run_compiler, sensing_in_use
 from .switching import switching_controller
 
 #: Largest ``export.json`` of an export read (bytes): a few kilobytes.
@@ -187,19 +187,10 @@ def _check_agrees(settings: Mapping[str, Any], run: Any, plant: Robot) -> None:
     sensing, job = run.sensing, run.job
     wanted = {
         "dt_s": job.dt,
-        "observer": sensing.loop_observer,
-        "observer_gain_per_s": sensing.observer_gain,
-        "velocity": "differenced" if sensing.active else "measured",
-        "resolution": sensing.resolution.tolist(),
+        **sensing_in_use(sensing),  # the entries of export.json the controller's arithmetic uses
         "controller_model_fingerprint": job.model.fingerprint,
         "n_joints": plant.n_joints,
     }
-    if sensing.active:
-        wanted["estimator"] = sensing.estimator
-        if sensing.estimator == "kalman":
-            wanted["kalman_gain"] = list(sensing.kalman_gain)
-        else:
-            wanted["velocity_filter"] = sensing.velocity_filter
     for key, value in wanted.items():
         exported = settings.get(key, "difference" if key == "estimator" else None)  # (exports before the option)
         if exported != value:
