@@ -467,7 +467,7 @@ def _write(folder: Path, export: _Export) -> None:
 #: What the GA adds to the build files when it is exported: ``(file, text, replacement)``.
 _GA_BUILD_EDITS = (
     ("Makefile", "vgtc_defaults.o", "vgtc_defaults.o vgtc_ga.o vgtc_switching.o"),
-    ("Makefile", "vgt_control.h", "vgt_control.h vgtc_ga.h vgtc_switching.h"),
+    ("Makefile", "vgt_control.h", "vgt_control.h vgt_ga.h vgtc_ga.h vgtc_switching.h"),
     ("Makefile", "all: libvgtc.a replay rt_loop", "all: libvgtc.a replay rt_loop ga_timing"),
     (  # the GA wants its fmaf as an instruction and its lane loops vectorised
         "Makefile",
@@ -488,13 +488,16 @@ _GA_BUILD_EDITS = (
 
 def _copy_sources(folder: Path, ga: bool) -> None:
     """The hand-written files (:data:`COPIED`; with ``ga``, :data:`GA_FILES` too, and the build
-    files gain them: :data:`_GA_BUILD_EDITS`) and the shared header, into ``folder``."""
+    files gain them: :data:`_GA_BUILD_EDITS`) and the shared headers into ``folder``: with ``ga``,
+    the simulation's GA too (``vgt_ga.h``, every operation of an activation: ``vgtc_ga.c``
+    includes it)."""
     for name in COPIED + (GA_FILES if ga else ()):
         shutil.copyfile(TEMPLATE_DIR / name, folder / name)
     if ga:  # the library's sources gain the GA
         for name, old, new in _GA_BUILD_EDITS:
             (folder / name).write_text((folder / name).read_text().replace(old, new))
-    shutil.copyfile(SHARED_HEADER, folder / SHARED_HEADER.name)
+    for shared in (SHARED_HEADER, *((SHARED_HEADER.parent / "vgt_ga.h",) if ga else ())):
+        shutil.copyfile(shared, folder / shared.name)
 
 
 def _config_header(

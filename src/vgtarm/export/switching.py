@@ -23,17 +23,18 @@ from ..errors import InputError, shown
 from ..ga import GAOptions
 from ..model.closedloop import bit_words, pack_bits
 
-#: Flags an x86-64 CPU needs for the x86-64-v3 clone of ga.c's kernel, the one that fuses.
+#: Flags an x86-64 CPU needs for the x86-64-v3 kernel of the simulation's GA (``vgt_ga.h``, picked
+#: by ``ga.c`` at run time), the one that fuses.
 _X86_64_V3 = ("avx", "avx2", "bmi1", "bmi2", "f16c", "fma", "abm", "movbe", "xsave")
 #: Variants of switching control the export writes.
 VARIANTS = ("safe", "paper")
 
 
 def simulator_fuses(cpuinfo: str | None = None) -> bool:
-    """Whether the simulation's GA kernel (``ga.c``: ``predict_block``, built with
-    ``fp-contract=fast``) runs with fused multiply-adds on this machine: on x86-64 when the CPU
-    takes its x86-64-v3 clone (``cpuinfo``: the text of /proc/cpuinfo, read when None), elsewhere
-    always (the other 64-bit ISAs fuse in their baseline)."""
+    """Whether the simulation's GA kernel (``vgt_ga.h``'s, built by ``ga.c`` in an x86-64-v4, v3 and
+    baseline version picked at run time, fusing in v3 and v4) runs with fused multiply-adds on this
+    machine: on x86-64 when the CPU takes the x86-64-v3 version (``cpuinfo``: the text of
+    /proc/cpuinfo, read when None), elsewhere always (the other 64-bit ISAs fuse in their baseline)."""
     machine = platform.machine().lower()
     if machine not in ("x86_64", "amd64"):
         return True
@@ -273,7 +274,8 @@ int status = vgtc_switching_step(&sw, t, q_meas, qd_meas, ref_rows, rows, tip_d_
 `vgtc_switching_step_feedforward` takes the expected tool force of the period after `f_meas`
 (`vgtc_step_feedforward`'s `f_exp`), fed forward under the fixed gains and the GA's alike.
 
-`vgtc_ga.c` is the simulation's GA (`ga.c`) rewritten for a real-time target: every buffer sized
+`vgtc_ga.c` runs the simulation's GA for a real-time target: the GA's operations are one file,
+`vgt_ga.h`, which the simulation compiles too (its `ga.c`); here every buffer is sized
 at compile time (`vgtc_config.h`), no heap, no threads, no intrinsics; the same random stream
 (xoshiro256** seeded through splitmix64, one seed per activation) and the same arithmetic, so an
 activation from the same state, window and seed returns the simulation's gains bit for bit

@@ -2,15 +2,17 @@
  * controller --switching ...`).
  *
  * One call of vgtc_ga_activate runs a whole GA activation: the paper's binary-coded algorithm
- * (Appendix B) with the operators, the random stream (xoshiro256** seeded through splitmix64) and
- * the arithmetic of the simulation's compiled GA (vgtarm/model/csrc/ga.c), so that the same
- * activation (state, reference window, seed) gives the simulation's gains bit for bit. Unlike
- * ga.c it uses no heap, no threads and no intrinsics: every buffer is a member of vgtc_ga, sized
- * at compile time from VGTC_NJ and the GA's sizes in vgtc_config.h (population, words per
- * individual, horizon, mutation flips); the candidates are predicted in blocks of VGTC_GA_LANES in
- * single precision, in plain loops over the block that the compiler may vectorise (-O3
- * -march=native does), with fmaf exactly where the simulation's vectorised kernel fuses
- * (VGTC_GA_FMA: 1 when the exporting machine ran that kernel with FMA, as x86-64-v3 machines do).
+ * (Appendix B) run by the simulation's own code (vgt_ga.h, which the simulation's compiled GA,
+ * vgtarm/model/csrc/ga.c, includes too): the same operators, random stream (xoshiro256** seeded
+ * through splitmix64) and arithmetic, so that the same activation (state, reference window, seed)
+ * gives the simulation's gains bit for bit. Unlike the simulation it uses no heap, no threads and
+ * no intrinsics: every buffer is a member of vgtc_ga, sized at compile time from VGTC_NJ and the
+ * GA's sizes in vgtc_config.h (population, words per individual, horizon, mutation flips); the
+ * candidates are predicted in blocks of VGTC_GA_LANES in single precision, vectors of GCC's and
+ * Clang's extensions or plain loops over the block (VGTC_GA_NO_VECTORS, and other compilers) that
+ * the compiler may vectorise (-O3 -march=native does), with fmaf exactly where the simulation's
+ * kernel fuses (VGTC_GA_FMA: 1 when the exporting machine ran that kernel with FMA, as x86-64-v3
+ * machines do).
  *
  * The fitness is the predicted tip error of a gain candidate over the horizon under the
  * controller's model (vgtarm/control/scm.py): the joint errors on the linear recursion of computed
@@ -102,7 +104,8 @@ typedef struct {
     uint64_t pop[VGTC_GA_POPULATION * VGTC_GA_WORDS], next[VGTC_GA_POPULATION * VGTC_GA_WORDS];
     uint64_t best_bits[VGTC_GA_WORDS];
     double cost[VGTC_GA_POPULATION], next_cost[VGTC_GA_POPULATION], new_cost[VGTC_GA_POPULATION];
-    double expectation[VGTC_GA_POPULATION], work[2 * VGTC_GA_POPULATION], parent_cost[VGTC_GA_POPULATION];
+    double expectation[VGTC_GA_POPULATION], work[2 * VGTC_GA_POPULATION + VGTC_GA_LANES];
+    double parent_cost[VGTC_GA_POPULATION];
     long order[VGTC_GA_POPULATION], pool[VGTC_GA_POPULATION], fresh[VGTC_GA_POPULATION];
     long flips[VGTC_GA_MAX_FLIPS + 1];
     float K[VGTC_GA_GENES][VGTC_GA_LANES];                /* a block's gains, one lane each      */
