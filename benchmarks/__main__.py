@@ -27,6 +27,7 @@ from . import (  # noqa: E402
     bench_recursive,
     bench_reproduce,
     bench_sim,
+    bench_single,
     bench_stacks,
     bench_study,
     bench_threads,
@@ -50,6 +51,7 @@ MODULES: dict[str, Any] = {
     "footprint": bench_footprint,
     "pathwide": bench_path_wide,
     "threads": bench_threads,
+    "single": bench_single,
 }
 #: Groups run when none is named (``stacks`` is long: it compiles ten libraries from cold).
 DEFAULT = [name for name in MODULES if name not in ("stacks", "pathwide", "recursive-control")]

@@ -8,8 +8,9 @@ from (built, cached, checked) is :mod:`.compiled`'s, :mod:`.compiling`'s and :mo
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -247,6 +248,51 @@ class CompiledBackend:
         else:
             split_rows(n, work, self.threads)
         return outputs
+
+
+def single_call(
+    backend: Backend, name: str, inputs: Sequence[NDArray[np.float64]], outputs: NDArray[np.float64]
+) -> Callable[[], int]:
+    """One sample of function ``name``, called again and again on the same buffers: the function's inputs
+    are ``inputs`` (1-D float64 arrays of its input sizes, the parameters last), its outputs are written
+    one after the other into ``outputs`` (1-D float64, the sum of the output sizes). The call returns 0
+    when done (a generated function's own status otherwise) and gives, bit for bit, what
+    ``backend.evaluate(name, [row of each input], 1)`` gives.
+
+    The compiled backend calls the generated function directly through cffi, with pointers to the
+    buffers and work arrays taken once (no batch driver, no allocation), as ``vgt_batch`` does for
+    each sample; every other backend goes through its ``evaluate``. The buffers must keep their
+    addresses (the call holds them), and one call runs at a time on a given set (the work arrays are
+    its own): a caller on several threads keeps one set per thread.
+    """
+    sig = backend.signature(name)
+    arrays = [*inputs, outputs]
+    sizes = (*sig.nnz_in, sum(sig.nnz_out))
+    if len(inputs) != len(sig.nnz_in) or any(
+        x.dtype != np.float64 or x.shape != (size,) or not x.flags.c_contiguous
+        for x, size in zip(arrays, sizes, strict=True)
+    ):
+        raise ValueError(f"{sig.name}: single_call expects 1-D float64 buffers of sizes {sizes}")
+    if not isinstance(backend, CompiledBackend):
+        rows = [x.reshape(1, -1) for x in inputs]
+
+        def evaluated() -> int:
+            np.concatenate([y.reshape(-1) for y in backend.evaluate(name, rows, 1)], out=outputs)
+            return 0
+
+        return evaluated
+    ffi = backend.ffi
+    arg = ffi.new("const double *[]", max(sig.sz_arg, len(inputs), 1))
+    res = ffi.new("double *[]", max(sig.sz_res, len(sig.nnz_out), 1))
+    for i, x in enumerate(inputs):
+        arg[i] = ffi.cast("double *", x.ctypes.data)
+    start = ffi.cast("double *", outputs.ctypes.data)
+    for j, offset in enumerate(np.cumsum((0, *sig.nnz_out[:-1])).tolist()):
+        res[j] = start + offset
+    iw, w = ffi.new("vgt_int[]", max(sig.sz_iw, 1)), ffi.new("double[]", max(sig.sz_w, 1))
+    call = partial(backend.function_pointer(name), arg, res, iw, w, 0)
+    call.buffers = arrays  # type: ignore[attr-defined]  # the memory the pointers point into stays alive
+    return call
 
 
 class InterpretedBackend:

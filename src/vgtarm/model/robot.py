@@ -3,7 +3,9 @@
 Every method takes arrays whose last axis is the joint (or force) vector and broadcasts over the
 leading axes: ``q`` of shape ``(..., n)`` gives results of shape ``(..., ...)``, ``n`` the robot's
 number of joints (7 for the paper's robot, :attr:`Robot.n_joints`). One call on a batch runs one
-compiled loop, so prefer batches to Python loops over single configurations.
+compiled loop, so prefer batches to Python loops over single configurations. One state given as
+1-D float64 arrays takes a shorter path (``Robot._call``: the same checks and the same
+numbers, the compiled function called directly): a few microseconds a call.
 
 A robot is the paper's (:class:`RobotParameters`, the fixed 7-joint model) or any stack of modules
 (:class:`~vgtarm.model.stack.Stack`, read by :func:`load_robot` from a file with ``[[modules]]``
@@ -19,7 +21,7 @@ import os
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -29,8 +31,9 @@ from ..fileio import parse_toml, read_text_limited
 from ..kinds import other_toml
 from ..machine import blas_on_one_thread
 from ..markup import html_table
-from ..memory import check_batch
+from ..memory import LIMIT_VARIABLE, check_batch
 from .assembly import check_margins
+from .backends import single_call
 from .compiled import Backend, CompiledBackend, InterpretedBackend, get_backend
 from .definition import PAPER, Definition, StackDefinition
 from .parameters import ROBOT_FILE_LIMIT, RobotParameters, load_parameters, parameters_from_dict
@@ -105,6 +108,178 @@ _LARGE_INPUT = 1e-3
 _BLAS_THREADED_PRODUCT = 262144
 
 
+#: One part of a method's result: the indices of the outputs of its compiled function that make it
+#: (several: stacked on a new axis after the leading ones) and its shape after the leading ones.
+Piece = tuple[tuple[int, ...], tuple[int, ...]]
+
+
+class _Spec(NamedTuple):
+    """What a method of :class:`Robot` evaluates: the compiled function, its inputs ``(argument, size of
+    the last axis)`` in the function's order (``q`` first), the floats it creates per row (for the
+    memory estimate, :meth:`Robot._arrays`) and the pieces of its result."""
+
+    function: str
+    inputs: tuple[tuple[str, int], ...]
+    outputs: int
+    pieces: tuple[Piece, ...]
+
+
+#: The tip force of a method called without one.
+_NO_TIP_FORCE = np.zeros(3)
+_NO_TIP_FORCE.flags.writeable = False
+_COPY = np.ndarray.copy
+#: Outputs of at most this many elements are checked finite by their sum (:func:`_all_finite`).
+_SUMMED = 24
+_SUBTRACT = np.subtract
+_FLOAT = np.dtype(np.float64)
+_NDARRAY = np.ndarray
+#: The name of ``$VGTARM_MEMORY_LIMIT`` as ``os.environ`` keys its own dictionary (CPython), see
+#: :func:`_memory_limit_set`.
+_LIMIT_KEY: Any = os.environ.encodekey(LIMIT_VARIABLE) if hasattr(os.environ, "encodekey") else None
+#: A triangle margin the single-state check computes is trusted from this fraction of the sizes of
+#: its terms (the joints' accepted bounds and the offset ``h``) up: its sum is taken in any order
+#: (BLAS), the batch path's as ``(G q) + h``, and the two differ by a few units of the last place
+#: (2**-52) of those sizes at most. A margin below it (1e-12 m for the paper's legs) goes the batch
+#: path, which decides as it always has.
+_MARGIN_TRUST = 2.0**-40
+
+
+def _memory_limit_set() -> bool:
+    """Whether ``$VGTARM_MEMORY_LIMIT`` is set (even to blanks): if it is not, :func:`check_batch`
+    returns at once for a row of less than ``SMALL_BATCH`` bytes. Looked up in ``os.environ``'s own
+    dictionary where CPython has one: ten times faster than ``os.environ.get``, which raises and
+    catches a KeyError for an unset variable (0.4 us, a tenth of a single state's forward
+    dynamics); True when unsure (then :func:`check_batch` decides)."""
+    data = getattr(os.environ, "_data", None)
+    if type(data) is not dict or _LIMIT_KEY is None:
+        return True
+    return _LIMIT_KEY in data
+
+
+class _SingleState:
+    """One method of a :class:`Robot` for one state, at the speed of its compiled call (issue 35).
+
+    It serves only 1-D float64 arrays (``numpy.ndarray`` itself) of the right length, and runs the
+    same checks as the batch path, in the same order, as a few whole-array operations on its own
+    buffers: the memory estimate (only when ``$VGTARM_MEMORY_LIMIT`` is set), every input finite
+    and inside :meth:`Robot.input_ranges`, the triangle margins of ``q`` above zero, the compiled
+    function's status and every output finite. When any check fails (or is not conclusive: a
+    margin within :data:`_MARGIN_TRUST`), or for any other input (lists, other types, batches), it
+    gives None and the method takes the batch path, which refuses the input with its message or
+    gives its result. Its numbers are the batch path's bit for bit: the same function on the same
+    inputs (:func:`~vgtarm.model.backends.single_call`).
+
+    The buffers of one call (a frame: the inputs between their bounds, the outputs, the work arrays)
+    are taken from a free list and put back after the call, so threads (a cffi call releases the
+    GIL) never share one.
+    """
+
+    __slots__ = (
+        "backend",
+        "bounds",
+        "frames",
+        "function",
+        "margins",
+        "method",
+        "n",
+        "p",
+        "shapes",
+        "spec",
+        "_row_bytes",
+    )
+
+    def __init__(self, robot: Robot, method: str, spec: _Spec) -> None:
+        self.backend, self.method, self.function, self.spec = robot.backend, method, spec.function, spec
+        sizes = [size for _, size in spec.inputs]
+        self.shapes = tuple((size,) for size in sizes)
+        self.p, self.n = robot._p.copy(), robot.n_joints
+        # the inputs one after the other behind a 1 (x) and its bounds [low, x, high]
+        low = np.concatenate([[1.0], *(robot._ranges[label][0] for label, _ in spec.inputs)])
+        high = np.concatenate([[1.0], *(robot._ranges[label][1] for label, _ in spec.inputs)])
+        self.bounds = (low, high)
+        self.margins = robot._trusted_margins()
+        self._row_bytes = 8 * spec.outputs + _MARGIN_BYTES * robot._G.shape[0] + 3 * sum(sizes)
+        self.frames: list[tuple[Any, ...]] = [self.frame()]
+
+    def frame(self) -> tuple[Any, ...]:
+        """The buffers of one call: the inputs' views of ``x`` (a 1, then the inputs one after the
+        other), the views ``[x, high]`` and ``[low, x]`` of ``[low, x, high]``, ``[1, q]``, the
+        differences, the outputs, the call and the views of the outputs that make the pieces."""
+        low, high = self.bounds
+        k = len(low)
+        bounded = np.concatenate([low, np.empty(k), high])
+        x = bounded[k : 2 * k]
+        x[0] = 1.0  # the factor of the margins' offsets, between bounds [1, 1]; never written again
+        sig = self.backend.signature(self.function)
+        offsets = np.cumsum((1, *(size for _, size in self.spec.inputs))).tolist()
+        inputs = [x[a:b] for a, b in zip(offsets[:-1], offsets[1:], strict=True)]
+        outputs = np.empty(sum(sig.nnz_out))
+        if not outputs.size:
+            raise ValueError(f"{self.function} has no outputs")
+        call = single_call(self.backend, self.function, [*inputs, self.p], outputs)
+        pieces = tuple(_piece(outputs, sig.nnz_out, piece) for piece in self.spec.pieces)
+        return inputs, bounded[k:], bounded[: 2 * k], x[: 1 + self.n], np.empty(2 * k), outputs, call, pieces
+
+    def row_bytes(self, arrays: tuple[Array, ...]) -> int:
+        """The batch path's estimate of a row (:meth:`Robot._arrays`) for these float64 arrays."""
+        return self._row_bytes + sum(8 * a.size for a in arrays if not a.flags.c_contiguous)
+
+    def __call__(self, arrays: tuple[Any, ...]) -> tuple[Array, ...] | None:
+        """The pieces of the result for ``arrays`` (one per input), or None: take the batch path."""
+        first = arrays[0]
+        if type(first) is not _NDARRAY or first.shape != self.shapes[0]:  # a batch, a list: at once
+            return None
+        frames = self.frames
+        frame = frames.pop() if frames else self.frame()
+        views, above, below, q, differences, y, call, pieces = frame
+        for view, shape, array in zip(views, self.shapes, arrays, strict=True):
+            # numpy's own float64 (not a subclass such as a masked array), 1-D of the right length;
+            # copied into the frame at once (a slice assignment each: cheaper than a concatenate)
+            if type(array) is not _NDARRAY or array.shape != shape or array.dtype is not _FLOAT:
+                frames.append(frame)
+                return None
+            view[...] = array
+        if _memory_limit_set():  # checked after the types, as the batch path does
+            try:
+                check_batch(1, self.row_bytes(arrays), self.method)
+            except BaseException:
+                frames.append(frame)
+                raise
+        _SUBTRACT(above, below, out=differences)  # x - low, high - x: >= 0 exactly when inside
+        result = None
+        if differences.item(differences.argmin()) >= 0.0:  # a NaN is the argmin and fails
+            margins = self.margins.dot(q)  # only now: finite inputs inside their bounds cannot overflow
+            if margins.item(margins.argmin()) >= 0.0 and not call() and _all_finite(y):
+                result = (pieces[0].copy(),) if len(pieces) == 1 else tuple(map(_COPY, pieces))
+        frames.append(frame)
+        return result
+
+
+def _all_finite(y: Array) -> bool:
+    """Whether every element of the 1-D ``y`` is finite, without a floating-point warning: the sum of
+    a few elements as Python floats (not finite if one is not; a finite sum that overflows only sends
+    the call to the batch path), else the smallest and largest (a NaN is both)."""
+    if len(y) <= _SUMMED:
+        return math.isfinite(sum(y.tolist()))
+    return math.isfinite(y.item(y.argmin())) and math.isfinite(y.item(y.argmax()))
+
+
+def _piece(outputs: Array, sizes: tuple[int, ...], piece: Piece) -> Array:
+    """The view of ``outputs`` (every output of a function one after the other, ``sizes``) that holds
+    one piece of a result for one state: one output, or equal outputs at equal spacing stacked."""
+    indices, shape = piece
+    starts = np.cumsum((0, *sizes)).tolist()
+    first, size = starts[indices[0]], sizes[indices[0]]
+    step = starts[indices[1]] - first if len(indices) > 1 else size
+    if any(sizes[i] != size or starts[i] != first + k * step for k, i in enumerate(indices)):
+        raise ValueError(f"outputs {indices} are not equal outputs at equal spacing")
+    rows = np.lib.stride_tricks.as_strided(outputs[first:], shape=(len(indices), size), strides=(8 * step, 8))
+    view = rows.reshape(shape)
+    if not np.shares_memory(view, outputs):
+        raise ValueError(f"outputs {indices} do not make a view of shape {shape}")
+    return view
+
+
 def definition_of(parameters: RobotParameters | Stack) -> Definition:
     """The model whose compiled functions serve ``parameters``: the paper's, or a stack's structure."""
     if isinstance(parameters, RobotParameters):
@@ -161,6 +336,10 @@ class Robot:
         self.joint_units: tuple[str, ...] = parameters.joint_units
         self.body_names: tuple[str, ...] = definition.body_names
         self.n_modules = len(parameters.margin_legs())
+        self._spec_table: dict[str, _Spec] | None = None
+        self._margins_trust: Array | None = None
+        #: Per method, the backend it was built for and its single-state path (None: has none).
+        self._single_states: dict[str, tuple[Any, _SingleState | None]] = {}
 
     def __repr__(self) -> str:
         return f"Robot({self.parameters.name!r}, backend={self.backend.kind!r})"
@@ -314,6 +493,78 @@ class Robot:
                     )
         return arrays, shape
 
+    def _specs(self) -> dict[str, _Spec]:
+        """What each method that evaluates the model evaluates (see :class:`_Spec`), by method name."""
+        if self._spec_table is not None:
+            return self._spec_table
+        n, m, nb = self.n_joints, self.n_modules, len(self.body_names)
+        q, qd = ("q", n), ("qd", n)
+        if self.definition == PAPER:  # passive, o1, C01, o2, C02, tip, C03
+            fk: tuple[Piece, ...] = (
+                ((0,), (m, 4)),
+                ((1, 3), (m, 3)),
+                ((2, 4), (m, 3, 3)),
+                ((5,), (3,)),
+                ((6,), (3, 3)),
+            )
+        else:  # passive, origins, rotations, tip, C03
+            fk = (((0,), (m, 4)), ((1,), (m, 3)), ((2,), (m, 3, 3)), ((3,), (3,)), ((4,), (3, 3)))
+        self._spec_table = {
+            "forward_kinematics": _Spec("fk", (q,), 28 * m + 12, fk),
+            "tip_position": _Spec("tip", (q,), 3, (((0,), (3,)),)),
+            "tip_jacobian": _Spec("jac", (q,), 6 * n, (((0,), (3, n)),)),
+            "tip_hessian": _Spec("tip_hessian", (q,), 3 * n * n, (((0,), (3, n, n)),)),
+            "angular_jacobian": _Spec("jac", (q,), 6 * n, (((1,), (3, n)),)),
+            "com_jacobians": _Spec("com_jac", (q,), 6 * nb * n, (((0,), (nb, 3, n)), ((1,), (nb, 3, n)))),
+            "tip_velocity": _Spec("velocity", (q, qd), 6, (((0,), (3,)), ((1,), (3,)))),
+            "bias_accelerations": _Spec(
+                "bias_acc", (q, qd), 6 + 6 * nb, (((0,), (3,)), ((1,), (3,)), ((2,), (nb, 3)), ((3,), (nb, 3)))
+            ),
+            "mass_matrix": _Spec("mass", (q,), n * n, (((0,), (n, n)),)),
+            "bias_forces": _Spec("bias_forces", (q, qd), n, (((0,), (n,)),)),
+            "forward_dynamics": _Spec("fd", (q, qd, ("F", n), ("f_tip", 3)), n, (((0,), (n,)),)),
+            "inverse_dynamics": _Spec("id", (q, qd, ("qdd", n), ("f_tip", 3)), n, (((0,), (n,)),)),
+            "energy": _Spec("energy", (q, qd), 2, (((0,), ()), ((1,), ()))),
+        }
+        return self._spec_table
+
+    def _call(self, method: str, *arrays: Any) -> tuple[Array, ...]:
+        """The pieces of ``method``'s result (:meth:`_specs`) for its arguments ``arrays``: one state
+        of 1-D float64 arrays through its single-state path (:class:`_SingleState`), anything else
+        (and whatever that path declines) through the batch path (:meth:`_evaluate`)."""
+        entry = self._single_states.get(method)
+        if entry is None or entry[0] is not self.backend:
+            entry = self._single_states[method] = (self.backend, self._single_state(method))
+        if entry[1] is not None:
+            result = entry[1](arrays)
+            if result is not None:
+                return result
+        spec = self._specs()[method]
+        named = [(label, value, size) for (label, size), value in zip(spec.inputs, arrays, strict=True)]
+        shape, out = self._evaluate(method, spec.function, named, outputs=spec.outputs)
+        return tuple(
+            (out[i[0]] if len(i) == 1 else np.stack([out[j] for j in i], axis=1)).reshape(shape + piece)
+            for i, piece in spec.pieces
+        )
+
+    def _trusted_margins(self) -> Array:
+        """``[h - trust, G]`` ``(6 m, 1 + n)``: its product with ``[1, q]`` is each triangle margin less
+        :data:`_MARGIN_TRUST` of the sizes of its terms (one row of 1 for a robot of no module)."""
+        if self._margins_trust is None:
+            largest = np.maximum(np.abs(self._low), np.abs(self._high))
+            trust = _MARGIN_TRUST * (np.abs(self._G) @ largest + np.abs(self._h))
+            margins = np.concatenate([(self._h - trust)[:, None], self._G], axis=1)
+            self._margins_trust = margins if len(margins) else np.eye(1, 1 + self.n_joints)
+        return self._margins_trust
+
+    def _single_state(self, method: str) -> _SingleState | None:
+        """The single-state path of ``method`` on this robot's backend (None if its outputs cannot be
+        served as views of one buffer, or the backend does not know the function)."""
+        try:
+            return _SingleState(self, method, self._specs()[method])
+        except (ValueError, KeyError, TypeError):
+            return None
+
     def _names(self, label: str) -> tuple[str, ...]:
         """Names of the entries of argument ``label``'s last axis (joints, or x y z of a force)."""
         return FORCE_NAMES if label == "f_tip" else self.joint_names if label in self._ranges else ()
@@ -450,41 +701,24 @@ class Robot:
 
     def forward_kinematics(self, q: ArrayLike) -> ForwardKinematics:
         """Passive angles, platform frames, tip point and orientation (paper eqs. 1-11)."""
-        m = self.n_modules
-        shape, out = self._evaluate("forward_kinematics", "fk", [("q", q, self.n_joints)], outputs=28 * m + 12)
-        if self.definition == PAPER:
-            passive, o1, c01, o2, c02, tip, c03 = out
-            origins, rotations = np.stack([o1, o2], axis=1), np.stack([c01, c02], axis=1)
-        else:
-            passive, origins, rotations, tip, c03 = out
-        return ForwardKinematics(
-            passive=passive.reshape(shape + (m, 4)),
-            platform_position=origins.reshape(shape + (m, 3)),
-            platform_rotation=rotations.reshape(shape + (m, 3, 3)),
-            tip=tip.reshape(shape + (3,)),
-            rotation=c03.reshape(shape + (3, 3)),
-        )
+        passive, origins, rotations, tip, rotation = self._call("forward_kinematics", q)
+        return ForwardKinematics(passive, origins, rotations, tip, rotation)
 
     def tip_position(self, q: ArrayLike) -> Array:
         """Tip point P in F0, ``(..., 3)`` (m). Cheaper than the full forward kinematics."""
-        shape, (tip,) = self._evaluate("tip_position", "tip", [("q", q, self.n_joints)], outputs=3)
-        return tip.reshape(shape + (3,))
+        return self._call("tip_position", q)[0]
 
     def tip_jacobian(self, q: ArrayLike) -> Array:
         """Translational Jacobian of the tip ``J_P = dP/dq``, ``(..., 3, n)``."""
-        shape, (jp, _) = self._evaluate("tip_jacobian", "jac", [("q", q, self.n_joints)], outputs=6 * self.n_joints)
-        return jp.reshape(shape + (3, self.n_joints))
+        return self._call("tip_jacobian", q)[0]
 
     def tip_hessian(self, q: ArrayLike) -> Array:
         """Second derivatives of the tip point ``d^2 P_k / dq_l dq_m``, ``(..., 3, n, n)``."""
-        n = self.n_joints
-        shape, (h,) = self._evaluate("tip_hessian", "tip_hessian", [("q", q, n)], outputs=3 * n * n)
-        return h.reshape(shape + (3, n, n))
+        return self._call("tip_hessian", q)[0]
 
     def angular_jacobian(self, q: ArrayLike) -> Array:
         """Angular Jacobian of the end-effector (F0 components), ``(..., 3, n)``."""
-        shape, (_, jw) = self._evaluate("angular_jacobian", "jac", [("q", q, self.n_joints)], outputs=6 * self.n_joints)
-        return jw.reshape(shape + (3, self.n_joints))
+        return self._call("angular_jacobian", q)[0]
 
     def com_jacobians(self, q: ArrayLike) -> tuple[Array, Array]:
         """Jacobians of the bodies' centres of mass and angular velocities, each ``(..., b, 3, n)``.
@@ -492,29 +726,18 @@ class Robot:
         Axis ``-3`` is the body (:attr:`body_names`: platform 1, platform 2, end-effector for the
         paper's robot).
         """
-        nb, n = len(self.body_names), self.n_joints
-        shape, (jv, jw) = self._evaluate("com_jacobians", "com_jac", [("q", q, n)], outputs=6 * nb * n)
-        return jv.reshape(shape + (nb, 3, n)), jw.reshape(shape + (nb, 3, n))
+        jv, jw = self._call("com_jacobians", q)
+        return jv, jw
 
     def tip_velocity(self, q: ArrayLike, qd: ArrayLike) -> tuple[Array, Array]:
         """Tip velocity ``J_P qd`` (m/s) and end-effector angular velocity (rad/s), ``(..., 3)`` each."""
-        n = self.n_joints
-        shape, (v, w) = self._evaluate("tip_velocity", "velocity", [("q", q, n), ("qd", qd, n)], outputs=6)
-        return v.reshape(shape + (3,)), w.reshape(shape + (3,))
+        v, w = self._call("tip_velocity", q, qd)
+        return v, w
 
     def bias_accelerations(self, q: ArrayLike, qd: ArrayLike) -> BiasAccelerations:
         """Accelerations due to ``qd`` alone (``qdd = 0``): ``Jdot qd`` of the tip and bodies."""
-        n = self.n_joints
-        outputs = 6 + 6 * len(self.body_names)
-        shape, (tip, ang, com, body_ang) = self._evaluate(
-            "bias_accelerations", "bias_acc", [("q", q, n), ("qd", qd, n)], outputs=outputs
-        )
-        return BiasAccelerations(
-            tip=tip.reshape(shape + (3,)),
-            angular=ang.reshape(shape + (3,)),
-            com=com.reshape(shape + (len(self.body_names), 3)),
-            body_angular=body_ang.reshape(shape + (len(self.body_names), 3)),
-        )
+        tip, angular, com, body_angular = self._call("bias_accelerations", q, qd)
+        return BiasAccelerations(tip, angular, com, body_angular)
 
     def inverse_kinematics(self, path: Any, *, check: bool = True, **options: Any) -> Any:
         """Convenience for :func:`vgtarm.ik.inverse_kinematics` ``(self, path, check=check, **options)``.
@@ -534,15 +757,11 @@ class Robot:
 
     def mass_matrix(self, q: ArrayLike) -> Array:
         """Mass matrix ``M(q)`` of eq. 15, ``(..., n, n)``."""
-        n = self.n_joints
-        shape, (m,) = self._evaluate("mass_matrix", "mass", [("q", q, n)], outputs=n * n)
-        return m.reshape(shape + (n, n))
+        return self._call("mass_matrix", q)[0]
 
     def bias_forces(self, q: ArrayLike, qd: ArrayLike) -> Array:
         """``C(q, qd)`` of eq. 15: velocity products + gravity + viscous friction, ``(..., n)``."""
-        n = self.n_joints
-        shape, (c,) = self._evaluate("bias_forces", "bias_forces", [("q", q, n), ("qd", qd, n)], outputs=n)
-        return c.reshape(shape + (n,))
+        return self._call("bias_forces", q, qd)[0]
 
     def forward_dynamics(self, q: ArrayLike, qd: ArrayLike, F: ArrayLike, f_tip: ArrayLike | None = None) -> Array:
         """Joint accelerations ``M^-1 (F + J_P^T f_tip - C)``, ``(..., n)``.
@@ -550,25 +769,16 @@ class Robot:
         ``F`` are the actuator efforts (N, and N m for the twist); ``f_tip`` the force acting
         on the end-effector at the tip point, in F0 (N), default zero.
         """
-        f = np.zeros(3) if f_tip is None else f_tip
-        n = self.n_joints
-        named: list[tuple[str, ArrayLike, int]] = [("q", q, n), ("qd", qd, n), ("F", F, n), ("f_tip", f, 3)]
-        shape, (qdd,) = self._evaluate("forward_dynamics", "fd", named, outputs=n)
-        return qdd.reshape(shape + (self.n_joints,))
+        return self._call("forward_dynamics", q, qd, F, _NO_TIP_FORCE if f_tip is None else f_tip)[0]
 
     def inverse_dynamics(self, q: ArrayLike, qd: ArrayLike, qdd: ArrayLike, f_tip: ArrayLike | None = None) -> Array:
         """Actuator efforts ``M qdd + C - J_P^T f_tip`` that produce ``qdd``, ``(..., n)``."""
-        f = np.zeros(3) if f_tip is None else f_tip
-        n = self.n_joints
-        named: list[tuple[str, ArrayLike, int]] = [("q", q, n), ("qd", qd, n), ("qdd", qdd, n), ("f_tip", f, 3)]
-        shape, (F,) = self._evaluate("inverse_dynamics", "id", named, outputs=n)
-        return F.reshape(shape + (self.n_joints,))
+        return self._call("inverse_dynamics", q, qd, qdd, _NO_TIP_FORCE if f_tip is None else f_tip)[0]
 
     def energy(self, q: ArrayLike, qd: ArrayLike) -> tuple[Array, Array]:
         """Kinetic and potential (gravity) energy, each of shape ``(...)`` (J)."""
-        n = self.n_joints
-        shape, (t, v) = self._evaluate("energy", "energy", [("q", q, n), ("qd", qd, n)], outputs=2)
-        return t.reshape(shape), v.reshape(shape)
+        kinetic, potential = self._call("energy", q, qd)
+        return kinetic, potential
 
 
 #: The models a stack's Robot can run on (``load_robot(model=...)``, ``$VGTARM_MODEL``, ``--model``).
