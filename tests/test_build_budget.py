@@ -33,6 +33,7 @@ from vgtarm.model import budget, compiled
 from vgtarm.model.definition import PAPER, StackDefinition
 from vgtarm.model.stack import Stack, load_stack, stack_to_toml
 
+from .build_support import LONG_BUILD_NAME, default_sigint, long_build_stack
 from .conftest import run_on_terminal
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -245,7 +246,13 @@ def _gone(group: int, within: float = ENDS_WITHIN) -> list[str]:
 
 def _start(args: list[str], env: dict[str, str]) -> subprocess.Popen[str]:
     return subprocess.Popen(
-        [str(SCRIPT), *args], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
+        [str(SCRIPT), *args],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        preexec_fn=default_sigint,  # noqa: PLW1509  (SIGINT not inherited ignored)
     )
 
 
@@ -330,12 +337,12 @@ def test_the_build_ends_with_the_command_whatever_kills_it(tmp_path):
 @pytest.mark.skipif(NO_COMPILER, reason="no C compiler")
 def test_a_long_build_shows_its_phases_on_a_terminal_only(tmp_path):
     cache = private_cache(tmp_path)
-    config = EXAMPLES / "paper_robot.toml"  # the paper's robot as a stack: about 9 s estimated
+    config = long_build_stack(tmp_path)  # the cheapest long build: two modules, about 7 s estimated
     status, out, shown = run_on_terminal([str(SCRIPT), *home_args(config)], environment(cache))
     assert status == 0 and b"tip" in out
     progress = [line.strip() for line in shown.decode().splitlines() if line.strip()]
-    assert progress[0].startswith("vgtarm: building the compiled model of stack 'reference")
-    assert "(2 modules, 7 joints): about" in progress[0] and progress[0].endswith("(estimated); Ctrl-C stops it")
+    assert progress[0].startswith(f"vgtarm: building the compiled model of stack '{LONG_BUILD_NAME}'")
+    assert "(2 modules, 6 joints): about" in progress[0] and progress[0].endswith("(estimated); Ctrl-C stops it")
     shown_phases = [line.split(": ", 2)[-1] for line in progress[1:]]
     # a phase longer than 30 s (a loaded machine) adds 'still <phase>' lines, each right after its phase's
     phases = [phase for phase in shown_phases if not phase.startswith("still ")]

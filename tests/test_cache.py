@@ -4,10 +4,11 @@ Every case of issue 14 that used to crash (SIGBUS, segfault), print a traceback,
 library or give garbage with exit 0 must now end in a rebuilt cache or in one line. The checks
 run for real; only the rebuild is made cheap in most tests by replacing ``compiled._produce``
 (the step that runs CasADi's generator and the C compiler in a build process) with a copy of the
-pristine library taken from the user's cache, so few genuine compiles are left
-(``test_truncated_library_is_rebuilt_by_the_command`` and the entries of another structure of
-issue 20, which compile two one-module stacks). Commands run in subprocesses with
-``VGTARM_CACHE_DIR`` pointing at a temporary folder.
+pristine library taken from the user's cache (in the commands of the entries of another structure
+of issue 20, by a copy of a one-module stack's library), so three genuine compiles are left, all
+of one-module stacks (the smallest model): the two stacks of the ``planars`` fixture and the
+rebuild by the command of ``test_truncated_library_is_rebuilt_by_the_command``. Commands run in
+subprocesses with ``VGTARM_CACHE_DIR`` pointing at a temporary folder.
 """
 
 from __future__ import annotations
@@ -37,6 +38,22 @@ CLI = "import sys; from vgtarm.app.cli.command import main; sys.exit(main())"
 #: Prints where the process's backend came from.
 WHICH = "import vgtarm; b = vgtarm.load_robot().backend; print(b.kind, getattr(b, 'library_path', ''))"
 FALLBACK = "VGTARM_BACKEND=interpreted chooses it without this line"
+#: The command line with its compile step (``compiled._produce``) replaced by a copy of the library
+#: ``$VGTARM_TEST_LIBRARY``, built beforehand for the same model: every check around it runs for real.
+CLI_COPYING = """
+import os, shutil, sys
+from pathlib import Path
+from vgtarm.model import compiled
+from vgtarm.app.cli.command import main
+
+def copy(compiler, workdir, definition, key):
+    library = Path(workdir) / "library.so"
+    shutil.copyfile(os.environ["VGTARM_TEST_LIBRARY"], library)
+    return library, {name: compiled.Signature.of(f) for name, f in compiled.build_functions(definition).items()}
+
+compiled._produce = copy
+sys.exit(main())
+"""
 
 
 @pytest.fixture(scope="module")
@@ -313,17 +330,24 @@ def test_backend_choice_is_validated(monkeypatch):
 # ----------------------------------------------------------------------------- commands, in subprocesses
 
 
-def test_truncated_library_is_rebuilt_by_the_command(tmp_path, pristine, configuration, expected_tip):
-    """The one genuine rebuild: the command that used to die of SIGBUS compiles afresh."""
-    entry = seed(tmp_path / "cache", pristine)
+def test_truncated_library_is_rebuilt_by_the_command(tmp_path, planars):
+    """A genuine rebuild: the command that used to die of SIGBUS compiles afresh (the entry of a
+    one-module stack, the cheapest compile; the check of the entry is the same for every model)."""
+    path, planar = planars["90"]
+    entry = compiled.CacheEntry(tmp_path / "cache", planar.key, planar.definition)
+    entry.folder.mkdir(mode=0o700)
+    for source in (planar.library, planar.metadata):
+        shutil.copy2(source, entry.folder / source.name)
     _truncate(entry)
-    done = run(fk_args(configuration), {"VGTARM_CACHE_DIR": str(entry.folder)}, tmp_path)
+    q = _planar_q(path)
+    args = ["fk", "--config", str(path), *(repr(float(v)) for v in q)]
+    done = run(args, {"VGTARM_CACHE_DIR": str(entry.folder)}, tmp_path)
     assert done.returncode == 0, done.stderr
     lines = stderr_lines(done)
     assert len(lines) == 1 and "damaged" in lines[0] and "rebuilding the library once" in lines[0], lines
-    np.testing.assert_allclose(printed_tip(done.stdout), expected_tip, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(printed_tip(done.stdout), _interpreted_tip(path, q), rtol=1e-9, atol=1e-12)
     assert_clean_entry(entry)
-    again = run(fk_args(configuration), {"VGTARM_CACHE_DIR": str(entry.folder)}, tmp_path)
+    again = run(args, {"VGTARM_CACHE_DIR": str(entry.folder)}, tmp_path)
     assert again.returncode == 0 and not again.stderr  # rebuilt once: the next command is silent
 
 
@@ -479,6 +503,13 @@ def _planar_q(path: Path) -> np.ndarray:
     return load_stack(path).home + np.array([0.01, -0.01, 0.0])
 
 
+def _interpreted_tip(path: Path, q: np.ndarray) -> np.ndarray:
+    """The tip of the stack in ``path`` at ``q`` from CasADi's interpreter, independent of any library."""
+    stack = load_stack(path)
+    functions = compiled.InterpretedBackend(compiled.build_functions(StackDefinition.of(stack)))
+    return functions.evaluate("tip", [q, stack.vector()], 1)[0][0]
+
+
 @pytest.mark.parametrize(
     ("other", "reason"),
     [
@@ -489,13 +520,15 @@ def _planar_q(path: Path) -> np.ndarray:
 def test_an_entry_of_another_structure_under_this_key_is_rebuilt_once(tmp_path, planars, pristine, other, reason):
     """Issue 20: a consistent entry of another structure, placed under this key with its key field
     rewritten, loaded and gave a wrong tip with exit 0 (same sizes) or a traceback on every command
-    (other sizes). It is damage: removed and rebuilt once, with one line, and the tip is right."""
+    (other sizes). It is damage: removed and rebuilt once, with one line, and the tip is right.
+    (The rebuild copies the fixture's library of this stack: ``CLI_COPYING``.)"""
     path, planar = planars["0"]
     entry = compiled.CacheEntry(tmp_path / "cache", planar.key, planar.definition)
     _place(pristine if other == "paper" else planars[other][1], entry)
     q = _planar_q(path)
     args = ["fk", "--config", str(path), *(repr(float(v)) for v in q)]
-    done = run(args, {"VGTARM_CACHE_DIR": str(entry.folder)}, tmp_path)
+    copying = {"VGTARM_CACHE_DIR": str(entry.folder), "VGTARM_TEST_LIBRARY": str(planar.library)}
+    done = run(args, copying, tmp_path, code=CLI_COPYING)
     assert done.returncode == 0, done.stderr
     found = stderr_lines(done)
     assert len(found) == 1 and reason in found[0] and "removing it and rebuilding the library once" in found[0], found

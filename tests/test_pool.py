@@ -25,6 +25,8 @@ import pytest
 from vgtarm.app import pool
 from vgtarm.model import load_parameters
 
+from .build_support import default_sigint
+
 pytestmark = pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux's /proc")
 
 #: Longest time (s) a worker may outlive its parent (the issue's bound; measured: under 0.1 s).
@@ -105,7 +107,7 @@ def _start(argv: list[str], cwd: Path, *, ready: int) -> tuple[subprocess.Popen[
     """``argv`` in its own session, once it has ``ready`` descendants that stay for 0.3 s."""
     process = subprocess.Popen(
         argv, cwd=cwd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-        start_new_session=True,
+        start_new_session=True, preexec_fn=default_sigint,  # noqa: PLW1509  (SIGINT not inherited ignored)
     )  # fmt: skip
     deadline = time.monotonic() + START_WITHIN
     try:
@@ -191,6 +193,7 @@ def test_a_ctrl_c_while_the_workers_start_is_never_lost(workers_script: Path) ->
     process = subprocess.Popen(
         [sys.executable, str(workers_script)], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE, start_new_session=True,
+        preexec_fn=default_sigint,  # noqa: PLW1509  (SIGINT not inherited ignored)
     )  # fmt: skip
     try:
         deadline = time.monotonic() + START_WITHIN

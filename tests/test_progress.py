@@ -24,6 +24,7 @@ from vgtarm.app.cli.command import build_parser, main
 from vgtarm.model import compiled
 from vgtarm.model.stack import load_stack
 
+from .build_support import home_of, long_build_stack
 from .conftest import run_on_terminal
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -187,12 +188,12 @@ def test_bar_helper_is_silent_with_quiet_and_off_a_terminal(monkeypatch: pytest.
 
 @pytest.mark.skipif(compiled.find_compiler() is None, reason="no C compiler")
 def test_quiet_silences_a_model_build_on_a_terminal(tmp_path: Path) -> None:
-    """The build of the paper's robot as a stack (about 9 s estimated: it shows its phases on a
-    terminal, tests/test_build_budget.py) shows nothing with ``-q``."""
+    """The cheapest long build (two modules, about 7 s estimated: it shows its phases on a terminal,
+    tests/test_build_budget.py) shows nothing with ``-q``."""
     cache = tmp_path / "cache"
     cache.mkdir(mode=0o700)
-    config = EXAMPLES / "paper_robot.toml"
-    home = [repr(float(v)) for v in load_stack(config).home]
+    config = long_build_stack(tmp_path)
+    home = home_of(config)
     env = {k: v for k, v in os.environ.items() if not k.startswith("VGTARM_")}
     env["VGTARM_CACHE_DIR"] = str(cache)
     status, out, shown = run_on_terminal([str(SCRIPT), "fk", "-q", "--config", str(config), *home], env)

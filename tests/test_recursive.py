@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import os
+import shutil
 from collections.abc import Callable
 from functools import partial
 from pathlib import Path
@@ -440,32 +441,54 @@ def test_a_ten_module_arm_on_the_recursive_model_equals_mujoco():
 
 
 def test_a_damaged_library_is_never_opened_and_is_rebuilt(tmp_path, monkeypatch):
-    """The library is checked against its metadata (size, SHA-256) before it is opened: an altered
-    file is removed and built again, and a library without metadata is not trusted."""
-    if compiled.find_compiler() is None:
+    """The library is checked against its metadata (size, SHA-256) before it is opened: an intact
+    entry is loaded as it is, an altered file is removed and built again, and a library without
+    metadata is not trusted.
+
+    The private cache starts with a copy of the user's entry (built once for the suite); the
+    altered library is rebuilt by the real compile, the untrusted one by a copy of the intact
+    library (what is checked there is that it is built again, not the compiler)."""
+    compiler = compiled.find_compiler()
+    if compiler is None:
         pytest.skip("no C compiler")
+    library.load_library.cache_clear()
+    library.load_library()  # the user's cache
+    key = library.cache_key(compiler)
+    pristine = compiled.cache_dir() / f"vgtarm_rec_{key}.so"
     folder = tmp_path / "cache"
+    folder.mkdir(mode=0o700)
+    for path in (pristine, pristine.with_suffix(".json")):
+        shutil.copy2(path, folder / path.name)
+    so, meta = folder / pristine.name, folder / pristine.with_suffix(".json").name
     monkeypatch.setenv("VGTARM_CACHE_DIR", str(folder))
     library.load_library.cache_clear()
+    built: list[str] = []
+    real = library._compile
+
+    def compile_(given: str, workdir: Path) -> Path:
+        if not built:
+            built.append("compiled")
+            return real(given, workdir)
+        built.append("copied")
+        shutil.copyfile(pristine, workdir / "library.so")
+        return workdir / "library.so"
+
+    monkeypatch.setattr(library, "_compile", compile_)
     try:
         library.load_library()
-        (so,) = folder.glob("vgtarm_rec_*.so")
-        (meta,) = folder.glob("vgtarm_rec_*.json")
+        assert built == [], "an intact entry is loaded as it is"
         good = so.read_bytes()
         altered = good[:-1] + bytes([good[-1] ^ 1])  # one bit changed
         (tmp_path / "altered.so").write_bytes(altered)  # a new file: the loaded one stays mapped intact
         os.replace(tmp_path / "altered.so", so)
         library.load_library.cache_clear()
-        built: list[int] = []
-        real = library._compile
-        monkeypatch.setattr(library, "_compile", lambda *a: built.append(1) or real(*a))
         library.load_library()
-        assert built == [1]
+        assert built == ["compiled"]
         assert so.read_bytes() != altered
         meta.unlink()  # no metadata: built again, never opened as it is
         library.load_library.cache_clear()
         library.load_library()
-        assert built == [1, 1] and meta.is_file()
+        assert built == ["compiled", "copied"] and meta.is_file()
     finally:
         library.load_library.cache_clear()
 
