@@ -7,12 +7,15 @@
   modules of every kind and ``six_modules.toml``; the C loops (``vgt_rec_ik_terms``) equal the
   NumPy jets on arms up to 50 modules, and ``H`` is the central difference of ``J^T lam``;
 - the inverse kinematics of case 1 and computed force control of it in the compiled loop (with the
-  momentum observer under the tool force) on the recursive model equal the symbolic model's on
-  ``six_modules.toml`` (its compiled library from the cache; skipped when it is not built).
+  momentum observer under the tool force), and switching control with the compiled GA, on the
+  recursive model equal the symbolic model's on a module with its twist (4 joints, built here) and
+  on ``six_modules.toml`` (21 joints; its compiled library from the cache, skipped when it is not
+  built: it takes minutes).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 from collections.abc import Callable
@@ -30,7 +33,7 @@ from vgtarm.model.codegen import ik as ik_codegen
 from vgtarm.model.definition import StackDefinition
 from vgtarm.model.recursive import RecursiveModel
 from vgtarm.model.recursive.second_order import ik_terms, tip_terms
-from vgtarm.model.stack import Stack, load_stack
+from vgtarm.model.stack import Stack, load_stack, stack_to_toml
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 TOLERANCE = 1e-10
@@ -102,17 +105,39 @@ def test_loops_equal_jets_and_differences_on_long_arms(k: int) -> None:
         assert np.abs(difference - H[i] @ v).max() < 1e-6 * np.abs(H[i] @ v).max()
 
 
-def _both(path: Path) -> tuple[vgtarm.Robot, vgtarm.Robot]:
-    stack = load_stack(path)
-    if compiled.find_compiler() is None or not compiled.library_cached(StackDefinition.of(stack)):
-        pytest.skip(f"the compiled symbolic library of {path.name} is not in the cache (building it takes minutes)")
+#: The stacks on which the recursive model's loops are held to the symbolic model's: a module with
+#: its twist (4 joints: the compiled GA's and the loop's code for a joint count known only at run
+#: time, its symbolic library built here in seconds) and ``six_modules.toml`` (21 joints; its
+#: symbolic library takes minutes to build: compared when it is in the cache).
+PAIRS = ("one module and its twist", "six_modules.toml")
+
+
+def _one_module_stack(folder: Path) -> Path:
+    """The paper's second module, with its twist, alone: 4 joints."""
+    paper = load_stack(EXAMPLES / "paper_robot.toml")
+    stack = dataclasses.replace(paper, name="one module and its twist", modules=(paper.modules[-1],))
+    assert stack.n_joints == 4
+    path = folder / "one_module.toml"
+    path.write_text(stack_to_toml(stack))
+    return path
+
+
+@pytest.fixture(scope="module", params=PAIRS)
+def both(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> tuple[vgtarm.Robot, vgtarm.Robot]:
+    """The same stack on its symbolic and on its recursive model."""
+    if request.param == "six_modules.toml":
+        path = EXAMPLES / "six_modules.toml"
+        if compiled.find_compiler() is None or not compiled.library_cached(StackDefinition.of(load_stack(path))):
+            pytest.skip(f"the compiled symbolic library of {path.name} is not in the cache (building it takes minutes)")
+    else:
+        path = _one_module_stack(tmp_path_factory.mktemp("one_module"))
     return vgtarm.load_robot(path, model="symbolic"), vgtarm.load_robot(path, model="recursive")
 
 
-def test_inverse_kinematics_and_closed_loop_equal_the_symbolic_model() -> None:
+def test_inverse_kinematics_and_closed_loop_equal_the_symbolic_model(both: tuple[vgtarm.Robot, vgtarm.Robot]) -> None:
     from vgtarm.experiment.cases import joint_reference, run_case
 
-    symbolic, recursive = _both(EXAMPLES / "six_modules.toml")
+    symbolic, recursive = both
     expected, actual = joint_reference(symbolic, 1), joint_reference(recursive, 1)
     assert np.abs(actual.q - expected.q).max() < 1e-12
     assert np.abs(actual.qd - expected.qd).max() < 1e-10
@@ -128,9 +153,9 @@ def test_inverse_kinematics_and_closed_loop_equal_the_symbolic_model() -> None:
         assert np.abs(b.tip - a.tip).max() < 1e-12
 
 
-def test_loop_functions_equal_the_symbolic_library() -> None:
+def test_loop_functions_equal_the_symbolic_library(both: tuple[vgtarm.Robot, vgtarm.Robot]) -> None:
     """The closed loop's functions (``velocity``, ``tip_state``, ``tip_hessian``, ``cfc``) through the Robot."""
-    symbolic, recursive = _both(EXAMPLES / "six_modules.toml")
+    symbolic, recursive = both
     stack = recursive.parameters
     count, n = 100, stack.n_joints
     rng = np.random.default_rng(5)
@@ -177,14 +202,33 @@ def test_which_model_a_robot_uses(monkeypatch: pytest.MonkeyPatch, capsys: pytes
     assert all(np.allclose(x, numbers[0], rtol=1e-9, atol=1e-12) for x in numbers)  # the same, to rounding
 
 
-def test_switching_control_with_the_compiled_ga_equals_the_symbolic_model() -> None:
+#: Known and open (2026-11-28): on the 4-joint stack the two libraries' GA runs part at the third
+#: activation (sample 2, from states equal to 1e-12: best cost 0.0080048 symbolic, 0.0080809
+#: recursive; 1,639 and 1,580 evaluations; the fixed gains' cost equal bit for bit), as they did
+#: before the GA's C was written once, and with the recursive library built at -O2 as well as -O3
+#: (not the kernel's -O3 fault of six_modules). Suspected: the tip derivatives the two models give
+#: 1e-12 apart round to different float32 values in the GA's prediction, and one selection turns.
+#: Not proven; strict, so that a fix shows.
+_FOUR_JOINT_GA = pytest.mark.xfail(
+    reason="the 4-joint stack's compiled GA parts between the symbolic and the recursive library at its third "
+    "activation (cause not found yet)",
+    strict=True,
+    raises=AssertionError,
+)
+
+
+def test_switching_control_with_the_compiled_ga_equals_the_symbolic_model(
+    both: tuple[vgtarm.Robot, vgtarm.Robot], request: pytest.FixtureRequest
+) -> None:
     """Switching control of case 2 from a perturbed start (the paper's variant, whose GA in the loop
     activates at every sample above the threshold: dozens of times in 0.1 s; the safe default holds
     its sets and activates a few times), its predictions through the adapters: the same activations
     and run as the symbolic model."""
     from vgtarm.experiment.cases import joint_reference, run_case
 
-    symbolic, recursive = _both(EXAMPLES / "six_modules.toml")
+    symbolic, recursive = both
+    if recursive.parameters.n_joints == 4:
+        request.node.add_marker(_FOUR_JOINT_GA)
     reference = joint_reference(symbolic, 2, duration=0.1)
     start = (reference.q[0] + 0.004, np.zeros(reference.q.shape[1]))
     a = run_case(symbolic, 2, reference=reference, controller="scm", scm_variant="paper", initial_state=start)
