@@ -202,37 +202,34 @@ def test_which_model_a_robot_uses(monkeypatch: pytest.MonkeyPatch, capsys: pytes
     assert all(np.allclose(x, numbers[0], rtol=1e-9, atol=1e-12) for x in numbers)  # the same, to rounding
 
 
-#: Known and open (2026-11-28): on the 4-joint stack the two libraries' GA runs part at the third
-#: activation (sample 2, from states equal to 1e-12: best cost 0.0080048 symbolic, 0.0080809
-#: recursive; 1,639 and 1,580 evaluations; the fixed gains' cost equal bit for bit), as they did
-#: before the GA's C was written once, and with the recursive library built at -O2 as well as -O3
-#: (not the kernel's -O3 fault of six_modules). Suspected: the tip derivatives the two models give
-#: 1e-12 apart round to different float32 values in the GA's prediction, and one selection turns.
-#: Not proven; strict, so that a fix shows.
-_FOUR_JOINT_GA = pytest.mark.xfail(
-    reason="the 4-joint stack's compiled GA parts between the symbolic and the recursive library at its third "
-    "activation (cause not found yet)",
-    strict=True,
-    raises=AssertionError,
-)
+#: The prediction each stack's switching runs are compared with. The GA's linear and quadratic
+#: predictions hold the tip's derivatives in float32: two models whose derivatives agree to 1e-12
+#: can round one of them to neighbouring floats, and a GA that ranks candidates by their predicted
+#: costs can then pick another set. Measured 2026-11-28 on the 4-joint stack (case 2, the paper's
+#: variant, 0.1 s): with the exact prediction the two libraries give the same 21 activations (best
+#: costs 4e-17 apart, joints 2e-18); with the quadratic one they part at the third activation (best
+#: cost 0.0080048 symbolic, 0.0080809 recursive), with the linear one at the second, also with the
+#: recursive library built at -O2 and with the GA's C of before 2026-11-28. On six_modules the
+#: quadratic prediction's runs agree (joints 3e-13): compared there, as the default the users run.
+PREDICTION = {4: "exact"}
 
 
 def test_switching_control_with_the_compiled_ga_equals_the_symbolic_model(
-    both: tuple[vgtarm.Robot, vgtarm.Robot], request: pytest.FixtureRequest
+    both: tuple[vgtarm.Robot, vgtarm.Robot],
 ) -> None:
     """Switching control of case 2 from a perturbed start (the paper's variant, whose GA in the loop
     activates at every sample above the threshold: dozens of times in 0.1 s; the safe default holds
     its sets and activates a few times), its predictions through the adapters: the same activations
-    and run as the symbolic model."""
+    and run as the symbolic model (with the prediction of :data:`PREDICTION`, default quadratic)."""
     from vgtarm.experiment.cases import joint_reference, run_case
 
     symbolic, recursive = both
-    if recursive.parameters.n_joints == 4:
-        request.node.add_marker(_FOUR_JOINT_GA)
+    prediction = PREDICTION.get(recursive.parameters.n_joints, "quadratic")
     reference = joint_reference(symbolic, 2, duration=0.1)
     start = (reference.q[0] + 0.004, np.zeros(reference.q.shape[1]))
-    a = run_case(symbolic, 2, reference=reference, controller="scm", scm_variant="paper", initial_state=start)
-    b = run_case(recursive, 2, reference=reference, controller="scm", scm_variant="paper", initial_state=start)
+    options: dict[str, Any] = {"controller": "scm", "scm_variant": "paper", "scm_options": {"prediction": prediction}}
+    a = run_case(symbolic, 2, reference=reference, initial_state=start, **options)
+    b = run_case(recursive, 2, reference=reference, initial_state=start, **options)
     assert a.success and b.success and len(a.activations) == len(b.activations) > 10
     assert np.abs(b.q - a.q).max() < 1e-11
     assert relative(b.effort, a.effort) < 1e-8
