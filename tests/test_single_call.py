@@ -7,7 +7,9 @@ path, the oracle here: the same inputs, the same backend, the code of before. Ev
 that evaluates the model is compared on random valid states, on the compiled and the interpreted
 paper robot and on a stack on the recursive model, and every kind of refusal (values not finite,
 outside their range, legs that cannot be assembled, a memory limit, a result that is not finite,
-dtypes and shapes the path does not serve) is compared message for message.
+dtypes and shapes the path does not serve) is compared message for message. On the compiled
+backend the checks run in C (``vgt_single_call``, ``csrc/single.c``): its decisions are compared
+with the NumPy checks the other backends run, on the same states.
 """
 
 from __future__ import annotations
@@ -24,7 +26,9 @@ import pytest
 import vgtarm
 from vgtarm.errors import AssemblyError, ConfigError, InputError
 from vgtarm.memory import LIMIT_VARIABLE
-from vgtarm.model.compiled import InterpretedBackend, build_functions
+from vgtarm.model import interface
+from vgtarm.model import robot as robot_module
+from vgtarm.model.compiled import CompiledBackend, InterpretedBackend, build_functions
 from vgtarm.model.robot import recursive_robot
 
 from .conftest import random_configurations
@@ -259,18 +263,10 @@ def test_a_memory_limit_applies_to_one_state_as_before(robot, monkeypatch):
 
 def test_a_result_that_is_not_finite_is_refused_as_before(robot):
     """A robot whose bodies weigh next to nothing: its accelerations overflow."""
-    p = robot.parameters
-    light = dataclasses.replace(
-        p,
-        bodies=tuple(
-            dataclasses.replace(b, mass=b.mass * 1e-300, inertia=tuple(tuple(x * 1e-300 for x in r) for r in b.inertia))
-            for b in p.bodies
-        ),
-    )
-    feather = robot.with_parameters(light)
-    args = (p.home.copy(), np.zeros(7), np.full(7, 1e3))
-    fast = outcome(lambda: feather.forward_dynamics(*args))
-    assert fast == outcome(lambda: batch_only(feather).forward_dynamics(*args))
+    light = feather(robot)
+    args = (robot.parameters.home.copy(), np.zeros(7), np.full(7, 1e3))
+    fast = outcome(lambda: light.forward_dynamics(*args))
+    assert fast == outcome(lambda: batch_only(light).forward_dynamics(*args))
     assert fast[0] == "raised" and "the result is not finite" in fast[1][1]
 
 
@@ -294,3 +290,64 @@ def test_threads_calling_at_once_get_their_own_numbers(robot):
         thread.join()
     assert not failures
     assert len(robot._single_states["forward_dynamics"][1].frames) >= 1
+
+
+def feather(robot: vgtarm.Robot) -> vgtarm.Robot:
+    """The robot with bodies that weigh next to nothing: its accelerations overflow."""
+    p = robot.parameters
+    bodies = tuple(
+        dataclasses.replace(b, mass=b.mass * 1e-300, inertia=tuple(tuple(x * 1e-300 for x in r) for r in b.inertia))
+        for b in p.bodies
+    )
+    return robot.with_parameters(dataclasses.replace(p, bodies=bodies))
+
+
+def test_the_compiled_robot_checks_one_state_in_c(robot):
+    assert isinstance(robot.backend, CompiledBackend)
+    ffi = robot.backend.ffi
+    for method in METHODS:
+        single = robot._single_state(method)
+        assert single is not None, method
+        _, run, _ = single.frame()
+        assert ffi.typeof(run.args[0]) is ffi.typeof("vgt_single *"), method
+
+
+def test_the_c_checks_decide_as_the_numpy_checks(robot, monkeypatch):
+    """Every state of :func:`cases` (and an overflowing result) through the C driver and through the
+    NumPy checks on the same robot: the same states are served, with the same numbers; the driver
+    says why it declines the others."""
+    status = interface.enum("vgt_single_status")
+    heavy, light = robot, feather(robot)
+    why: dict[tuple[str, str], str] = {}
+    for name, args in [*cases(robot), ("overflow", {**valid(robot), "F": np.full(robot.n_joints, 1e3)})]:
+        for method, labels in METHODS.items():
+            who = light if name == "overflow" else heavy
+            in_c = who._single_state(method)
+            with monkeypatch.context() as patch:
+                patch.setattr(robot_module, "checked_single_call", lambda *_: None)
+                in_numpy = who._single_state(method)
+            assert in_c is not None and in_numpy is not None
+            values = tuple(args[label] for label in labels)
+            fast, slow = in_c(values), in_numpy(values)
+            assert (fast is None) == (slow is None), (name, method)
+            if fast is not None:
+                assert_same_bits(fast, slow, f"{name} {method}")
+            views, run, _ = in_c.frame()
+            if any(
+                type(v) is not np.ndarray or v.shape != w.shape or v.dtype != np.float64
+                for v, w in zip(values, views, strict=True)
+            ):
+                continue  # not served: never reaches the driver
+            for view, value in zip(views, values, strict=True):
+                view[...] = value
+            code = run()
+            assert (code == 0) == (fast is not None), (name, method, code)
+            why[name, method] = next(k for k, v in status.items() if v == code)
+    for method in METHODS:
+        assert why["valid", method] == "VGT_SINGLE_DONE", method
+        assert why["q = nan", method] == why["q beyond its bound", method] == "VGT_SINGLE_OUTSIDE", method
+        assert why["q a leg of zero", method] == "VGT_SINGLE_MARGIN", method
+    assert (
+        why["F = inf", "forward_dynamics"] == why["f_tip beyond its bound", "inverse_dynamics"] == "VGT_SINGLE_OUTSIDE"
+    )
+    assert why["overflow", "forward_dynamics"] == "VGT_SINGLE_NOT_FINITE"

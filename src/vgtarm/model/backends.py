@@ -265,14 +265,7 @@ def single_call(
     addresses (the call holds them), and one call runs at a time on a given set (the work arrays are
     its own): a caller on several threads keeps one set per thread.
     """
-    sig = backend.signature(name)
-    arrays = [*inputs, outputs]
-    sizes = (*sig.nnz_in, sum(sig.nnz_out))
-    if len(inputs) != len(sig.nnz_in) or any(
-        x.dtype != np.float64 or x.shape != (size,) or not x.flags.c_contiguous
-        for x, size in zip(arrays, sizes, strict=True)
-    ):
-        raise ValueError(f"{sig.name}: single_call expects 1-D float64 buffers of sizes {sizes}")
+    sig = _single_signature(backend, name, inputs, outputs)
     if not isinstance(backend, CompiledBackend):
         rows = [x.reshape(1, -1) for x in inputs]
 
@@ -281,6 +274,97 @@ def single_call(
             return 0
 
         return evaluated
+    arg, res, iw, w = _work_arrays(backend, sig, inputs, outputs)
+    call = partial(backend.function_pointer(name), arg, res, iw, w, 0)
+    call.buffers = [*inputs, outputs]  # type: ignore[attr-defined]  # the memory the pointers point into stays alive
+    return call
+
+
+def checked_single_call(
+    backend: Backend,
+    name: str,
+    inputs: Sequence[NDArray[np.float64]],
+    outputs: NDArray[np.float64],
+    bounded: NDArray[np.float64],
+    margins: NDArray[np.float64],
+) -> Callable[[], int] | None:
+    """:func:`single_call` with the checks of :class:`~vgtarm.model.robot.Robot`'s batch path, in C
+    (``vgt_single_call``, ``csrc/single.c``), or None for a backend without it (not compiled).
+
+    ``bounded`` ``(3 k,)`` is ``[low, x, high]``: the state ``x`` ``(k,)``, a 1 and then the inputs
+    but the parameters one after the other (``inputs`` but the last are views of it, in order), between
+    its inclusive bounds; ``margins`` ``(rows, 1 + n)`` the trusted triangle margins, whose products
+    with ``x[: 1 + n]`` (``[1, q]``) must be >= 0. The call returns 0 when every input is finite and
+    inside its bounds, every margin >= 0, the function succeeded and every output is finite (then
+    ``outputs`` holds its result, bit for bit :func:`single_call`'s), else the nonzero
+    ``vgt_single_status`` of the first check that failed. The same rules on buffers and threads."""
+    sig = _single_signature(backend, name, inputs, outputs)
+    if not isinstance(backend, CompiledBackend) or not hasattr(backend.library, "vgt_single_call"):
+        return None
+    k = len(bounded) // 3
+    x = bounded[k : 2 * k]
+    margins = np.ascontiguousarray(margins, dtype=np.float64)
+    starts = np.cumsum((1, *sig.nnz_in[:-1])).tolist()
+    if (
+        bounded.dtype != np.float64
+        or bounded.shape != (3 * k,)
+        or not bounded.flags.c_contiguous
+        or starts[-1] != k
+        or margins.ndim != 2
+        or margins.shape[1] != 1 + sig.nnz_in[0]
+        or any(a.ctypes.data != x.ctypes.data + 8 * start for a, start in zip(inputs[:-1], starts[:-1], strict=True))
+    ):
+        raise ValueError(f"{sig.name}: checked_single_call expects the inputs as views of [low, (1, inputs), high]")
+    ffi = backend.ffi
+    arg, res, iw, w = _work_arrays(backend, sig, inputs, outputs)
+
+    def pointer(a: NDArray[np.float64], offset: int = 0) -> Any:
+        return ffi.cast("double *", a.ctypes.data) + offset
+
+    state = ffi.new(
+        "vgt_single *",
+        {
+            "f": backend.function_pointer(name),
+            "arg": arg,
+            "res": res,
+            "iw": iw,
+            "w": w,
+            "n_x": k,
+            "x": pointer(bounded, k),
+            "low": pointer(bounded),
+            "high": pointer(bounded, 2 * k),
+            "n_margins": len(margins),
+            "n_columns": margins.shape[1],
+            "margins": pointer(margins),
+            "n_y": len(outputs),
+            "y": pointer(outputs),
+        },
+    )
+    call = partial(backend.library.vgt_single_call, state)
+    call.buffers = [*inputs, outputs, bounded, margins, arg, res, iw, w]  # type: ignore[attr-defined]
+    return call
+
+
+def _single_signature(
+    backend: Backend, name: str, inputs: Sequence[NDArray[np.float64]], outputs: NDArray[np.float64]
+) -> Signature:
+    """The signature of ``name``, after checking the buffers of :func:`single_call`."""
+    sig = backend.signature(name)
+    arrays = [*inputs, outputs]
+    sizes = (*sig.nnz_in, sum(sig.nnz_out))
+    if len(inputs) != len(sig.nnz_in) or any(
+        x.dtype != np.float64 or x.shape != (size,) or not x.flags.c_contiguous
+        for x, size in zip(arrays, sizes, strict=True)
+    ):
+        raise ValueError(f"{sig.name}: single_call expects 1-D float64 buffers of sizes {sizes}")
+    return sig
+
+
+def _work_arrays(
+    backend: CompiledBackend, sig: Signature, inputs: Sequence[NDArray[np.float64]], outputs: NDArray[np.float64]
+) -> tuple[Any, Any, Any, Any]:
+    """The argument and result pointers of one sample (into ``inputs`` and ``outputs``, the outputs one
+    after the other) and the work arrays of ``sig``'s function, as ``vgt_batch`` sets them."""
     ffi = backend.ffi
     arg = ffi.new("const double *[]", max(sig.sz_arg, len(inputs), 1))
     res = ffi.new("double *[]", max(sig.sz_res, len(sig.nnz_out), 1))
@@ -289,10 +373,7 @@ def single_call(
     start = ffi.cast("double *", outputs.ctypes.data)
     for j, offset in enumerate(np.cumsum((0, *sig.nnz_out[:-1])).tolist()):
         res[j] = start + offset
-    iw, w = ffi.new("vgt_int[]", max(sig.sz_iw, 1)), ffi.new("double[]", max(sig.sz_w, 1))
-    call = partial(backend.function_pointer(name), arg, res, iw, w, 0)
-    call.buffers = arrays  # type: ignore[attr-defined]  # the memory the pointers point into stays alive
-    return call
+    return arg, res, ffi.new("vgt_int[]", max(sig.sz_iw, 1)), ffi.new("double[]", max(sig.sz_w, 1))
 
 
 class InterpretedBackend:

@@ -20,6 +20,7 @@ import math
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -33,7 +34,7 @@ from ..machine import blas_on_one_thread
 from ..markup import html_table
 from ..memory import LIMIT_VARIABLE, check_batch
 from .assembly import check_margins
-from .backends import single_call
+from .backends import checked_single_call, single_call
 from .compiled import Backend, CompiledBackend, InterpretedBackend, get_backend
 from .definition import PAPER, Definition, StackDefinition
 from .parameters import ROBOT_FILE_LIMIT, RobotParameters, load_parameters, parameters_from_dict
@@ -138,9 +139,10 @@ _NDARRAY = np.ndarray
 _LIMIT_KEY: Any = os.environ.encodekey(LIMIT_VARIABLE) if hasattr(os.environ, "encodekey") else None
 #: A triangle margin the single-state check computes is trusted from this fraction of the sizes of
 #: its terms (the joints' accepted bounds and the offset ``h``) up: its sum is taken in any order
-#: (BLAS), the batch path's as ``(G q) + h``, and the two differ by a few units of the last place
-#: (2**-52) of those sizes at most. A margin below it (1e-12 m for the paper's legs) goes the batch
-#: path, which decides as it always has.
+#: (BLAS; the C driver ``csrc/single.c`` term after term), the batch path's as ``(G q) + h``, and
+#: the two differ by a few units of the last place (2**-52) of those sizes times the number of
+#: terms at most (a few thousand joints would still be far from 2**12 units). A margin below it
+#: (1e-12 m for the paper's legs) goes the batch path, which decides as it always has.
 _MARGIN_TRUST = 2.0**-40
 
 
@@ -159,15 +161,16 @@ def _memory_limit_set() -> bool:
 class _SingleState:
     """One method of a :class:`Robot` for one state, at the speed of its compiled call (issue 35).
 
-    It serves only 1-D float64 arrays (``numpy.ndarray`` itself) of the right length, and runs the
-    same checks as the batch path, in the same order, as a few whole-array operations on its own
-    buffers: the memory estimate (only when ``$VGTARM_MEMORY_LIMIT`` is set), every input finite
-    and inside :meth:`Robot.input_ranges`, the triangle margins of ``q`` above zero, the compiled
-    function's status and every output finite. When any check fails (or is not conclusive: a
-    margin within :data:`_MARGIN_TRUST`), or for any other input (lists, other types, batches), it
-    gives None and the method takes the batch path, which refuses the input with its message or
-    gives its result. Its numbers are the batch path's bit for bit: the same function on the same
-    inputs (:func:`~vgtarm.model.backends.single_call`).
+    It serves only 1-D float64 arrays (``numpy.ndarray`` itself) of the right length, copies them
+    into its own buffer and runs the same checks as the batch path, in the same order: the memory
+    estimate (only when ``$VGTARM_MEMORY_LIMIT`` is set, in Python), then every input finite and
+    inside :meth:`Robot.input_ranges`, the triangle margins of ``q`` above zero, the function's
+    status and every output finite, all in one C call on the compiled backend
+    (:func:`~vgtarm.model.backends.checked_single_call`), as a few whole-array operations on the
+    others (:func:`_checked`). When any check fails (or is not conclusive: a margin within
+    :data:`_MARGIN_TRUST`), or for any other input (lists, other types, batches), it gives None
+    and the method takes the batch path, which refuses the input with its message or gives its
+    result. Its numbers are the batch path's bit for bit: the same function on the same inputs.
 
     The buffers of one call (a frame: the inputs between their bounds, the outputs, the work arrays)
     are taken from a free list and put back after the call, so threads (a cffi call releases the
@@ -203,8 +206,8 @@ class _SingleState:
 
     def frame(self) -> tuple[Any, ...]:
         """The buffers of one call: the inputs' views of ``x`` (a 1, then the inputs one after the
-        other), the views ``[x, high]`` and ``[low, x]`` of ``[low, x, high]``, ``[1, q]``, the
-        differences, the outputs, the call and the views of the outputs that make the pieces."""
+        other, held in ``[low, x, high]``), the checked call (returns 0 when the result stands) and the
+        views of the outputs that make the pieces."""
         low, high = self.bounds
         k = len(low)
         bounded = np.concatenate([low, np.empty(k), high])
@@ -216,9 +219,13 @@ class _SingleState:
         outputs = np.empty(sum(sig.nnz_out))
         if not outputs.size:
             raise ValueError(f"{self.function} has no outputs")
-        call = single_call(self.backend, self.function, [*inputs, self.p], outputs)
+        run = checked_single_call(self.backend, self.function, [*inputs, self.p], outputs, bounded, self.margins)
+        if run is None:  # no C driver (CasADi's interpreter, the recursive model): the checks in NumPy
+            call = single_call(self.backend, self.function, [*inputs, self.p], outputs)
+            above, below, q = bounded[k:], bounded[: 2 * k], x[: 1 + self.n]
+            run = partial(_checked, above, below, q, np.empty(2 * k), self.margins, call, outputs)
         pieces = tuple(_piece(outputs, sig.nnz_out, piece) for piece in self.spec.pieces)
-        return inputs, bounded[k:], bounded[: 2 * k], x[: 1 + self.n], np.empty(2 * k), outputs, call, pieces
+        return inputs, run, pieces
 
     def row_bytes(self, arrays: tuple[Array, ...]) -> int:
         """The batch path's estimate of a row (:meth:`Robot._arrays`) for these float64 arrays."""
@@ -226,15 +233,14 @@ class _SingleState:
 
     def __call__(self, arrays: tuple[Any, ...]) -> tuple[Array, ...] | None:
         """The pieces of the result for ``arrays`` (one per input), or None: take the batch path."""
-        first = arrays[0]
-        if type(first) is not _NDARRAY or first.shape != self.shapes[0]:  # a batch, a list: at once
-            return None
         frames = self.frames
         frame = frames.pop() if frames else self.frame()
-        views, above, below, q, differences, y, call, pieces = frame
-        for view, shape, array in zip(views, self.shapes, arrays, strict=True):
+        views, run, pieces = frame
+        # one array per input, as the methods pass them (not strict: a strict zip costs 0.1 us)
+        for view, shape, array in zip(views, self.shapes, arrays, strict=False):
             # numpy's own float64 (not a subclass such as a masked array), 1-D of the right length;
-            # copied into the frame at once (a slice assignment each: cheaper than a concatenate)
+            # copied into the frame at once (a slice assignment each: cheaper than a concatenate, or
+            # than handing the C driver each array's pointer through cffi's from_buffer)
             if type(array) is not _NDARRAY or array.shape != shape or array.dtype is not _FLOAT:
                 frames.append(frame)
                 return None
@@ -245,14 +251,24 @@ class _SingleState:
             except BaseException:
                 frames.append(frame)
                 raise
-        _SUBTRACT(above, below, out=differences)  # x - low, high - x: >= 0 exactly when inside
         result = None
-        if differences.item(differences.argmin()) >= 0.0:  # a NaN is the argmin and fails
-            margins = self.margins.dot(q)  # only now: finite inputs inside their bounds cannot overflow
-            if margins.item(margins.argmin()) >= 0.0 and not call() and _all_finite(y):
-                result = (pieces[0].copy(),) if len(pieces) == 1 else tuple(map(_COPY, pieces))
+        if not run():
+            result = (pieces[0].copy(),) if len(pieces) == 1 else tuple(map(_COPY, pieces))
         frames.append(frame)
         return result
+
+
+def _checked(above: Array, below: Array, q: Array, differences: Array, margins: Array, call: Any, y: Array) -> int:
+    """The checks of ``vgt_single_call`` (``csrc/single.c``) in NumPy, around ``call``: 0 when every
+    input lies inside its bounds (``above`` ``[x, high]`` less ``below`` ``[low, x]``, >= 0), every
+    trusted margin ``margins @ q`` (``[1, q]``) >= 0, the call returned 0 and every output ``y`` is
+    finite; else 1."""
+    _SUBTRACT(above, below, out=differences)  # x - low, high - x: >= 0 exactly when inside
+    if differences.item(differences.argmin()) >= 0.0:  # a NaN is the argmin and fails
+        found = margins.dot(q)  # only now: finite inputs inside their bounds cannot overflow
+        if found.item(found.argmin()) >= 0.0 and not call() and _all_finite(y):
+            return 0
+    return 1
 
 
 def _all_finite(y: Array) -> bool:

@@ -116,6 +116,38 @@ int vgt_batch(vgt_fn f, vgt_int sz_arg, vgt_int sz_res, vgt_int sz_iw, vgt_int s
               const double *const *in, const long *in_stride,
               double *const *out, const long *out_stride);
 
+/* One state of a generated function with the checks of Robot's batch path (single.c): the caller
+ * copies the state into x and sets the argument pointers into it (and the parameters) and the
+ * result pointers into y; the call keeps every pointer. */
+typedef struct {
+    vgt_fn f;                 /* the generated function                                       */
+    const double **arg;       /* its arguments: into x, then the parameters                    */
+    double **res;             /* its results: into y                                          */
+    vgt_int *iw;              /* its work arrays, of the sizes it reports                     */
+    double *w;
+    long n_x;                 /* x: a 1, then the inputs one after the other (q first)        */
+    const double *x;          /* (n_x) the state                                              */
+    const double *low, *high; /* (n_x) accepted bounds, inclusive ([1, 1] for the 1)          */
+    long n_margins;           /* rows of the trusted triangle margins                         */
+    long n_columns;           /* 1 + joints                                                   */
+    const double *margins;    /* (n_margins, n_columns) row by row: the margin less its trust */
+                              /* is the row's product with x[0 .. n_columns - 1], [1, q]      */
+    long n_y;                 /* y: every output one after the other                          */
+    const double *y;          /* (n_y)                                                        */
+} vgt_single;
+
+/* What vgt_single_call returns: DONE, else why the batch path must decide. */
+enum vgt_single_status {
+    VGT_SINGLE_DONE = 0,       /* every check passed: y holds the result                       */
+    VGT_SINGLE_OUTSIDE = 1,    /* an input is not finite or outside its bounds (y untouched)   */
+    VGT_SINGLE_MARGIN = 2,     /* a triangle margin is below its trust (y untouched)           */
+    VGT_SINGLE_FAILED = 3,     /* the generated function returned an error                     */
+    VGT_SINGLE_NOT_FINITE = 4  /* an output is not finite                                      */
+};
+
+/* Check the state, evaluate the function once, check its outputs (single.c). */
+int vgt_single_call(const vgt_single *s);
+
 /* Run computed force control on the plant for samples k0 .. k1-1 (closed_loop.c). */
 int vgt_simulate(const vgt_model *m, const vgt_settings *s, const vgt_run *r,
                  const double *Kp, const double *Kv, long k0, long k1, long *stop);
