@@ -10,11 +10,18 @@ path), against, in the same run and in turns:
 - **batch of one**: the same state as arrays of one row, ``(1, n)``, which take the batch path:
   what a single call cost before the single-state path (issue 35 measured 55 us for the forward
   dynamics);
-- **Pinocchio**: ``constraintDynamics`` (one Python call) on the chain of the same shape as a
-  two-module stack (:func:`benchmarks.bench_recursive.pinocchio_chain`: seven joints, a planar
-  joint per module and a twist) with one 3-D loop constraint at its last body, and ``aba`` on the
-  same chain. It is not a twin of the paper's robot (none is built here), only a measure of what
-  one call of a compiled dynamics library's binding costs; absent without the ``bench`` extra.
+- **Pinocchio** (the anchor of issue 35's target: the paper robot's ``forward_dynamics`` at most
+  half of it): ``constraintDynamics`` (one Python call) on the twin of the paper's robot
+  (:func:`benchmarks.pinocchio_twin.build_twin`: the truss, each leg a revolute and a prismatic
+  joint, 15 joints, its four loops closed by 3-D point constraints; its accelerations equal ours,
+  ``tests/test_pinocchio_twin.py``) at the same state as ours, timed in turns with the Robot's
+  ``forward_dynamics`` and its core. As a fair user would, the twin's data, constraint data and
+  proximal settings are prepared once, and its state (``q``, ``v``, and ``tau``: our efforts less
+  the viscous friction, plus ``J^T f`` of the tip force) is mapped once; the call's result is
+  checked against ours before timing. Two proximal settings: the fastest that stays accurate (one
+  iteration, ``mu = 1e-12``: the anchor) and the exact one (two iterations; Pinocchio's stopping
+  test never passes on the loops' redundant rows, so it always runs them all;
+  :data:`benchmarks.pinocchio_twin.PROXIMAL`). Absent without the ``bench`` extra.
 
 Each variant is timed in rounds of about :data:`ROUND_SECONDS`, the variants of a method in turns
 (so load from other processes falls on all of them alike); the figures are the median over
@@ -123,42 +130,43 @@ def _rows(label: str, robot: vgtarm.Robot, methods: tuple[tuple[str, str, tuple[
 
 
 def _pinocchio(paper: vgtarm.Robot) -> list[str] | None:
-    """Rows of one ``constraintDynamics`` and one ``aba`` call (module docstring), timed in turns with
-    the paper robot's forward dynamics and forward kinematics of one state."""
+    """Rows of one ``constraintDynamics`` call on the twin (module docstring), with the fastest accurate
+    and the exact proximal settings, timed in turns with the paper robot's ``forward_dynamics`` and
+    its core at the same state; the first row is the table's title."""
     try:
-        from .bench_recursive import pinocchio_chain
-        from .bench_stacks import family
+        from .pinocchio_twin import FASTEST, PROXIMAL, build_twin
 
-        pin, model = pinocchio_chain(family(2))
+        twin = build_twin(paper.parameters)
     except ImportError:  # the extra `bench` (PyPI `pin`) is not installed
         return None
-    p: Any = pin
-    m: Any = model
-    data = m.createData()
-    rng = np.random.default_rng(0)
-    q = p.randomConfiguration(m, -np.ones(m.nq), np.ones(m.nq))
-    v, tau = rng.normal(scale=0.1, size=m.nv), rng.normal(scale=5.0, size=m.nv)
-    where = p.SE3(np.eye(3), np.array([0.05, 0.02, 0.1]))
-    constraint = p.RigidConstraintModel(p.ContactType.CONTACT_3D, m, m.njoints - 1, where, p.ReferenceFrame.LOCAL)
-    models, datas = p.StdVec_RigidConstraintModel(), p.StdVec_RigidConstraintData()
-    models.append(constraint)
-    datas.append(constraint.createData())
-    p.initConstraintDynamics(m, data, models, datas)
-    prox = p.ProximalSettings(1e-12, 1e-10, 10)  # the planar chain leaves the loop's z redundant
     state = _state(paper, 0)
-    times = _rounds(
-        {
-            "Pinocchio `constraintDynamics`": lambda: p.constraintDynamics(m, data, q, v, tau, models, datas, prox),
-            "Pinocchio `aba`": lambda: p.aba(m, data, q, v, tau),
-            "fd": lambda: paper.forward_dynamics(state["q"], state["qd"], state["F"], state["f_tip"]),
-            "fk": lambda: paper.forward_kinematics(state["q"]),
-        }
-    )
-    rows = []
-    for name in ("Pinocchio `constraintDynamics`", "Pinocchio `aba`"):
-        fd = statistics.median(a / b for a, b in zip(times["fd"], times[name], strict=True))
-        fk = statistics.median(a / b for a, b in zip(times["fk"], times[name], strict=True))
-        rows.append(f"| {name} | {_us(statistics.median(times[name]))} | **{fd:.2f}** | {fk:.2f} |")
+    q, qd, F, f = state["q"], state["qd"], state["F"], state["f_tip"]
+    x = twin.configuration(q, paper.forward_kinematics(q).passive)
+    v, tau = twin.velocity(x, qd), twin.efforts(x, qd, F, f)
+    p: Any = twin.pin
+    m: Any = twin.model
+    ours = paper.forward_dynamics(q, qd, F, f)
+    variants: dict[str, Call] = {}
+    errors = []
+    for label, proximal in (("one iteration, mu 1e-12", FASTEST), ("two iterations, mu 1e-8", PROXIMAL)):
+        data, models, datas, settings = twin.prepare(proximal)
+        theirs = np.asarray(p.constraintDynamics(m, data, x, v, tau, models, datas, settings))[twin.actuated]
+        errors.append(f"{float(np.abs(theirs - ours).max() / np.abs(ours).max()):.1e} ({label})")
+        name = f"Pinocchio `constraintDynamics`, twin, {label}"
+        variants[name] = lambda d=data, c=models, e=datas, s=settings: p.constraintDynamics(m, d, x, v, tau, c, e, s)
+    anchor = next(iter(variants))
+    variants["Robot `forward_dynamics`"] = lambda: paper.forward_dynamics(q, qd, F, f)
+    variants["its core (`fd`)"] = _core(paper, "fd", [state[k] for k in ("q", "qd", "F", "f_tip")])
+    times = _rounds(variants)
+    rows = [
+        f"The anchor: one Python call of Pinocchio's `constraintDynamics` on the twin of the paper robot "
+        f"({m.nv} joints, {len(twin.constraints)} 3-D loop constraints), in turns with the paper robot's forward "
+        "dynamics at the same state:\n"
+    ]
+    for name, series in times.items():
+        ratio = statistics.median(a / b for a, b in zip(series, times[anchor], strict=True))
+        rows.append(f"| {name} | {_us(statistics.median(series))} | **{ratio:.2f}** |")
+    rows.append(f"\nThe twin's accelerations of our joints at this state, from ours (relative): {', '.join(errors)}.")
     return rows
 
 
@@ -186,10 +194,10 @@ def run() -> None:
     if rows is None:
         print("\nPinocchio: not installed (the `bench` extra); no comparison with its binding.")
         return
-    print("\nOne Python call of Pinocchio on the 7-joint chain of a two-module stack, in turns with the paper robot:\n")
-    print("| call | time | Robot `forward_dynamics` / it | Robot `forward_kinematics` / it |")
-    print("| --- | --- | --- | --- |")
-    for row in rows:
+    print("\n" + rows[0])
+    print("| call | time | / Pinocchio (one iteration) |")
+    print("| --- | --- | --- |")
+    for row in rows[1:]:
         print(row)
 
 
