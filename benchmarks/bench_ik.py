@@ -7,9 +7,17 @@ slow to run on all 6,284 samples inside a benchmark. It is timed on ``BLOCKS`` b
 the sample before it (as if the reference had solved it), and its time is scaled to the whole
 path. Both runs include the exact rates and the per-sample verification. The worst differences
 between the two solutions are measured on the same blocks.
+
+Where the fast solver's time goes (issue 35): the share of one call spent in the compiled model's
+evaluations (:meth:`vgtarm.Robot.evaluate`, with its checks and its threads), the median of
+``SPLIT_CALLS`` calls; the rest is the solver's NumPy work and Python.
 """
 
 from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -21,6 +29,36 @@ from .common import Row, best_time, print_table
 
 BLOCKS = 4
 BLOCK = 150
+#: Calls of the fast solver timed for the split between the model's evaluations and the rest.
+SPLIT_CALLS = 15
+
+
+def _model_split(robot: vgtarm.Robot, solve: Callable[[], object]) -> tuple[float, float, int, int]:
+    """Median seconds of ``solve()`` and of the model evaluations in it, evaluations and samples per call."""
+    evaluate = robot.evaluate
+    spent, counts = [0.0], [0, 0]
+
+    def timed(name: str, inputs: Any, n: int) -> dict[str, np.ndarray]:
+        begin = time.perf_counter()
+        try:
+            return evaluate(name, inputs, n)
+        finally:
+            spent[0] += time.perf_counter() - begin
+            counts[0] += 1
+            counts[1] += n
+
+    robot.evaluate = timed  # type: ignore[method-assign]
+    try:
+        totals, models = [], []
+        for _ in range(SPLIT_CALLS):
+            spent[0], counts[:] = 0.0, [0, 0]
+            begin = time.perf_counter()
+            solve()
+            totals.append(time.perf_counter() - begin)
+            models.append(spent[0])
+    finally:
+        del robot.evaluate
+    return float(np.median(totals)), float(np.median(models)), counts[0], counts[1]
 
 
 def _reference_on_blocks(
@@ -87,6 +125,13 @@ def run() -> list[Row]:
         f"effort criterion: whole path {effort_time * 1e3:.1f} ms ({effort_time / fast_time:.2f}x eq. 12), "
         f"{effort.message}, {np.count_nonzero(effort.samples.iterations == 0):,} samples needed no Newton step"
     )
+    for label, keywords in (("eq. 12", {}), ("effort criterion", {"criterion": "effort"})):
+        total, model, calls, samples = _model_split(robot, lambda k=keywords: inverse_kinematics(robot, path, **k))
+        print(
+            f"where the time goes ({label}, median of {SPLIT_CALLS} calls): {total * 1e3:.1f} ms, of which "
+            f"{model * 1e3:.1f} ms ({model / total:.0%}) in {calls} model evaluations of {samples:,} samples "
+            f"and {(total - model) * 1e3:.1f} ms in the solver's NumPy and Python"
+        )
     return rows
 
 

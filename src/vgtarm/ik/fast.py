@@ -261,9 +261,15 @@ def quintic_hermite(t_known: Array, y: Array, yd: Array, ydd: Array, t: Array) -
     h4 = -4 * s3 + 7 * s4 - 3 * s5
     h5 = 10 * s3 - 15 * s4 + 6 * s5
     a, b = segment, segment + 1
-    return np.asarray(
-        h0 * y[a] + h1 * h * yd[a] + h2 * h * h * ydd[a] + h3 * h * h * ydd[b] + h4 * h * yd[b] + h5 * y[b]
-    )
+    y, yd, ydd = (np.asarray(v, dtype=float) for v in (y, yd, ydd))
+    # h0 y[a] + h1 h yd[a] + h2 h h ydd[a] + h3 h h ydd[b] + h4 h yd[b] + h5 y[b], summed left to right,
+    # each term in the buffer of its gathered rows (the same operations, no temporary of (n, d) more)
+    out = y[a]
+    out *= h0
+    for weight, rows in ((h1 * h, yd[a]), (h2 * h * h, ydd[a]), (h3 * h * h, ydd[b]), (h4 * h, yd[b]), (h5, y[b])):
+        rows *= weight
+        out += rows
+    return np.asarray(out)
 
 
 def linear(t_known: Array, y: Array, t: Array) -> Array:
@@ -271,4 +277,9 @@ def linear(t_known: Array, y: Array, t: Array) -> Array:
     segment = np.clip(np.searchsorted(t_known, t, side="right") - 1, 0, t_known.shape[0] - 2)
     t0, t1 = t_known[segment], t_known[segment + 1]
     s = ((t - t0) / (t1 - t0))[:, None]
-    return np.asarray((1 - s) * y[segment] + s * y[segment + 1])
+    y = np.asarray(y, dtype=float)
+    out, after = y[segment], y[segment + 1]  # (1 - s) y[segment] + s y[segment + 1], in the gathered rows
+    out *= 1 - s
+    after *= s
+    out += after
+    return np.asarray(out)

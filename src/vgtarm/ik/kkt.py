@@ -39,7 +39,9 @@ A sample passes when
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.linalg
@@ -47,7 +49,7 @@ import scipy.linalg.lapack
 from numpy.typing import NDArray
 
 from .options import Tolerances
-from .problem import BatchState, IKProblem, rows_times
+from .problem import BatchState, IKProblem, largest_magnitude, rows_times
 
 Array = NDArray[np.float64]
 Mask = NDArray[np.bool_]
@@ -144,7 +146,10 @@ def solve(K: Array, rhs: Array) -> tuple[Array, Mask]:
 
 def stationarity(problem: IKProblem, q: Array, J: Array, lam: Array, mu: Array, g: Array | None = None) -> Array:
     """Gradient of the Lagrangian ``grad Phi + J^T lam - A^T mu`` ``(n, nj)`` (``A`` = inequality rows)."""
-    return cost_gradient(problem, q, g) + np.einsum("nmi,nm->ni", J, lam) - rows_times(mu, problem.A.T)
+    out = cost_gradient(problem, q, g)  # a new array: the sum is formed in it, left to right
+    out += np.einsum("nmi,nm->ni", J, lam)
+    out -= rows_times(mu, problem.A.T)
+    return out
 
 
 def bound_multipliers(
@@ -169,9 +174,10 @@ def predict_active(problem: IKProblem, q: Array, mu: Array, active: Mask, tolera
     A constraint enters the set when it is violated by more than ``tolerance`` (or its predicted
     multiplier says so) and leaves it when its multiplier is below ``-tolerance``.
     """
-    slack = problem.slacks(q)
     scale = problem.active_scale
-    indicator = mu - scale * slack
+    indicator = problem.slacks(q)  # a new array: mu - scale * slack is formed in it
+    indicator *= scale
+    np.subtract(mu, indicator, out=indicator)
     enter = indicator > scale * tolerance
     stay = mu > -tolerance
     return np.where(active, stay, enter)
@@ -236,17 +242,29 @@ def reduced_curvature(problem: IKProblem, W: Array, J: Array, active: NDArray[np
     positive definite exactly when the reduced Hessian is. Values are divided by the mean cost
     weight ``c``.
     """
-    nj = problem.n
     scale = float(problem.weight.mean())
-    diagonal = np.diagonal(W, axis1=1, axis2=2)
-    certificate = (diagonal - (np.abs(W).sum(axis=2) - np.abs(diagonal))).min(axis=1) / scale
+    certificate = _gershgorin(W) / scale
     need = np.flatnonzero(~(certificate > 0))
     if need.size == 0:
         return certificate
-    if nj >= LAPACK_FROM:
+    if problem.n >= LAPACK_FROM:
         return _curvature_lapack(problem, W, J, active, certificate, need, scale)
-    certificate[need] = ldl_pivots(W[need]).min(axis=1) / scale
-    need = need[~(certificate[need] > 0)]
+    certificate[need] = _beyond_gershgorin(problem, W[need], J[need], active[need], scale)
+    return certificate
+
+
+def _gershgorin(W: Array) -> Array:
+    """Gershgorin's lower bound ``(n,)`` of the smallest eigenvalue of each symmetric ``W`` ``(n, r, r)``."""
+    diagonal = np.diagonal(W, axis1=1, axis2=2)
+    return np.asarray((diagonal - (np.abs(W).sum(axis=2) - np.abs(diagonal))).min(axis=1))
+
+
+def _beyond_gershgorin(problem: IKProblem, W: Array, J: Array, active: NDArray[np.bool_], scale: float) -> Array:
+    """:func:`reduced_curvature` of samples whose Gershgorin bound is not positive (fewer than
+    :data:`LAPACK_FROM` joints): the smallest ``LDL^T`` pivot of ``W``, else that of ``P W P + c (I - P)``."""
+    nj = problem.n
+    certificate = ldl_pivots(W).min(axis=1) / scale
+    need = np.flatnonzero(~(certificate > 0))
     if need.size == 0:
         return certificate
     n, m = need.size, J.shape[1]
@@ -265,6 +283,34 @@ def reduced_curvature(problem: IKProblem, W: Array, J: Array, active: NDArray[np
     projector = np.eye(nj) - rows.transpose(0, 2, 1) @ through
     M = projector @ W[need] @ projector + scale * (np.eye(nj) - projector)
     certificate[need] = ldl_pivots(M).min(axis=1) / scale
+    return certificate
+
+
+#: Bytes of the Hessians whose Gershgorin bounds :func:`verify` computes at once (a few hundred kB:
+#: the temporaries stay in the cache and in memory the allocator keeps; each bound is its own row's).
+GERSHGORIN_BLOCK_BYTES = 256 * 2**10
+
+
+def _certify(problem: IKProblem, H: Array, J: Array, active: NDArray[np.bool_]) -> Array:
+    """:func:`reduced_curvature` of ``hessian(problem, H)``, the same values, with the Hessians made
+    and bounded :data:`GERSHGORIN_BLOCK_BYTES` at a time (the later stages see the same samples together)."""
+    nj = problem.n
+    scale = float(problem.weight.mean())
+    certificate = np.empty(H.shape[0])
+    step = max(1, GERSHGORIN_BLOCK_BYTES // (8 * nj * nj))
+    for start in range(0, H.shape[0], step):
+        part = slice(start, start + step)
+        W = hessian(problem, H[part])
+        certificate[part] = _gershgorin(W) / scale
+        if nj >= LAPACK_FROM:  # per sample: the same in any block
+            need = np.flatnonzero(~(certificate[part] > 0))
+            if need.size:
+                _curvature_lapack(problem, W, J[part], active[part], certificate[part], need, scale)
+    if nj < LAPACK_FROM:
+        need = np.flatnonzero(~(certificate > 0))
+        if need.size:
+            W = hessian(problem, H[need])
+            certificate[need] = _beyond_gershgorin(problem, W, J[need], active[need], scale)
     return certificate
 
 
@@ -319,19 +365,46 @@ def _curvature_lapack(
 CURVATURE_BLOCK_BYTES = 64 * 2**20
 
 
+#: Rows of :func:`verify`'s per-sample measures taken at once: the temporaries of a block stay small
+#: (tens of kB, in the cache and in memory the allocator keeps) where those of a whole path (megabytes)
+#: would be mapped afresh, and written through page faults, for every operation.
+ROW_BLOCK = 1024
+
+
+def _row_maxima(function: Callable[..., Array], *arrays: NDArray[Any]) -> Array:
+    """``function(*arrays).max(axis=1)`` ``(n,)`` for an elementwise ``function`` of row arrays ``(n, ...)``,
+    :data:`ROW_BLOCK` rows at a time (each row's maximum is its own: the same values)."""
+    n = arrays[0].shape[0]
+    out = np.empty(n)
+    for start in range(0, n, ROW_BLOCK):
+        part = slice(start, start + ROW_BLOCK)
+        out[part] = function(*(a[part] for a in arrays)).max(axis=1)
+    return out
+
+
+def _shortfall(slack: Array) -> Array:
+    """How far each inequality is violated, ``max(0, -slack)``."""
+    return np.maximum(0.0, -slack)
+
+
+def _wrong_sign(active: Mask, mu: Array) -> Array:
+    """A multiplier's error of sign: ``max(0, -mu)`` on an active row, ``|mu|`` on an inactive one."""
+    return np.where(active, np.maximum(0.0, -mu), np.abs(mu))
+
+
 def verify(problem: IKProblem, state: BatchState, tolerances: Tolerances) -> Verification:
     """Check the KKT conditions of every sample from the solution and model values in ``state``."""
     q, lam, mu, active = state.q, state.lam, state.mu, state.active
     residual, J, H = state.residual, state.J, state.H
-    primal = np.abs(residual).max(axis=1)
-    gradient = np.abs(stationarity(problem, q, J, lam, mu, state.g)).max(axis=1)
-    violation = np.maximum(0.0, -problem.slacks(q)).max(axis=1)
-    wrong_sign = np.where(active, np.maximum(0.0, -mu), np.abs(mu)).max(axis=1)
+    primal = largest_magnitude(residual)
+    gradient = largest_magnitude(stationarity(problem, q, J, lam, mu, state.g))
+    violation = _row_maxima(_shortfall, problem.slacks(q))
+    wrong_sign = _row_maxima(_wrong_sign, active, mu)
     curvature = np.empty(q.shape[0])
     block = max(1, CURVATURE_BLOCK_BYTES // (8 * problem.n * problem.n))  # the paper's robot: one block
     for start in range(0, q.shape[0], block):
         part = slice(start, start + block)
-        curvature[part] = reduced_curvature(problem, hessian(problem, H[part]), J[part], active[part])
+        curvature[part] = _certify(problem, H[part], J[part], active[part])
     with np.errstate(invalid="ignore"):
         passed = (
             (primal <= tolerances.primal)

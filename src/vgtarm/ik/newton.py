@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 from . import kkt
 from . import rates as rate_modes
 from .options import NewtonSettings
-from .problem import BatchState, IKProblem, Task, rows_times
+from .problem import BatchState, IKProblem, Task, largest_magnitude, rows_all, rows_any, rows_times
 
 Array = NDArray[np.float64]
 Index = NDArray[np.intp]
@@ -43,7 +43,7 @@ Index = NDArray[np.intp]
 
 def _step_length(problem: IKProblem, q: Array, dq: Array, max_step: float) -> Array:
     """Step fractions ``(n,)`` in ``(0, 1]``: step length limit and fraction-to-boundary of assemblability."""
-    longest = np.abs(dq).max(axis=1)
+    longest = largest_magnitude(dq)
     alpha = np.minimum(1.0, max_step / np.maximum(longest, 1e-300))
     margins = rows_times(q, problem.G_all) + problem.h_all
     change = rows_times(dq, problem.G_all)
@@ -70,7 +70,7 @@ def negative_curvature(problem: IKProblem, W: Array, J: Array, active: NDArray[n
     out = np.zeros(W.shape[0], dtype=bool)
     diagonal = np.diagonal(W, axis1=1, axis2=2)
     bound = (diagonal - (np.abs(W).sum(axis=2) - np.abs(diagonal))).min(axis=1)
-    need = np.flatnonzero(~active.any(axis=1) & ~(bound > CURVATURE_TOLERANCE * scale))
+    need = np.flatnonzero(~rows_any(active) & ~(bound > CURVATURE_TOLERANCE * scale))
     if need.size:
         Z = _null_basis(J[need])
         reduced = Z.transpose(0, 2, 1) @ W[need] @ Z
@@ -141,24 +141,28 @@ def stopping_test(
     ``model`` is ``(residual, J, H)`` at ``(q, lam)``; ``g`` the model part of the cost gradient (effort).
     """
     residual, J, H = model
-    primal = np.abs(residual).max(axis=1)
-    stationarity = np.abs(kkt.stationarity(problem, q, J, lam, mu, g)).max(axis=1)
+    primal = largest_magnitude(residual)
+    stationarity = largest_magnitude(kkt.stationarity(problem, q, J, lam, mu, g))
     # NaN in the model values propagates into these maxima; H comes from the same expressions as J.
-    finite = np.isfinite(primal + stationarity) & np.isfinite(H[:, :, 0]).all(axis=1)
+    finite = np.isfinite(primal + stationarity) & rows_all(np.isfinite(H[:, :, 0]))
     predicted = kkt.predict_active(problem, q, mu, active, settings.tol_active)
     with np.errstate(invalid="ignore"):
         done = (
             finite
             & (primal <= settings.tol_primal)
             & (stationarity <= settings.tol_stationarity)
-            & (predicted == active).all(axis=1)
+            & rows_all(predicted == active)
         )
     return np.asarray(done), predicted, np.asarray(finite)
 
 
 def _store_rates(state: BatchState, working: Index, ready: NDArray[np.bool_], rates: tuple[Array, ...]) -> None:
-    rows = working[ready]
-    qd, lam_d, qdd, lam_dd = (r[ready] for r in rates)
+    if ready.all():  # the finest level: every sample stops at its first evaluation
+        rows = working
+        qd, lam_d, qdd, lam_dd = rates
+    else:
+        rows = working[ready]
+        qd, lam_d, qdd, lam_dd = (r[ready] for r in rates)
     state.qd[rows], state.lam_d[rows], state.qdd[rows], state.lam_dd[rows] = qd, lam_d, qdd, lam_dd
     state.rates_ready[rows] = True
 
@@ -196,47 +200,76 @@ def iterate(
         if working.size == 0:
             break
         q, lam, mu, active = state.q[working], state.lam[working], state.mu[working], state.active[working]
-        residual, J, H, g, rates = _evaluate(problem, task, state, working, q, lam, in_call)
+        residual, J, H, g, rates = _evaluate(task, working, q, lam, problem.weight, in_call)
         done, predicted, finite = stopping_test(problem, q, lam, mu, active, (residual, J, H), settings, g)
         saddle = np.zeros(working.size, dtype=bool)
+        W = None
         if curvature:
-            check = finite & ~predicted.any(axis=1)
-            saddle[check] = negative_curvature(problem, kkt.hessian(problem, H[check]), J[check], predicted[check])
+            check = finite & ~rows_any(predicted)
+            W = kkt.hessian(problem, H)
+            saddle[check] = negative_curvature(problem, _rows(W, check), J[check], predicted[check])
             done &= ~saddle
+        keep = finite & ~done
+        last = step == settings.max_iterations
+        _store_model(state, working, None if last else ~keep, (residual, J, H, g))
         state.converged[working[done]] = True
         if compiled_rates and not in_call:
-            _rates_at_the_end(problem, task, state, working, q, lam, done & ~active.any(axis=1))
+            _rates_at_the_end(problem, task, state, working, q, lam, done & ~rows_any(active))
         elif in_call:
-            _store_rates(state, working, done & ~active.any(axis=1), rates)
+            _store_rates(state, working, done & ~rows_any(active), rates)
         elif with_rates:
-            rate_modes.exact(problem, task, state, working[done & ~active.any(axis=1)])
-        keep = finite & ~done
-        if step == settings.max_iterations:
+            rate_modes.exact(problem, task, state, working[done & ~rows_any(active)])
+        if last:
             break
         working = working[keep]
         if working.size == 0:
             break
         g = None if g is None else g[keep]
         model = (residual[keep], J[keep], H[keep], g)
-        working = _newton_step(problem, state, working, q[keep], model, predicted[keep], saddle[keep], settings)
+        W = None if W is None else W[keep]
+        working = _newton_step(problem, state, working, q[keep], model, predicted[keep], saddle[keep], settings, W)
     return np.asarray(state.converged[idx])
 
 
+def _rows(a: Array, mask: NDArray[np.bool_]) -> Array:
+    """``a[mask]``, or ``a`` itself when the mask keeps every row (no copy)."""
+    return a if mask.all() else a[mask]
+
+
 def _evaluate(
-    problem: IKProblem, task: Task, state: BatchState, working: Index, q: Array, lam: Array, in_call: bool
+    task: Task, working: Index, q: Array, lam: Array, weight: Array, in_call: bool
 ) -> tuple[Array, Array, Array, Array | None, tuple[Array, ...]]:
-    """The model values ``(residual, J, H, g)`` at the iterate ``(q, lam)`` of the samples
-    ``working``, stored into ``state``, and with ``in_call`` the exact rates from the same compiled
-    call (else an empty tuple)."""
-    rates: tuple[Array, ...] = ()
+    """The model values ``(residual, J, H, g)`` at the iterate ``(q, lam)`` of the samples ``working``
+    and with ``in_call`` the exact rates from the same compiled call (else an empty tuple); ``weight``
+    is the diagonal of the Hessian of ``Phi``. :func:`_store_model` keeps them in the state."""
     if in_call:
-        residual, J, H, g, rates = task.evaluate_with_rates(working, q, lam, problem.weight)
-    else:
-        residual, J, H, g = task.evaluate_cost(working, q, lam)
+        return task.evaluate_with_rates(working, q, lam, weight)
+    residual, J, H, g = task.evaluate_cost(working, q, lam)
+    return residual, J, H, g, ()
+
+
+def _store_model(
+    state: BatchState,
+    working: Index,
+    leaving: NDArray[np.bool_] | None,
+    model: tuple[Array, Array, Array, Array | None],
+) -> None:
+    """Store the model values ``(residual, J, H, g)`` of the samples ``working`` that leave the
+    iteration here (``leaving``; None: all of them) into ``state``.
+
+    A sample that goes on is evaluated again at its next iterate, whose values would overwrite these:
+    only the values at each sample's last evaluation are written (on a long arm ``H`` is a quarter of
+    a megabyte a sample).
+    """
+    residual, J, H, g = model
+    if leaving is not None and not leaving.all():
+        if not leaving.any():
+            return
+        working, residual, J, H = working[leaving], residual[leaving], J[leaving], H[leaving]
+        g = None if g is None else g[leaving]
     state.residual[working], state.J[working], state.H[working] = residual, J, H
     if g is not None and state.g is not None:
         state.g[working] = g
-    return residual, J, H, g, rates
 
 
 def _rates_at_the_end(
@@ -259,14 +292,18 @@ def _newton_step(
     active: NDArray[np.bool_],
     saddle: NDArray[np.bool_],
     settings: NewtonSettings,
+    W: Array | None = None,
 ) -> Index:
     """One step of the samples ``working`` still going from ``q`` (the model's ``(residual, J, H,
     g)`` there), with the predicted active sets ``active``: the Newton step of the KKT system (the
     :func:`curvature_step` for a ``saddle``), limited in length and kept assemblable, written into
-    ``state``. Returns the samples that took it: those whose step could be solved."""
+    ``state``. ``W``: :func:`kkt.hessian` of ``H`` if already computed. Returns the samples that took
+    it: those whose step could be solved (the model values of the others are stored, as those of
+    samples that stop)."""
     nj = problem.n
     residual, J, H, g = model
-    W = kkt.hessian(problem, H)
+    if W is None:
+        W = kkt.hessian(problem, H)
     K = kkt.kkt_matrix(problem, W, J, active)
     x, solvable = kkt.solve(K, kkt.newton_rhs(problem, q, residual, active, g))
     if saddle.any():
@@ -280,8 +317,9 @@ def _newton_step(
             settings.max_step,
         )
         solvable[saddle] = np.isfinite(x[saddle]).all(axis=1)
-    solvable &= np.isfinite(x).all(axis=1)
+    solvable &= rows_all(np.isfinite(x))
     if not solvable.all():
+        _store_model(state, working, ~solvable, model)
         working, q, W, J, x, active = (a[solvable] for a in (working, q, W, J, x, active))  # type: ignore[assignment]
         g = None if g is None else g[solvable]
     m = J.shape[1]
