@@ -11,7 +11,9 @@ the last). Figures, all in this process and run:
   folder: import, load, the 50-module arm's model made and evaluated once), and the making of one
   arm's model in this process (its data arrays: nothing is compiled per arm);
 - **forward dynamics per sample**, batches of configurations within a tenth of each joint's span
-  around home: the recursive model (articulated bodies, C), the symbolic model's compiled library
+  around home: the recursive model (articulated bodies, C; its batches run eight samples side by
+  side in the lanes of vectors, issue 35, and are timed with the lanes off too, one sample at a
+  time as before them: ``vgt_rec_lanes(0)``), the symbolic model's compiled library
   where the cache already holds it (the structures of 2 and 6 modules; building the others takes
   minutes to hours and is what ``python -m benchmarks stacks`` measures), and **Pinocchio**'s
   articulated-body algorithm (``abaInParallel`` on one thread: its batched C++ entry point) on a
@@ -177,6 +179,15 @@ def _pinocchio_per_sample(stack: Stack, n: int) -> tuple[float, float]:
     return batched, _per_sample(loop, m)
 
 
+def _without_lanes(model: RecursiveModel, call: Callable[[], object], n: int) -> float:
+    """:func:`_per_sample` of ``call`` with the batches' vector lanes off (one sample at a time)."""
+    model._lib.vgt_rec_lanes(0)
+    try:
+        return _per_sample(call, n)
+    finally:
+        model._lib.vgt_rec_lanes(-1)
+
+
 def _growth(x: list[float], y: list[float]) -> float:
     return float(np.polyfit(np.log(x), np.log(y), 1)[0])
 
@@ -192,8 +203,11 @@ def _row(k: int) -> dict[str, float]:
     row["fd"] = _per_sample(lambda: model.forward_dynamics(q, qd, F), SAMPLES)
     row["fd_wall"] = _per_sample(lambda: model.forward_dynamics(q, qd, F), SAMPLES, time.perf_counter)
     row["id"] = _per_sample(lambda: model.inverse_dynamics(q, qd, F), SAMPLES)
+    row["fd_one"] = _without_lanes(model, lambda: model.forward_dynamics(q, qd, F), SAMPLES)
+    row["id_one"] = _without_lanes(model, lambda: model.inverse_dynamics(q, qd, F), SAMPLES)
     m = max(SAMPLES // k, 200)
     row["mass"] = _per_sample(lambda: model.mass_matrix(q[:m]), m)
+    row["mass_one"] = _without_lanes(model, lambda: model.mass_matrix(q[:m]), m)
     row["symbolic"] = math.nan
     if library_cached(StackDefinition.of(stack)):
         robot = vgtarm.Robot(stack)
@@ -201,8 +215,10 @@ def _row(k: int) -> dict[str, float]:
     row["pinocchio"], row["pinocchio_loop"] = _pinocchio_per_sample(stack, SAMPLES)
     symbolic = _fmt(row["symbolic"]) if math.isfinite(row["symbolic"]) else "-"
     print(
-        f"  {k} modules ({stack.n_joints} joints): FD {_fmt(row['fd'])}, ID {_fmt(row['id'])}, "
-        f"M {_fmt(row['mass'])}, symbolic FD {symbolic}, Pinocchio ABA {_fmt(row['pinocchio'])}",
+        f"  {k} modules ({stack.n_joints} joints): FD {_fmt(row['fd'])} (one at a time {_fmt(row['fd_one'])}), "
+        f"ID {_fmt(row['id'])} (one at a time {_fmt(row['id_one'])}), "
+        f"M {_fmt(row['mass'])} (one at a time {_fmt(row['mass_one'])}), symbolic FD {symbolic}, "
+        f"Pinocchio ABA {_fmt(row['pinocchio'])}",
         flush=True,
     )
     return row
@@ -403,17 +419,20 @@ def run() -> list[dict[str, float]]:
 def _print(rows: list[dict[str, float]], build: dict[str, float]) -> None:
     print("\n### The recursive model, 1 to 50 modules (per sample, CPU time; ratios in the same run)\n")
     print(
-        "| modules | joints | bodies | forward dynamics (ABA) | wall | inverse dynamics (RNEA) | M (CRBA) "
+        "| modules | joints | bodies | forward dynamics (ABA) | wall | one sample at a time "
+        "| inverse dynamics (RNEA) | one sample at a time | M (CRBA) | one sample at a time "
         "| symbolic library FD | symbolic / recursive | Pinocchio ABA, batched | recursive / Pinocchio "
         "| Pinocchio ABA, one Python call each |"
     )
-    print("|" + " --- |" * 12)
+    print("|" + " --- |" * 15)
     for r in rows:
         sym = r["symbolic"]
         sym_cells = f"{_fmt(sym)} | {sym / r['fd']:.1f}x" if math.isfinite(sym) else "- | -"
         print(
             f"| {r['k']:.0f} | {r['n']:.0f} | {r['bodies']:.0f} | {_fmt(r['fd'])} | {_fmt(r['fd_wall'])} | "
-            f"{_fmt(r['id'])} | {_fmt(r['mass'])} | {sym_cells} | {_fmt(r['pinocchio'])} | "
+            f"{_fmt(r['fd_one'])} | {_fmt(r['id'])} | {_fmt(r['id_one'])} | {_fmt(r['mass'])} | "
+            f"{_fmt(r['mass_one'])} | {sym_cells} | "
+            f"{_fmt(r['pinocchio'])} | "
             f"{r['fd'] / r['pinocchio']:.2f}x | {_fmt(r['pinocchio_loop'])} |"
         )
     big = [r for r in rows if r["k"] >= 10]
@@ -426,6 +445,12 @@ def _print(rows: list[dict[str, float]], build: dict[str, float]) -> None:
     print(f"| forward dynamics, 50 modules (175 joints) | {_fmt(by_k[50]['fd'])} | <= 30 us |")
     print(f"| growth exponent of FD, 10 to 50 modules | {growth:.2f} (Pinocchio {pin_growth:.2f}) | <= 1.3 |")
     print(f"| recursive / Pinocchio ABA at 50 modules | {by_k[50]['fd'] / by_k[50]['pinocchio']:.2f}x | <= 3x |")
+    for k in (10, 50):
+        r = by_k[k]
+        print(
+            f"| recursive in lanes / Pinocchio ABA (batched, one thread) at {k} modules | "
+            f"{r['fd'] / r['pinocchio']:.2f}x (one sample at a time {r['fd_one'] / r['pinocchio']:.2f}x) | <= 0.8x |"
+        )
     print(
         f"| cold build of the one library + 50-module arm, own process (wall, peak memory) | "
         f"{build['cold']:.1f} s, {build['cold_peak'] / 1e6:.0f} MB | <= 15 s, <= 500 MB |"

@@ -19,6 +19,7 @@ import contextlib
 import hashlib
 import json
 import os
+import re
 import shutil
 import tempfile
 import threading
@@ -80,11 +81,64 @@ def _ffi() -> cffi.FFI:
 _MARGIN_ROW = "-DVGT_MARGIN_ROW=vgt_rec_margin"
 
 
+#: What the bodies of the generated module functions may call, and the lane versions
+#: (``csrc/vgt_rec_lanes.h``) that replace the calls in :func:`module_lanes`.
+_LANE_CALLS = {"casadi_sq": "lane_sq", "sin": "lane_sin", "cos": "lane_cos", "acos": "lane_acos", "atan2": "lane_atan2"}
+_LANE_CALLS |= {"sqrt": "lane_sqrt"}
+_LANE_STATEMENT = re.compile(r"a\d+=[^;]*;|if \(res\[\d\]!=0\) res\[\d\]\[\d+\]=a\d+;|return 0;|casadi_real [a\d, ]+;")
+
+
+def module_lanes(source: str) -> str:
+    """The generated module functions ``vgt_rec_module`` (joint pose, motion subspace and bias) and
+    ``vgt_rec_module_kin`` (pose, motion subspace and passive angles) as ``lane_module`` and
+    ``lane_module_kin``, on vectors of doubles (``vd``, one sample per lane) with the very operations
+    of the generated C in the same order: the header ``vgt_rec_module_lanes.h`` that
+    ``csrc/vgt_rec_lanes.h`` includes. Empty (so that the lanes call the generated functions sample
+    by sample) when the generated code holds anything else than assignments of constants, inputs,
+    arithmetic and the calls of :data:`_LANE_CALLS`, and outputs."""
+    head = "/* vgt_rec_module and vgt_rec_module_kin on vectors (vgtarm.model.recursive.library.module_lanes) */\n"
+    parts = [head + "#define VGT_REC_MODULE_LANES 1\n"]
+    for function, lane in (("vgt_rec_module", "lane_module"), ("vgt_rec_module_kin", "lane_module_kin")):
+        body = _lane_body(source, function)
+        if not body:
+            return ""
+        parts.append(f"LANE_INLINE void {lane}(const vd *const *arg, vd *const *res) {{\n{body}\n}}\n")
+    return "\n".join(parts)
+
+
+def _lane_body(source: str, function: str) -> str:
+    """The statements of the generated ``function`` on vectors (:func:`module_lanes`), or ``""``."""
+    name = re.search(rf"int {function}\(const casadi_real\*\* arg.*?\{{\s*return (casadi_f\d+)\(", source, re.S)
+    body = name and re.search(
+        rf"static int {name.group(1)}\(const casadi_real\*\* arg[^{{]*\{{\n(.*?)\n\}}\n", source, re.S
+    )
+    if not body:
+        return ""
+    lines = [line.strip() for line in body.group(1).splitlines()]
+    if not all(_LANE_STATEMENT.fullmatch(line) for line in lines):
+        return ""
+    text = "\n".join("    " + line for line in lines if line != "return 0;")
+    text = re.sub(r"arg\[(\d)\]\? arg\[\1\]\[(\d+)\] : 0", r"arg[\1][\2]", text)
+    text = re.sub(r"=(-?[0-9.]+(?:e[-+]?\d+)?);", r"=LANE_SPLAT(\1);", text)
+    calls = set(re.findall(r"\b([A-Za-z_]\w*)\(", text)) - {"LANE_SPLAT"}
+    if not calls <= set(_LANE_CALLS) or "?" in text:
+        return ""
+    text = re.sub(r"\b(\w+)\(", lambda m: _LANE_CALLS.get(m.group(1), m.group(1)) + "(", text)
+    text = text.replace("casadi_real ", "vd ")
+    known = {"arg", "res", "if", "vd", "LANE_SPLAT", *_LANE_CALLS.values()}
+    words = re.findall(r"\d[\d.]*(?:e[-+]?\d+)?|[A-Za-z_]\w*", text)  # numbers, then names
+    if any(w not in known and not re.fullmatch(r"a\d+|\d.*", w) for w in words):
+        return ""  # a name of the generated code's own (a constant such as casadi_inf)
+    return text
+
+
 def _compile(compiler: str, workdir: Path) -> Path:
     generator = ca.CodeGenerator(f"{_GENERATED}.c", {"with_header": True})
     for f in module_functions():
         generator.add(f)
     generator.generate(str(workdir) + os.sep)
+    lanes = module_lanes((workdir / f"{_GENERATED}.c").read_text())
+    (workdir / "vgt_rec_module_lanes.h").write_text(lanes)
     (workdir / "layout.c").write_text(interface.layout_source())
     library = workdir / "library.so"
     command = [compiler, *_CFLAGS, _MARGIN_ROW, "-I", str(_CSRC), "-I", str(_DRIVERS), "-I", str(workdir)]

@@ -379,11 +379,13 @@ int vgt_rec_jacobian(const vgt_rec_arm *arm, long n, const double *q, double *jp
     return 0;
 }
 
+#include "vgt_rec_lanes.h"
+
 int vgt_rec_mass(const vgt_rec_arm *arm, long n, const double *q, double *m) {
     work_t k;
     if (work_open(&k, arm)) return -1;
     int nb = arm->nb, nq = arm->nq;
-    for (long s = 0; s < n; ++s) {
+    for (long s = run_lanes(arm, &k, n, q, NULL, NULL, NULL, m, 2); s < n; ++s) { /* the rest one by one */
         joints(arm, &k, q + s * nq, NULL, NULL);
         double *M = m + (long)nq * nq * s;
         for (int i = 0; i < nb; ++i) memcpy(k.body[i].IA, arm->inertia + 36 * i, 36 * sizeof(double));
@@ -468,7 +470,7 @@ int vgt_rec_inverse(const vgt_rec_arm *arm, long n, const double *q, const doubl
     work_t k;
     if (work_open(&k, arm)) return -1;
     int nq = arm->nq;
-    for (long s = 0; s < n; ++s) {
+    for (long s = run_lanes(arm, &k, n, q, qd, qdd, fext, tau, 1); s < n; ++s) { /* the rest one by one */
         const double *x = q + s * nq, *xd = qd + s * nq, *xdd = qdd + s * nq;
         joints(arm, &k, x, xd, NULL);
         velocities(arm, &k, xd);
@@ -588,7 +590,7 @@ int vgt_rec_forward(const vgt_rec_arm *arm, long n, const double *q, const doubl
     work_t k;
     if (work_open(&k, arm)) return -1;
     int nq = arm->nq;
-    for (long s = 0; s < n; ++s) {
+    for (long s = run_lanes(arm, &k, n, q, qd, tau, fext, qdd, 0); s < n; ++s) { /* the rest one by one */
         const double *x = q + s * nq, *xd = qd + s * nq;
         joints(arm, &k, x, xd, NULL);
         velocities(arm, &k, xd);

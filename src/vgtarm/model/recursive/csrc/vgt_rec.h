@@ -35,6 +35,13 @@ int vgt_rec_inverse(const vgt_rec_arm *arm, long n, const double *q, const doubl
                     const double *fext, double *tau);
 int vgt_rec_forward(const vgt_rec_arm *arm, long n, const double *q, const double *qd, const double *tau,
                     const double *fext, double *qdd);
+/* Forward and inverse dynamics and the mass matrix run blocks of samples side by side in the lanes
+ * of vectors where the compiler and the CPU have them (the same numbers, bit for bit, as one sample
+ * at a time; vgt_rec_lanes.h). vgt_rec_lanes chooses their instruction set for the whole process:
+ * 0 none (one sample at a time), 1 the baseline (not on x86-64), 2 x86-64-v3 (AVX2), 3 x86-64-v4
+ * (AVX-512), -1 the best of this CPU (the default). Returns the samples per block, 0 for none (-1:
+ * none on this CPU), or -1 when this CPU or library lacks the set asked for (nothing changed). */
+int vgt_rec_lanes(int level);
 /* The pose of every module joint (E row-major, r; without the offset tz) and its partial derivatives
  * of orders 1 to 3 in the module's three legs: 12 + 36 + 108 + 324 = 480 values per module, modules in
  * order, per sample (the generated vgt_rec_module_taylor). */
