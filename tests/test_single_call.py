@@ -32,23 +32,15 @@ from vgtarm.model.compiled import CompiledBackend, InterpretedBackend, build_fun
 from vgtarm.model.robot import recursive_robot
 
 from .conftest import random_configurations
+from .test_api_inputs import METHODS as API_METHODS
 from .test_recursive import configurations, varied_stack
 
-#: Every public method of Robot that evaluates the model on one state, with its arguments.
+#: Every public method of Robot that evaluates the model on one state, with its arguments: those
+#: of test_api_inputs' table but the range and assembly predicates, which evaluate nothing.
 METHODS: dict[str, tuple[str, ...]] = {
-    "forward_kinematics": ("q",),
-    "tip_position": ("q",),
-    "tip_jacobian": ("q",),
-    "tip_hessian": ("q",),
-    "angular_jacobian": ("q",),
-    "com_jacobians": ("q",),
-    "tip_velocity": ("q", "qd"),
-    "bias_accelerations": ("q", "qd"),
-    "mass_matrix": ("q",),
-    "bias_forces": ("q", "qd"),
-    "energy": ("q", "qd"),
-    "forward_dynamics": ("q", "qd", "F", "f_tip"),
-    "inverse_dynamics": ("q", "qd", "qdd", "f_tip"),
+    name: labels
+    for name, labels in API_METHODS.items()
+    if name not in ("in_joint_range", "is_assemblable", "check_assembly")
 }
 STATES = 40
 
