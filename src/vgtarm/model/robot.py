@@ -32,7 +32,7 @@ from ..fileio import parse_toml, read_text_limited
 from ..kinds import other_toml
 from ..machine import blas_on_one_thread
 from ..markup import html_table
-from ..memory import LIMIT_VARIABLE, check_batch
+from ..memory import check_batch, limit_variable_set
 from .assembly import check_margins
 from .backends import checked_single_call, single_call
 from .compiled import Backend, CompiledBackend, InterpretedBackend, get_backend
@@ -134,9 +134,6 @@ _SUMMED = 24
 _SUBTRACT = np.subtract
 _FLOAT = np.dtype(np.float64)
 _NDARRAY = np.ndarray
-#: The name of ``$VGTARM_MEMORY_LIMIT`` as ``os.environ`` keys its own dictionary (CPython), see
-#: :func:`_memory_limit_set`.
-_LIMIT_KEY: Any = os.environ.encodekey(LIMIT_VARIABLE) if hasattr(os.environ, "encodekey") else None
 #: A triangle margin the single-state check computes is trusted from this fraction of the sizes of
 #: its terms (the joints' accepted bounds and the offset ``h``) up: its sum is taken in any order
 #: (BLAS; the C driver ``csrc/single.c`` term after term), the batch path's as ``(G q) + h``, and
@@ -144,18 +141,6 @@ _LIMIT_KEY: Any = os.environ.encodekey(LIMIT_VARIABLE) if hasattr(os.environ, "e
 #: terms at most (a few thousand joints would still be far from 2**12 units). A margin below it
 #: (1e-12 m for the paper's legs) goes the batch path, which decides as it always has.
 _MARGIN_TRUST = 2.0**-40
-
-
-def _memory_limit_set() -> bool:
-    """Whether ``$VGTARM_MEMORY_LIMIT`` is set (even to blanks): if it is not, :func:`check_batch`
-    returns at once for a row of less than ``SMALL_BATCH`` bytes. Looked up in ``os.environ``'s own
-    dictionary where CPython has one: ten times faster than ``os.environ.get``, which raises and
-    catches a KeyError for an unset variable (0.4 us, a tenth of a single state's forward
-    dynamics); True when unsure (then :func:`check_batch` decides)."""
-    data = getattr(os.environ, "_data", None)
-    if type(data) is not dict or _LIMIT_KEY is None:
-        return True
-    return _LIMIT_KEY in data
 
 
 class _SingleState:
@@ -245,7 +230,7 @@ class _SingleState:
                 frames.append(frame)
                 return None
             view[...] = array
-        if _memory_limit_set():  # checked after the types, as the batch path does
+        if limit_variable_set():  # checked after the types, as the batch path does
             try:
                 check_batch(1, self.row_bytes(arrays), self.method)
             except BaseException:
