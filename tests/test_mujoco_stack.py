@@ -123,6 +123,47 @@ def test_geometry_matches_ours_over_random_states(stack):
         np.testing.assert_allclose(bridge.joint_positions(), q, rtol=0, atol=1e-14)
 
 
+def _turned_tool(robot: vgtarm.Robot, angle: float = 0.4) -> vgtarm.Robot:
+    """``robot`` with its tool's axis tilted by ``angle`` (rad) about F3's ``x`` and its edge along
+    F3's ``-y`` turned alike (the tool frame ``[edge, axis x edge, axis]`` is then not the identity)."""
+    c, s = float(np.cos(angle)), float(np.sin(angle))
+    return robot.with_parameters(dataclasses.replace(robot.parameters, tool_axis=(0.0, -s, c), tool_edge=(0.0, -c, -s)))
+
+
+def _assert_tip_site_is_the_tool_frame(robot: vgtarm.Robot, n: int, seed: int) -> None:
+    """Over random states, MuJoCo's site ``tip`` is at the tip and turned as ``robot.tool_frame(q)``
+    (to the 13 significant digits of the written ``quat``)."""
+    bridge = MujocoRobot(robot)
+    site = bridge.model.site("tip").id
+    for q in random_states(robot, n, seed=seed):
+        bridge.set_state(q, np.zeros(robot.n_joints))
+        tip, rotation = robot.tool_frame(q)
+        np.testing.assert_allclose(bridge.data.site_xpos[site], tip, rtol=0, atol=1e-14)
+        np.testing.assert_allclose(bridge.data.site_xmat[site].reshape(3, 3), rotation, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(bridge.data.site_xmat[site].reshape(3, 3)[:, 2], robot.tool_axis(q), atol=1e-12)
+
+
+def test_the_tip_site_carries_the_tool_frame(stack):
+    """A turned tool: the site ``tip``'s axes are the tool frame, its ``z`` the tool's axis. A default
+    tool writes no orientation (the file as before) and the site's axes are then ``C03``'s (the
+    examples stand straight at home)."""
+    robot, _ = stack
+    assert not re.search(r'<site name="tip"[^>]*quat', to_mjcf(robot))
+    _assert_tip_site_is_the_tool_frame(robot, 5, seed=12)
+    turned = _turned_tool(robot)
+    assert re.search(r'<site name="tip"[^>]*quat="', to_mjcf(turned))
+    _assert_tip_site_is_the_tool_frame(turned, 10, seed=13)
+
+
+def test_the_tip_site_carries_the_tool_frame_on_an_arm_tilted_at_home():
+    """The site's orientation is the end-effector's at home times the tool frame: written for a
+    default tool too when the arm does not stand straight at home (the odd stack's module 1)."""
+    robot = _odd_stack()
+    assert re.search(r'<site name="tip"[^>]*quat="', to_mjcf(robot))
+    _assert_tip_site_is_the_tool_frame(robot, 5, seed=14)
+    _assert_tip_site_is_the_tool_frame(_turned_tool(robot, angle=-1.1), 5, seed=15)
+
+
 #: Worst differences measured over 1,000 states of the six-module arm (``vgtarm check mujoco
 #: --config examples/six_modules.toml``, seed 0; docs/mujoco.md), and the bounds asked here.
 DYNAMICS_BOUND = 1e-10

@@ -315,6 +315,15 @@ class Robot:
 
     and, with :class:`~vgtarm.errors.AssemblyError`, leg sets that cannot be assembled. A batch of
     zero rows gives empty results.
+
+    Kinematics: :meth:`forward_kinematics` (passive angles, platform frames, the tip point and the
+    end-effector's orientation ``C03``), :meth:`tip_position`, :meth:`tip_jacobian`,
+    :meth:`tip_hessian`, :meth:`angular_jacobian`, :meth:`tip_velocity`,
+    :meth:`bias_accelerations`, and the tool's frame: :attr:`tool_rotation` (the tool frame in the
+    end-effector frame: ``x`` along the tool's edge, ``z`` along its axis; a stack's
+    ``[end_effector] tool_axis``, ``tool_edge``, the identity by default and for the paper's
+    robot), :meth:`tool_frame` (the tip and ``C03 @ tool_rotation``) and :meth:`tool_axis`
+    (``C03 @ axis``, the direction a drill advances, in F0).
     """
 
     def __init__(
@@ -332,6 +341,10 @@ class Robot:
         self._low, self._high = self._ranges["q"]
         self._units = input_units(parameters)
         self._G, self._h = parameters.margin_form()
+        # the tool frame in the end-effector frame (the paper's robot has none: the identity)
+        self._tool_rotation = parameters.tool_rotation if isinstance(parameters, Stack) else np.eye(3)
+        self._tool_rotation.flags.writeable = False
+        self._tool_default = bool(np.array_equal(self._tool_rotation, np.eye(3)))
         self.n_joints: int = parameters.n_joints
         self.joint_names: tuple[str, ...] = parameters.joint_names
         self.joint_units: tuple[str, ...] = parameters.joint_units
@@ -704,6 +717,27 @@ class Robot:
         """Passive angles, platform frames, tip point and orientation (paper eqs. 1-11)."""
         passive, origins, rotations, tip, rotation = self._call("forward_kinematics", q)
         return ForwardKinematics(passive, origins, rotations, tip, rotation)
+
+    @property
+    def tool_rotation(self) -> Array:
+        """The tool frame in the end-effector frame F3, ``(3, 3)``: its columns are the tool's edge,
+        ``axis x edge`` and axis (a stack's ``[end_effector] tool_edge`` and ``tool_axis``); the
+        identity by default and for the paper's robot."""
+        return self._tool_rotation.copy()
+
+    def tool_frame(self, q: ArrayLike) -> tuple[Array, Array]:
+        """The tool frame in F0: the tip point ``(..., 3)`` (m) and the orientation
+        ``C03 @ tool_rotation`` ``(..., 3, 3)`` (``z`` the tool's axis, ``x`` its edge); with the
+        default tool the orientation is ``C03`` itself."""
+        fk = self.forward_kinematics(q)
+        if self._tool_default:
+            return fk.tip, fk.rotation
+        return fk.tip, fk.rotation @ self._tool_rotation
+
+    def tool_axis(self, q: ArrayLike) -> Array:
+        """The tool's axis in F0, ``C03 @ axis`` ``(..., 3)`` (a unit vector: the direction a drill
+        advances)."""
+        return self.forward_kinematics(q).rotation @ self._tool_rotation[:, 2]
 
     def tip_position(self, q: ArrayLike) -> Array:
         """Tip point P in F0, ``(..., 3)`` (m). Cheaper than the full forward kinematics."""

@@ -257,6 +257,11 @@ COLOURS = {
 }
 
 
+#: A tool frame this close to the end-effector body's axes (every element) is written as the body's:
+#: round-off of a home pose standing straight (2.8e-16 for ``examples/six_modules.toml``).
+_SAME_AXES = 1e-12
+
+
 def to_spec(
     robot: Robot,
     *,
@@ -294,6 +299,7 @@ class _SpecBuilder:
         self.closed = [self.names[j] for legs in self.stack.leg_indices for j in legs[1:]]
         self.last = len(self.g.modules) - 1
         self.tool = np.array(self.stack.tool, dtype=float)
+        self.tool_rotation = self.stack.tool_rotation
         self.leg_mass = leg_mass
         self.leg_inertia = leg_inertia
         self.digits = digits
@@ -393,11 +399,19 @@ class _SpecBuilder:
     def effector(self, body: Any, origin: Array, rotation: Array, mount: Array) -> None:
         """The end-effector's inertial, and the tip site (with a rod from the mount point to it
         when the tool stands off), in ``body`` at ``origin`` (the last platform's centre) whose
-        tool is mounted at ``mount`` from it."""
+        tool is mounted at ``mount`` from it and turned by ``rotation`` at home. The site's axes
+        are the tool frame (``z`` the tool's axis, ``x`` its edge): an orientation is written
+        only when that frame is not the body's (F0's axes at home), so a default tool on an arm
+        standing straight at home keeps the file as it was."""
         r = self.r
         self.part(body, self.stack.end_effector, origin, rotation, origin)
         tip = mount + rotation @ self.tool
         site = body.add_site(name="tip", pos=r(tip), size=[0.005])
+        frame = rotation @ self.tool_rotation  # the tool frame at home, in the body's (F0) axes
+        if np.abs(frame - np.eye(3)).max() > _SAME_AXES:
+            quat = np.zeros(4)
+            self.mujoco.mju_mat2Quat(quat, frame.ravel())
+            site.quat = r(quat)
         if self.scene:
             site.material = "tip"
         if self.tool.any():

@@ -1,4 +1,4 @@
-"""The mechanism drawn with Matplotlib: legs, platforms, twist axis, tool and frames, to scale.
+"""The mechanism drawn with Matplotlib: legs, platforms, twist axis, tool (and its axis) and frames, to scale.
 
 :func:`draw_mechanism` draws one :class:`~vgtarm.app.pictures.geometry.MechanismGeometry` into a 3-D Axes
 and returns the artists, which :meth:`MechanismArtists.update` moves to another configuration
@@ -77,6 +77,7 @@ _STYLE: dict[str, dict[str, Any]] = {
     "twist_bar": {"linewidth": 3.0},
     "tool": {"color": "black", "linewidth": 2.6},
     "end_effector": {"linewidth": 3.0},
+    "tool_axis": {"color": "tab:red", "linewidth": 1.4, "linestyle": (0, (6, 2, 1, 2))},
 }
 #: Colours of the plates: the base, then the platforms alternately (the paper's two: blue, purple).
 _PLATE_COLOURS = {"base": "0.55", "platform1": "tab:blue", "platform2": "tab:purple"}

@@ -16,7 +16,8 @@ joints ``A' = A + s (cos alpha, sin alpha)`` and ``B' = A + p (cos beta, sin bet
 module 2's mirrored ``(-h, 0, z)`` of the paper. The platform centre ``O_k`` is the middle of
 ``A'B'``, its frame ``C_0k`` the model's. What stands on module ``k`` stands on ``(O_k, C_0k)``,
 or, after a twist joint ``psi``, on ``(O_k + height C_0k u3, C_0k Rz(psi))``; the tip is the last
-such origin plus the end-effector's rotation times the tool offset. The tests check the centres
+such origin plus the end-effector's rotation times the tool offset. From the tip a short line runs
+along the tool's axis (``C03 @ axis``, :meth:`vgtarm.Robot.tool_axis`). The tests check the centres
 and the tip against the model's own.
 
 Lengths are in metres, in F0.
@@ -24,7 +25,7 @@ Lengths are in metres, in F0.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -38,9 +39,22 @@ from ...model.stack.symbolic import plane_direction
 Array = NDArray[np.float64]
 
 #: Kinds of drawn segment, in drawing order.
-SEGMENT_KINDS = ("base", "leg", "platform", "twist", "twist_axis", "twist_bar", "tool", "end_effector")
+SEGMENT_KINDS = (
+    "base",
+    "leg",
+    "platform",
+    "twist",
+    "twist_axis",
+    "twist_bar",
+    "tool",
+    "end_effector",
+    "tool_axis",
+)
 #: Length of the frames' axis arrows as a fraction of module 1's base half-width.
 FRAME_AXIS_FRACTION = 0.6
+#: Length of the tool's axis drawn from the tip, as a fraction of module 1's base half-width
+#: (longer than the frames' axes, so it shows past the end-effector frame's ``z`` arrow).
+TOOL_AXIS_FRACTION = 1.0
 #: Half-length of a twist's cross-bar (the end-effector's, or an inner twist's) as a fraction of the
 #: half-width of the platform it stands on.
 END_EFFECTOR_FRACTION = 0.6
@@ -56,9 +70,10 @@ class Segment:
         name: ``"s1"``, ``"v1"``, ``"p1"`` ... for legs (the joint's name), ``"base1"``,
             ``"platform1"`` (the module's top edge ``A'B'``), ``"tool"`` (the end-effector, from
             the last platform centre to the tip), ``"twist_axis"`` (the end-effector's twist
-            axis), ``"end_effector"`` (its cross-bar); a twist joint ``psiN`` inside the arm
-            gives ``"twistN"`` (its part, from the platform centre to the next module's mount),
-            ``"twist_axisN"`` and ``"twist_barN"`` (its cross-bar).
+            axis), ``"end_effector"`` (its cross-bar), ``"tool_axis"`` (from the tip along the
+            tool's axis, :data:`TOOL_AXIS_FRACTION` of module 1's base half-width); a twist
+            joint ``psiN`` inside the arm gives ``"twistN"`` (its part, from the platform centre
+            to the next module's mount), ``"twist_axisN"`` and ``"twist_barN"`` (its cross-bar).
         kind: one of :data:`SEGMENT_KINDS`.
         start, end: end points (3,) in F0 (m).
         joint: index in ``q`` of the joint that drives this bar (legs, the twists' cross-bars and
@@ -165,6 +180,7 @@ class ArmLayout:
         legs: ``(m,)`` indices in ``q`` of each module's ``(s, v, p)``.
         twists: ``(m,)`` the twist joint after each module as ``(index in q, height in m)``, or None.
         tool: ``(3,)`` tip point from the last mount point, in the end-effector's frame (m).
+        tool_rotation: ``(3, 3)`` the tool frame in the end-effector's frame (``z`` its axis).
     """
 
     joint_names: tuple[str, ...]
@@ -176,6 +192,7 @@ class ArmLayout:
     legs: tuple[tuple[int, int, int], ...]
     twists: tuple[tuple[int, float] | None, ...]
     tool: Array
+    tool_rotation: Array = field(default_factory=lambda: np.eye(3))
 
     @property
     def n_modules(self) -> int:
@@ -206,6 +223,7 @@ def arm_layout(parameters: RobotParameters | Stack) -> ArmLayout:
         legs=stack.leg_indices,
         twists=tuple(twists),
         tool=np.array(stack.tool, dtype=float),
+        tool_rotation=stack.tool_rotation,
     )
 
 
@@ -404,6 +422,8 @@ class _Drawing:
             )
         )
         self.frames.append(FrameAxes(f"F{self.m + 1}", tip, fk.rotation))
+        axis = fk.rotation @ layout.tool_rotation[:, 2]
+        self.segments.append(Segment("tool_axis", "tool_axis", tip, tip + TOOL_AXIS_FRACTION * layout.b[0] * axis))
         return tip
 
     def plates(self) -> list[Plate]:

@@ -6,7 +6,10 @@ and home values, its platform body, and the angle of its operating plane about t
 (degrees, measured in the frame it stands on; the paper's robot: 0 and 90). A twist joint may
 follow any module: it turns what stands above that module about the platform normal, and its
 part has a height along that normal (the mount point of the next module, or of the tool). The
-end-effector body rides on the last frame; the tool point is given from the last mount point.
+end-effector body rides on the last frame; the tool point is given from the last mount point,
+and the tool's orientation in the end-effector frame (F3 of the paper's robot) by its axis (the
+direction a drill advances) and its edge (a blade's cutting edge): the tool frame has ``z`` along
+the axis and ``x`` along the edge (:attr:`Stack.tool_rotation`; by default the identity).
 
 Joints are numbered along the chain: ``s1, v1, p1, [psi2], s2, v2, p2, [psi3], ...``. The twist
 joint after module ``k`` is ``psi{k+1}``: it turns the frame between module ``k`` and module
@@ -34,6 +37,8 @@ The file format (see ``examples/paper_robot.toml``)::
     com = [0.0, 0.0, 0.05]
     inertia = [[...], [...], [...]]
     tool = [0.0, 0.0, 0.0]             # optional: tip point from the last mount point (m)
+    tool_axis = [0.0, 0.0, 1.0]        # optional: the tool's axis, a unit vector in F3
+    tool_edge = [1.0, 0.0, 0.0]        # optional: its edge, a unit vector in F3 perpendicular to the axis
     [environment]
     gravity = [0.0, 0.0, -9.81]        # optional
 
@@ -44,6 +49,7 @@ with a :class:`~vgtarm.errors.ConfigError` of one line naming the module and the
 
 from __future__ import annotations
 
+import math
 import os
 import warnings
 from collections.abc import Callable, Mapping
@@ -87,6 +93,12 @@ LEG_NAMES: tuple[str, str, str] = ("s", "v", "p")
 PASSIVE_NAMES: tuple[str, str, str, str] = ("alpha", "beta", "gamma", "theta")
 #: Length of one body in :meth:`Stack.vector`: mass, com (3), Ixx, Iyy, Izz, Ixy, Ixz, Iyz.
 BODY_VALUES = 10
+#: The default tool axis and edge (in the end-effector frame): the identity tool frame.
+TOOL_AXIS: tuple[float, float, float] = (0.0, 0.0, 1.0)
+TOOL_EDGE: tuple[float, float, float] = (1.0, 0.0, 0.0)
+#: How far the tool's axis and edge may be from unit length, and their dot product from 0.
+TOOL_FRAME_TOLERANCE = 1e-9
+_TOLERANCE_TEXT = "1e-9"
 
 
 @dataclass(frozen=True)
@@ -134,6 +146,8 @@ class Stack:
     modules: tuple[StackModule, ...]
     end_effector: Body
     tool: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    tool_axis: tuple[float, float, float] = TOOL_AXIS
+    tool_edge: tuple[float, float, float] = TOOL_EDGE
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     source: str = field(default="<stack>", compare=False)
 
@@ -262,6 +276,12 @@ class Stack:
         return tuple(module.d for module in self.modules)
 
     @property
+    def tool_rotation(self) -> NDArray[np.float64]:
+        """The tool frame in the end-effector frame, ``(3, 3)``: its columns are ``edge, axis x edge,
+        axis`` (``x`` along the edge, ``z`` along the axis); the identity by default."""
+        return tool_rotation(self.tool_axis, self.tool_edge)
+
+    @property
     def total_mass(self) -> float:
         """Sum of the body masses (kg)."""
         return float(sum(body.mass for body in self.bodies))
@@ -345,6 +365,20 @@ class Stack:
         return len(self.vector())
 
 
+def tool_rotation(axis: tuple[float, float, float], edge: tuple[float, float, float]) -> NDArray[np.float64]:
+    """The rotation ``[edge, axis x edge, axis]`` (columns) of a tool's axis and edge, ``(3, 3)``.
+
+    The axis and edge are unit and perpendicular within :data:`TOOL_FRAME_TOLERANCE` (a stack's are
+    checked); they are made so to round-off here (the axis normalised, the edge's part across it
+    normalised), so the result is a rotation. The defaults give the identity exactly."""
+    z = np.array(axis, dtype=float)
+    z /= math.hypot(*z)
+    x = np.array(edge, dtype=float)
+    x -= (x @ z) * z
+    x /= math.hypot(*x)
+    return np.column_stack([x, np.cross(z, x), z])
+
+
 def _body_values(body: Body) -> list[float]:
     i = body.inertia
     return [body.mass, *body.com, i[0][0], i[1][1], i[2][2], i[0][1], i[0][2], i[1][2]]
@@ -414,8 +448,12 @@ def stack_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> Stack
         reader.fail("modules", f"<{len(entries)} modules>", f"at most {MAX_MODULES} modules")
     modules = [_read_module(reader, entry, k) for k, entry in enumerate(entries, start=1)]
     effector = data["end_effector"]
-    end_effector = _read_body(reader, effector, "end_effector", "end_effector", optional={"tool"})
+    end_effector = _read_body(
+        reader, effector, "end_effector", "end_effector", optional={"tool", "tool_axis", "tool_edge"}
+    )
     tool = reader.vector(effector.get("tool", [0.0, 0.0, 0.0]), "end_effector.tool", 3, "[x, y, z]")
+    axis = reader.vector(effector.get("tool_axis", list(TOOL_AXIS)), "end_effector.tool_axis", 3, "[x, y, z]")
+    edge = reader.vector(effector.get("tool_edge", list(TOOL_EDGE)), "end_effector.tool_edge", 3, "[x, y, z]")
     environment = data.get("environment", {"gravity": [0.0, 0.0, -9.81]})
     reader.keys(environment, "environment", required={"gravity"})
     gravity = reader.vector(environment["gravity"], "environment.gravity", 3, "[gx, gy, gz]")
@@ -427,6 +465,8 @@ def stack_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> Stack
         modules=tuple(modules),
         end_effector=end_effector,
         tool=(tool[0], tool[1], tool[2]),
+        tool_axis=(axis[0], axis[1], axis[2]),
+        tool_edge=(edge[0], edge[1], edge[2]),
         gravity=(gravity[0], gravity[1], gravity[2]),
         source=source,
     )
@@ -517,8 +557,52 @@ def _validate(stack: Stack) -> None:
     _check_body(source, "end_effector", stack.end_effector)
     tool = _field(source, "end_effector.tool")
     checks.vector(tool, stack.tool, 3, minimum=-MAX_LENGTH, maximum=MAX_LENGTH, unit="m", error=ConfigError)
+    _validate_tool_frame(source, stack.tool_axis, stack.tool_edge)
     gravity = _field(source, "environment.gravity")
     checks.vector(gravity, stack.gravity, 3, minimum=-MAX_GRAVITY, maximum=MAX_GRAVITY, unit="m/s^2", error=ConfigError)
+
+
+def _validate_tool_frame(source: str, axis: object, edge: object) -> None:
+    """The tool's axis and edge: finite unit vectors (within :data:`TOOL_FRAME_TOLERANCE`, else the
+    message gives the normalised vector to paste), the edge perpendicular to the axis."""
+    directions: dict[str, NDArray[np.float64]] = {}
+    for name, value in (("tool_axis", axis), ("tool_edge", edge)):
+        where = _field(source, f"end_effector.{name}")
+        given = list(value) if isinstance(value, tuple | list) else value  # shown as the file writes it
+        vector = checks.vector(where, given, 3, expected="3 finite numbers [x, y, z]", error=ConfigError)
+        norm = math.hypot(*vector)
+        if norm == 0.0:
+            checks.refuse(where, given, "a unit vector (a direction), not the zero vector", ConfigError)
+        if abs(norm - 1.0) > TOOL_FRAME_TOLERANCE:
+            expected = f"a unit vector (norm 1 within {_TOLERANCE_TEXT}), its norm is {_norm_text(norm)}"
+            normalised = _pasted(np.array(vector) / norm)
+            checks.refuse(where, given, f"{expected}; normalised: {normalised}", ConfigError)
+        directions[name] = np.array(vector)
+    z, x = directions["tool_axis"], directions["tool_edge"]
+    dot = float(z @ x)
+    if abs(dot) > TOOL_FRAME_TOLERANCE:
+        expected = (
+            f"a direction perpendicular to tool_axis = {_pasted(z)} (|axis . edge| <= {_TOLERANCE_TEXT}), "
+            f"axis . edge is {dot:.6g}"
+        )
+        part = x - dot * z  # the edge's part across the axis
+        if np.linalg.norm(part) > 1e-6:
+            expected += f"; its part across the axis, normalised: {_pasted(part / np.linalg.norm(part))}"
+        checks.refuse(_field(source, "end_effector.tool_edge"), [float(v) for v in x], expected, ConfigError)
+
+
+def _norm_text(norm: float) -> str:
+    """A norm refused as not 1, with the digits that show it is not 1."""
+    for digits in (6, 12):
+        text = f"{norm:.{digits}g}"
+        if float(text) != 1.0:
+            return text
+    return repr(norm)
+
+
+def _pasted(vector: NDArray[np.float64]) -> str:
+    """A direction as TOML to paste, 12 significant digits (a unit vector to ~1e-12)."""
+    return "[" + ", ".join(f"{x + 0.0:.12g}" for x in vector) + "]"
 
 
 def _check_body(source: str, where: str, body: Body) -> None:
@@ -688,6 +772,11 @@ def stack_to_toml(stack: Stack, *, header: str = "") -> str:
         f"com = {_toml_value(body.com)}",
         f"inertia = {_toml_value(body.inertia)}",
         f"tool = {_toml_value(stack.tool)}",
+    ]
+    # the tool's orientation only when it is not the default (old files write back as they were)
+    lines += [f"tool_axis = {_toml_value(stack.tool_axis)}"] if tuple(stack.tool_axis) != TOOL_AXIS else []
+    lines += [f"tool_edge = {_toml_value(stack.tool_edge)}"] if tuple(stack.tool_edge) != TOOL_EDGE else []
+    lines += [
         "",
         "[environment]",
         f"gravity = {_toml_value(stack.gravity)}",
@@ -701,6 +790,8 @@ def reference_stack() -> Stack:
 
 
 __all__ = [
+    "TOOL_AXIS",
+    "TOOL_EDGE",
     "Stack",
     "StackModule",
     "Twist",
@@ -710,4 +801,5 @@ __all__ = [
     "stack_from_parameters",
     "stack_margins",
     "stack_to_toml",
+    "tool_rotation",
 ]
