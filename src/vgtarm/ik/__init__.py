@@ -1,17 +1,20 @@
 """Redundancy-resolving inverse kinematics along desired tip paths (paper Section IV, eq. 12).
 
 For each sample of a desired tip path the joint vector minimises the joint-limit cost ``Phi``
-subject to the tip point (optionally the full pose), the joint limits and assemblability with a
+subject to the tip point (optionally the full pose, the tool's axis or an entry point the axis
+passes through), the joint limits and assemblability with a
 margin; the joint rates and accelerations of the reference follow exactly from the optimality
 conditions. See ``docs/ik.md``.
 
 Public API: :func:`inverse_kinematics` (also ``Robot.inverse_kinematics``), :func:`solve_point`
 (one tip point, a :class:`PointSolution` record), the records
-:class:`IKResult` and :class:`IKSamples`, :class:`OrientationPath`, :class:`IKOptions`, the
+:class:`IKResult` and :class:`IKSamples`, :class:`OrientationPath`, :class:`AxisPath` (a tool
+axis along a direction, the spin free; :mod:`vgtarm.ik.axis`), :class:`IKOptions`, the
 solver interface and registry (:class:`Solver`, :class:`SolverResult`, :func:`register_solver`,
 :data:`SOLVERS`, :func:`solver_names`) and :func:`write_csv`.
 """
 
+from .axis import AxisPath
 from .options import IKOptions
 from .point import PointSolution, solve_point
 from .pose import OrientationPath
@@ -31,6 +34,7 @@ from .solve import (
 __all__ = [
     "ALIASES",
     "CSV_COLUMNS",
+    "AxisPath",
     "SOLVERS",
     "IKOptions",
     "IKResult",

@@ -54,7 +54,7 @@ def _sample_start(state: BatchState, i: int) -> dict[str, Array]:
 
 def approach(problem: IKProblem, task: Task, state: BatchState, i: int, q_start: Array, settings: FastSettings) -> bool:
     """Solve sample ``i`` from ``q_start`` by continuation along a line (and rotation arc) to its target."""
-    tip, rotation = task.forward(q_start[None])
+    tip, rotation = task.forward_frame(q_start[None])
     target = task.position[i]
     distance = float(np.linalg.norm(target - tip[0]))
     angle = 0.0

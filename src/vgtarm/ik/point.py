@@ -10,7 +10,7 @@ the feasible configuration that comes closest, ``success`` False and a one-line 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -21,10 +21,11 @@ from ..errors import UnreachableError
 from ..model.robot import Robot
 from ..paths import MAX_COORDINATE, TipPath
 from . import reference
+from .axis import AxisTarget, axis_error
 from .options import IKOptions
-from .pose import angle_error, orientation_target
+from .pose import OrientationTarget, angle_error, orientation_target
 from .problem import IKProblem
-from .solve import REACH_TOLERANCE, _task, inverse_kinematics
+from .solve import REACH_TOLERANCE, _Targets, _task, inverse_kinematics
 
 Array = NDArray[np.float64]
 #: The time step of the two-sample resting path a point is solved as (s); it does not enter the answer.
@@ -41,8 +42,8 @@ class PointSolution:
         q: ``(n,)`` joint values (m, rad): the eq. 12 optimum when ``success``, else the feasible
             configuration whose tip comes closest to the point.
         residual: distance of the tip at ``q`` from the point (m).
-        orientation_error: angle between the end-effector at ``q`` and ``rotation`` (rad); NaN
-            when the orientation is free.
+        orientation_error: angle between the end-effector at ``q`` and ``rotation`` (rad), or
+            between the tool's axis and ``axis``; NaN when the orientation is free.
         margins: ``(n, 2)`` distance of each joint to its lower limit (column 0) and to its upper
             limit (column 1), in the joint's unit; both >= 0 within the limits.
         phi: the joint-limit cost ``Phi(q)`` of eq. 12.
@@ -54,6 +55,8 @@ class PointSolution:
         wall_time_s: wall-clock time of the solve (s).
         robot: the :class:`~vgtarm.Robot` it was solved for (None if unknown). Not pickled (a robot
             holds its compiled library): a solution sent to another process keeps ``joint_names``.
+        axis: ``(3,)`` the target direction of the tool's axis (axis and entry-point tasks), or None.
+        entry_point: ``(3,)`` the entry point the tool's axis passes through (m), or None.
     """
 
     point: Array
@@ -69,6 +72,8 @@ class PointSolution:
     joint_names: tuple[str, ...]
     wall_time_s: float
     robot: Robot | None = None
+    axis: Array | None = None
+    entry_point: Array | None = None
 
     def __getstate__(self) -> dict[str, Any]:
         """The pickled state: everything but :attr:`robot` (its compiled library does not pickle)."""
@@ -93,7 +98,14 @@ def _format(p: Array) -> str:
 
 
 def solve_point(
-    robot: Robot, point: object, *, rotation: object = None, solver: str = "fast", **options: Any
+    robot: Robot,
+    point: object,
+    *,
+    rotation: object = None,
+    axis: object = None,
+    entry_point: object = None,
+    solver: str = "fast",
+    **options: Any,
 ) -> PointSolution:
     """Joint configuration that puts the tip of ``robot`` at ``point``, by eq. 12's joint-limit criterion.
 
@@ -102,6 +114,10 @@ def solve_point(
         point: ``(3,)`` the tip point in the base frame (m).
         rotation: ``None`` (free orientation) or the end-effector orientation ``C03`` ``(3, 3)``
             (as ``vgtarm fk`` prints it).
+        axis: ``None`` or the direction ``(3,)`` of the tool's axis in the base frame, the spin about
+            it free (:mod:`vgtarm.ik.axis`).
+        entry_point: ``None`` or a point ``(3,)`` (m) the tool's axis passes through (the axis is
+            then the direction from it to ``point``).
         solver: an inverse-kinematics solver name (:func:`vgtarm.ik.solver_names`).
         **options: See :class:`~vgtarm.ik.options.IKOptions` (``margin``, ``initial_guess``, ...).
 
@@ -116,18 +132,31 @@ def solve_point(
     """
     started = time.perf_counter()
     p = _as_point(point)
-    target = None if rotation is None else orientation_target(rotation, 2, True)
     path = TipPath(
         "point", np.array([0.0, _REST_DT]), np.stack([p, p]), np.zeros((2, 3)), np.zeros((2, 3)), np.zeros((2, 3))
     )
+    tasks = _Targets(rotation, axis, entry_point)
+    target = None if rotation is None else orientation_target(rotation, 2, True)
+    pointing = tasks.target(path, True)
     pose = None if target is None else target.rotation[0]
     try:
-        result = inverse_kinematics(robot, path, solver=solver, rates="finite_difference", pose=pose, **options)
+        result = inverse_kinematics(
+            robot,
+            path,
+            solver=solver,
+            rates="finite_difference",
+            pose=pose,
+            axis=axis,
+            entry_point=entry_point,
+            **options,
+        )
     except UnreachableError:
-        return _closest(robot, path, p, target, options, started)
+        return _closest(robot, path, p, target if pointing is None else pointing, options, started)
     q = np.array(result.q[0])
     tip, tip_rotation = robot.tip_position(q), robot.forward_kinematics(q).rotation
     error = float("nan") if pose is None else float(angle_error(tip_rotation[None], pose[None])[0])
+    if pointing is not None:
+        error = float(axis_error(robot.tool_axis(q)[None], pointing.direction[:1])[0])
     success = bool(result.samples.success[0])
     message = (
         f"point {_format(p)} m reached and the optimality conditions of eq. 12 verified"
@@ -135,7 +164,15 @@ def solve_point(
         else f"point {_format(p)} m: {result.message}"
     )
     status = "solved" if success else "unverified"
-    return _solution(robot, p, pose, q, float(np.linalg.norm(tip - p)), error, status, message, started)
+    solution = _solution(robot, p, pose, q, float(np.linalg.norm(tip - p)), error, status, message, started)
+    return _pointing(solution, pointing)
+
+
+def _pointing(solution: PointSolution, pointing: AxisTarget | None) -> PointSolution:
+    """``solution`` with the axis task's target (axis and entry point) recorded."""
+    if pointing is None:
+        return solution
+    return replace(solution, axis=pointing.direction[0].copy(), entry_point=pointing.entry_point)
 
 
 def _closest(
@@ -148,14 +185,16 @@ def _closest(
     task = _task(robot, path, target)
     q, r = reference.closest(problem, task, 0, [np.asarray(start, dtype=float)], settings)
     residual = float(np.linalg.norm(r[:3]))
-    error = float(np.arcsin(min(1.0, float(np.linalg.norm(r[3:]))))) if task.m == 6 else float("nan")
-    extra = f" and orientation error {error:.3g} rad" if task.m == 6 else ""
+    oriented = task.m > 3
+    error = float(np.arcsin(min(1.0, float(np.linalg.norm(r[3:]))))) if oriented else float("nan")
+    extra = f" and {'axis' if task.kind == 'axis' else 'orientation'} error {error:.3g} rad" if oriented else ""
     message = (
         f"point {_format(p)} m cannot be reached: the closest tip within the joint limits and the assembly margin "
         f"({problem.margin:g} m) is {residual:.3g} m away{extra} (tolerance {REACH_TOLERANCE:g} m)"
     )
-    pose = None if target is None else target.rotation[0]
-    return _solution(robot, p, pose, np.array(q, dtype=float), residual, error, "unreachable", message, started)
+    pose = target.rotation[0] if isinstance(target, OrientationTarget) else None
+    solution = _solution(robot, p, pose, np.array(q, dtype=float), residual, error, "unreachable", message, started)
+    return _pointing(solution, target if isinstance(target, AxisTarget) else None)
 
 
 def _solution(

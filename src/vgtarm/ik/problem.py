@@ -35,6 +35,7 @@ from ..model.assembly import TRIANGLE_INEQUALITIES
 from ..model.parameters import JOINT_NAMES, N_JOINTS, RobotParameters
 from ..model.robot import Robot
 from ..model.stack import Stack
+from . import axis
 from .effort import EffortTerms
 
 Array = NDArray[np.float64]
@@ -236,12 +237,14 @@ class Task:
     """Targets of every sample of a path and the compiled functions of the task.
 
     Attributes:
-        kind: ``"position"`` (3 equality rows: tip point) or ``"pose"`` (6: tip point and the
-            orientation residual ``0.5 vee(R_d^T R - R^T R_d)``).
+        kind: ``"position"`` (3 equality rows: tip point), ``"pose"`` (6: tip point and the
+            orientation residual ``0.5 vee(R_d^T R - R^T R_d)``) or ``"axis"`` (5: tip point and the
+            tool's axis along a direction, :mod:`vgtarm.ik.axis`).
         t: ``(N,)`` sample times (s).
         position, velocity, acceleration: ``(N, 3)`` desired tip point and its derivatives (SI).
-        rotation: ``(N, 9)`` desired orientation, row-major, or ``None`` for the position task.
-        angular_velocity, angular_acceleration: ``(N, 3)`` of the desired orientation in F0
+        rotation: ``(N, 9)`` desired orientation, row-major (the axis task: the frames ``[w1 w2 d]``
+            of the target axis ``d``), or ``None`` for the position task.
+        angular_velocity, angular_acceleration: ``(N, 3)`` of the desired orientation (frame) in F0
             (rad/s, rad/s^2), or ``None``.
         model: the robot whose compiled functions the task evaluates (by name, through
             :meth:`vgtarm.Robot.evaluate`).
@@ -253,6 +256,7 @@ class Task:
             or a line (``r = 1``) (:mod:`vgtarm.ik.taskspace`): the position task is then the
             ``r`` rows ``E (P(q) - P_d)``, evaluated through the same compiled functions (the
             multipliers enter them as ``E^T lam``); None for the tip's three coordinates.
+        tool: ``(3, 3)`` the tool rotation ``B`` in the end-effector frame (the axis task only).
     """
 
     kind: str
@@ -267,6 +271,7 @@ class Task:
     evaluations: list[int] = field(default_factory=lambda: [0])
     effort: EffortTerms | None = None
     directions: Array | None = None
+    tool: Array | None = None
 
     def _evaluate(self, name: str, inputs: dict[str, Array], n: int) -> dict[str, Array]:
         self.evaluations[0] += n
@@ -277,13 +282,13 @@ class Task:
         """Number of equality rows."""
         if self.directions is not None:
             return int(self.directions.shape[0])
-        return 3 if self.kind == "position" else 6
+        return {"position": 3, "axis": 5}.get(self.kind, 6)
 
     @property
     def compiled_rates(self) -> bool:
         """Whether :meth:`evaluate_with_rates` can give the rates in its compiled call (not for a
         reduced task, whose rates :func:`vgtarm.ik.rates.exact` computes from the same conditions)."""
-        return self.directions is None
+        return self.directions is None and self.kind != "axis"
 
     @property
     def rates_at_the_end(self) -> bool:
@@ -331,6 +336,7 @@ class Task:
             self.evaluations,
             None if self.effort is None else self.effort.subset(idx),
             self.directions,
+            self.tool,
         )
 
     def with_targets(self, position: Array, rotation: Array | None, like: int = 0) -> Task:
@@ -352,6 +358,7 @@ class Task:
             self.evaluations,
             None if self.effort is None else self.effort.at_rest(like, n),
             self.directions,
+            self.tool,
         )
 
     def forward(self, q: Array) -> tuple[Array, Array]:
@@ -361,7 +368,32 @@ class Task:
 
     def _orientation_inputs(self, idx: Index) -> dict[str, Array]:
         assert self.rotation is not None
+        if self.kind == "axis":
+            assert self.tool is not None
+            return {"R_d": axis.compiled_target(self.rotation[idx].reshape(-1, 3, 3), self.tool)}
         return {"R_d": self.rotation[idx]}
+
+    def _axis_rows(self) -> Array:
+        """``D`` ``(2, 3)``: the axis task's rows of the pose functions' orientation residual."""
+        assert self.tool is not None
+        return axis.task_rows(self.tool)
+
+    def _lift_axis(self, lam: Array) -> Array:
+        """The pose functions' six multipliers ``[lam_P; D^T lam_a]`` of the axis task's five."""
+        return np.concatenate([lam[:, :3], lam[:, 3:] @ self._axis_rows()], axis=1)
+
+    def _reduce_axis(self, rows: Array, nj: int) -> Array:
+        """A pose KKT-residual vector ``(n, nj + 6)`` with its orientation rows projected, ``(n, nj + 5)``."""
+        return np.concatenate([rows[:, : nj + 3], rows[:, nj + 3 :] @ self._axis_rows().T], axis=1)
+
+    def forward_frame(self, q: Array) -> tuple[Array, Array]:
+        """As :meth:`forward`, with the rotation the task's targets compare with: the end-effector's
+        (pose task) or the tool frame's ``C03 B`` (axis task, whose targets are frames ``[w1 w2 d]``)."""
+        tip, rotation = self.forward(q)
+        if self.kind != "axis":
+            return tip, rotation
+        assert self.tool is not None
+        return tip, (rotation.reshape(-1, 3, 3) @ self.tool).reshape(-1, 9)
 
     def _motion_inputs(self, idx: Index, suffix: str = "") -> dict[str, Array]:
         assert self.angular_velocity is not None and self.angular_acceleration is not None
@@ -391,11 +423,24 @@ class Task:
             out = self._evaluate("ik_position", {"q": q, "lam": lam}, n)
             c, J, H = out["c"], out["J"], out["H"]
             c -= self.position[idx]
+        elif self.kind == "axis":
+            return self._evaluate_axis(idx, q, lam)
         else:
             out = self._evaluate("ik_pose", {"q": q, "lam": lam, **self._orientation_inputs(idx)}, n)
             c, J, H = out["c"], out["J"], out["H"]
             c[:, :3] -= self.position[idx]
         return c, J.reshape(n, self.m, nj), H.reshape(n, nj, nj), g
+
+    def _evaluate_axis(self, idx: Index, q: Array, lam: Array) -> tuple[Array, Array, Array, None]:
+        """:meth:`evaluate_cost` of the axis task: the pose functions at ``M = F K B^T``, rows projected."""
+        n, nj = idx.shape[0], q.shape[1]
+        inputs = {"q": q, "lam": self._lift_axis(lam), **self._orientation_inputs(idx)}
+        out = self._evaluate("ik_pose", inputs, n)
+        c = self._reduce_axis(out["c"], 0)
+        c[:, :3] -= self.position[idx]
+        J = out["J"].reshape(n, 6, nj)
+        J = np.concatenate([J[:, :3], np.einsum("rk,nkj->nrj", self._axis_rows(), J[:, 3:])], axis=1)
+        return c, J, out["H"].reshape(n, nj, nj), None
 
     def _evaluate_reduced(self, idx: Index, q: Array, lam: Array) -> tuple[Array, Array, Array, Array | None]:
         """:meth:`evaluate_cost` of a reduced position task: the three-row functions at ``E^T lam``, projected."""
@@ -476,6 +521,12 @@ class Task:
         elif self.kind == "pose":
             inputs = {"q": q, "lam": lam, **self._orientation_inputs(idx), **self._motion_inputs(idx)}
             rhs -= self._evaluate("ik_pose_dt", inputs, n)["dt"]
+        elif self.kind == "axis":
+            full = np.zeros((n, nj + 6))
+            full[:, nj : nj + 3] = self.velocity[idx]
+            inputs = {"q": q, "lam": self._lift_axis(lam), **self._orientation_inputs(idx), **self._motion_inputs(idx)}
+            full -= self._evaluate("ik_pose_dt", inputs, n)["dt"]
+            return self._reduce_axis(full, nj)
         return rhs
 
     def second_order_rhs(self, idx: Index, q: Array, lam: Array, qd: Array, lam_d: Array) -> Array:
@@ -487,6 +538,8 @@ class Task:
         n = idx.shape[0]
         if self.directions is not None:
             lam, lam_d = self._lift(lam), self._lift(lam_d)
+        elif self.kind == "axis":
+            lam, lam_d = self._lift_axis(lam), self._lift_axis(lam_d)
         inputs = {"q": q, "lam": lam, "qd": qd, "lam_d": lam_d}
         if self.effort is not None:
             d2 = self._evaluate("ik_effort_d2", {**inputs, **self._effort_inputs(idx, rates=True)}, n)["d2"]
@@ -498,6 +551,8 @@ class Task:
         rhs = -d2
         nj = q.shape[1]
         rhs[:, nj : nj + 3] += self.acceleration[idx]
+        if self.kind == "axis":
+            return self._reduce_axis(rhs, nj)
         return rhs if self.directions is None else self._reduce(rhs, nj)
 
 

@@ -30,12 +30,13 @@ class IKSamples:
         success: ``(N,)`` the sample was solved and its KKT conditions verified.
         residual: ``(N,)`` distance of the tip from the desired point (m).
         orientation_error: ``(N,)`` angle between the end-effector and the desired orientation
-            (rad); NaN for the free-orientation task.
+            (rad), for the axis task between the tool's axis and the desired axis; NaN for the
+            free-orientation task.
         phi: ``(N,)`` the cost ``Phi(q)`` of eq. 12.
         active: ``(N, 2 n + k)`` active inequalities, labelled by ``constraint_labels``: lower
             limits, upper limits, then the assembly rows ``G q + h >= margin``.
         constraint_labels: ``(2 n + k,)`` names of the inequalities.
-        multipliers: ``(N, m)`` Lagrange multipliers of the task equations (3 or 6; 2 or 1 for a
+        multipliers: ``(N, m)`` Lagrange multipliers of the task equations (3, 5 or 6; 2 or 1 for a
             robot whose tip moves in a plane or a line).
         inequality_multipliers: ``(N, 2 n + k)`` multipliers of the inequalities (>= 0 at an optimum).
         stationarity: ``(N,)`` largest entry of the Lagrangian gradient.
@@ -46,6 +47,8 @@ class IKSamples:
             guess already met the tolerances).
         method: ``(N,)`` method that produced the sample: ``"newton"``, ``"slsqp"``, ``"ipopt"``,
             or ``"slsqp (fallback)"`` for a sample the fast solver handed to the reference solver.
+        entry_distance: ``(N,)`` distance of the entry point from the tool's axis (m), for the
+            entry-point task; None otherwise.
     """
 
     success: NDArray[np.bool_]
@@ -60,6 +63,7 @@ class IKSamples:
     curvature: Array
     iterations: NDArray[np.int64]
     method: NDArray[np.str_]
+    entry_distance: Array | None = None
 
     @property
     def n_bounds(self) -> int:
@@ -86,10 +90,12 @@ class IKResult:
         q, qd, qdd: ``(N, n)`` joint values, rates and accelerations (m, rad; per s, per s^2).
         position, velocity, acceleration: ``(N, 3)`` the desired tip path (SI).
         orientation: ``(N, 3, 3)`` the desired orientation (pose task) or ``None``.
+        axis: ``(N, 3)`` the desired tool axis (axis and entry-point tasks) or ``None``.
+        entry_point: ``(3,)`` the entry point the tool's axis passes through (m), or ``None``.
         samples: the per-sample record.
         solver: name of the solver (``"fast"``, ``"slsqp"``, ``"ipopt"``).
         rates: ``"exact"`` or ``"finite_difference"``.
-        task: ``"position"`` or ``"pose"``.
+        task: ``"position"``, ``"pose"``, ``"axis"`` or ``"entry point"``.
         margin: assembly margin used (m).
         lower, upper: ``(n,)`` joint limits.
         wall_time_s: wall-clock time of the solve (s).
@@ -142,6 +148,8 @@ class IKResult:
     status: str = ""
     robot: Robot | None = None
     path: TipPath | None = None
+    axis: Array | None = None
+    entry_point: Array | None = None
 
     def __post_init__(self) -> None:
         if not self.status:  # not given: what success says (an unreachable path is said by the solve)

@@ -218,12 +218,16 @@ def build_ipopt(
     definition: Definition = PAPER,
     effort: bool = False,
     directions: Array | None = None,
+    tool: Array | None = None,
 ) -> ca.Function:
     """The IPOPT solver of one sample of the robot ``definition`` (default the paper's); its parameter
     is ``[target point (3), R_d row-major (9, pose only), p]``, and with ``effort`` (the effort
     criterion, position task) ``[target point (3), tool force (3), inverse scales (n), p]``. With
     ``directions`` ``(r, 3)`` (a robot whose tip moves in a plane or a line) the position rows are
-    ``E (P(q) - point)``, written symbolically here, independently of the compiled projection."""
+    ``E (P(q) - point)``, written symbolically here, independently of the compiled projection. The
+    axis task (``kind`` ``"axis"``, ``tool`` the tool rotation ``B``) takes the frame ``[w1 w2 d]`` of its
+    target axis (9, row-major) where the pose task takes ``R_d``, and its rows ``w1 . a``, ``w2 . a`` of
+    the tool axis ``a = C03 B e3``, written here from the forward kinematics."""
     q = ca.SX.sym("q", definition.n_joints)
     point = ca.SX.sym("point", 3)
     p = ca.SX.sym("p", definition.n_parameters)
@@ -236,6 +240,14 @@ def build_ipopt(
     elif kind == "position":
         parameters = ca.vertcat(point, p)
         c = definition.kinematics(q, p).tip - point
+    elif kind == "axis":
+        assert tool is not None
+        frame = ca.SX.sym("F", 9)
+        parameters = ca.vertcat(point, frame, p)
+        fk = definition.kinematics(q, p)
+        a = fk.C03 @ ca.DM(tool[:, 2])
+        w = rotation_from_row_major(frame)
+        c = ca.vertcat(fk.tip - point, w[:, 0].T @ a, w[:, 1].T @ a)
     else:
         rd = ca.SX.sym("R_d", 9)
         parameters = ca.vertcat(point, rd, p)
@@ -260,7 +272,8 @@ def build_ipopt(
 
 def solve_ipopt(problem: IKProblem, task: Task, state: BatchState, q_start: Array, options: IKOptions) -> None:
     """The IPOPT reference solver (solver contract: :class:`vgtarm.ik.Solver`)."""
-    solver = build_ipopt(problem, task.kind, options, task.model.definition, task.effort is not None, task.directions)
+    effort = task.effort is not None
+    solver = build_ipopt(problem, task.kind, options, task.model.definition, effort, task.directions, task.tool)
     m, k = task.m, problem.n_triangle
     lbg = np.concatenate([np.zeros(m), np.full(k, problem.margin)])
     ubg = np.concatenate([np.zeros(m), np.full(k, np.inf)])

@@ -27,6 +27,7 @@ from ..model.robot import Robot
 from ..paths import MAX_COORDINATE, TipPath
 from . import fast, kkt, reference
 from . import rates as rate_modes
+from .axis import AxisTarget, axis_error, axis_target, entry_distance, entry_point_target, tool_axes
 from .effort import EffortTerms, effort_terms
 from .options import IKOptions, default_coarse_step
 from .pose import HOLD, OrientationTarget, angle_error, orientation_target
@@ -66,7 +67,7 @@ def _check_start(robot: Robot, problem: IKProblem, q: Array) -> Array:
 def _task(
     robot: Robot,
     path: TipPath,
-    target: OrientationTarget | None,
+    target: OrientationTarget | AxisTarget | None,
     effort: EffortTerms | None = None,
     space: TaskSpace | None = None,
 ) -> Task:
@@ -74,6 +75,10 @@ def _task(
     if target is None:
         directions = None if space is None else space.directions
         return Task("position", *common, None, None, None, robot, effort=effort, directions=directions)
+    if isinstance(target, AxisTarget):
+        frame = target.frame.reshape(-1, 9)
+        motion = (target.angular_velocity, target.angular_acceleration)
+        return Task("axis", *common, frame, *motion, robot, tool=np.asarray(robot.tool_rotation, dtype=float))
     rotation = target.rotation.reshape(-1, 9)
     return Task(
         "pose",
@@ -100,11 +105,13 @@ def _closest(
     (it misses by more than :data:`REACH_TOLERANCE`)."""
     q, r = reference.closest(problem, task, i, starts, options)
     position = float(np.linalg.norm(r[:3]))
-    orientation = float(np.arcsin(min(1.0, float(np.linalg.norm(r[3:]))))) if task.m == 6 else 0.0
+    oriented = task.m > 3  # the pose (6 rows) and axis (5) tasks: their rows past the tip are sin(angle)
+    orientation = float(np.arcsin(min(1.0, float(np.linalg.norm(r[3:]))))) if oriented else 0.0
     if max(position, orientation) <= REACH_TOLERANCE:
         return q, None
     x = ", ".join(f"{v:.6g}" for v in task.position[i])
-    extra = f" and orientation error {orientation:.3g} rad" if task.m == 6 else ""
+    what = "axis" if task.kind == "axis" else "orientation"
+    extra = f" and {what} error {orientation:.3g} rad" if oriented else ""
     return q, (
         f"sample {i} at t = {task.t[i]:.6g} s cannot be reached: target tip point ({x}) m; the smallest position "
         f"residual reached within the joint limits and the assembly margin ({problem.margin:g} m) is "
@@ -176,6 +183,8 @@ def inverse_kinematics(
     solver: str = "fast",
     rates: str = "exact",
     pose: object = None,
+    axis: object = None,
+    entry_point: object = None,
     check: bool = True,
     **options: Any,
 ) -> IKResult:
@@ -196,6 +205,12 @@ def inverse_kinematics(
             optimum at the first sample, held constant), a rotation ``(3, 3)`` or ``(N, 3, 3)``,
             or an :class:`~vgtarm.ik.pose.OrientationPath` with the target's angular velocity
             and acceleration (needed for exact rates of a changing orientation).
+        axis: the tool's axis (``robot.tool_rotation``'s third column, in the end-effector frame)
+            along a direction in F0, the spin about it free (:mod:`vgtarm.ik.axis`): a unit vector
+            ``(3,)`` (held), one per sample ``(N, 3)``, or an :class:`~vgtarm.ik.axis.AxisPath`
+            with its rate and acceleration (needed for exact rates of a changing axis).
+        entry_point: a point ``(3,)`` (m) the tool's axis passes through while the tip follows the
+            path (a remote centre of motion): the axis task of the direction from it to the tip.
         check: raise :class:`UnreachableError` for a sample out of reach (the default). With False
             the result is returned instead: ``success`` False, ``status`` ``"unreachable"``, its
             ``message`` naming the first sample out of reach (in time order), its rows before that
@@ -234,11 +249,49 @@ def inverse_kinematics(
     # threads then spin on the cores the work needs: the 50-module arm's case 1 took 421 s wall
     # (235 s CPU) on the 2 shared cores with them, 45 s wall (30 s CPU) without them
     with blas_on_one_thread():
-        return _inverse_kinematics(robot, path, solver=solver, rates=rates, pose=pose, check=check, **options)
+        tasks = _Targets(pose, axis, entry_point)
+        return _inverse_kinematics(robot, path, solver=solver, rates=rates, tasks=tasks, check=check, **options)
+
+
+@dataclass(frozen=True)
+class _Targets:
+    """The orientation part of the task as the user gave it: ``pose``, ``axis`` or ``entry_point`` (at
+    most one), each None when not given."""
+
+    pose: object = None
+    axis: object = None
+    entry_point: object = None
+
+    def __post_init__(self) -> None:
+        given = self.given
+        if len(given) > 1:
+            raise InputError(
+                f"{' and '.join(given)} were both given: expected one of pose, axis and entry_point (an entry point "
+                "sets the axis, from it to the tip)"
+            )
+
+    @property
+    def given(self) -> list[str]:
+        """The names of the arguments given."""
+        return [name for name in ("pose", "axis", "entry_point") if getattr(self, name) is not None]
+
+    @property
+    def kind(self) -> str:
+        """The task: ``"position"``, ``"pose"``, ``"axis"`` or ``"entry point"``."""
+        given = self.given
+        return given[0].replace("_", " ") if given else "position"
+
+    def target(self, path: TipPath, exact: bool) -> AxisTarget | None:
+        """The axis target of an axis or entry-point task (None for the others)."""
+        if self.axis is not None:
+            return axis_target(self.axis, len(path), exact)
+        if self.entry_point is not None:
+            return entry_point_target(self.entry_point, path.position, path.velocity, path.acceleration)
+        return None
 
 
 def _inverse_kinematics(
-    robot: Robot, path: TipPath, *, solver: str, rates: str, pose: object, check: bool, **options: Any
+    robot: Robot, path: TipPath, *, solver: str, rates: str, tasks: _Targets, check: bool, **options: Any
 ) -> IKResult:
     """:func:`inverse_kinematics` (its BLAS limited to one thread)."""
     started = time.perf_counter()
@@ -251,8 +304,9 @@ def _inverse_kinematics(
         reach = float(np.linalg.norm(robot.tip_position(robot.parameters.home)))
         settings = replace(settings, coarse_step=default_coarse_step(reach))
     effort = settings.criterion == "effort"
-    if effort and pose is not None:
-        raise InputError("criterion='effort' supports the tip-position task only (pose=None), got a pose")
+    pose = tasks.pose
+    if effort and tasks.given:
+        raise InputError(f"criterion='effort' supports the tip-position task only, got {tasks.given[0]}")
     problem = IKProblem.from_parameters(
         robot.parameters, settings.margin, settings.joint_limit_weight if effort else 1.0
     )
@@ -261,15 +315,17 @@ def _inverse_kinematics(
     )
     space, cut = None, None
     if robot.is_stack and np.linalg.matrix_rank(robot.tip_jacobian(q_start), tol=1e-9) < 3:
-        space, cut = _reduced_task(robot, path, q_start, pose, check)
+        space, cut = _reduced_task(robot, path, q_start, tasks.kind, check)
     n = len(path)
     check_memory(
-        memory_estimate(n, pose is not None),
+        memory_estimate(n, bool(tasks.given)),
         f"path {shown(path.name)}: {n:,} samples of inverse kinematics",
         "give a larger dt or a shorter path",
     )
-    kind = "position" if pose is None else "pose"
-    target, cut = _pose_target(robot, path, pose, rates, (solve, problem, q_start, settings), check, cut)
+    kind = tasks.kind
+    target: OrientationTarget | AxisTarget | None = tasks.target(path, rates == "exact")
+    if target is None:
+        target, cut = _pose_target(robot, path, pose, rates, (solve, problem, q_start, settings), check, cut)
     terms = effort_terms(robot, path, settings.tool_force, settings.tool_force_speed) if effort else None
     whole = _task(robot, path, target, terms, space)
     task = whole if cut is None else whole.subset(np.arange(cut.sample, dtype=np.intp))
@@ -285,7 +341,9 @@ def _inverse_kinematics(
         # values of a batched solve of the whole path also depend, in their last bits, on what follows)
         cut, task = found, whole.subset(np.arange(found.sample, dtype=np.intp))
     solved_target = target  # the samples solved: before the cut
-    if cut is not None and target is not None:
+    if cut is not None and isinstance(target, AxisTarget):
+        solved_target = target.subset(cut.sample)
+    elif cut is not None and isinstance(target, OrientationTarget):
         solved_target = replace(target, rotation=target.rotation[: cut.sample])
     qd, qdd = _rates(problem, task, state, rates, path.dt)
     verification = kkt.verify(problem, state, settings.tolerances)
@@ -310,7 +368,14 @@ def _inverse_kinematics(
 
 
 #: :attr:`IKResult.task_space` of the full tasks.
-TASK_FULL = MappingProxyType({"position": "tip (u1, u2, u3)", "pose": "tip (u1, u2, u3) and orientation"})
+TASK_FULL = MappingProxyType(
+    {
+        "position": "tip (u1, u2, u3)",
+        "pose": "tip (u1, u2, u3) and orientation",
+        "axis": "tip (u1, u2, u3) and tool axis",
+        "entry point": "tip (u1, u2, u3) and tool axis through the entry point",
+    }
+)
 
 
 def _check_call(robot: object, path: object, check: object) -> None:
@@ -414,23 +479,23 @@ def reduced_task(robot: Robot, path: TipPath, q_start: Array, pose: object = Non
     checked against the path: a point off it (by more than :data:`REACH_TOLERANCE`) cannot be reached
     (:class:`UnreachableError`, naming the farthest; :func:`vgtarm.ik.solve_point` then gives the
     closest configuration)."""
-    space, _ = _reduced_task(robot, path, q_start, pose, True)
+    space, _ = _reduced_task(robot, path, q_start, "position" if pose is None else "pose", True)
     return space
 
 
-def _reduced_task(
-    robot: Robot, path: TipPath, q_start: Array, pose: object, check: bool
-) -> tuple[TaskSpace, _Cut | None]:
+def _reduced_task(robot: Robot, path: TipPath, q_start: Array, kind: str, check: bool) -> tuple[TaskSpace, _Cut | None]:
     """:func:`reduced_task`; without ``check``, the first point off the plane or line is returned as the
     cut instead of raised for."""
     space = task_space(robot, q_start)
     name = shown(robot.parameters.name)
     if space is None:  # rank 3 elsewhere: task_space raised for the singular start; defensive
         raise InputError(f"robot {name}: the start pose is singular; start from another pose (initial_guess)")
-    if pose is not None:
+    if kind != "position":
+        given = kind.replace(" ", "_")
         raise InputError(
-            f"robot {name}: its tip moves in a {'plane' if space.rank == 2 else 'line'} (task: {space.label}); a pose "
-            "target needs a tip that moves in three directions: leave pose out"
+            f"robot {name}: its tip moves in a {'plane' if space.rank == 2 else 'line'} (task: {space.label}); "
+            f"{'an' if kind[0] in 'aeiou' else 'a'} {kind} target needs a tip that moves in three directions: leave "
+            f"{given} out"
         )
     off = space.distance(path.position)
     outside = np.flatnonzero(off > REACH_TOLERANCE)
@@ -459,15 +524,35 @@ def _checked(result: object, task: Task) -> SolverResult:
     return result
 
 
+def _orientation_errors(
+    task: Task, state: BatchState, target: OrientationTarget | AxisTarget | None
+) -> tuple[Array, Array | None, NDArray[np.bool_]]:
+    """The angle errors ``(N,)`` of the samples (NaN without an orientation target), the entry point's
+    distance from the tool axis ``(N,)`` (entry-point task, else None) and which samples point their
+    axis along the target, not against it (the axis rows also vanish at ``a = -d``)."""
+    n = len(task)
+    if target is None:
+        return np.full(n, np.nan), None, np.ones(n, dtype=bool)
+    tip, rotation = task.forward(state.q)
+    if isinstance(target, OrientationTarget):
+        return angle_error(rotation.reshape(-1, 3, 3), target.rotation), None, np.ones(n, dtype=bool)
+    assert task.tool is not None
+    axes = tool_axes(rotation.reshape(-1, 3, 3), task.tool)
+    error = axis_error(axes, target.direction)
+    entry = None if target.entry_point is None else entry_distance(tip, axes, target.entry_point)
+    return error, entry, np.asarray(error < 0.5 * np.pi)
+
+
 def _samples(
-    problem: IKProblem, task: Task, state: BatchState, check: kkt.Verification, target: OrientationTarget | None
+    problem: IKProblem,
+    task: Task,
+    state: BatchState,
+    check: kkt.Verification,
+    target: OrientationTarget | AxisTarget | None,
 ) -> IKSamples:
-    orientation = np.full(len(task), np.nan)
-    if target is not None:
-        _, rotation = task.forward(state.q)
-        orientation = angle_error(rotation.reshape(-1, 3, 3), target.rotation)
+    orientation, entry, along = _orientation_errors(task, state, target)
     samples = IKSamples(
-        success=state.converged & check.passed,
+        success=state.converged & check.passed & along,
         residual=np.linalg.norm(state.residual[:, :3], axis=1),
         orientation_error=orientation,
         phi=problem.phi(state.q) + task.effort_cost(np.arange(len(task), dtype=np.intp), state.q),
@@ -479,6 +564,7 @@ def _samples(
         curvature=check.curvature,
         iterations=state.iterations.copy(),
         method=state.method.copy(),
+        entry_distance=entry,
     )
     for value in vars(samples).values():
         if isinstance(value, np.ndarray):
@@ -492,7 +578,7 @@ def _result(
     qd: Array,
     qdd: Array,
     samples: IKSamples,
-    target: OrientationTarget | None,
+    target: OrientationTarget | AxisTarget | None,
     problem: IKProblem,
     solver: str,
     rates: str,
@@ -525,7 +611,9 @@ def _result(
         position=path.position,
         velocity=path.velocity,
         acceleration=path.acceleration,
-        orientation=None if target is None else target.rotation,
+        orientation=target.rotation if isinstance(target, OrientationTarget) else None,
+        axis=target.direction if isinstance(target, AxisTarget) else None,
+        entry_point=target.entry_point if isinstance(target, AxisTarget) else None,
         samples=samples,
         solver=solver,
         rates=rates,

@@ -439,7 +439,7 @@ def _check_ik_memory(args: argparse.Namespace, path: DesiredPath) -> None:
     source = f"--path {shown(str(args.path), 200)}" if args.path is not None else f"--case {args.case}"
     spacing = f"--dt {path.dt:g} s" if args.dt is not None else f"dt {path.dt:g} s"
     check_memory(
-        memory_estimate(len(path), args.pose is not None),
+        memory_estimate(len(path), args.pose is not None or args.axis is not None or args.entry_point is not None),
         f"{source} at {spacing}: {len(path):,} samples of inverse kinematics",
         "give a larger --dt or a shorter path",
     )
@@ -486,6 +486,36 @@ def _ik_rotation(args: argparse.Namespace) -> np.ndarray | str | None:
     return _numbers(args.pose, "--pose", 9, "the rotation C03 row by row, R11,R12,...,R33").reshape(3, 3)
 
 
+def _ik_pointing(args: argparse.Namespace) -> dict[str, Any]:
+    """``--axis`` (a unit vector) and ``--entry-point`` (a point): the keywords of the tool-axis tasks."""
+    from ...ik.axis import unit_directions
+
+    out: dict[str, Any] = {}
+    if args.axis is not None:
+        values = _numbers(args.axis, "--axis", 3, "the direction of the tool's axis x,y,z, a unit vector")
+        out["axis"] = unit_directions(values, 1, "--axis")[0]
+    if args.entry_point is not None:
+        out["entry_point"] = _numbers(args.entry_point, "--entry-point", 3, "the entry point x,y,z in m")
+    given = [
+        flag for flag, on in (("--pose", args.pose), ("--axis", args.axis), ("--entry-point", args.entry_point)) if on
+    ]
+    if len(given) > 1:
+        raise InputError(f"{' and '.join(given)}: expected one of --pose, --axis and --entry-point")
+    return out
+
+
+def _ik_task_line(rotation: object, pointing: dict[str, Any]) -> str:
+    """What ``vgtarm ik`` solved, in words."""
+    if "axis" in pointing:
+        return "tip position and the tool's axis along --axis, its spin free"
+    if "entry_point" in pointing:
+        return "tip position and the tool's axis through --entry-point"
+    return {
+        None: "tip position, orientation free",
+        "hold": "tip position and orientation held from the first sample",
+    }.get(rotation if isinstance(rotation, str | None) else "", "tip position and the orientation of --pose")
+
+
 def _ik_point(args: argparse.Namespace) -> tuple[float, np.ndarray] | None:
     """The time (s) and the point (m) of ``--point`` (time 0) or of a one-row ``--path`` file; None for a path."""
     if args.point is not None:
@@ -510,9 +540,10 @@ def cmd_ik(args: argparse.Namespace) -> int:
     if args.output is not None:  # before the work; never over the path file it reads
         check_output_file(args.output, "-o", inputs=[args.path, args.config])
     rotation = _ik_rotation(args)
+    pointing = _ik_pointing(args)
     point = _ik_point(args)
     if point is not None:
-        return _ik_one_point(args, point, rotation)
+        return _ik_one_point(args, point, rotation, pointing)
     path = _ik_path(args)
     _check_ik_memory(args, path)
     robot = load_robot(args.config)
@@ -521,8 +552,14 @@ def cmd_ik(args: argparse.Namespace) -> int:
 
         placement = path_placement(robot)
         path = path if placement is None else placement.apply(path)
+    if "entry_point" in pointing:  # refused naming the flag, before the work
+        from ...ik.axis import entry_point_target
+
+        entry_point_target(pointing["entry_point"], path.position, path.velocity, path.acceleration, "--entry-point")
     with progress_bar("inverse kinematics", "sample", len(path)):  # a long path or a large stack takes seconds
-        result = robot.inverse_kinematics(path, solver=args.solver, rates=args.rates, pose=rotation, **_criterion(args))
+        result = robot.inverse_kinematics(
+            path, solver=args.solver, rates=args.rates, pose=rotation, **pointing, **_criterion(args)
+        )
     if not result.success:
         raise UnreachableError(f"inverse kinematics did not verify every sample: {result.message}; nothing written")
     if args.output is not None:
@@ -531,10 +568,7 @@ def cmd_ik(args: argparse.Namespace) -> int:
     samples = result.samples
     worst = int(np.argmax(samples.residual))
     largest = int(np.argmax(samples.phi))
-    task = {
-        None: "tip position, orientation free",
-        "hold": "tip position and orientation held from the first sample",
-    }.get(rotation if isinstance(rotation, str | None) else "", "tip position and the orientation of --pose")
+    task = _ik_task_line(rotation, pointing)
     if result.task_space.endswith(("plane", "line")):  # a robot whose tip moves in a plane or a line
         task = f"{result.task_space} (its tip cannot leave it), orientation free"
     span = f"dt = {path.dt:g} s, t = {path.t[0]:g} .. {path.t[-1]:g} s"
@@ -544,8 +578,11 @@ def cmd_ik(args: argparse.Namespace) -> int:
     fallbacks = int(np.count_nonzero(np.char.find(samples.method.astype(str), "fallback") >= 0))
     print(f"result     {result.message}; {fallbacks} samples re-solved by the reference solver")
     print(f"residual   worst {samples.residual[worst]:.3g} m at t = {result.t[worst]:.6g} s")
-    if rotation is not None:
-        print(f"           worst orientation error {np.nanmax(samples.orientation_error):.3g} rad")
+    if rotation is not None or pointing:
+        what = "orientation" if rotation is not None else "axis"
+        print(f"           worst {what} error {np.nanmax(samples.orientation_error):.3g} rad")
+    if samples.entry_distance is not None:
+        print(f"           worst distance of the axis from the entry point {samples.entry_distance.max():.3g} m")
     print(f"Phi        largest {samples.phi[largest]:.6g} at t = {result.t[largest]:.6g} s")
     print("limits     closest approach to each joint limit over the path")
     below, above = result.limit_clearance()
@@ -560,7 +597,12 @@ def cmd_ik(args: argparse.Namespace) -> int:
     return 0
 
 
-def _ik_one_point(args: argparse.Namespace, sample: tuple[float, np.ndarray], rotation: np.ndarray | str | None) -> int:
+def _ik_one_point(
+    args: argparse.Namespace,
+    sample: tuple[float, np.ndarray],
+    rotation: np.ndarray | str | None,
+    pointing: dict[str, Any],
+) -> int:
     """``vgtarm ik --point`` (or a one-row path file): the configuration, its residual and its limit margins."""
     from ...ik import solve_point
     from ...ik.records import csv_columns
@@ -573,7 +615,9 @@ def _ik_one_point(args: argparse.Namespace, sample: tuple[float, np.ndarray], ro
     robot = load_robot(args.config)
     t, point = sample
     held = rotation is None or isinstance(rotation, str)  # "hold": the free optimum's own orientation
-    solution = solve_point(robot, point, rotation=None if held else rotation, solver=args.solver, **_criterion(args))
+    solution = solve_point(
+        robot, point, rotation=None if held else rotation, solver=args.solver, **pointing, **_criterion(args)
+    )
     if not solution.success:
         raise UnreachableError(f"{solution.message}; nothing written")
     if args.output is not None:
@@ -586,11 +630,14 @@ def _ik_one_point(args: argparse.Namespace, sample: tuple[float, np.ndarray], ro
 
     space = reduced_space(robot)  # a robot whose tip moves in a plane or a line: that reduced task
     tip_task = "tip position" if space is None else f"{space.label} (its tip cannot leave it)"
-    print(f"task       {tip_task}, orientation {'free' if held else 'of --pose'}")
+    orientation = "free" if held else "of --pose"
+    if pointing:
+        orientation = "the tool's axis " + ("along --axis" if "axis" in pointing else "through --entry-point")
+    print(f"task       {tip_task}, orientation {orientation}")
     print(f"result     {solution.message}")
     print(f"residual   {solution.residual:.3g} m")
-    if not held:
-        print(f"           orientation error {solution.orientation_error:.3g} rad")
+    if not held or pointing:
+        print(f"           {'axis' if pointing else 'orientation'} error {solution.orientation_error:.3g} rad")
     print(f"Phi        {solution.phi:.6g}")
     print("q          name   value            to min       to max")
     for i, name in enumerate(robot.joint_names):
@@ -685,6 +732,22 @@ _IK_FLAGS: tuple[_Flag, ...] = (
             metavar="C03",
             help="also the end-effector orientation: alone, that of the free-orientation optimum at the first sample "
             "(held); or nine numbers R11,R12,...,R33, the rotation C03 row by row (as vgtarm fk prints it)",
+        ),
+    ),
+    (
+        ("--axis",),
+        dict(
+            default=None,
+            metavar="X,Y,Z",
+            help="also the tool's axis along this unit vector (base frame), its spin free: a drill's axis",
+        ),
+    ),
+    (
+        ("--entry-point",),
+        dict(
+            default=None,
+            metavar="X,Y,Z",
+            help="also the tool's axis through this point (m) while the tip follows the path: keyhole work",
         ),
     ),
     (("--solver",), dict(default="fast", metavar="NAME", help="fast (default), reference, slsqp or ipopt")),
