@@ -31,6 +31,7 @@ from . import (  # noqa: E402
     bench_stacks,
     bench_study,
     bench_threads,
+    bench_tool_tasks,
 )
 from .common import machine  # noqa: E402
 
@@ -52,6 +53,7 @@ MODULES: dict[str, Any] = {
     "pathwide": bench_path_wide,
     "threads": bench_threads,
     "single": bench_single,
+    "tools": bench_tool_tasks,
 }
 #: Groups run when none is named (``stacks`` is long: it compiles ten libraries from cold).
 DEFAULT = [name for name in MODULES if name not in ("stacks", "pathwide", "recursive-control")]
