@@ -45,7 +45,7 @@ if TYPE_CHECKING:  # the names as static type checkers and editors see them
     from .experiment.cases import case_study, run_case
     from .export import export_controller
     from .ga import GAOptions
-    from .ik import IKOptions, IKResult, OrientationPath, PointSolution, inverse_kinematics, solve_point
+    from .ik import AxisPath, IKOptions, IKResult, OrientationPath, PointSolution, inverse_kinematics, solve_point
     from .model import (
         JOINT_NAMES,
         BiasAccelerations,
@@ -92,6 +92,7 @@ _SOURCES: dict[str, tuple[str, str]] = {
     **{
         name: ("ik", name)
         for name in (
+            "AxisPath",
             "IKOptions",
             "IKResult",
             "OrientationPath",
@@ -142,10 +143,11 @@ _SOURCES: dict[str, tuple[str, str]] = {
 }
 
 #: Subpackages a user reaches by attribute (``vgtarm.paths.case1``), imported on first use.
-_MODULES = ("control", "export", "ga", "ik", "model", "mujoco_bridge", "paths", "simulation", "study")
+_MODULES = ("control", "export", "ga", "ik", "model", "mujoco_bridge", "paths", "simulation", "study", "toolpaths")
 
 __all__ = [
     "AssemblyError",
+    "AxisPath",
     "BiasAccelerations",
     "ComputedForceControl",
     "ConfigError",
@@ -198,6 +200,7 @@ __all__ = [
     "simulation",
     "solve_point",
     "study",
+    "toolpaths",
     "to_mjcf",
 ]
 

@@ -42,6 +42,11 @@ class JointReference:
     ``robot`` and ``robot_fingerprint`` name the robot they were solved for (see
     :attr:`vgtarm.Robot.fingerprint`; "" if unknown). The simulator checks that the plant's
     kinematics put the tip of ``q`` on ``tip``, and names both robots when they do not.
+
+    ``task`` is the IK task the joints were solved for (``"position"``, or a tool task: ``"axis"``,
+    ``"entry point"``, ``"pose"``) and ``entry_point`` ``(3,)`` the point the tool's axis passes
+    through (None: none); a run's summary then gives the tool's axis error and the axis' distance
+    from the entry point.
     """
 
     t: Array
@@ -53,6 +58,8 @@ class JointReference:
     tip: Array | None = None
     robot: str = ""
     robot_fingerprint: str = ""
+    task: str = "position"
+    entry_point: Array | None = None
 
     def __post_init__(self) -> None:
         t = _array(self.t, "t")
@@ -115,6 +122,8 @@ class JointReference:
             tip=None if position is None else _array(position, "tip"),
             robot=_name_of(source, "robot"),
             robot_fingerprint=str(getattr(source, "robot_fingerprint", "")),
+            task=str(getattr(source, "task", "position")),
+            entry_point=_optional(getattr(source, "entry_point", None), "entry_point"),
         )
 
     def head(self, n: int) -> JointReference:
@@ -127,6 +136,11 @@ class JointReference:
             qdd=self.qdd[:n],
             tip=None if self.tip is None else self.tip[:n],
         )
+
+
+def _optional(value: object, label: str) -> Array | None:
+    """An IK result's optional array (its tool task's ``axis``, ``entry_point``), or None."""
+    return None if value is None else _array(value, label)
 
 
 def _name_of(source: object, what: str) -> str:

@@ -154,8 +154,33 @@ class SimulationResult:
             ga_activation_time_median_s=_percentile(self.activations, 50.0),
             ga_activation_time_p99_s=_percentile(self.activations, 99.0),
             time_in_ga_mode_s=float(np.count_nonzero(self.mode == MODE_GA) * self.dt),
+            **self._tool_figures(n),
         )
         return summary
+
+    def _tool_figures(self, n: int) -> dict[str, Any]:
+        """A tool task's figures (:mod:`vgtarm.ik.axis`; the pose task too): the largest and RMS angle
+        of the tool's axis from its desired axis (that of the desired joints, as the tip error is
+        ``|P(q_d) - P(q)|``), after the transient too, and with an entry point the largest distance of
+        the axis from it; none for a run whose reference is the tip alone or whose robot is unknown."""
+        reference, robot = self.reference, self.robot
+        if reference is None or reference.task in ("position", "") or robot is None or n == 0:
+            return {}
+        from ..ik.axis import axis_error, entry_distance
+
+        tip, rotation = robot.tool_frame(self.q[:n])
+        axes = rotation[:, :, 2]
+        error = axis_error(axes, robot.tool_axis(self.q_desired[:n]))
+        transient = float(self.metadata.get("transient_s", 0.2))
+        after = error[self.t[:n] >= self.t[0] + transient]
+        figures: dict[str, Any] = {
+            "max_axis_error_rad": _max(error),
+            "rms_axis_error_rad": _rms(error),
+            "max_axis_error_after_transient_rad": _max(after),
+        }
+        if reference.entry_point is not None:
+            figures["max_entry_distance_m"] = _max(entry_distance(tip, axes, np.asarray(reference.entry_point)))
+        return figures
 
     def _repr_html_(self) -> str:
         """The run in a notebook: its main figures as a table and a small plot of the tip error

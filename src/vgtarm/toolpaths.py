@@ -1,0 +1,335 @@
+"""Tool paths: a tip path with the tool's axis or its whole frame, and the builders of drilling and cutting.
+
+A :class:`ToolPath` is a :class:`~vgtarm.paths.TipPath` (the tool's tip) with the desired tool axis
+(:class:`~vgtarm.ik.AxisPath`, the spin free) or the desired tool frame (its rotation, angular
+velocity and acceleration), all exact derivatives of one motion model, never finite differences.
+``ToolPath.task(robot)`` gives the keywords of :func:`vgtarm.inverse_kinematics`.
+
+- :func:`drilling`: approach (a straight line from a start point while the axis turns onto the
+  drill's axis), plunge along the axis through the entry point to a depth at a constant feed rate,
+  dwell, retract along the axis. The axis task: the drill's spin is free.
+- :func:`cutting`: an arc (or a straight cut) of a given length on a plane, the blade's edge along
+  the cut's tangent and its axis tilted by a held angle about the edge from the plane's inward
+  normal. The tool frame is given in full (a blade's spin is not free), and it turns about the
+  plane's normal at ``kappa * ds/dt``: its angular velocity and acceleration are exact.
+
+Every motion along a line or an arc follows the same speed profile: from rest, the speed rises to
+its cruise value along a quintic ``10 x^3 - 15 x^4 + 6 x^5`` of the ramp time (so the acceleration
+is continuous and zero at both ends), holds, and falls again to rest. Units are SI.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from . import checks
+from .errors import PathError, shown
+from .paths import MIN_DT, TipPath
+
+if TYPE_CHECKING:
+    from .model.robot import Robot
+
+Array = NDArray[np.float64]
+
+#: Largest ``| |v| - 1 |`` of a direction given as a unit vector.
+UNIT_TOLERANCE = 1e-9
+#: Default ramp time of a motion's speed (s): from rest to the cruise speed.
+RAMP = 0.2
+
+
+@dataclass(frozen=True, eq=False)
+class ToolPath:
+    """A tip path with the desired tool axis or tool frame.
+
+    Attributes:
+        tip: the tool tip's path (:class:`~vgtarm.paths.TipPath`).
+        axis: ``(N, 3)`` the desired tool axis (F0), its rate and acceleration, as an
+            :class:`~vgtarm.ik.AxisPath`, or None when the whole frame is given.
+        frame: ``(N, 3, 3)`` the desired tool frame (columns: edge, edge x axis... the tool frame's
+            axes in F0; ``z`` the tool axis, ``x`` the blade's edge), or None.
+        angular_velocity, angular_acceleration: ``(N, 3)`` of ``frame`` (rad/s, rad/s^2), or None.
+        phases: ``(name, start, end)`` times (s) of the path's phases, in order.
+        entry_point: ``(3,)`` where the tool enters the work (m), or None.
+    """
+
+    tip: TipPath
+    axis: object = None
+    frame: Array | None = None
+    angular_velocity: Array | None = None
+    angular_acceleration: Array | None = None
+    phases: tuple[tuple[str, float, float], ...] = ()
+    entry_point: Array | None = None
+
+    @property
+    def name(self) -> str:
+        """The tip path's name."""
+        return self.tip.name
+
+    def task(self, robot: Robot) -> dict[str, object]:
+        """The keywords of :func:`vgtarm.inverse_kinematics` for ``robot``: ``axis`` (the axis task), or
+        ``pose`` (the end-effector frame ``C03 = F B^T`` of the tool frame ``F``, ``B`` the robot's
+        tool rotation, with the same angular velocity and acceleration)."""
+        from .ik import OrientationPath
+
+        if self.axis is not None:
+            return {"axis": self.axis}
+        assert self.frame is not None
+        tool: Array = np.array(robot.tool_rotation, dtype=np.float64)
+        rotation = self.frame @ tool.T
+        return {"pose": OrientationPath(rotation, self.angular_velocity, self.angular_acceleration)}
+
+
+@dataclass(frozen=True)
+class _Motion:
+    """Arc length ``s`` and its first three time derivatives ``(N,)`` of a motion along a line or arc."""
+
+    s: Array
+    v: Array
+    a: Array
+    j: Array
+
+
+def _unit(name: str, value: object) -> Array:
+    vector = checks.finite_array(name, value, (3,), error=PathError).astype(float)
+    norm = float(np.linalg.norm(vector))
+    if abs(norm - 1.0) > UNIT_TOLERANCE:
+        fixed = "" if norm == 0 else "; normalised: [" + ", ".join(f"{v:.12g}" for v in vector / norm) + "]"
+        raise PathError(
+            f"{name} = {shown(vector.tolist())}: expected a unit vector (length 1 within {UNIT_TOLERANCE:g}), its "
+            f"length is {norm:.9g}{fixed}"
+        )
+    return vector
+
+
+def _point(name: str, value: object) -> Array:
+    return checks.finite_array(name, value, (3,), error=PathError).astype(float)
+
+
+def _profile(distance: float, speed: float, ramp: float) -> tuple[float, float]:
+    """The ramp time and the total time of a motion over ``distance`` at cruise ``speed``."""
+    if distance <= 0.0:
+        return 0.0, 0.0
+    ramp = min(ramp, distance / speed)  # too short to cruise: ramp up then down
+    return ramp, distance / speed + ramp
+
+
+def _rest_to_cruise(tau: Array, speed: float, ramp: float) -> tuple[Array, Array, Array, Array]:
+    """``s, ds/dt, d2s/dt2, d3s/dt3`` of the ramp from rest to ``speed`` over ``ramp`` seconds, at ``tau``."""
+    x = np.clip(tau / ramp, 0.0, 1.0)
+    s = speed * ramp * x**4 * (2.5 - 3 * x + x**2)
+    v = speed * x**3 * (10 - 15 * x + 6 * x**2)
+    a = speed * 30 * x**2 * (1 - x) ** 2 / ramp
+    j = np.where(x < 1, speed * 60 * x * (1 - x) * (1 - 2 * x) / ramp**2, 0.0)
+    return s, v, a, j
+
+
+def _move(t: Array, distance: float, speed: float, ramp: float) -> _Motion:
+    """The motion ``s(t)`` from rest at 0 to rest at ``distance`` (cruise ``speed``), ``t`` (s) from its start."""
+    r, total = _profile(distance, speed, ramp)
+    if total == 0.0:
+        zero = np.zeros_like(t)
+        return _Motion(zero, zero, zero, zero)
+    cruise = distance / (total - r)
+    s, v, a, j = _rest_to_cruise(t, cruise, r)
+    middle = (t > r) & (t < total - r)
+    s = np.where(middle, cruise * (r / 2 + t - r), s)
+    v = np.where(middle, cruise, v)
+    a, j = np.where(middle, 0.0, a), np.where(middle, 0.0, j)
+    end = t >= total - r
+    s_e, v_e, a_e, j_e = _rest_to_cruise(total - t, cruise, r)
+    s, v = np.where(end, distance - s_e, s), np.where(end, v_e, v)
+    a, j = np.where(end, -a_e, a), np.where(end, j_e, j)
+    return _Motion(s, v, a, j)
+
+
+def _times(duration: float, dt: float) -> Array:
+    dt = checks.number("dt", dt, minimum=MIN_DT, unit="s", error=PathError)
+    count = int(math.floor(duration / dt + 1e-9)) + 1
+    return np.arange(count, dtype=np.float64) * dt
+
+
+def _rotate(k: Array, angle: Array, v: Array) -> Array:
+    """``v`` ``(3,)`` or ``(N, 3)`` turned about the unit ``k`` by ``angle`` ``(N,)`` (Rodrigues)."""
+    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
+    v = np.broadcast_to(v, (angle.shape[0], 3))
+    return np.asarray(v * c + np.cross(k, v) * s + (1 - c) * (v @ k)[:, None] * k)
+
+
+def drilling(
+    entry: ArrayLike,
+    axis: ArrayLike,
+    depth: float,
+    *,
+    feed: float = 2e-3,
+    dwell: float = 0.5,
+    clearance: float = 5e-3,
+    start: ArrayLike | None = None,
+    start_axis: ArrayLike | None = None,
+    approach_speed: float = 0.02,
+    ramp: float = RAMP,
+    dt: float = 1e-3,
+) -> ToolPath:
+    """A drilling cycle: approach and align, plunge at the feed rate, dwell, retract along the axis.
+
+    Args:
+        entry: ``(3,)`` where the drill enters the work (m).
+        axis: ``(3,)`` unit vector, the direction the drill advances (F0).
+        depth: how deep past the entry point (m, > 0).
+        feed: the plunge's feed rate (m/s, > 0); reached before the entry point.
+        dwell: time at the bottom of the hole (s, >= 0).
+        clearance: the plunge starts and the retract ends this far before the entry point, on the
+            axis (m, > 0).
+        start: ``(3,)`` where the approach starts (m); default: at the plunge's start (no approach).
+        start_axis: ``(3,)`` unit tool axis at ``start``; default ``axis`` (it turns onto ``axis`` during
+            the approach, about their common normal, with the approach's profile).
+        approach_speed: cruise speed of the approach and the retract (m/s).
+        ramp: ramp time of every motion's speed (s).
+        dt: sampling period (s).
+
+    Returns:
+        A :class:`ToolPath` named ``"drilling"`` with the axis task (phases ``approach``, ``plunge``,
+        ``dwell``, ``retract``).
+    """
+    e, d = _point("entry", entry), _unit("axis", axis)
+    depth = checks.positive("depth", depth, "m", error=PathError)
+    feed = checks.positive("feed", feed, "m/s", error=PathError)
+    dwell = checks.number("dwell", dwell, minimum=0.0, unit="s", error=PathError)
+    clearance = checks.positive("clearance", clearance, "m", error=PathError)
+    approach_speed = checks.positive("approach_speed", approach_speed, "m/s", error=PathError)
+    ramp = checks.positive("ramp", ramp, "s", error=PathError)
+    above = e - clearance * d
+    p0 = above if start is None else _point("start", start)
+    d0 = d if start_axis is None else _unit("start_axis", start_axis)
+    reach = float(np.linalg.norm(above - p0))
+    turn = float(np.arctan2(np.linalg.norm(np.cross(d0, d)), d0 @ d))
+    # the approach lasts as long as the longer of its travel and of its turn (0.1 m per radian)
+    approach = max(reach, 0.1 * turn)
+    spans = (
+        _profile(approach, approach_speed, ramp)[1],
+        _profile(clearance + depth, feed, ramp)[1],
+        dwell,
+        _profile(clearance + depth, approach_speed, ramp)[1],
+    )
+    ends = np.cumsum(spans)
+    t = _times(float(ends[-1]), dt)
+    starts = np.concatenate([[0.0], ends[:-1]])
+    phase = np.minimum(np.searchsorted(ends, t, side="right"), 3)
+    local = t - starts[phase]
+    position, velocity, acceleration, jerk = (np.zeros((t.size, 3)) for _ in range(4))
+    direction, rate, turning = np.tile(d, (t.size, 1)), np.zeros((t.size, 3)), np.zeros((t.size, 3))
+    # approach: a straight line from p0 while the axis turns from d0 onto d, on one profile u in [0, 1]
+    on = phase == 0
+    u = _move(local[on], approach, approach_speed, ramp) if approach > 0 else None
+    if u is not None:
+        fraction = (u.s / approach, u.v / approach, u.a / approach, u.j / approach)
+        line = above - p0
+        position[on] = p0 + np.outer(fraction[0], line)
+        velocity[on], acceleration[on], jerk[on] = (np.outer(f, line) for f in fraction[1:])
+        if turn > 0:
+            k = np.cross(d0, d) / np.linalg.norm(np.cross(d0, d))
+            direction[on] = _rotate(k, turn * fraction[0], d0)
+            rate[on] = turn * fraction[1][:, None] * np.cross(k, direction[on])
+            turning[on] = turn * fraction[2][:, None] * np.cross(k, direction[on]) + (
+                turn * fraction[1][:, None]
+            ) ** 2 * np.cross(k, np.cross(k, direction[on]))
+    # plunge, dwell, retract: along the axis from ``above``
+    along = (
+        (1, _move(local[phase == 1], clearance + depth, feed, ramp), 1.0),
+        (3, _move(local[phase == 3], clearance + depth, approach_speed, ramp), -1.0),
+    )
+    for index, motion, sign in along:
+        on = phase == index
+        base = above if sign > 0 else e + depth * d
+        position[on] = base + np.outer(sign * motion.s, d)
+        velocity[on], acceleration[on], jerk[on] = (np.outer(sign * f, d) for f in (motion.v, motion.a, motion.j))
+    position[phase == 2] = e + depth * d
+    names = ("approach", "plunge", "dwell", "retract")
+    phases = tuple((names[i], float(starts[i]), float(ends[i])) for i in range(4))
+    from .ik import AxisPath
+
+    tip = TipPath("drilling", t, position, velocity, acceleration, jerk)
+    return ToolPath(tip, axis=AxisPath(direction, rate, turning), phases=phases, entry_point=e)
+
+
+def cutting(
+    start: ArrayLike,
+    direction: ArrayLike,
+    normal: ArrayLike,
+    length: float,
+    *,
+    radius: float = math.inf,
+    tilt: float = 0.0,
+    speed: float = 0.01,
+    ramp: float = RAMP,
+    dt: float = 1e-3,
+) -> ToolPath:
+    """A cut of ``length`` on a plane: the blade's edge along the cut, its axis tilted by a held angle.
+
+    Args:
+        start: ``(3,)`` where the cut starts, on the plane (m).
+        direction: ``(3,)`` unit, the cut's direction at its start (in the plane).
+        normal: ``(3,)`` unit normal of the plane, pointing out of the work (towards the tool): the
+            blade's axis points along ``-normal`` (into the work) when ``tilt`` is 0.
+        length: the cut's length along its curve (m, > 0).
+        radius: the radius of the arc (m); positive turns about ``normal`` counter-clockwise, negative
+            clockwise, ``inf`` (the default) a straight cut.
+        tilt: the blade's tilt about its edge from ``-normal`` (rad), held along the cut.
+        speed: cruise cutting speed (m/s).
+        ramp: ramp time of the speed (s).
+        dt: sampling period (s).
+
+    Returns:
+        A :class:`ToolPath` named ``"cutting"`` with the whole tool frame: ``x`` the edge along the
+        cut's tangent, ``z`` the blade's axis.
+    """
+    p0, t0, n = _point("start", start), _unit("direction", direction), _unit("normal", normal)
+    if abs(float(t0 @ n)) > UNIT_TOLERANCE:
+        raise PathError(
+            f"direction = {shown(t0.tolist())} is not in the plane of normal = {shown(n.tolist())} "
+            f"(direction . normal = {float(t0 @ n):.3g}); expected them perpendicular"
+        )
+    length = checks.positive("length", length, "m", error=PathError)
+    straight = isinstance(radius, int | float) and math.isinf(radius) and radius > 0
+    if not straight:
+        radius = checks.number("radius", radius, unit="m", expected="a non-zero radius (m), or inf", error=PathError)
+        if radius == 0:
+            raise PathError("radius = 0: expected a non-zero radius (m), or inf for a straight cut")
+    tilt = checks.number("tilt", tilt, minimum=-math.pi / 2, maximum=math.pi / 2, unit="rad", error=PathError)
+    speed = checks.positive("speed", speed, "m/s", error=PathError)
+    ramp = checks.positive("ramp", ramp, "s", error=PathError)
+    kappa = 0.0 if straight else 1.0 / float(radius)
+    t = _times(_profile(length, speed, ramp)[1], dt)
+    m = _move(t, length, speed, ramp)
+    side = np.cross(n, t0)
+    angle = kappa * m.s
+    tangent = _rotate(n, angle, t0)
+    across = np.cross(n, tangent)
+    position = p0 + (_sinc(angle) * m.s)[:, None] * t0 + (_versine(angle, kappa) * m.s)[:, None] * side
+    v, a, j = m.v[:, None], m.a[:, None], m.j[:, None]
+    velocity = v * tangent
+    acceleration = a * tangent + kappa * v**2 * across
+    jerk = j * tangent + 3 * kappa * v * a * across - kappa**2 * v**3 * tangent
+    z0 = _rotate(t0, np.array([tilt]), -n)[0]
+    frame0 = np.stack([t0, np.cross(z0, t0), z0], axis=1)
+    frame = np.stack([_rotate(n, angle, frame0[:, i]) for i in range(3)], axis=2)
+    tip = TipPath("cutting", t, position, velocity, acceleration, jerk)
+    omega, alpha = np.outer(kappa * m.v, n), np.outer(kappa * m.a, n)
+    phases = (("cut", 0.0, float(t[-1])),)
+    return ToolPath(tip, frame=frame, angular_velocity=omega, angular_acceleration=alpha, phases=phases)
+
+
+def _sinc(angle: Array) -> Array:
+    """``sin(angle) / angle`` (1 at 0)."""
+    return np.asarray(np.sinc(angle / np.pi))
+
+
+def _versine(angle: Array, kappa: float) -> Array:
+    """``(1 - cos(angle)) / angle`` (0 at 0): with ``angle = kappa s``, times ``s`` the offset across."""
+    small = np.abs(angle) < 1e-4
+    safe = np.where(small, 1.0, angle)
+    return np.asarray(np.where(small, angle / 2 - angle**3 / 24, (1 - np.cos(safe)) / safe))
