@@ -36,7 +36,7 @@ LAYERS: tuple[frozenset[str], ...] = (
     ),
     frozenset({"model"}),
     frozenset({"paths", "ga"}),
-    frozenset({"ik"}),
+    frozenset({"ik", "toolpaths"}),
     frozenset({"control"}),
     frozenset({"simulation"}),
     frozenset({"mujoco_bridge"}),

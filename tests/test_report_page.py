@@ -49,6 +49,7 @@ SECTIONS = [
     "Safe switching control on 60 runs (issue 23)",
     "The low-force preset (issue 22)",
     "The trade-off: tip error against actuator force (issue 22)",
+    "Tool tasks: drilling and cutting",
     "What bounds the remaining error",
 ]
 

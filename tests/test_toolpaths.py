@@ -188,3 +188,19 @@ def test_position_runs_have_no_tool_figures(robot):
     ik = vgtarm.inverse_kinematics(robot, vgtarm.paths.case2(dt=1e-3))
     run = vgtarm.simulate(robot, ik, vgtarm.ComputedForceControl.with_gains(15000, 600))
     assert not any("axis" in key or "entry" in key for key in run.summary())
+
+
+def test_reproduces_tool_rows_keep_their_figures_across_processes(robot, tmp_path):
+    """A tool run made in a worker comes back without its robot: its axis figures travel in its metadata."""
+    import pickle
+
+    from vgtarm.app.reports.tool_runs import ToolRun, run_tool_one, tool_section
+
+    spec = ToolRun("drilling")
+    made = run_tool_one(robot, spec, tmp_path, seed=0, integrator="rk4", substeps=1, duration=0.3)
+    back = pickle.loads(pickle.dumps(made))
+    assert back.robot is None
+    assert back.summary()["max_axis_error_rad"] == made.summary()["max_axis_error_rad"]
+    row = tool_section({spec: back})[-1]
+    assert f"| {made.summary()['max_axis_error_rad'] * 1e3:.3f} |" in row
+    assert (tmp_path / spec.folder / "summary.json").is_file()

@@ -22,13 +22,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import checks
 from .errors import PathError, shown
+from .ik.axis import AxisPath
+from .ik.pose import OrientationPath
 from .paths import MIN_DT, TipPath
 
 if TYPE_CHECKING:
@@ -50,15 +52,15 @@ class ToolPath:
         tip: the tool tip's path (:class:`~vgtarm.paths.TipPath`).
         axis: ``(N, 3)`` the desired tool axis (F0), its rate and acceleration, as an
             :class:`~vgtarm.ik.AxisPath`, or None when the whole frame is given.
-        frame: ``(N, 3, 3)`` the desired tool frame (columns: edge, edge x axis... the tool frame's
-            axes in F0; ``z`` the tool axis, ``x`` the blade's edge), or None.
+        frame: ``(N, 3, 3)`` the desired tool frame in F0, its columns the tool frame's axes (``x`` the
+            blade's edge, ``z`` the tool axis, ``y = z x x``), or None.
         angular_velocity, angular_acceleration: ``(N, 3)`` of ``frame`` (rad/s, rad/s^2), or None.
         phases: ``(name, start, end)`` times (s) of the path's phases, in order.
         entry_point: ``(3,)`` where the tool enters the work (m), or None.
     """
 
     tip: TipPath
-    axis: object = None
+    axis: AxisPath | None = None
     frame: Array | None = None
     angular_velocity: Array | None = None
     angular_acceleration: Array | None = None
@@ -70,12 +72,10 @@ class ToolPath:
         """The tip path's name."""
         return self.tip.name
 
-    def task(self, robot: Robot) -> dict[str, object]:
+    def task(self, robot: Robot) -> dict[str, Any]:
         """The keywords of :func:`vgtarm.inverse_kinematics` for ``robot``: ``axis`` (the axis task), or
         ``pose`` (the end-effector frame ``C03 = F B^T`` of the tool frame ``F``, ``B`` the robot's
         tool rotation, with the same angular velocity and acceleration)."""
-        from .ik import OrientationPath
-
         if self.axis is not None:
             return {"axis": self.axis}
         assert self.frame is not None
@@ -250,8 +250,6 @@ def drilling(
     position[phase == 2] = e + depth * d
     names = ("approach", "plunge", "dwell", "retract")
     phases = tuple((names[i], float(starts[i]), float(ends[i])) for i in range(4))
-    from .ik import AxisPath
-
     tip = TipPath("drilling", t, position, velocity, acceleration, jerk)
     return ToolPath(tip, axis=AxisPath(direction, rate, turning), phases=phases, entry_point=e)
 

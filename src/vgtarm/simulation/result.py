@@ -154,16 +154,17 @@ class SimulationResult:
             ga_activation_time_median_s=_percentile(self.activations, 50.0),
             ga_activation_time_p99_s=_percentile(self.activations, 99.0),
             time_in_ga_mode_s=float(np.count_nonzero(self.mode == MODE_GA) * self.dt),
-            **self._tool_figures(n),
+            **self.tool_figures(),
         )
         return summary
 
-    def _tool_figures(self, n: int) -> dict[str, Any]:
+    def tool_figures(self) -> dict[str, Any]:
         """A tool task's figures (:mod:`vgtarm.ik.axis`; the pose task too): the largest and RMS angle
         of the tool's axis from its desired axis (that of the desired joints, as the tip error is
         ``|P(q_d) - P(q)|``), after the transient too, and with an entry point the largest distance of
-        the axis from it; none for a run whose reference is the tip alone or whose robot is unknown."""
-        reference, robot = self.reference, self.robot
+        the axis from it; none for a run whose reference is the tip alone or whose robot is unknown (a
+        run sent back from another process: keep them in its ``metadata`` there, for its summary)."""
+        reference, robot, n = self.reference, self.robot, self.completed
         if reference is None or reference.task in ("position", "") or robot is None or n == 0:
             return {}
         from ..ik.axis import axis_error, entry_distance

@@ -37,6 +37,7 @@ from .html import runs_from_reproduction, write_html_report
 from .low_force import PresetRun, low_force_runs, low_force_section, run_low_force_one
 from .runs import TABLE_COLUMNS, RunSpec, folder_cell, mm, paper_runs, table_row
 from .seeds import seed_section
+from .tool_runs import ToolRun, run_tool_one, tool_runs, tool_section
 
 
 @dataclass(frozen=True)
@@ -145,8 +146,9 @@ def _reproduce_into(
     specs = list(dict.fromkeys(specs))
     extra = beyond_runs() if beyond_paper else []
     low = low_force_runs(robot) if beyond_paper else []  # issue 22: the low-force preset's rows
+    tools = tool_runs(robot) if beyond_paper else []  # issue 36: drilling and cutting
     made = _RunsAndFigures(folder, specs, extra, progress)
-    made.make(robot, workers, options, low, beyond_paper=beyond_paper, duration=duration)
+    made.make(robot, workers, options, (low, tools), beyond_paper=beyond_paper, duration=duration)
     results = {spec: made.results[spec] for spec in specs}
     figures = {p.caption: made.figures[p.caption] for p in made.plan}
     beyond_results = made.beyond_results
@@ -164,6 +166,8 @@ def _reproduce_into(
         base = next(((b.folder, beyond_results[b]) for b in extra if b.label == "CFC + observer" and b.realistic), None)
         section = low_force_section({r: made.low_results[r] for r in low}, base, seed=seed)
         beyond = _with_low_force(beyond, section, folder)
+    if tools:  # after the runs of sensing and force, before what bounds their error
+        beyond = _before_bounds(beyond, tool_section({r: made.tool_results[r] for r in tools}))
     if beyond:
         text += "\n" + "\n".join(beyond) + "\n"
     if seeds:
@@ -189,6 +193,7 @@ class _RunsAndFigures:
         self.results: dict[RunSpec, SimulationResult] = {}
         self.beyond_results: dict[BeyondRun, SimulationResult] = {}
         self.low_results: dict[PresetRun, SimulationResult] = {}
+        self.tool_results: dict[ToolRun, SimulationResult] = {}
         self.figures: dict[str, str] = {}
         self.beyond_figure_name: list[str] = []
 
@@ -197,12 +202,14 @@ class _RunsAndFigures:
         robot: Robot,
         workers: int,
         options: dict[str, Any],
-        low: list[PresetRun],
+        more: tuple[list[PresetRun], list[ToolRun]],
         *,
         beyond_paper: bool,
         duration: float | None,
     ) -> None:
-        """Make every run and figure with ``workers`` processes (:func:`_pool`)."""
+        """Make every run and figure with ``workers`` processes (:func:`_pool`); ``more``: the low-force
+        preset's runs and the tool tasks' runs of the section beyond the paper."""
+        low, tools = more
         with _pool(robot, workers) as pool:
             self.tasks = _Tasks(pool)
             # the references once, here; then the runs, the longest first (switching control), and
@@ -223,6 +230,11 @@ class _RunsAndFigures:
                     _low_force_run,
                     (run, self.folder, {**options, "duration": duration}),  # cut like every other run
                     partial(self.low_results.__setitem__, run),
+                )
+            for tool in tools:
+                done = partial(self.tool_results.__setitem__, tool)
+                self.tasks.add(
+                    _cost("cfc", True), _tool_run, (tool, self.folder, {**options, "duration": duration}), done
                 )
             while self.tasks.busy():
                 self.tasks.step()
@@ -254,6 +266,11 @@ def _with_low_force(beyond: list[str], section: list[str], folder: Path) -> list
     study = force_study.load_summary()  # issue 22's front, from the shipped studies
     save_figure(force_study.front_figure(study), folder / FORCE_FRONT_FIGURE)
     section += force_study.section_lines(study, FORCE_FRONT_FIGURE)
+    return _before_bounds(beyond, section)
+
+
+def _before_bounds(beyond: list[str], section: list[str]) -> list[str]:
+    """The section beyond the paper with ``section`` inserted before what bounds the remaining error."""
     at = beyond.index(BOUNDS_HEADING) if BOUNDS_HEADING in beyond else len(beyond)
     return [*beyond[:at], *section, *([""] if at < len(beyond) else []), *beyond[at:]]
 
@@ -346,6 +363,10 @@ def _beyond_run(
 
 def _low_force_run(robot: Robot, spec: PresetRun, folder: Path, options: dict[str, Any]) -> SimulationResult:
     return run_low_force_one(robot, spec, folder, **options)
+
+
+def _tool_run(robot: Robot, spec: ToolRun, folder: Path, options: dict[str, Any]) -> SimulationResult:
+    return run_tool_one(robot, spec, folder, **options)
 
 
 def _draw(robot: Robot, plan: FigurePlan, results: dict[RunSpec, SimulationResult], folder: Path) -> str:
