@@ -10,6 +10,7 @@ assemblable configurations inside the joint ranges.
 
 from __future__ import annotations
 
+import re
 import tomllib
 from pathlib import Path
 
@@ -309,3 +310,78 @@ def test_command_line_refusals_name_the_flag(tmp_path, capsys, args, words):
     for word in words:
         assert word in error, error
     assert not out.exists()
+
+
+def _ipopt_cone(robot: vgtarm.Robot) -> tuple[ca.Function, np.ndarray, np.ndarray]:
+    """IPOPT on ``min Phi`` subject to the tip, ``d . a(q) >= cos(beta)``, the limits and the margin;
+    parameters ``[point (3), d (3), cos(beta)]``."""
+    n = robot.n_joints
+    low, high = robot.joint_limits()
+    q = ca.SX.sym("q", n)
+    fk = robot.definition.kinematics(q, ca.DM(robot.parameter_vector))
+    axis = fk.C03 @ ca.DM(robot.tool_rotation[:, 2])
+    point, d, bound = ca.SX.sym("x", 3), ca.SX.sym("d", 3), ca.SX.sym("c")
+    phi = ca.sumsqr((q - ca.DM((low + high) / 2)) / ca.DM(high - low)) / n
+    G, h = robot.margin_form()
+    g = ca.vertcat(fk.tip - point, d.T @ axis - bound, ca.DM(G) @ q + ca.DM(h))
+    options = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes", "ipopt.tol": 1e-12}
+    options["ipopt.bound_relax_factor"] = 0.0
+    solver = ca.nlpsol("cone_anchor", "ipopt", {"x": q, "p": ca.vertcat(point, d, bound), "f": phi, "g": g}, options)
+    lbg = np.concatenate([np.zeros(4), np.full(G.shape[0], MARGIN)])
+    ubg = np.concatenate([np.zeros(3), [np.inf], np.full(G.shape[0], np.inf)])
+    return solver, lbg, ubg
+
+
+@pytest.mark.parametrize("tool", ["default tool", "mounted drill"])
+def test_cone_is_ipopts_optimum_with_the_inequality(tools, tool):
+    """Seeded targets whose cone (5 degrees) holds the free optimum's axis or not: the same cost as
+    IPOPT with the inequality written from the FK, both where it is active and where it is not."""
+    robot = tools[tool]
+    solver, lbg, ubg = _ipopt_cone(robot)
+    tips, axes = _targets(robot, 60, seed=23)
+    rng = np.random.default_rng(29)
+    beta = np.radians(5.0)
+    low, high = robot.joint_limits()
+    active = worst = compared = 0
+    for i in range(60):
+        d = _rotation(rng.normal(size=3), np.radians(rng.uniform(0.0, 15.0))) @ axes[i]
+        path = TipPath("point", np.array([0.0, 1.0]), np.stack([tips[i]] * 2), np.zeros((2, 3)), np.zeros((2, 3)))
+        ours = inverse_kinematics(robot, path, axis=d, cone=beta, margin=MARGIN)
+        result = solver(
+            x0=robot.parameters.home,
+            p=np.concatenate([tips[i], d, [np.cos(beta)]]),
+            lbx=low,
+            ubx=high,
+            lbg=lbg,
+            ubg=ubg,
+        )
+        if not solver.stats()["success"]:
+            continue
+        compared += 1
+        assert ours.success, (i, ours.message)
+        assert ours.samples.orientation_error[0] <= beta + 1e-9
+        active += ours.samples.orientation_error[0] > beta - 1e-9
+        cost = float(result["f"])
+        worst = max(worst, abs(ours.samples.phi[0] - cost) / cost)
+    print(f"compared {compared} of 60, {active} with the cone active, worst relative cost difference {worst:.2e}")
+    assert compared >= 50 and active >= 10 and compared - active >= 2  # both cases met
+    assert worst < 1e-9
+
+
+def test_cone_refusals(robot):
+    path = vgtarm.paths.case1(dt=0.01)
+    for value, words in ((0.0, "(0, 90) degrees"), (2.0, "(0, 90) degrees"), ("wide", "cone = 'wide'")):
+        with pytest.raises(InputError, match=re.escape(words)):
+            inverse_kinematics(robot, path, axis=[0.0, 0.0, 1.0], cone=value)
+    with pytest.raises(InputError, match="a cone needs its axis"):
+        inverse_kinematics(robot, path, cone=0.1)
+
+
+def test_command_line_cone(capsys):
+    from vgtarm.app.cli.command import main
+
+    assert main(["ik", "--case", "1", "--dt", "0.01", "--axis", "0,0,1", "--cone", "5"]) == 0
+    printed = capsys.readouterr().out
+    assert "within --cone of --axis" in printed and "on the cone's boundary" in printed
+    assert main(["ik", "--case", "1", "--dt", "0.01", "--axis", "0,0,1", "--cone", "90"]) == 1
+    assert "--cone '90': expected a half-angle in (0, 90) degrees" in capsys.readouterr().err

@@ -48,6 +48,9 @@ UNIT_TOLERANCE = 1e-9
 #: Smallest distance (m) of a tip target from the entry point: the axis through both is undefined
 #: when they meet, and its rates grow as the inverse of the distance.
 ENTRY_CLEARANCE = 1e-3
+#: The frame ``[d w1 w2]`` of the frame ``[w1 w2 d]`` (a cyclic permutation: a rotation), whose first
+#: row of the axis rows is ``d . a``: the row of a cone's boundary.
+AXIS_FIRST = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
 #: ``K`` of the module docstring: ``F K`` has the columns ``[2 w2, -2 w1, 0]``.
 _K = np.array([[0.0, -2.0, 0.0], [2.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
 
@@ -77,6 +80,8 @@ class AxisTarget:
         frame: ``(N, 3, 3)`` the rotations ``F = [w1 w2 d]``.
         angular_velocity, angular_acceleration: ``(N, 3)`` of ``F`` in F0.
         entry_point: ``(3,)`` the entry point the axis passes through, or None.
+        cone: ``cos`` of a cone's half-angle whose boundary the axis is held on (one row
+            ``d . a = cone``), or None for the axis itself.
     """
 
     direction: Array
@@ -86,6 +91,7 @@ class AxisTarget:
     angular_velocity: Array
     angular_acceleration: Array
     entry_point: Array | None = None
+    cone: float | None = None
 
     def subset(self, n: int) -> AxisTarget:
         """The target of the first ``n`` samples."""
@@ -97,6 +103,7 @@ class AxisTarget:
             self.angular_velocity[:n],
             self.angular_acceleration[:n],
             self.entry_point,
+            self.cone,
         )
 
 
@@ -210,6 +217,19 @@ def entry_point_target(
         )
     direction, rate, accel = _unit_part(offset, velocity, acceleration)
     return AxisTarget(direction, rate, accel, *frames(direction, rate, accel), entry_point=entry)
+
+
+def cone_angle(value: object, name: str = "cone") -> float:
+    """A cone's half-angle (rad) in ``(0, pi/2)``, refused in one line otherwise."""
+    try:
+        angle = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        angle = float("nan")
+    if not 0.0 < angle < 0.5 * np.pi:
+        raise InputError(
+            f"{name} = {shown(value)}: expected a half-angle in (0, 90) degrees, given in rad (0 to {0.5 * np.pi:.6g})"
+        )
+    return angle
 
 
 def compiled_target(frame: Array, tool: Array) -> Array:

@@ -257,6 +257,9 @@ class Task:
             ``r`` rows ``E (P(q) - P_d)``, evaluated through the same compiled functions (the
             multipliers enter them as ``E^T lam``); None for the tip's three coordinates.
         tool: ``(3, 3)`` the tool rotation ``B`` in the end-effector frame (the axis task only).
+        cone: for the axis task on the boundary of a cone (:mod:`vgtarm.ik.axis`), ``cos`` of its
+            half-angle: one row ``d . a(q) = cone`` (the frames' first column is ``d``) instead of the
+            axis' two; None for the axis itself.
     """
 
     kind: str
@@ -272,6 +275,7 @@ class Task:
     effort: EffortTerms | None = None
     directions: Array | None = None
     tool: Array | None = None
+    cone: float | None = None
 
     def _evaluate(self, name: str, inputs: dict[str, Array], n: int) -> dict[str, Array]:
         self.evaluations[0] += n
@@ -282,6 +286,8 @@ class Task:
         """Number of equality rows."""
         if self.directions is not None:
             return int(self.directions.shape[0])
+        if self.kind == "axis" and self.cone is not None:
+            return 4
         return {"position": 3, "axis": 5}.get(self.kind, 6)
 
     @property
@@ -337,6 +343,7 @@ class Task:
             None if self.effort is None else self.effort.subset(idx),
             self.directions,
             self.tool,
+            self.cone,
         )
 
     def with_targets(self, position: Array, rotation: Array | None, like: int = 0) -> Task:
@@ -359,6 +366,7 @@ class Task:
             None if self.effort is None else self.effort.at_rest(like, n),
             self.directions,
             self.tool,
+            self.cone,
         )
 
     def forward(self, q: Array) -> tuple[Array, Array]:
@@ -374,9 +382,11 @@ class Task:
         return {"R_d": self.rotation[idx]}
 
     def _axis_rows(self) -> Array:
-        """``D`` ``(2, 3)``: the axis task's rows of the pose functions' orientation residual."""
+        """``D`` ``(2, 3)`` (the cone's boundary: ``(1, 3)``): the axis task's rows of the pose
+        functions' orientation residual."""
         assert self.tool is not None
-        return axis.task_rows(self.tool)
+        rows = axis.task_rows(self.tool)
+        return rows if self.cone is None else rows[:1]
 
     def _lift_axis(self, lam: Array) -> Array:
         """The pose functions' six multipliers ``[lam_P; D^T lam_a]`` of the axis task's five."""
@@ -393,7 +403,8 @@ class Task:
         if self.kind != "axis":
             return tip, rotation
         assert self.tool is not None
-        return tip, (rotation.reshape(-1, 3, 3) @ self.tool).reshape(-1, 9)
+        tool = self.tool if self.cone is None else self.tool @ axis.AXIS_FIRST
+        return tip, (rotation.reshape(-1, 3, 3) @ tool).reshape(-1, 9)
 
     def _motion_inputs(self, idx: Index, suffix: str = "") -> dict[str, Array]:
         assert self.angular_velocity is not None and self.angular_acceleration is not None
@@ -438,6 +449,8 @@ class Task:
         out = self._evaluate("ik_pose", inputs, n)
         c = self._reduce_axis(out["c"], 0)
         c[:, :3] -= self.position[idx]
+        if self.cone is not None:
+            c[:, 3] -= self.cone
         J = out["J"].reshape(n, 6, nj)
         J = np.concatenate([J[:, :3], np.einsum("rk,nkj->nrj", self._axis_rows(), J[:, 3:])], axis=1)
         return c, J, out["H"].reshape(n, nj, nj), None

@@ -27,7 +27,17 @@ from ..model.robot import Robot
 from ..paths import MAX_COORDINATE, TipPath
 from . import fast, kkt, reference
 from . import rates as rate_modes
-from .axis import AxisTarget, axis_error, axis_target, entry_distance, entry_point_target, tool_axes
+from .axis import (
+    AXIS_FIRST,
+    AxisTarget,
+    axis_error,
+    axis_target,
+    cone_angle,
+    entry_distance,
+    entry_point_target,
+    tool_axes,
+)
+from .cone import within_cone
 from .effort import EffortTerms, effort_terms
 from .options import IKOptions, default_coarse_step
 from .pose import HOLD, OrientationTarget, angle_error, orientation_target
@@ -76,9 +86,10 @@ def _task(
         directions = None if space is None else space.directions
         return Task("position", *common, None, None, None, robot, effort=effort, directions=directions)
     if isinstance(target, AxisTarget):
-        frame = target.frame.reshape(-1, 9)
+        frames = target.frame if target.cone is None else target.frame @ AXIS_FIRST
         motion = (target.angular_velocity, target.angular_acceleration)
-        return Task("axis", *common, frame, *motion, robot, tool=np.asarray(robot.tool_rotation, dtype=float))
+        tool = np.asarray(robot.tool_rotation, dtype=float)
+        return Task("axis", *common, frames.reshape(-1, 9), *motion, robot, tool=tool, cone=target.cone)
     rotation = target.rotation.reshape(-1, 9)
     return Task(
         "pose",
@@ -185,6 +196,7 @@ def inverse_kinematics(
     pose: object = None,
     axis: object = None,
     entry_point: object = None,
+    cone: object = None,
     check: bool = True,
     **options: Any,
 ) -> IKResult:
@@ -211,6 +223,8 @@ def inverse_kinematics(
             with its rate and acceleration (needed for exact rates of a changing axis).
         entry_point: a point ``(3,)`` (m) the tool's axis passes through while the tip follows the
             path (a remote centre of motion): the axis task of the direction from it to the tip.
+        cone: with ``axis``, the half-angle (rad, in (0, pi/2)) of a cone about it that the tool's
+            axis must stay within, the spin free (an inequality, :mod:`vgtarm.ik.cone`).
         check: raise :class:`UnreachableError` for a sample out of reach (the default). With False
             the result is returned instead: ``success`` False, ``status`` ``"unreachable"``, its
             ``message`` naming the first sample out of reach (in time order), its rows before that
@@ -250,7 +264,26 @@ def inverse_kinematics(
     # (235 s CPU) on the 2 shared cores with them, 45 s wall (30 s CPU) without them
     with blas_on_one_thread():
         tasks = _Targets(pose, axis, entry_point)
+        if cone is not None:
+            return _within_cone(robot, path, tasks, cone, solver=solver, rates=rates, check=check, **options)
         return _inverse_kinematics(robot, path, solver=solver, rates=rates, tasks=tasks, check=check, **options)
+
+
+def _within_cone(
+    robot: Robot, path: TipPath, tasks: _Targets, cone: object, *, solver: str, rates: str, check: bool, **options: Any
+) -> IKResult:
+    """:func:`inverse_kinematics` with the tool's axis within a cone (:func:`vgtarm.ik.cone.within_cone`)."""
+    half_angle = cone_angle(cone)
+    if tasks.axis is None or tasks.given != ["axis"]:
+        raise InputError(f"cone = {shown(cone)}: a cone needs its axis (axis=...) and neither pose nor entry_point")
+    _check_call(robot, path, check)
+
+    def solve(piece: TipPath, extra: dict[str, Any], start: Array | None) -> IKResult:
+        settings = options if start is None else {**options, "initial_guess": start}
+        task = _Targets(**extra)
+        return _inverse_kinematics(robot, piece, solver=solver, rates=rates, tasks=task, check=check, **settings)
+
+    return within_cone(robot, path, tasks.axis, half_angle, rates == "exact", solve)
 
 
 @dataclass(frozen=True)
@@ -261,6 +294,8 @@ class _Targets:
     pose: object = None
     axis: object = None
     entry_point: object = None
+    #: ``cos`` of the half-angle of a cone whose boundary the axis is held on (:mod:`.cone`), or None.
+    boundary: float | None = None
 
     def __post_init__(self) -> None:
         given = self.given
@@ -284,7 +319,8 @@ class _Targets:
     def target(self, path: TipPath, exact: bool) -> AxisTarget | None:
         """The axis target of an axis or entry-point task (None for the others)."""
         if self.axis is not None:
-            return axis_target(self.axis, len(path), exact)
+            target = axis_target(self.axis, len(path), exact)
+            return target if self.boundary is None else replace(target, cone=self.boundary)
         if self.entry_point is not None:
             return entry_point_target(self.entry_point, path.position, path.velocity, path.acceleration)
         return None

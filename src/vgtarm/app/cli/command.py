@@ -496,6 +496,13 @@ def _ik_pointing(args: argparse.Namespace) -> dict[str, Any]:
         out["axis"] = unit_directions(values, 1, "--axis")[0]
     if args.entry_point is not None:
         out["entry_point"] = _numbers(args.entry_point, "--entry-point", 3, "the entry point x,y,z in m")
+    if args.cone is not None:
+        if args.axis is None:
+            raise InputError(f"--cone {shown(args.cone)}: a cone needs its axis, --axis X,Y,Z")
+        degrees = _numbers(args.cone, "--cone", 1, "the cone's half-angle in degrees, in (0, 90)")[0]
+        if not 0.0 < degrees < 90.0:
+            raise InputError(f"--cone {shown(args.cone)}: expected a half-angle in (0, 90) degrees")
+        out["cone"] = float(np.radians(degrees))
     given = [
         flag for flag, on in (("--pose", args.pose), ("--axis", args.axis), ("--entry-point", args.entry_point)) if on
     ]
@@ -506,6 +513,8 @@ def _ik_pointing(args: argparse.Namespace) -> dict[str, Any]:
 
 def _ik_task_line(rotation: object, pointing: dict[str, Any]) -> str:
     """What ``vgtarm ik`` solved, in words."""
+    if "cone" in pointing:
+        return "tip position and the tool's axis within --cone of --axis, its spin free"
     if "axis" in pointing:
         return "tip position and the tool's axis along --axis, its spin free"
     if "entry_point" in pointing:
@@ -579,8 +588,10 @@ def cmd_ik(args: argparse.Namespace) -> int:
     print(f"result     {result.message}; {fallbacks} samples re-solved by the reference solver")
     print(f"residual   worst {samples.residual[worst]:.3g} m at t = {result.t[worst]:.6g} s")
     if rotation is not None or pointing:
-        what = "orientation" if rotation is not None else "axis"
-        print(f"           worst {what} error {np.nanmax(samples.orientation_error):.3g} rad")
+        what = "orientation error" if rotation is not None else "axis error"
+        if "cone" in pointing:
+            what = f"axis angle from --axis (cone {np.degrees(pointing['cone']):g} degrees)"
+        print(f"           worst {what} {np.nanmax(samples.orientation_error):.3g} rad")
     if samples.entry_distance is not None:
         print(f"           worst distance of the axis from the entry point {samples.entry_distance.max():.3g} m")
     print(f"Phi        largest {samples.phi[largest]:.6g} at t = {result.t[largest]:.6g} s")
@@ -632,7 +643,8 @@ def _ik_one_point(
     tip_task = "tip position" if space is None else f"{space.label} (its tip cannot leave it)"
     orientation = "free" if held else "of --pose"
     if pointing:
-        orientation = "the tool's axis " + ("along --axis" if "axis" in pointing else "through --entry-point")
+        where = "within --cone of --axis" if "cone" in pointing else "along --axis"
+        orientation = "the tool's axis " + (where if "axis" in pointing else "through --entry-point")
     print(f"task       {tip_task}, orientation {orientation}")
     print(f"result     {solution.message}")
     print(f"residual   {solution.residual:.3g} m")
@@ -749,6 +761,10 @@ _IK_FLAGS: tuple[_Flag, ...] = (
             metavar="X,Y,Z",
             help="also the tool's axis through this point (m) while the tip follows the path: keyhole work",
         ),
+    ),
+    (
+        ("--cone",),
+        dict(default=None, metavar="DEG", help="with --axis: the tool's axis within this half-angle of it (degrees)"),
     ),
     (("--solver",), dict(default="fast", metavar="NAME", help="fast (default), reference, slsqp or ipopt")),
     (("--rates",), dict(default="exact", metavar="MODE", help="exact (default) or finite_difference")),
