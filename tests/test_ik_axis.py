@@ -27,7 +27,9 @@ from vgtarm.paths import TipPath
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
-N_TARGETS = 200
+#: Seeded targets per task: the issue's 200 on the paper robot, 50 on the mounted drill (a second tool
+#: rotation, for the transform's sake; the same anchor).
+N_TARGETS = {"default tool": 200, "mounted drill": 50}
 MARGIN = 5e-3
 
 
@@ -128,11 +130,12 @@ def _plane(d: np.ndarray) -> np.ndarray:
 def test_same_optimum_as_ipopt_from_the_forward_kinematics(tools, tool, entry):
     robot = tools[tool]
     solver, lbg, ubg, _ = _ipopt(robot, entry)
-    tips, axes = _targets(robot, N_TARGETS, seed=11 if entry else 7)
-    depth = np.random.default_rng(3).uniform(0.05, 0.3, N_TARGETS)
+    count = N_TARGETS[tool]
+    tips, axes = _targets(robot, count, seed=11 if entry else 7)
+    depth = np.random.default_rng(3).uniform(0.05, 0.3, count)
     solved = compared = 0
     worst = 0.0
-    for i in range(N_TARGETS):
+    for i in range(count):
         if entry:
             where = tips[i] - depth[i] * axes[i]
             ours = solve_point(robot, tips[i], entry_point=where, margin=MARGIN)
@@ -153,9 +156,9 @@ def test_same_optimum_as_ipopt_from_the_forward_kinematics(tools, tool, entry):
         worst = max(worst, abs(ours.phi - cost) / cost)
         assert ours.orientation_error < 1e-9
         assert ours.residual < 1e-9
-    assert compared >= 0.9 * N_TARGETS
+    assert compared >= 0.9 * count
     assert solved == compared
-    print(f"compared {compared} of {N_TARGETS}, worst relative cost difference {worst:.2e}")
+    print(f"compared {compared} of {count}, worst relative cost difference {worst:.2e}")
     assert worst < 1e-9, worst
 
 
