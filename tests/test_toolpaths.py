@@ -204,3 +204,28 @@ def test_reproduces_tool_rows_keep_their_figures_across_processes(robot, tmp_pat
     row = tool_section({spec: back})[-1]
     assert f"| {made.summary()['max_axis_error_rad'] * 1e3:.3f} |" in row
     assert (tmp_path / spec.folder / "summary.json").is_file()
+
+
+def test_entry_point_is_recorded_and_drawn(robot, tmp_path, monkeypatch):
+    """The run records its tool task and entry point; saved and read back, its animation marks the point."""
+    from vgtarm.app.pictures import animation
+
+    path = vgtarm.paths.case1(dt=1e-3, duration=0.2)
+    entry = np.array([0.0, 0.06, 0.46])
+    ik = vgtarm.inverse_kinematics(robot, path, entry_point=entry)
+    run = vgtarm.simulate(robot, ik, vgtarm.ComputedForceControl.with_gains(15000, 600))
+    assert run.metadata["task"] == "entry point" and run.metadata["entry_point_m"] == entry.tolist()
+    run.save(tmp_path / "run")
+    back = vgtarm.SimulationResult.load(tmp_path / "run")
+    drawn = []
+    original = animation._Scene.__init__
+
+    def spy(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        drawn.extend(line for ax in self.fig.axes for line in ax.get_lines() if line.get_label() == "entry point")
+
+    monkeypatch.setattr(animation._Scene, "__init__", spy)
+    animation.animation_frame(robot, back, 0.1, dpi=40)
+    assert len(drawn) == 1
+    x, y, z = (np.asarray(v, dtype=float) for v in drawn[0].get_data_3d())
+    assert np.allclose([x[0], y[0], z[0]], entry * 1e3)

@@ -231,6 +231,15 @@ class Run:
             reference=ref,
         )
 
+    def _tool_task(self) -> dict[str, Any]:
+        """The reference's tool task and entry point (none for the tip alone): the summary says which
+        task the run tracked, and the pictures mark the entry point."""
+        reference = self.reference
+        if reference.task in ("position", ""):
+            return {}
+        entry = reference.entry_point
+        return {"task": reference.task, **({} if entry is None else {"entry_point_m": [float(v) for v in entry]})}
+
     def _drops(self, outcome: Outcome) -> dict[str, Any]:
         """The safe variant's held gain sets dropped for the fixed gains because the error seen
         rose above its value at their switch (the summary's ``scm_hold_drops``)."""
@@ -253,6 +262,7 @@ class Run:
             "substeps": scenario.substeps,
             "reference_rates": self.reference.rates,
             "reference": self.reference.name,
+            **self._tool_task(),
             "transient_s": scenario.transient_s,
             "controller_model": self.job.model.parameters.name,
             "plant": plant.parameters.name,

@@ -136,6 +136,15 @@ def _names(names: tuple[str, ...]) -> str:
     return " ".join(names) if len(names) <= 8 else " ".join((*names[:3], "...", *names[-3:]))
 
 
+def _entry_point(result: SimulationResult) -> Array | None:
+    """The entry point (m) of a run whose reference passes the tool's axis through one, else None."""
+    value = result.metadata.get("entry_point_m")
+    if not isinstance(value, list | tuple) or len(value) != 3:
+        return None
+    point = np.array(value, dtype=float)
+    return point if np.isfinite(point).all() else None
+
+
 def _uses_switching(result: SimulationResult) -> bool:
     return str(result.metadata.get("controller", "")).lower() == "scm" or bool(np.any(result.mode == MODE_GA))
 
@@ -158,9 +167,14 @@ class _Scene:
         desired, actual = result.tip_desired[:n] * MM, result.tip[:n] * MM
         ax3d.plot(*desired.T, color="tab:blue", linewidth=1.0, linestyle="--", label="desired tip path")
         ax3d.plot(*actual.T, color="tab:orange", linewidth=1.0, label="actual tip path")
+        entry = _entry_point(result)
+        if entry is not None:  # a tool task through an entry point: the point the axis passes through
+            ax3d.plot(*([v] for v in entry * MM), "x", color="tab:green", markersize=8, label="entry point")
         ax3d.view_init(elev=22.0, azim=-52.0)
         label_axes(ax3d)
-        every = np.concatenate([g.points() for g in geometries] + [desired / MM, actual / MM])
+        every = np.concatenate(
+            [g.points() for g in geometries] + [desired / MM, actual / MM] + ([] if entry is None else [entry[None]])
+        )
         set_equal_extent(ax3d, every * MM)
         ax3d.legend(loc="upper left", fontsize=8)
 
