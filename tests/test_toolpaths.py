@@ -229,3 +229,46 @@ def test_entry_point_is_recorded_and_drawn(robot, tmp_path, monkeypatch):
     assert len(drawn) == 1
     x, y, z = (np.asarray(v, dtype=float) for v in drawn[0].get_data_3d())
     assert np.allclose([x[0], y[0], z[0]], entry * 1e3)
+
+
+def test_frame_spline_has_exact_rates_and_passes_its_rotations():
+    """SciPy's C2 rotation spline through given tool frames: through them at their times, and its
+    angular velocity (F0) and acceleration equal to central differences of the sampled frames."""
+    from scipy.spatial.transform import Rotation
+
+    tip = vgtarm.paths.case1(dt=1e-4, duration=3.0)
+    times = np.array([0.0, 1.0, 2.0, 3.0])
+    rotations = Rotation.from_euler("XYZ", [[-10, 20, 30], [0, 15, 40], [-30, 45, 30], [20, 45, 90]], degrees=True)
+    path = toolpaths.with_frames(tip, times, rotations.as_matrix())
+    at = np.searchsorted(tip.t, times[:3] - 1e-9)
+    assert np.allclose(path.frame[at], rotations.as_matrix()[:3], atol=1e-12)
+    h = tip.t[1] - tip.t[0]
+    skew = (path.frame[2:] - path.frame[:-2]) / (2 * h) @ path.frame[1:-1].transpose(0, 2, 1)
+    omega = np.stack([skew[:, 2, 1], skew[:, 0, 2], skew[:, 1, 0]], axis=1)
+    assert np.abs(omega - path.angular_velocity[1:-1]).max() < 1e-6 * np.abs(path.angular_velocity).max()
+    alpha = (path.angular_velocity[2:] - path.angular_velocity[:-2]) / (2 * h)
+    assert np.abs(alpha - path.angular_acceleration[1:-1]).max() < 1e-4 * np.abs(path.angular_acceleration).max()
+
+
+def test_axis_spline_has_exact_rates_and_passes_its_directions():
+    tip = vgtarm.paths.case1(dt=1e-4, duration=2.0)
+    times = np.array([0.0, 0.7, 2.0])
+    directions = np.array([[0.0, 0.0, 1.0], [0.0, 0.28, 0.96], [0.6, 0.0, 0.8]])
+    path = toolpaths.with_axes(tip, times, directions)
+    d, rate, acceleration = (np.asarray(a) for a in (path.axis.direction, path.axis.rate, path.axis.acceleration))
+    assert np.allclose(d[[0, 7000, -1]], directions, atol=1e-12)
+    assert np.allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-15)
+    assert _difference_error(tip.t, d, rate) < 1e-6 * np.abs(rate).max()
+    assert _difference_error(tip.t, rate, acceleration) < 1e-4 * np.abs(acceleration).max()
+
+
+def test_splines_refuse_bad_samples():
+    tip = vgtarm.paths.case1(dt=1e-2, duration=1.0)
+    with pytest.raises(PathError, match="strictly increasing"):
+        toolpaths.with_axes(tip, [0.0, 0.0], [[0, 0, 1.0], [0, 0, 1.0]])
+    with pytest.raises(PathError, match=r"directions\[1\] = .*unit vector"):
+        toolpaths.with_axes(tip, [0.0, 1.0], [[0, 0, 1.0], [0, 0, 2.0]])
+    with pytest.raises(PathError, match="leave the given times"):
+        toolpaths.with_axes(tip, [0.0, 0.5], [[0, 0, 1.0], [0, 0, 1.0]])
+    with pytest.raises(PathError, match=r"rotations\[0\] is not a rotation"):
+        toolpaths.with_frames(tip, [0.0, 1.0], [np.eye(3) * 2, np.eye(3)])

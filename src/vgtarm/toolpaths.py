@@ -28,8 +28,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import checks
-from .errors import PathError, shown
-from .ik.axis import AxisPath
+from .errors import InputError, PathError, shown
+from .ik.axis import AxisPath, unit_directions, unit_part
 from .ik.pose import OrientationPath
 from .paths import MIN_DT, TipPath
 
@@ -331,3 +331,66 @@ def _versine(angle: Array, kappa: float) -> Array:
     small = np.abs(angle) < 1e-4
     safe = np.where(small, 1.0, angle)
     return np.asarray(np.where(small, angle / 2 - angle**3 / 24, (1 - np.cos(safe)) / safe))
+
+
+def _knots(times: ArrayLike, count: int, what: str) -> Array:
+    knots = checks.finite_array("times", times, (None,), error=PathError).astype(float)
+    if knots.shape != (count,) or count < 2:
+        raise PathError(f"times has shape {knots.shape}: expected ({count},), one time per {what}, at least 2")
+    if not (np.diff(knots) > 0).all():
+        raise PathError(f"times = {shown(knots.tolist())}: expected strictly increasing times (s)")
+    return knots
+
+
+def _inside(tip: TipPath, knots: Array) -> None:
+    if tip.t[0] < knots[0] - 1e-12 or tip.t[-1] > knots[-1] + 1e-12:
+        raise PathError(
+            f"the tip path's times {tip.t[0]:.6g} .. {tip.t[-1]:.6g} s leave the given times {knots[0]:.6g} .. "
+            f"{knots[-1]:.6g} s: expected the tip path within them"
+        )
+
+
+def with_frames(tip: TipPath, times: ArrayLike, rotations: ArrayLike) -> ToolPath:
+    """A tool path of ``tip`` whose tool frame passes through ``rotations`` ``(M, 3, 3)`` at ``times``
+    ``(M,)`` (s): SciPy's C2 rotation spline (:class:`scipy.spatial.transform.RotationSpline`, its
+    angular rate and acceleration continuous), sampled at the tip's times, with its angular velocity
+    and acceleration in F0 (``R w_body``, ``R a_body``: exact)."""
+    from scipy.spatial.transform import Rotation, RotationSpline
+
+    matrices = checks.finite_array("rotations", rotations, (None, 3, 3), error=PathError).astype(float)
+    knots = _knots(times, matrices.shape[0], "rotation")
+    deviation = np.abs(matrices.transpose(0, 2, 1) @ matrices - np.eye(3)).max(axis=(1, 2))
+    bad = np.flatnonzero((deviation > 1e-9) | (np.linalg.det(matrices) <= 0))
+    if bad.size:
+        raise PathError(f"rotations[{int(bad[0])}] is not a rotation matrix (|R^T R - I| = {deviation[bad[0]]:.3g})")
+    _inside(tip, knots)
+    spline = RotationSpline(knots, Rotation.from_matrix(matrices))
+    t = np.clip(tip.t, knots[0], knots[-1])
+    frame = spline(t).as_matrix()
+    omega = np.einsum("nij,nj->ni", frame, spline(t, 1))
+    alpha = np.einsum("nij,nj->ni", frame, spline(t, 2))
+    return ToolPath(tip, frame=frame, angular_velocity=omega, angular_acceleration=alpha)
+
+
+def with_axes(tip: TipPath, times: ArrayLike, directions: ArrayLike) -> ToolPath:
+    """A tool path of ``tip`` whose tool axis passes through the unit ``directions`` ``(M, 3)`` at
+    ``times`` ``(M,)`` (s), the spin free: a C2 cubic spline of the vectors (zero rate at both ends),
+    normalised, sampled at the tip's times with its exact rate and acceleration."""
+    from scipy.interpolate import CubicSpline
+
+    vectors = checks.finite_array("directions", directions, (None, 3), error=PathError).astype(float)
+    knots = _knots(times, vectors.shape[0], "direction")
+    try:
+        vectors = unit_directions(vectors, vectors.shape[0], "directions")
+    except InputError as error:
+        raise PathError(str(error)) from None
+    _inside(tip, knots)
+    spline = CubicSpline(knots, vectors, bc_type="clamped")
+    t = np.clip(tip.t, knots[0], knots[-1])
+    g, gd, gdd = spline(t), spline(t, 1), spline(t, 2)
+    if np.linalg.norm(g, axis=1).min() < 1e-6:
+        raise PathError(
+            "directions: the spline between two of them passes through zero (they turn by nearly half a turn)"
+        )
+    direction, rate, acceleration = unit_part(g, gd, gdd)
+    return ToolPath(tip, axis=AxisPath(direction, rate, acceleration))

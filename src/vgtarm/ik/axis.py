@@ -144,7 +144,7 @@ def _helper(direction: Array) -> Array:
     return np.eye(3)[int(np.argmin(worst))]
 
 
-def _unit_part(g: Array, gd: Array, gdd: Array) -> tuple[Array, Array, Array]:
+def unit_part(g: Array, gd: Array, gdd: Array) -> tuple[Array, Array, Array]:
     """``n = g / |g|`` and its first two time derivatives, row by row, from those of ``g``."""
     r = np.linalg.norm(g, axis=1, keepdims=True)
     n = g / r
@@ -164,7 +164,7 @@ def frames(direction: Array, rate: Array, acceleration: Array) -> tuple[Array, A
     g = h - along[:, None] * direction
     gd = -rate_along[:, None] * direction - along[:, None] * rate
     gdd = -(acceleration @ h)[:, None] * direction - 2.0 * rate_along[:, None] * rate - along[:, None] * acceleration
-    w1, w1d, w1dd = _unit_part(g, gd, gdd)
+    w1, w1d, w1dd = unit_part(g, gd, gdd)
     w2 = np.cross(direction, w1)
     w2d = np.cross(rate, w1) + np.cross(direction, w1d)
     w2dd = np.cross(acceleration, w1) + 2.0 * np.cross(rate, w1d) + np.cross(direction, w1dd)
@@ -215,7 +215,7 @@ def entry_point_target(
             f"{close}); expected at least {ENTRY_CLEARANCE:g} m (the tool's axis through the entry point and the "
             "tip is undefined where they meet)"
         )
-    direction, rate, accel = _unit_part(offset, velocity, acceleration)
+    direction, rate, accel = unit_part(offset, velocity, acceleration)
     return AxisTarget(direction, rate, accel, *frames(direction, rate, accel), entry_point=entry)
 
 
