@@ -121,9 +121,10 @@ def within_cone(robot: Any, path: TipPath, axis: object, half_angle: float, exac
     for array in (q, qd, qdd):
         array.flags.writeable = False
     failed = np.flatnonzero(~samples.success)
+    on_boundary = int(np.count_nonzero(samples.orientation_error >= half_angle - 1e-9))
     degrees = f"{np.degrees(half_angle):.6g} degrees"
     message = (
-        f"all {len(path)} samples solved and verified ({np.count_nonzero(outside)} on the cone's boundary)"
+        f"all {len(path)} samples solved and verified ({on_boundary} on the cone's boundary)"
         if free.success and not failed.size
         else free.message
         if not free.success
