@@ -388,3 +388,45 @@ def test_command_line_cone(capsys):
     assert "within --cone of --axis" in printed and "on the cone's boundary" in printed
     assert main(["ik", "--case", "1", "--dt", "0.01", "--axis", "0,0,1", "--cone", "90"]) == 1
     assert "--cone '90': expected a half-angle in (0, 90) degrees" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("entry", [False, True], ids=["axis", "entry_point"])
+def test_effort_criterion_with_the_axis_is_ipopts_optimum(robot, entry):
+    """The effort criterion (its Lagrangian the effort functions' plus the pose functions' at the
+    orientation multipliers) on seeded axis and entry-point targets at rest (gravity alone: the tool
+    force's model is zero at rest): the same cost as IPOPT on the rows written from the FK
+    (``solver="ipopt"``), to 1e-9 relative."""
+    tips, axes = _targets(robot, 30, seed=31 if entry else 37)
+    worst = 0.0
+    for i in range(30):
+        rest = np.zeros((2, 3))
+        path = TipPath("point", np.array([0.0, 1.0]), np.stack([tips[i]] * 2), rest, rest, rest)
+        task = {"entry_point": tips[i] - 0.1 * axes[i]} if entry else {"axis": axes[i]}
+        options = {"criterion": "effort", "tool_force": 20.0, "margin": MARGIN, **task}
+        ours = inverse_kinematics(robot, path, **options)
+        anchor = inverse_kinematics(robot, path, solver="ipopt", **options)
+        assert ours.success, ours.message
+        if not anchor.success:
+            continue
+        worst = max(worst, abs(ours.samples.phi[0] - anchor.samples.phi[0]) / anchor.samples.phi[0])
+        assert ours.samples.orientation_error[0] < 1e-9
+    print(f"worst relative cost difference {worst:.2e}")
+    assert worst < 1e-9
+
+
+def test_effort_criterion_rates_of_a_moving_axis(robot):
+    """Exact rates of the effort criterion's axis task equal extrapolated central differences."""
+    tips, axes = _targets(robot, 1, seed=41)
+    h = 1e-4
+    t = np.linspace(-h, h, 5)
+    v = np.array([0.02, -0.01, 0.015])
+    position = tips[0] + t[:, None] * v
+    k, w = np.array([1.0, 0.3, 0.0]) / np.hypot(1.0, 0.3), 0.4
+    d = np.stack([_rotation(k, w * ti) @ axes[0] for ti in t])
+    path = TipPath("moving", t, position, np.tile(v, (5, 1)), np.zeros((5, 3)), np.zeros((5, 3)))
+    axis = AxisPath(d, w * np.cross(k, d), w**2 * np.cross(k, np.cross(k, d)))
+    result = inverse_kinematics(robot, path, axis=axis, criterion="effort", tool_force=20.0)
+    assert result.success, result.message
+    q = result.q
+    difference = (4 * (q[3] - q[1]) / h - (q[4] - q[0]) / (2 * h)) / 3
+    assert np.abs(difference - result.qd[2]).max() <= 1e-7 * np.abs(result.qd[2]).max()

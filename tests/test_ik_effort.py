@@ -163,7 +163,7 @@ def test_default_criterion_unchanged(robot):
         ({"tool_force": 20.0}, "tool_force applies to criterion='effort' only"),
         ({"criterion": "effort", "tool_force": -1.0}, "tool_force = -1.0: expected a finite number >= 0 (N)"),
         ({"criterion": "effort", "joint_limit_weight": 0.0}, "joint_limit_weight = 0.0: expected a finite number > 0"),
-        ({"criterion": "effort", "pose": "hold"}, "criterion='effort' supports the tip-position task only"),
+        ({"criterion": "effort", "pose": "hold"}, "supports the tip, axis and entry-point tasks, not the full pose"),
     ],
 )
 def test_bad_options(robot, options, message):

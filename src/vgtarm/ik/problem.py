@@ -425,6 +425,8 @@ class Task:
         n, nj = idx.shape[0], q.shape[1]
         if self.directions is not None:
             return self._evaluate_reduced(idx, q, lam)
+        if self.kind == "axis":
+            return self._evaluate_axis(idx, q, lam)
         g = None
         if self.effort is not None:
             out = self._evaluate("ik_effort", {"q": q, "lam": lam, **self._effort_inputs(idx)}, n)
@@ -434,26 +436,34 @@ class Task:
             out = self._evaluate("ik_position", {"q": q, "lam": lam}, n)
             c, J, H = out["c"], out["J"], out["H"]
             c -= self.position[idx]
-        elif self.kind == "axis":
-            return self._evaluate_axis(idx, q, lam)
         else:
             out = self._evaluate("ik_pose", {"q": q, "lam": lam, **self._orientation_inputs(idx)}, n)
             c, J, H = out["c"], out["J"], out["H"]
             c[:, :3] -= self.position[idx]
         return c, J.reshape(n, self.m, nj), H.reshape(n, nj, nj), g
 
-    def _evaluate_axis(self, idx: Index, q: Array, lam: Array) -> tuple[Array, Array, Array, None]:
-        """:meth:`evaluate_cost` of the axis task: the pose functions at ``M = F K B^T``, rows projected."""
+    def _evaluate_axis(self, idx: Index, q: Array, lam: Array) -> tuple[Array, Array, Array, Array | None]:
+        """:meth:`evaluate_cost` of the axis task: the pose functions at ``M = F K B^T``, rows projected.
+
+        With the effort criterion the Lagrangian is the effort functions' (``Phi_e`` and the tip's rows,
+        ``ik_effort``) plus the pose functions' at the orientation multipliers alone: the Hessians add."""
         n, nj = idx.shape[0], q.shape[1]
-        inputs = {"q": q, "lam": self._lift_axis(lam), **self._orientation_inputs(idx)}
-        out = self._evaluate("ik_pose", inputs, n)
+        lifted = self._lift_axis(lam)
+        if self.effort is not None:
+            lifted[:, :3] = 0.0  # the tip's rows are the effort functions'
+        out = self._evaluate("ik_pose", {"q": q, "lam": lifted, **self._orientation_inputs(idx)}, n)
         c = self._reduce_axis(out["c"], 0)
         c[:, :3] -= self.position[idx]
         if self.cone is not None:
             c[:, 3] -= self.cone
         J = out["J"].reshape(n, 6, nj)
         J = np.concatenate([J[:, :3], np.einsum("rk,nkj->nrj", self._axis_rows(), J[:, 3:])], axis=1)
-        return c, J, out["H"].reshape(n, nj, nj), None
+        H, g = out["H"].reshape(n, nj, nj), None
+        if self.effort is not None:
+            effort = self._evaluate("ik_effort", {"q": q, "lam": lam[:, :3], **self._effort_inputs(idx)}, n)
+            H = H + effort["H"].reshape(n, nj, nj)
+            g = effort["g"]
+        return c, J, H, g
 
     def _evaluate_reduced(self, idx: Index, q: Array, lam: Array) -> tuple[Array, Array, Array, Array | None]:
         """:meth:`evaluate_cost` of a reduced position task: the three-row functions at ``E^T lam``, projected."""
@@ -526,6 +536,8 @@ class Task:
                 inputs = {"q": q, "lam": self._lift(lam), **self._effort_inputs(idx), "fd": self.effort.force_rate[idx]}
                 rhs -= self._evaluate("ik_effort_dt", inputs, n)["dt"]
             return self._reduce(rhs, nj)
+        if self.kind == "axis":
+            return self._axis_first_order_rhs(idx, q, lam)
         rhs = np.zeros((n, nj + self.m))
         rhs[:, nj : nj + 3] = self.velocity[idx]
         if self.effort is not None:
@@ -534,13 +546,20 @@ class Task:
         elif self.kind == "pose":
             inputs = {"q": q, "lam": lam, **self._orientation_inputs(idx), **self._motion_inputs(idx)}
             rhs -= self._evaluate("ik_pose_dt", inputs, n)["dt"]
-        elif self.kind == "axis":
-            full = np.zeros((n, nj + 6))
-            full[:, nj : nj + 3] = self.velocity[idx]
-            inputs = {"q": q, "lam": self._lift_axis(lam), **self._orientation_inputs(idx), **self._motion_inputs(idx)}
-            full -= self._evaluate("ik_pose_dt", inputs, n)["dt"]
-            return self._reduce_axis(full, nj)
         return rhs
+
+    def _axis_first_order_rhs(self, idx: Index, q: Array, lam: Array) -> Array:
+        """:meth:`first_order_rhs` of the axis task: the pose functions' (the tip's rows do not depend on
+        time at fixed ``q``), plus with the effort criterion the effort functions' (the force's rate)."""
+        n, nj = idx.shape[0], q.shape[1]
+        full = np.zeros((n, nj + 6))
+        full[:, nj : nj + 3] = self.velocity[idx]
+        inputs = {"q": q, "lam": self._lift_axis(lam), **self._orientation_inputs(idx), **self._motion_inputs(idx)}
+        full -= self._evaluate("ik_pose_dt", inputs, n)["dt"]
+        if self.effort is not None:
+            inputs = {"q": q, "lam": lam[:, :3], **self._effort_inputs(idx), "fd": self.effort.force_rate[idx]}
+            full[:, : nj + 3] -= self._evaluate("ik_effort_dt", inputs, n)["dt"]
+        return self._reduce_axis(full, nj)
 
     def second_order_rhs(self, idx: Index, q: Array, lam: Array, qd: Array, lam_d: Array) -> Array:
         """``-d^2/dt^2 F(q + t qd, lam + t lam_d, t)`` at ``t = 0``, ``(n, nj + m)``.
@@ -549,10 +568,10 @@ class Task:
         derivatives of the optimum along the path.
         """
         n = idx.shape[0]
+        if self.kind == "axis":
+            return self._axis_second_order_rhs(idx, q, lam, qd, lam_d)
         if self.directions is not None:
             lam, lam_d = self._lift(lam), self._lift(lam_d)
-        elif self.kind == "axis":
-            lam, lam_d = self._lift_axis(lam), self._lift_axis(lam_d)
         inputs = {"q": q, "lam": lam, "qd": qd, "lam_d": lam_d}
         if self.effort is not None:
             d2 = self._evaluate("ik_effort_d2", {**inputs, **self._effort_inputs(idx, rates=True)}, n)["d2"]
@@ -564,9 +583,31 @@ class Task:
         rhs = -d2
         nj = q.shape[1]
         rhs[:, nj : nj + 3] += self.acceleration[idx]
-        if self.kind == "axis":
-            return self._reduce_axis(rhs, nj)
         return rhs if self.directions is None else self._reduce(rhs, nj)
+
+    def _axis_second_order_rhs(self, idx: Index, q: Array, lam: Array, qd: Array, lam_d: Array) -> Array:
+        """:meth:`second_order_rhs` of the axis task; with the effort criterion the stationarity rows
+        add the effort functions' (``Phi_e`` and the tip's rows, at the tip's multipliers) to the pose
+        functions' at the orientation multipliers alone."""
+        n, nj = idx.shape[0], q.shape[1]
+        lifted, lifted_d = self._lift_axis(lam), self._lift_axis(lam_d)
+        if self.effort is not None:
+            lifted[:, :3] = lifted_d[:, :3] = 0.0
+        inputs = {"q": q, "lam": lifted, "qd": qd, "lam_d": lifted_d}
+        inputs.update(self._orientation_inputs(idx), **self._motion_inputs(idx))
+        d2 = self._evaluate("ik_pose_d2", inputs, n)["d2"]
+        if self.effort is not None:
+            inputs = {
+                "q": q,
+                "lam": lam[:, :3],
+                "qd": qd,
+                "lam_d": lam_d[:, :3],
+                **self._effort_inputs(idx, rates=True),
+            }
+            d2[:, :nj] += self._evaluate("ik_effort_d2", inputs, n)["d2"][:, :nj]
+        rhs = -d2
+        rhs[:, nj : nj + 3] += self.acceleration[idx]
+        return self._reduce_axis(rhs, nj)
 
 
 @dataclass

@@ -219,39 +219,39 @@ def build_ipopt(
     effort: bool = False,
     directions: Array | None = None,
     tool: Array | None = None,
+    cone: float | None = None,
 ) -> ca.Function:
     """The IPOPT solver of one sample of the robot ``definition`` (default the paper's); its parameter
     is ``[target point (3), R_d row-major (9, pose only), p]``, and with ``effort`` (the effort
-    criterion, position task) ``[target point (3), tool force (3), inverse scales (n), p]``. With
-    ``directions`` ``(r, 3)`` (a robot whose tip moves in a plane or a line) the position rows are
+    criterion) ``[target point (3), (the axis task's frame (9),) tool force (3), inverse scales (n), p]``.
+    With ``directions`` ``(r, 3)`` (a robot whose tip moves in a plane or a line) the position rows are
     ``E (P(q) - point)``, written symbolically here, independently of the compiled projection. The
     axis task (``kind`` ``"axis"``, ``tool`` the tool rotation ``B``) takes the frame ``[w1 w2 d]`` of its
     target axis (9, row-major) where the pose task takes ``R_d``, and its rows ``w1 . a``, ``w2 . a`` of
-    the tool axis ``a = C03 B e3``, written here from the forward kinematics."""
+    the tool axis ``a = C03 B e3``, written here from the forward kinematics; on a cone's boundary
+    (``cone`` its half-angle's cosine, the frame ``[d w1 w2]``) the one row ``d . a - cone``."""
     q = ca.SX.sym("q", definition.n_joints)
     point = ca.SX.sym("point", 3)
     p = ca.SX.sym("p", definition.n_parameters)
-    extra = None
-    if effort:
-        force, scale = ca.SX.sym("f", 3), ca.SX.sym("s", definition.n_joints)
-        parameters = ca.vertcat(point, force, scale, p)
-        c = definition.kinematics(q, p).tip - point
-        extra = effort_cost(q, force, scale, p, definition)
-    elif kind == "position":
-        parameters = ca.vertcat(point, p)
-        c = definition.kinematics(q, p).tip - point
-    elif kind == "axis":
+    fk = definition.kinematics(q, p)
+    extra, pieces, c = None, [point], fk.tip - point
+    if kind == "axis":
         assert tool is not None
         frame = ca.SX.sym("F", 9)
-        parameters = ca.vertcat(point, frame, p)
-        fk = definition.kinematics(q, p)
+        pieces.append(frame)
         a = fk.C03 @ ca.DM(tool[:, 2])
         w = rotation_from_row_major(frame)
-        c = ca.vertcat(fk.tip - point, w[:, 0].T @ a, w[:, 1].T @ a)
-    else:
+        rows = [w[:, 0].T @ a, w[:, 1].T @ a] if cone is None else [w[:, 0].T @ a - cone]
+        c = ca.vertcat(c, *rows)
+    elif kind == "pose":
         rd = ca.SX.sym("R_d", 9)
-        parameters = ca.vertcat(point, rd, p)
+        pieces.append(rd)
         c = pose_constraints(q, rotation_from_row_major(rd), p, definition) - ca.vertcat(point, ca.SX.zeros(3))
+    if effort:
+        force, scale = ca.SX.sym("f", 3), ca.SX.sym("s", definition.n_joints)
+        pieces += [force, scale]
+        extra = effort_cost(q, force, scale, p, definition)
+    parameters = ca.vertcat(*pieces, p)
     if directions is not None:
         c = ca.DM(directions) @ c
     cost = 0.5 * ca.sum1(ca.DM(problem.weight) * (q - ca.DM(problem.centre)) ** 2)
@@ -273,7 +273,8 @@ def build_ipopt(
 def solve_ipopt(problem: IKProblem, task: Task, state: BatchState, q_start: Array, options: IKOptions) -> None:
     """The IPOPT reference solver (solver contract: :class:`vgtarm.ik.Solver`)."""
     effort = task.effort is not None
-    solver = build_ipopt(problem, task.kind, options, task.model.definition, effort, task.directions, task.tool)
+    definition = task.model.definition
+    solver = build_ipopt(problem, task.kind, options, definition, effort, task.directions, task.tool, task.cone)
     m, k = task.m, problem.n_triangle
     lbg = np.concatenate([np.zeros(m), np.full(k, problem.margin)])
     ubg = np.concatenate([np.zeros(m), np.full(k, np.inf)])

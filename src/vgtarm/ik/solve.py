@@ -276,6 +276,9 @@ def _within_cone(
     half_angle = cone_angle(cone)
     if tasks.axis is None or tasks.given != ["axis"]:
         raise InputError(f"cone = {shown(cone)}: a cone needs its axis (axis=...) and neither pose nor entry_point")
+    if options.get("criterion") == "effort":  # measured: on case 1 the boundary's multiplier turns, and the
+        # released optimum leaves the cone again on 1,674 of 6,284 samples; not offered until that is solved
+        raise InputError(f"cone = {shown(cone)}: the effort criterion is not supported within a cone; use axis alone")
     _check_call(robot, path, check)
 
     def solve(piece: TipPath, extra: dict[str, Any], start: Array | None) -> IKResult:
@@ -341,8 +344,8 @@ def _inverse_kinematics(
         settings = replace(settings, coarse_step=default_coarse_step(reach))
     effort = settings.criterion == "effort"
     pose = tasks.pose
-    if effort and tasks.given:
-        raise InputError(f"criterion='effort' supports the tip-position task only, got {tasks.given[0]}")
+    if effort and tasks.pose is not None:
+        raise InputError("criterion='effort' supports the tip, axis and entry-point tasks, not the full pose")
     problem = IKProblem.from_parameters(
         robot.parameters, settings.margin, settings.joint_limit_weight if effort else 1.0
     )
