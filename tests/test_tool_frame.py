@@ -279,3 +279,15 @@ def test_the_drawing_shows_the_tool_axis_from_the_tip(planar):
     np.testing.assert_allclose(segment.start, turned.tip_position(q), rtol=0, atol=1e-15)
     length = TOOL_AXIS_FRACTION * turned.parameters.modules[0].b
     np.testing.assert_allclose(segment.end - segment.start, length * turned.tool_axis(q), rtol=0, atol=1e-15)
+
+
+def test_describe_prints_the_tool_frame(planar, tmp_path, capsys):
+    from vgtarm.app.cli.command import main
+
+    axis, edge = _turned_frame(1)
+    path = tmp_path / "turned.toml"
+    path.write_text(stack_to_toml(replace(planar.parameters, tool_axis=axis, tool_edge=edge)))
+    assert main(["describe", "--config", str(path)]) == 0
+    line = next(row for row in capsys.readouterr().out.splitlines() if row.startswith("tool axis"))
+    numbers = [float(v) for v in re.findall(r"-?\d+(?:\.\d+)?(?:e-?\d+)?", line)]
+    assert np.allclose(numbers[:3], axis, atol=1e-6) and np.allclose(numbers[3:6], edge, atol=1e-6)

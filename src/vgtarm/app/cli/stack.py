@@ -152,6 +152,7 @@ def describe_stack(stack: Stack) -> int:
     for name, body in zip(stack.body_names, stack.bodies, strict=True):
         print(f"body       {name:<13} mass {body.mass:g} kg, com {_vector(body.com)} m")
     print(f"tool       {_vector(stack.tool)} m from the last mount point")
+    print(f"tool axis  {_vector(stack.tool_axis)}, edge {_vector(stack.tool_edge)} in the end-effector frame")
     print(f"friction   {_vector(stack.viscous)} (N s/m legs; N m s/rad twists)")
     print(f"gravity    {_vector(stack.gravity)} m/s^2")
     print(f"tip @ home {_vector(tip, 10)} m; reach {float(np.linalg.norm(tip)):.6g} m")
