@@ -21,7 +21,7 @@ from ..errors import UnreachableError
 from ..model.robot import Robot
 from ..paths import MAX_COORDINATE, TipPath
 from . import reference
-from .axis import AxisTarget, axis_error
+from .axis import AxisTarget
 from .options import IKOptions
 from .pose import OrientationTarget, angle_error, orientation_target
 from .problem import IKProblem
@@ -137,7 +137,6 @@ def solve_point(
     )
     tasks = _Targets(rotation, axis, entry_point)
     target = None if rotation is None else orientation_target(rotation, 2, True)
-    pointing = tasks.target(path, True)
     pose = None if target is None else target.rotation[0]
     try:
         result = inverse_kinematics(
@@ -151,12 +150,13 @@ def solve_point(
             **options,
         )
     except UnreachableError:
+        pointing = tasks.target(path, True)
         return _closest(robot, path, p, target if pointing is None else pointing, options, started)
     q = np.array(result.q[0])
     tip, tip_rotation = robot.tip_position(q), robot.forward_kinematics(q).rotation
     error = float("nan") if pose is None else float(angle_error(tip_rotation[None], pose[None])[0])
-    if pointing is not None:
-        error = float(axis_error(robot.tool_axis(q)[None], pointing.direction[:1])[0])
+    if result.axis is not None:  # the axis and entry-point tasks: the angle their record gives
+        error = float(result.samples.orientation_error[0])
     success = bool(result.samples.success[0])
     message = (
         f"point {_format(p)} m reached and the optimality conditions of eq. 12 verified"
@@ -165,14 +165,15 @@ def solve_point(
     )
     status = "solved" if success else "unverified"
     solution = _solution(robot, p, pose, q, float(np.linalg.norm(tip - p)), error, status, message, started)
-    return _pointing(solution, pointing)
+    return _pointing(solution, result.axis, result.entry_point)
 
 
-def _pointing(solution: PointSolution, pointing: AxisTarget | None) -> PointSolution:
-    """``solution`` with the axis task's target (axis and entry point) recorded."""
-    if pointing is None:
+def _pointing(solution: PointSolution, axis: Array | None, entry_point: Array | None) -> PointSolution:
+    """``solution`` with the axis task's target recorded: its axis ``(N, 3)`` (None: not an axis task)
+    and its entry point."""
+    if axis is None:
         return solution
-    return replace(solution, axis=pointing.direction[0].copy(), entry_point=pointing.entry_point)
+    return replace(solution, axis=np.array(axis[0]), entry_point=entry_point)
 
 
 def _closest(
@@ -194,7 +195,9 @@ def _closest(
     )
     pose = target.rotation[0] if isinstance(target, OrientationTarget) else None
     solution = _solution(robot, p, pose, np.array(q, dtype=float), residual, error, "unreachable", message, started)
-    return _pointing(solution, target if isinstance(target, AxisTarget) else None)
+    if not isinstance(target, AxisTarget):
+        return solution
+    return _pointing(solution, target.direction, target.entry_point)
 
 
 def _solution(
