@@ -28,8 +28,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import checks
-from .errors import InputError, PathError, shown
-from .ik.axis import AxisPath, unit_directions, unit_part
+from .errors import PathError, shown
+from .ik.axis import UNIT_TOLERANCE, AxisPath, unit_directions, unit_part
 from .ik.pose import OrientationPath
 from .paths import MIN_DT, TipPath
 
@@ -38,8 +38,6 @@ if TYPE_CHECKING:
 
 Array = NDArray[np.float64]
 
-#: Largest ``| |v| - 1 |`` of a direction given as a unit vector.
-UNIT_TOLERANCE = 1e-9
 #: Default ramp time of a motion's speed (s): from rest to the cruise speed.
 RAMP = 0.2
 
@@ -95,15 +93,8 @@ class _Motion:
 
 
 def _unit(name: str, value: object) -> Array:
-    vector = checks.finite_array(name, value, (3,), error=PathError).astype(float)
-    norm = float(np.linalg.norm(vector))
-    if abs(norm - 1.0) > UNIT_TOLERANCE:
-        fixed = "" if norm == 0 else "; normalised: [" + ", ".join(f"{v:.12g}" for v in vector / norm) + "]"
-        raise PathError(
-            f"{name} = {shown(vector.tolist())}: expected a unit vector (length 1 within {UNIT_TOLERANCE:g}), its "
-            f"length is {norm:.9g}{fixed}"
-        )
-    return vector
+    vector = checks.finite_array(name, value, (3,), error=PathError)
+    return np.asarray(unit_directions(vector, 1, name, error=PathError)[0])
 
 
 def _point(name: str, value: object) -> Array:
@@ -380,10 +371,7 @@ def with_axes(tip: TipPath, times: ArrayLike, directions: ArrayLike) -> ToolPath
 
     vectors = checks.finite_array("directions", directions, (None, 3), error=PathError).astype(float)
     knots = _knots(times, vectors.shape[0], "direction")
-    try:
-        vectors = unit_directions(vectors, vectors.shape[0], "directions")
-    except InputError as error:
-        raise PathError(str(error)) from None
+    vectors = unit_directions(vectors, vectors.shape[0], "directions", error=PathError)
     _inside(tip, knots)
     spline = CubicSpline(knots, vectors, bc_type="clamped")
     t = np.clip(tip.t, knots[0], knots[-1])

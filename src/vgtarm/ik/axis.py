@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..checks import Error
 from ..errors import InputError, shown
 
 Array = NDArray[np.float64]
@@ -107,31 +108,31 @@ class AxisTarget:
         )
 
 
-def _vectors(value: object, n: int, name: str) -> Array:
+def _vectors(value: object, n: int, name: str, error: Error = InputError) -> Array:
     try:
         array = np.array(value, dtype=float)
     except (TypeError, ValueError):
-        raise InputError(f"{name} = {shown(value)}: expected a vector [x, y, z] or one per sample ({n}, 3)") from None
+        raise error(f"{name} = {shown(value)}: expected a vector [x, y, z] or one per sample ({n}, 3)") from None
     if array.shape not in ((3,), (n, 3)):
-        raise InputError(f"{name} has shape {array.shape}: expected (3,) or ({n}, 3) for a path of {n} samples")
+        raise error(f"{name} has shape {array.shape}: expected (3,) or ({n}, 3) for a path of {n} samples")
     if not np.isfinite(array).all():
-        raise InputError(f"{name} = {shown(array.tolist())}: expected finite numbers")
+        raise error(f"{name} = {shown(array.tolist())}: expected finite numbers")
     return np.broadcast_to(array, (n, 3)).copy()
 
 
-def unit_directions(value: object, n: int, name: str = "axis") -> Array:
-    """``value`` as ``(n, 3)`` unit vectors, refused in one line when a row's length is not 1 within
-    :data:`UNIT_TOLERANCE` (the message gives the normalised vector to use instead)."""
-    d = _vectors(value, n, name)
+def unit_directions(value: object, n: int, name: str = "axis", *, error: Error = InputError) -> Array:
+    """``value`` as ``(n, 3)`` unit vectors, refused in one ``error`` line when a row's length is not 1
+    within :data:`UNIT_TOLERANCE` (the message gives the normalised vector to use instead)."""
+    d = _vectors(value, n, name, error)
     norm = np.linalg.norm(d, axis=1)
     bad = np.flatnonzero(np.abs(norm - 1.0) > UNIT_TOLERANCE)
     if bad.size:
         i = int(bad[0])
         where = name if np.ndim(np.asarray(value)) == 1 else f"{name}[{i}]"
         if norm[i] == 0.0:
-            raise InputError(f"{where} = {shown(d[i].tolist())}: expected a unit vector, got the zero vector")
+            raise error(f"{where} = {shown(d[i].tolist())}: expected a unit vector, got the zero vector")
         fixed = ", ".join(f"{v:.12g}" for v in d[i] / norm[i])
-        raise InputError(
+        raise error(
             f"{where} = {shown(d[i].tolist())}: expected a unit vector (length 1 within {UNIT_TOLERANCE:g}), its "
             f"length is {norm[i]:.9g}; normalised: [{fixed}]"
         )
