@@ -141,12 +141,9 @@ LOOP = {
 }
 
 
-def test_drilling_in_the_closed_loop(robot):
-    path = _drill(robot)
-    ik = vgtarm.inverse_kinematics(robot, path.tip, **path.task(robot))
-    assert ik.success, ik.message
-    assert ik.task == "axis"
-    run = vgtarm.simulate(
+def _closed_loop(robot: vgtarm.Robot, ik: vgtarm.IKResult) -> vgtarm.SimulationResult:
+    """The run of :data:`LOOP`: CFC (the case gains), the tool force and disturbance, seed 1."""
+    return vgtarm.simulate(
         robot,
         ik,
         vgtarm.ComputedForceControl.with_gains(15000, 600),
@@ -155,6 +152,14 @@ def test_drilling_in_the_closed_loop(robot):
         seed=1,
         **LOOP,
     )
+
+
+def test_drilling_in_the_closed_loop(robot):
+    path = _drill(robot)
+    ik = vgtarm.inverse_kinematics(robot, path.tip, **path.task(robot))
+    assert ik.success, ik.message
+    assert ik.task == "axis"
+    run = _closed_loop(robot, ik)
     summary = run.summary()
     assert summary["max_tip_error_m"] <= 30e-6
     assert summary["max_axis_error_rad"] <= 0.5e-3
@@ -168,15 +173,7 @@ def test_entry_point_in_the_closed_loop(robot):
     path = vgtarm.paths.case1(dt=1e-3)
     entry = path.position.mean(axis=0) - np.array([0.0, 0.0, 0.2])
     ik = vgtarm.inverse_kinematics(robot, path, entry_point=entry)
-    run = vgtarm.simulate(
-        robot,
-        ik,
-        vgtarm.ComputedForceControl.with_gains(15000, 600),
-        external_force=vgtarm.ExternalForce(),
-        controller_model=robot.parameters.scaled(mass=1.1),
-        seed=1,
-        **LOOP,
-    )
+    run = _closed_loop(robot, ik)
     summary = run.summary()
     assert summary["max_entry_distance_m"] <= 0.05e-3
     tip, rotation = robot.tool_frame(run.q)
