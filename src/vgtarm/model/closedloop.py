@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..machine import threads_setting, usable_cpus
+from .actuators import Actuators
 from .compiled import CompiledBackend
 from .interface import enum, ffi
 
@@ -75,6 +76,9 @@ class LoopSettings:
     kalman_gain: tuple[float, float, float] = (0.0, 0.0, 0.0)
     threshold_measured: bool = False
     tool_feedforward: bool = False
+    #: clip the effort to the actuators' limits (``LoopArrays``' ``force_limit``, ``speed_limit``,
+    #: ``force_speed``) at the velocity the controller sees
+    saturation: bool = False
 
     def struct(self, n_joints: int, n_margins: int) -> Any:
         """The C structure of these settings for a robot of ``n_joints`` joints."""
@@ -99,6 +103,7 @@ class LoopSettings:
                 "kalman_gain": list(self.kalman_gain),
                 "threshold_measured": int(self.threshold_measured),
                 "tool_feedforward": int(self.tool_feedforward),
+                "saturation": int(self.saturation),
             },
         )
 
@@ -129,6 +134,7 @@ class LoopArrays:
         resolution: Array | None = None,
         velocity_noise: Array | None = None,
         tool_force_expected: Array | None = None,
+        actuators: Actuators | None = None,
     ) -> None:
         n, n_joints = np.shape(q_d)
         self.n = n
@@ -151,6 +157,10 @@ class LoopArrays:
                 resolution=np.zeros(n_joints) if resolution is None else resolution,
                 velocity_noise=np.zeros((n, n_joints)) if velocity_noise is None else velocity_noise,
                 tool_force_expected=np.zeros((n, 3)) if tool_force_expected is None else tool_force_expected,
+                # the actuators' limits (used with LoopSettings.saturation): none by default
+                force_limit=np.full(n_joints, np.inf) if actuators is None else actuators.force,
+                speed_limit=np.full(n_joints, np.inf) if actuators is None else actuators.speed,
+                force_speed=np.zeros(n_joints) if actuators is None else actuators.force_speed.astype(float),
             ).items()
         }
         self.q = np.full((n, n_joints), np.nan)

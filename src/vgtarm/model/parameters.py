@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 from ..errors import ConfigError, cut, shown
 from ..fileio import parse_toml, read_text_limited
 from ..kinds import other_toml
+from .actuators import Actuators, read_actuators
 from .assembly import TRIANGLE_INEQUALITIES, linear_form, triangle_margins
 from .factors import model_factor
 
@@ -117,6 +118,8 @@ class RobotParameters:
     viscous: tuple[float, ...]
     gravity: tuple[float, float, float]
     source: str = field(default="<parameters>", compare=False)
+    #: The joints' actuators (:mod:`vgtarm.model.actuators`), or ``None``: no limits (the paper).
+    actuators: Actuators | None = None
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -254,7 +257,10 @@ def parameters_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> 
         raise ConfigError(f"{cut(str(source), _SOURCE_LENGTH)}: {other}")
     reader = _Reader(cut(str(source), _SOURCE_LENGTH))
     reader.keys(
-        data, "", required={"geometry", "limits", "home", "bodies"}, optional={"name", "friction", "environment"}
+        data,
+        "",
+        required={"geometry", "limits", "home", "bodies"},
+        optional={"name", "friction", "environment", "actuators"},
     )
     geometry = data["geometry"]
     reader.keys(geometry, "geometry", required={"module1", "module2", "h1"})
@@ -315,6 +321,7 @@ def parameters_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> 
         viscous=tuple(reader.vector(friction["viscous"], "friction.viscous", N_JOINTS, "one value per joint")),
         gravity=tuple(reader.vector(environment["gravity"], "environment.gravity", 3, "[gx, gy, gz]")),  # type: ignore[arg-type]
         source=source,
+        actuators=None if "actuators" not in data else read_actuators(data["actuators"], JOINT_NAMES, source),
     )
 
 
@@ -474,6 +481,15 @@ def _validate(p: RobotParameters) -> None:
             _fail(p, f"friction.viscous[{i}] ({JOINT_NAMES[i]})", c, f"a coefficient in [0, {MAX_FRICTION:g}]")
     if len(p.gravity) != 3 or not _finite(p.gravity, MAX_GRAVITY):
         _fail(p, "environment.gravity", list(p.gravity), f"a 3-vector with entries within +-{MAX_GRAVITY:g} (m/s^2)")
+    check_actuators(p.source, p.actuators, JOINT_NAMES)
+
+
+def check_actuators(source: str, actuators: object, names: tuple[str, ...]) -> None:
+    """``actuators`` is ``None`` or an :class:`~vgtarm.model.actuators.Actuators` of the joints ``names``."""
+    if actuators is None:
+        return
+    if not isinstance(actuators, Actuators) or tuple(actuators.names) != tuple(names):
+        fail_field(source, "actuators", actuators, f"None or Actuators of the joints {', '.join(names)}")
 
 
 def _validate_body(p: RobotParameters, body: Body) -> None:

@@ -33,6 +33,7 @@ from ..kinds import other_toml
 from ..machine import blas_on_one_thread
 from ..markup import html_table
 from ..memory import check_batch, limit_variable_set
+from .actuators import Actuators, check_holding
 from .assembly import check_margins
 from .backends import checked_single_call, single_call
 from .compiled import Backend, CompiledBackend, InterpretedBackend, get_backend
@@ -719,6 +720,13 @@ class Robot:
         return ForwardKinematics(passive, origins, rotations, tip, rotation)
 
     @property
+    def actuators(self) -> Actuators | None:
+        """The joints' actuators (peak force, no-load speed, acceleration limit, force-speed line) of
+        the robot file's ``[actuators]`` table, or ``None`` (no limits, the paper's robot); see
+        :mod:`vgtarm.model.actuators`."""
+        return self.parameters.actuators
+
+    @property
     def tool_rotation(self) -> Array:
         """The tool frame in the end-effector frame F3, ``(3, 3)``: its columns are the tool's edge,
         ``axis x edge`` and axis (a stack's ``[end_effector] tool_edge`` and ``tool_axis``); the
@@ -858,8 +866,14 @@ def _robot_of(parameters: RobotParameters | Stack, model: str | None) -> Robot:
                 "model = 'recursive' is for stacks of modules; the paper's robot keeps its symbolic model "
                 "(convert it: vgtarm convert-robot --out stack.toml)"
             )
-        return recursive_robot(parameters)
-    return Robot(parameters)
+        robot = recursive_robot(parameters)
+    else:
+        robot = Robot(parameters)
+    if parameters.actuators is not None:  # a file's actuators must at least hold the robot at home
+        home = parameters.home
+        holding = robot.inverse_dynamics(home, np.zeros_like(home), np.zeros_like(home))
+        check_holding(parameters.actuators, holding, parameters.source)
+    return robot
 
 
 def load_robot(config: str | Path | None = None, *, model: str | None = None) -> Robot:

@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 from ..control.law import computed_force
 from ..control.scm import predict_tip_error
 from ..errors import AssemblyError, InputError
+from ..model.actuators import effort_bounds
 from ..model.closedloop import (
     ABOVE_THRESHOLD,
     DONE,
@@ -205,6 +206,9 @@ class PythonLoop:
                 except (AssemblyError, InputError):
                     return NOT_FINITE, k
                 arrays.F[k] = arrays.F[k] - J.T @ inp["tool_force_expected"][k]
+            if settings.saturation:  # the actuators' limits at the velocity the controller sees
+                lower, upper = effort_bounds(inp["force_limit"], inp["speed_limit"], inp["force_speed"], vm)
+                arrays.F[k] = np.minimum(np.maximum(arrays.F[k], lower), upper)
             dist = inp["disturbance"][k]
             arrays.f_ext[k] = self._tool_force(settings, velocity, dist)
             if k + 1 >= arrays.n:

@@ -222,7 +222,12 @@ class Run:
             message=message,
             wall_time_s=outcome.wall_time_s,
             ga_time_s=sum((a.wall_time_s for a in outcome.activations), 0.0),
-            metadata={**self.metadata(), **self._drops(outcome), **dict(metadata or {})},
+            metadata={
+                **self.metadata(),
+                **self._drops(outcome),
+                **actuator_figures(self.plant, arrays, mode, ref.dt),
+                **dict(metadata or {}),
+            },
             effort_estimate=_blank(arrays.tau_hat, mode) if self.sensing.loop_observer != "none" else None,
             tip_error_measured=(
                 _measured_tip_error(self.job.model, arrays, self.tip_d, mode) if self.sensing.active else None
@@ -390,6 +395,7 @@ def _loop_settings(
         **sensing.loop_fields(),
         threshold_measured=isinstance(controller, SwitchingControl) and controller.measured_switching,
         tool_feedforward=bool(scenario.tool_force_feedforward),
+        saturation=plant.actuators is not None,
     )
 
 
@@ -479,7 +485,32 @@ def loop_arrays(
         resolution=resolution,
         velocity_noise=velocity_noise,
         tool_force_expected=tool_force_expected,
+        actuators=plant.actuators,
     )
+
+
+def actuator_figures(plant: Robot, arrays: LoopArrays, mode: np.ndarray, dt: float) -> dict[str, Any]:
+    """Per joint with an actuator, the peak utilisation of its force limit (the effort over the limit
+    in its direction at the velocity the controller saw, as the loop clipped it: at most 1) and the
+    time spent at a limit (s); none for a robot without actuators."""
+    actuators = plant.actuators
+    if actuators is None:
+        return {}
+    run = (mode != MODE_NOT_RUN) & np.isfinite(arrays.F).all(axis=1) & np.isfinite(arrays.qd_meas).all(axis=1)
+    F, v = arrays.F[run], arrays.qd_meas[run]
+    lower, upper = actuators.bounds(v)
+    utilisation = actuators.utilisation(F, v)
+    at_limit = ((F == lower) | (F == upper)) & actuators.limited
+    names = [name for name, limited in zip(plant.joint_names, actuators.limited, strict=True) if limited]
+    index = np.flatnonzero(actuators.limited)
+    return {
+        "actuator_peak_utilisation": {
+            name: float(utilisation[:, i].max()) if len(F) else None for name, i in zip(names, index, strict=True)
+        },
+        "actuator_time_at_limit_s": {
+            name: float(np.count_nonzero(at_limit[:, i]) * dt) for name, i in zip(names, index, strict=True)
+        },
+    }
 
 
 def _blank(values: np.ndarray, mode: np.ndarray) -> np.ndarray:

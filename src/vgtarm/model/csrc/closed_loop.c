@@ -314,7 +314,8 @@ static int feed_forward(const vgt_model *m, const vgt_settings *s, const vgt_run
  * its error and what the controller sees, stop if the error exceeds the threshold (*stop = k,
  * before any control), estimate the external efforts, compute the effort (computed force control
  * minus the estimate and, with tool_feedforward, minus the expected tool force through J_P^T) and
- * the tool force, and integrate to sample k+1 (unless k is the last). On any other stop, *stop is the sample whose state failed. */
+ * the tool force, clip the effort to the actuators' limits (settings.saturation), and integrate to
+ * sample k+1 (unless k is the last). On any other stop, *stop is the sample whose state failed. */
 int vgt_simulate(const vgt_model *m, const vgt_settings *s, const vgt_run *r,
                  const double *Kp, const double *Kv, long k0, long k1, long *stop)
 {
@@ -379,6 +380,7 @@ int vgt_simulate_slice(const vgt_model *m, const vgt_settings *s, const vgt_run 
             if (s->tool_feedforward && feed_forward(m, s, r, &wk, k, F)) {
                 status = VGT_FUNCTION_FAILED; *stop = k; break;
             }
+            if (s->saturation) vgt_saturate(nj, r->force_limit, r->speed_limit, r->force_speed, vm, F);
             tool_force(s, V, dist, r->f_ext + 3 * k);
             ++used;
             if (k + 1 >= r->n) continue;

@@ -80,4 +80,24 @@ static inline void vgt_subtract_estimate(int n, const double *tau, double *F)
     for (int i = 0; i < n; ++i) F[i] -= tau[i];
 }
 
+/* The actuators' limits on the effort F at the joint velocities v (vgtarm/model/actuators.py):
+ * |F_i| <= force[i] (inf: no actuator) and, where line[i] != 0, the force-speed line of a motor whose
+ * voltage is bounded, F_i sign(v_i) <= force[i] (1 - |v_i| / speed[i]) in the direction of motion
+ * (braking keeps the full force; past twice the no-load speed both ends are the full braking
+ * force). F is clipped in place, as NumPy's minimum(maximum(F, lower), upper). */
+static inline void vgt_saturate(int n, const double *force, const double *speed, const double *line,
+                                const double *v, double *F)
+{
+    for (int i = 0; i < n; ++i) {
+        double lower = -force[i], upper = force[i];
+        if (line[i] != 0.0) {
+            const double r = v[i] / speed[i];
+            upper = fmax(force[i] * fmin(1.0, 1.0 - r), -force[i]);
+            lower = fmin(-force[i] * fmin(1.0, 1.0 + r), force[i]);
+        }
+        if (F[i] < lower) F[i] = lower;
+        if (F[i] > upper) F[i] = upper;
+    }
+}
+
 #endif

@@ -85,6 +85,9 @@ typedef struct {
     int tool_feedforward;   /* 1: the expected tool force (vgt_run.tool_force_expected) is fed */
                             /* forward, F -= J_P(q_meas)^T f_exp_k, and the observer and the   */
                             /* Kalman process model take it as known (they estimate the rest)  */
+    int saturation;         /* 1: the effort is clipped to the actuators' limits at the        */
+                            /* velocity the controller sees (vgt_saturate, vgt_control.h), so  */
+                            /* F, the plant, the observer and the estimator get what is applied */
 } vgt_settings;
 
 /* One run: n samples of an n_joints robot (nj below). */
@@ -108,6 +111,10 @@ typedef struct {
                                             /* at each sample where it was (NULL: not kept)  */
     const double *tool_force_expected;      /* (n, 3) expected tool force on the tip (N), fed */
                                             /* forward with settings.tool_feedforward        */
+    const double *force_limit;              /* (nj) actuators' peak force (inf: none), with   */
+    const double *speed_limit;              /* (nj) their no-load speed and                   */
+    const double *force_speed;              /* (nj) 1 where the force-speed line holds        */
+                                            /* (settings.saturation)                          */
 } vgt_run;
 
 /* Evaluate one generated function over n samples (batch.c). */

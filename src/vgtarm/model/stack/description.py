@@ -64,6 +64,7 @@ from ... import checks
 from ...errors import ConfigError, cut, shown
 from ...fileio import parse_toml, read_text_limited
 from ...kinds import other_toml
+from ..actuators import Actuators, read_actuators
 from ..assembly import TRIANGLE_INEQUALITIES, linear_form
 from ..factors import model_factor
 from ..parameters import (
@@ -78,6 +79,7 @@ from ..parameters import (
     Body,
     RobotParameters,
     _Reader,
+    check_actuators,
     check_body,
     fail_field,
     load_parameters,
@@ -150,6 +152,8 @@ class Stack:
     tool_edge: tuple[float, float, float] = TOOL_EDGE
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     source: str = field(default="<stack>", compare=False)
+    #: The joints' actuators (:mod:`vgtarm.model.actuators`), or ``None``: no limits.
+    actuators: Actuators | None = None
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -412,7 +416,7 @@ def stack_margins(stack: Stack, q: NDArray[np.float64]) -> NDArray[np.float64]:
 # -- reading a file ------------------------------------------------------------------------
 
 _TOP_KEYS = {"modules", "end_effector"}
-_TOP_OPTIONAL = {"name", "environment"}
+_TOP_OPTIONAL = {"name", "environment", "actuators"}
 _MODULE_KEYS = {"b", "d", "plane", "limits", "home", "platform"}
 _MODULE_OPTIONAL = {"viscous", "twist"}
 _TWIST_KEYS = {"height", "limits"}
@@ -460,6 +464,10 @@ def stack_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> Stack
     name = data.get("name", Path(str(source)).stem)
     if not isinstance(name, str) or len(name) > NAME_LENGTH:
         reader.fail("name", name, f"a string of at most {NAME_LENGTH} characters")
+    actuators = None
+    if "actuators" in data:
+        names = _joint_names(modules)
+        actuators = read_actuators(data["actuators"], names, source)
     return Stack(
         name=name,
         modules=tuple(modules),
@@ -469,7 +477,18 @@ def stack_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> Stack
         tool_edge=(edge[0], edge[1], edge[2]),
         gravity=(gravity[0], gravity[1], gravity[2]),
         source=source,
+        actuators=actuators,
     )
+
+
+def _joint_names(modules: list[StackModule]) -> tuple[str, ...]:
+    """The joint names of a stack of these modules (as :attr:`Stack.joint_names`), before it is built."""
+    names: list[str] = []
+    for k, module in enumerate(modules, start=1):
+        names += [f"{leg}{k}" for leg in LEG_NAMES]
+        if module.twist is not None:
+            names.append(f"psi{k + 1}")
+    return tuple(names)
 
 
 def _read_body(reader: _Reader, entry: object, where: str, name: str, optional: set[str] | None = None) -> Body:
@@ -560,6 +579,7 @@ def _validate(stack: Stack) -> None:
     _validate_tool_frame(source, stack.tool_axis, stack.tool_edge)
     gravity = _field(source, "environment.gravity")
     checks.vector(gravity, stack.gravity, 3, minimum=-MAX_GRAVITY, maximum=MAX_GRAVITY, unit="m/s^2", error=ConfigError)
+    check_actuators(source, stack.actuators, _joint_names(list(modules)))
 
 
 def _validate_tool_frame(source: str, axis: object, edge: object) -> None:
@@ -713,10 +733,13 @@ def stack_from_parameters(parameters: RobotParameters) -> Stack:
         tool=(0.0, 0.0, 0.0),
         gravity=p.gravity,
         source=p.source,
+        actuators=p.actuators,
     )
 
 
 def _toml_value(value: object) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
     if isinstance(value, str):
         return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
     if isinstance(value, tuple | list):
@@ -781,6 +804,11 @@ def stack_to_toml(stack: Stack, *, header: str = "") -> str:
         "[environment]",
         f"gravity = {_toml_value(stack.gravity)}",
     ]
+    if stack.actuators is not None:
+        lines += ["", "[actuators]"]
+        for joint, entry in stack.actuators.entries().items():
+            fields = ", ".join(f"{key} = {_toml_value(value)}" for key, value in entry.items())
+            lines.append(f"{joint} = {{ {fields} }}")
     return "\n".join(lines) + "\n"
 
 

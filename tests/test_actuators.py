@@ -1,0 +1,240 @@
+"""Actuators: the robot file's [actuators] table, its refusals, the force-speed limits, and the
+saturation in the closed loop, against an analytic motor, the NumPy loop and a replay of the
+applied efforts."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from importlib import resources
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+import vgtarm
+from vgtarm.control import ComputedForceControl
+from vgtarm.errors import ConfigError
+from vgtarm.model.actuators import Actuator, Actuators, effort_bounds
+from vgtarm.model.compiled import InterpretedBackend, build_functions
+from vgtarm.model.robot import robot_from_dict
+from vgtarm.model.stack.description import stack_from_dict, stack_from_parameters, stack_to_toml
+from vgtarm.simulation import JointReference, simulate
+
+from .conftest import assert_close
+
+CFC = ComputedForceControl.with_gains(5000.0, 300.0)
+LEGS = {"force": 60.0, "speed": 0.05}
+
+
+def _reference_file() -> dict:
+    text = resources.files("vgtarm.model.data").joinpath("reference_robot.toml").read_text("utf-8")
+    return tomllib.loads(text)
+
+
+def _with(robot: vgtarm.Robot, **by_name: Actuator | None) -> vgtarm.Robot:
+    """``robot`` with actuators built in Python (no file check: a limit below the home hold is allowed)."""
+    joints = tuple(by_name.get(name) for name in robot.joint_names)
+    actuators = Actuators(names=robot.joint_names, joints=joints)
+    return robot.with_parameters(dataclasses.replace(robot.parameters, actuators=actuators))
+
+
+# -- the file ------------------------------------------------------------------------------------
+
+
+def test_groups_and_joint_entries_merge_key_by_key():
+    data = _reference_file()
+    data["actuators"] = {
+        "legs": LEGS,
+        "twists": {"force": 2.0, "speed": 3.0},
+        "p1": {"force": 90.0, "acceleration": 1.5, "force_speed": True},
+    }
+    robot = robot_from_dict(data, source="arm.toml")
+    a = robot.actuators
+    assert a is not None and a.names == robot.joint_names
+    np.testing.assert_array_equal(a.force, [60, 60, 90, 60, 60, 60, 2])
+    np.testing.assert_array_equal(a.speed, [0.05] * 6 + [3.0])
+    np.testing.assert_array_equal(a.acceleration, [math.inf, math.inf, 1.5] + [math.inf] * 4)
+    np.testing.assert_array_equal(a.force_speed, [False, False, True, False, False, False, False])
+    assert vgtarm.load_robot().actuators is None  # the paper's robot: none
+
+
+def test_a_joint_no_table_covers_has_no_limits():
+    data = _reference_file()
+    data["actuators"] = {"s1": LEGS}
+    a = robot_from_dict(data, source="arm.toml").actuators
+    assert a is not None
+    assert list(a.limited) == [True] + [False] * 6
+    assert np.isinf(a.force[1:]).all()
+    lower, upper = a.bounds(np.full(7, 0.3))
+    assert np.isinf(upper[1:]).all() and np.isneginf(lower[1:]).all()
+
+
+def test_a_stack_writes_its_actuators_back_and_reads_them_the_same():
+    data = _reference_file()
+    data["actuators"] = {"legs": LEGS, "p2": {"force": 80.0, "force_speed": True, "acceleration": 2.0}}
+    stack = stack_from_parameters(robot_from_dict(data, source="arm.toml").parameters)
+    again = stack_from_dict(tomllib.loads(stack_to_toml(stack)), source="again.toml")
+    assert again.actuators == stack.actuators
+    assert again.actuators is not None and again.actuators.force_speed[5]
+
+
+@pytest.mark.parametrize(
+    ("table", "message"),
+    [
+        (
+            {"legs": {"force": 0.0, "speed": 0.05}},
+            "field 'actuators.legs.force' = 0.0: expected a number in (0, 1e+09] (N)",
+        ),
+        ({"legs": {"force": -5.0, "speed": 0.05}}, "field 'actuators.legs.force' = -5.0"),
+        ({"s1": {"force": float("nan"), "speed": 0.05}}, "field 'actuators.s1.force' = nan"),
+        (
+            {"legs": {"force": 60.0, "speed": 0.0}},
+            "field 'actuators.legs.speed' = 0.0: expected a number in (0, 1e+06] (m/s)",
+        ),
+        ({"twists": {"force": 1.0, "speed": 1.0, "acceleration": -1.0}}, "'actuators.twists.acceleration' = -1.0"),
+        ({"legs": LEGS, "s1": {"force": 10.0}}, "field 'actuators.s1.force' = 10.0: expected at least 31.1412 N"),
+        ({"legs": {"force": 20.0, "speed": 0.05}}, "field 'actuators.legs.force' = 20.0: expected at least 31.1412 N"),
+        ({"s1": {"force": 60.0}}, "missing key 'actuators.s1.speed'"),
+        ({"s9": LEGS}, "unknown key 'actuators.s9'"),
+        ({"s1": {**LEGS, "stall": 1.0}}, "unknown key 'actuators.s1.stall'"),
+        ({"s1": {**LEGS, "force_speed": 1}}, "field 'actuators.s1.force_speed' = 1: expected True or False"),
+        ({"s1": 60.0}, "field 'actuators.s1' = 60.0"),
+    ],
+)
+def test_a_bad_limit_is_refused_in_one_line_naming_the_field(table, message):
+    data = _reference_file()
+    data["actuators"] = table
+    with pytest.raises(ConfigError) as caught:
+        robot_from_dict(data, source="arm.toml")
+    text = str(caught.value)
+    assert "\n" not in text and text.startswith("arm.toml: ") and message in text, text
+
+
+def test_the_home_hold_is_the_gravity_the_model_computes(robot):
+    """The refusal's threshold is the inverse dynamics at rest at home: a limit just above it loads."""
+    hold = robot.inverse_dynamics(robot.parameters.home, np.zeros(7), np.zeros(7))
+    data = _reference_file()
+    data["actuators"] = {"s2": {"force": float(abs(hold[3])) * (1 + 1e-9), "speed": 0.05}}
+    assert robot_from_dict(data, source="arm.toml").actuators is not None
+    data["actuators"] = {"s2": {"force": float(abs(hold[3])) * (1 - 1e-9), "speed": 0.05}}
+    with pytest.raises(ConfigError, match="actuators.s2.force"):
+        robot_from_dict(data, source="arm.toml")
+
+
+# -- the limits ----------------------------------------------------------------------------------
+
+
+def test_the_force_speed_line_is_a_voltage_limited_motor():
+    """The motor's current range at speed ``v``: ``(+-V - K_e v) / R`` within ``+-I_max``; with
+    ``F_s = K_t V / R = K_t I_max`` and ``v_max = V / K_e`` that is the line of the module."""
+    Fs, vmax = 60.0, 0.05
+    a = Actuators(names=("s1",), joints=(Actuator(force=Fs, speed=vmax, force_speed=True),))
+    v = np.linspace(-0.12, 0.12, 241)[:, None]
+    lower, upper = a.bounds(v)
+    Kt, R, V = 2.0, 1.5, 45.0  # N/A, ohm, volt: F_s = Kt V / R = 60 N
+    Ke = V / vmax
+    current_high = np.clip((V - Ke * v) / R, -V / R, V / R)
+    current_low = np.clip((-V - Ke * v) / R, -V / R, V / R)
+    assert_close(upper, Kt * current_high, rtol=1e-12, atol=1e-12, what="upper")
+    assert_close(lower, Kt * current_low, rtol=1e-12, atol=1e-12, what="lower")
+    box = Actuators(names=("s1",), joints=(Actuator(force=Fs, speed=vmax),))
+    assert (box.bounds(v)[1] == Fs).all() and (box.bounds(v)[0] == -Fs).all()
+
+
+def test_saturate_and_utilisation_agree():
+    rng = np.random.default_rng(4)
+    a = Actuators(
+        names=("s1", "v1", "psi2"),
+        joints=(Actuator(60.0, 0.05, force_speed=True), Actuator(40.0, 0.1), None),
+    )
+    F = rng.normal(scale=80.0, size=(500, 3))
+    v = rng.normal(scale=0.05, size=(500, 3))
+    clipped = a.saturate(F, v)
+    assert (a.utilisation(clipped, v)[:, :2] <= 1 + 1e-15).all()
+    inside = a.utilisation(F, v)[:, :2] <= 1
+    np.testing.assert_array_equal(clipped[:, :2][inside], F[:, :2][inside])
+    np.testing.assert_array_equal(clipped[:, 2], F[:, 2])  # no actuator: untouched
+    lower, upper = effort_bounds(a.force, a.speed, a.force_speed, v)
+    np.testing.assert_array_equal(clipped, np.minimum(np.maximum(F, lower), upper))
+
+
+# -- the closed loop -----------------------------------------------------------------------------
+
+
+def _spin_reference(robot: vgtarm.Robot, duration: float, acceleration: float) -> JointReference:
+    """Legs held at home, the twist asked to spin up at ``acceleration`` (rad/s^2)."""
+    t = np.arange(0.0, duration + 1e-12, 1e-3)
+    q = np.tile(robot.parameters.home, (len(t), 1))
+    qd, qdd = np.zeros_like(q), np.zeros_like(q)
+    q[:, -1] = 0.5 * acceleration * t**2
+    qd[:, -1] = acceleration * t
+    qdd[:, -1] = acceleration
+    return JointReference(t, q, qd, qdd)
+
+
+def test_a_saturated_twist_spins_up_as_a_motor_does(robot):
+    """The end-effector is symmetric about the twist axis with its centre of mass on it, so with the
+    legs held the twist obeys ``I w' = tau`` alone (I = the effector's Izz). Asked for far more than
+    its motor gives, the twist gets ``tau_s (1 - w_k / w_max)`` held over each period (the loop
+    clips at the sampled speed), so its speed follows the exact discrete recursion
+    ``w_{k+1} = w_k + dt tau_s (1 - w_k / w_max) / I``: ``w_k = w_max (1 - r^k)``, ``r = 1 - dt tau_s / (I w_max)``."""
+    tau_s, w_max = 0.05, 20.0
+    plant = _with(robot, psi3=Actuator(force=tau_s, speed=w_max, force_speed=True))
+    run = simulate(plant, _spin_reference(plant, 0.3, 2000.0), CFC, integrator="rk4")
+    inertia = robot.parameters.bodies[2].inertia[2][2]
+    k = np.arange(len(run.t))
+    expected = w_max * (1.0 - (1.0 - 1e-3 * tau_s / (inertia * w_max)) ** k)
+    assert_close(run.qd[:, -1], expected, rtol=1e-9, atol=1e-12, what="twist speed")
+    np.testing.assert_array_equal(run.effort[:, -1], tau_s * (1.0 - run.qd[:, -1] / w_max))
+    assert np.abs(run.q[:, :-1] - robot.parameters.home[:-1]).max() < 1e-12  # the legs never moved
+    assert run.summary()["actuator_time_at_limit_s"] == {"psi3": pytest.approx(0.301)}
+    assert run.summary()["actuator_peak_utilisation"]["psi3"] == 1.0
+
+
+def test_the_loop_integrates_the_applied_effort_not_the_command(robot):
+    """Replayed with SciPy (the plant's forward dynamics under each sample's recorded effort, held),
+    a run whose legs saturate lands on the loop's states: the plant got the clipped effort."""
+    plant = _with(robot, **{name: Actuator(force=45.0, speed=0.05, force_speed=True) for name in robot.joint_names[:6]})
+    ref = vgtarm.inverse_kinematics(plant, vgtarm.paths.case1(duration=0.4))
+    run = simulate(plant, ref, CFC, integrator="rk4", substeps=4)
+    assert run.summary()["actuator_time_at_limit_s"]["v1"] > 0.05
+    n = plant.n_joints
+    for k in (50, 150, 300):
+
+        def rhs(_t, x, F=run.effort[k]):
+            return np.concatenate([x[n:], plant.forward_dynamics(x[:n], x[n:], F)])
+
+        x0 = np.concatenate([run.q[k], run.qd[k]])
+        end = solve_ivp(rhs, (0.0, 1e-3), x0, rtol=1e-12, atol=1e-14).y[:, -1]
+        assert_close(end[:n], run.q[k + 1], rtol=0, atol=1e-12, what=f"q at {k + 1}")
+        assert_close(end[n:], run.qd[k + 1], rtol=0, atol=1e-9, what=f"qd at {k + 1}")
+        lower, upper = plant.actuators.bounds(run.qd[k])
+        assert (run.effort[k] >= lower).all() and (run.effort[k] <= upper).all()
+
+
+@pytest.mark.parametrize("options", [{}, {"encoder_resolution": 1e-6, "observer": "momentum"}])
+def test_the_compiled_loop_saturates_as_its_numpy_twin(robot, options):
+    plant = _with(
+        robot, **{name: Actuator(force=60.0, speed=0.05, force_speed=name[0] != "s") for name in robot.joint_names[:6]}
+    )
+    slow = vgtarm.Robot(plant.parameters, InterpretedBackend(build_functions()))
+    ref = vgtarm.inverse_kinematics(plant, vgtarm.paths.case1(duration=0.3))
+    fast, twin = simulate(plant, ref, CFC, **options), simulate(slow, ref, CFC, **options)
+    assert twin.metadata["backend"] == "interpreted"
+    for name in ("q", "qd", "effort"):
+        assert_close(getattr(fast, name), getattr(twin, name), rtol=1e-9, atol=1e-12, what=name)
+    assert fast.summary()["actuator_time_at_limit_s"] == twin.summary()["actuator_time_at_limit_s"]
+    assert fast.summary()["actuator_time_at_limit_s"]["v1"] > 0.1
+
+
+def test_without_actuators_nothing_changes(robot):
+    """A robot with an actuator table that never binds runs bit for bit as the robot without one."""
+    ref = vgtarm.inverse_kinematics(robot, vgtarm.paths.case1(duration=0.2))
+    loose = _with(robot, **{name: Actuator(force=1e6, speed=1e3) for name in robot.joint_names})
+    a, b = simulate(robot, ref, CFC), simulate(loose, ref, CFC)
+    np.testing.assert_array_equal(a.q, b.q)
+    np.testing.assert_array_equal(a.effort, b.effort)
+    assert "actuator_peak_utilisation" not in a.summary()
+    assert b.summary()["actuator_time_at_limit_s"]["s1"] == 0.0
