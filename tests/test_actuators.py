@@ -238,3 +238,39 @@ def test_without_actuators_nothing_changes(robot):
     np.testing.assert_array_equal(a.effort, b.effort)
     assert "actuator_peak_utilisation" not in a.summary()
     assert b.summary()["actuator_time_at_limit_s"]["s1"] == 0.0
+
+
+def test_the_mujoco_plant_saturates_as_ours_and_its_motors_carry_the_peak_force(robot):
+    """The MJCF's motors get ``forcerange`` = +-peak force (MuJoCo's own clamp; the force-speed
+    line has no MJCF form and is clipped by the loop before MuJoCo's turn); a saturating run on the
+    MuJoCo plant follows ours to the integrators' agreement (RK4: 1e-10 m, as without limits)."""
+    mujoco = pytest.importorskip("mujoco")
+    actuators = {name: Actuator(force=60.0, speed=0.05, force_speed=name[0] != "s") for name in robot.joint_names[:6]}
+    plant = _with(robot, **actuators)
+    model = mujoco.MjModel.from_xml_string(vgtarm.to_mjcf(plant))
+    np.testing.assert_array_equal(model.actuator_forcerange[:6], [[-60.0, 60.0]] * 6)
+    assert list(model.actuator_forcelimited) == [1] * 6 + [0]
+    ref = vgtarm.inverse_kinematics(plant, vgtarm.paths.case1(duration=0.3))
+    ours = simulate(plant, ref, CFC, integrator="rk4")
+    theirs = simulate(plant, ref, CFC, integrator="rk4", plant_engine="mujoco")
+    np.testing.assert_allclose(theirs.q, ours.q, rtol=0, atol=1e-9)
+    assert theirs.summary()["actuator_time_at_limit_s"] == ours.summary()["actuator_time_at_limit_s"]
+    assert ours.summary()["actuator_time_at_limit_s"]["v1"] > 0.2
+
+
+def test_the_recursive_model_saturates_as_the_symbolic_one(robot):
+    """The same arm as a stack on the recursive O(n) model (its own compiled loop functions, the same
+    driver): the same clipped run to round-off, the same time at each limit."""
+    from vgtarm.model.robot import recursive_robot
+    from vgtarm.model.stack.description import stack_from_parameters
+
+    actuators = {name: Actuator(force=60.0, speed=0.05, force_speed=name[0] != "s") for name in robot.joint_names[:6]}
+    symbolic = _with(robot, **actuators)
+    recursive = recursive_robot(stack_from_parameters(symbolic.parameters))
+    ref = vgtarm.inverse_kinematics(symbolic, vgtarm.paths.case1(duration=0.3))
+    joint_ref = JointReference(ref.t, ref.q, ref.qd, ref.qdd)
+    a, b = simulate(symbolic, joint_ref, CFC), simulate(recursive, joint_ref, CFC)
+    assert b.metadata["backend"] == "recursive"
+    assert_close(b.q, a.q, rtol=0, atol=1e-14, what="q")
+    assert_close(b.effort, a.effort, rtol=1e-10, atol=1e-10, what="effort")
+    assert b.summary()["actuator_time_at_limit_s"] == a.summary()["actuator_time_at_limit_s"]

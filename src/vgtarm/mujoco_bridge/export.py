@@ -509,10 +509,16 @@ class _SpecBuilder:
             tendon = spec.add_tendon(name=f"{n}_leg", damping=[self.r1(self.damping[n]), 0.0, 0.0], width=0.004)
             tendon.wrap_site(f"{n}_foot")
             tendon.wrap_site(f"{n}_head")
+        actuators = self.stack.actuators
+        peak = dict(zip(self.names, actuators.force, strict=True)) if actuators is not None else {}
         for n in self.names:
             kind = mujoco.mjtTrn.mjTRN_TENDON if n in self.closed else mujoco.mjtTrn.mjTRN_JOINT
             motor = spec.add_actuator(name=n, trntype=kind, target=f"{n}_leg" if n in self.closed else n)
             motor.set_to_motor()
+            if math.isfinite(peak.get(n, math.inf)):  # the actuator's peak force, unrounded (the
+                # force-speed line has no MJCF form: vgtarm's loop clips to it before MuJoCo's turn)
+                motor.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+                motor.forcerange = [-float(peak[n]), float(peak[n])]
 
 
 def to_mjcf(
