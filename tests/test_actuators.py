@@ -274,3 +274,31 @@ def test_the_recursive_model_saturates_as_the_symbolic_one(robot):
     assert_close(b.q, a.q, rtol=0, atol=1e-14, what="q")
     assert_close(b.effort, a.effort, rtol=1e-10, atol=1e-10, what="effort")
     assert b.summary()["actuator_time_at_limit_s"] == a.summary()["actuator_time_at_limit_s"]
+
+
+def test_the_exported_controller_clips_as_the_simulation_bit_for_bit(robot, tmp_path):
+    """Case 2 under the observer with 1 um encoders, legs on 60 N lines: the exported C closed through
+    vgtarm's plant gives the simulation's efforts bit for bit, saturated samples included, and its
+    export.json records the limits."""
+    pytest.importorskip("cffi")
+    import json
+
+    from vgtarm.experiment.cases import case_study, joint_reference
+    from vgtarm.export import CompiledExport, export_controller, simulate_exported
+    from vgtarm.simulation import Scenario
+
+    case = case_study(2)
+    actuators = {name: Actuator(force=60.0, speed=0.05, force_speed=name[0] != "s") for name in robot.joint_names[:6]}
+    plant = _with(robot, **actuators)
+    scenario = Scenario(external_force=case.external_force, observer="momentum", encoder_resolution=1e-6)
+    folder = export_controller(plant, tmp_path / "controller", scenario=scenario, kp=case.kp, kv=case.kv).folder
+    record = json.loads((folder / "export.json").read_text())
+    assert record["effort_max"][:6] == [60.0] * 6 and record["effort_max"][6] is None
+    assert record["force_speed"] == [False, True, True, False, True, True, False]
+    reference = joint_reference(plant, 2, duration=0.5)
+    theirs = simulate(plant, reference, case.controller("cfc"), scenario)
+    mine = simulate_exported(CompiledExport(folder), plant, reference, scenario)
+    assert theirs.summary()["actuator_time_at_limit_s"]["s1"] > 0.0  # its 107 N start is clipped
+    np.testing.assert_array_equal(mine.effort, theirs.effort)
+    np.testing.assert_array_equal(mine.q, theirs.q)
+    np.testing.assert_array_equal(mine.effort_estimate, theirs.effort_estimate)
