@@ -26,6 +26,7 @@ from . import (  # noqa: E402
     bench_path_wide,
     bench_recursive,
     bench_reproduce,
+    bench_retime,
     bench_sim,
     bench_single,
     bench_stacks,
@@ -54,6 +55,7 @@ MODULES: dict[str, Any] = {
     "threads": bench_threads,
     "single": bench_single,
     "tools": bench_tool_tasks,
+    "retime": bench_retime,
 }
 #: Groups run when none is named (``stacks`` is long: it compiles ten libraries from cold).
 DEFAULT = [name for name in MODULES if name not in ("stacks", "pathwide", "recursive-control")]

@@ -39,7 +39,7 @@ LAYERS: tuple[frozenset[str], ...] = (
     frozenset({"ik", "toolpaths"}),
     frozenset({"control"}),
     frozenset({"simulation"}),
-    frozenset({"mujoco_bridge"}),
+    frozenset({"mujoco_bridge", "retiming"}),
     frozenset({"experiment"}),
     frozenset({"study", "export"}),
     frozenset({"app"}),
