@@ -1,5 +1,5 @@
 """``vgtarm export mjcf``, ``vgtarm export controller`` and ``vgtarm check mujoco``: the MuJoCo bridge
-and the exported controller from the command line."""
+and the exported controller from the command line (``vgtarm check path``: :mod:`.check_path`)."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from ...errors import escape
 from ...export import command as export_command
 from ...fileio import atomic_write_text, check_output_file
 from ...model.robot import load_robot
+from . import check_path
 from .options import add_config, positive_float, positive_int, seed_number, whole_number
 
 
@@ -81,10 +82,14 @@ def add_parsers(sub: Any) -> None:
     export_command.add_arguments(controller)
     controller.set_defaults(run=export_command.run)
 
-    check = sub.add_parser("check", help="cross-check our dynamics against another engine")
-    check.add_argument("engine", choices=("mujoco",), help="mujoco: the exported model stepped by MuJoCo")
+    check_parser = sub.add_parser(
+        "check", help="check the robot: our dynamics against MuJoCo's, or a path against its actuator limits"
+    )
+    kinds = check_parser.add_subparsers(dest="engine", required=True, metavar="WHAT")
+    check = kinds.add_parser("mujoco", help="our dynamics against the exported model stepped by MuJoCo")
     check.add_argument("--states", type=positive_int, default=1000, help="random states (default 1000)")
     check.add_argument("--seed", type=seed_number, default=0, help="seed of the states (default 0; 0 to 2**63 - 1)")
     add_digits(check)
     add_config(check)
     check.set_defaults(run=cmd_check)
+    check_path.add_parser(kinds)
