@@ -302,3 +302,15 @@ def test_the_exported_controller_clips_as_the_simulation_bit_for_bit(robot, tmp_
     np.testing.assert_array_equal(mine.effort, theirs.effort)
     np.testing.assert_array_equal(mine.q, theirs.q)
     np.testing.assert_array_equal(mine.effort_estimate, theirs.effort_estimate)
+
+
+def test_the_page_s_actuator_table_escapes_what_a_user_named():
+    from vgtarm.app.reports.html import actuator_markdown
+
+    assert actuator_markdown([("plain", {"max_tip_error_m": 1e-4})]) == []
+    summary = {"actuator_peak_utilisation": {"s1": 0.5, "v1": 1.0}, "actuator_time_at_limit_s": {"s1": 0.0, "v1": 0.25}}
+    lines = actuator_markdown([("mine | <script>", summary)])
+    assert lines[1] == "## Actuators"
+    rows = lines[lines.index("| --- | --- | --- | --- |") + 1 :]
+    assert len(rows) == 2 and "<script>" not in "\n".join(lines) and rows[0].startswith("| mine \\| ")
+    assert rows[1].endswith("| v1 | 1.000 | 0.250 |")

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 from .version import __version__ as __version__
 
 if TYPE_CHECKING:  # the names as static type checkers and editors see them
-    from . import control, export, ga, ik, model, mujoco_bridge, paths, simulation, study
+    from . import control, export, ga, ik, model, mujoco_bridge, paths, retiming, simulation, study, toolpaths
     from .app.library import run_study
     from .app.pictures.plotting import (
         comparison_figure,
@@ -56,7 +56,9 @@ if TYPE_CHECKING:  # the names as static type checkers and editors see them
         load_robot,
     )
     from .mujoco_bridge import to_mjcf
+    from .retiming import retime
     from .simulation import ExternalForce, JointReference, Scenario, SimulationResult, simulate
+    from .simulation.limits_check import check_path
     from .study import Study, load_study
 
 #: Where each public name lives: ``(module, name in that module)``, the module relative to this
@@ -115,6 +117,9 @@ _SOURCES: dict[str, tuple[str, str]] = {
             "simulate",
         )
     },
+    # actuators: a path checked against their limits, and its fastest timing under them
+    "check_path": ("simulation.limits_check", "check_path"),
+    "retime": ("retiming", "retime"),
     # one run as a record (every option declared once), the presets
     "Experiment": ("experiment", "Experiment"),
     "PRESETS": ("experiment", "PRESETS"),
@@ -143,7 +148,19 @@ _SOURCES: dict[str, tuple[str, str]] = {
 }
 
 #: Subpackages a user reaches by attribute (``vgtarm.paths.case1``), imported on first use.
-_MODULES = ("control", "export", "ga", "ik", "model", "mujoco_bridge", "paths", "simulation", "study", "toolpaths")
+_MODULES = (
+    "control",
+    "export",
+    "ga",
+    "ik",
+    "model",
+    "mujoco_bridge",
+    "paths",
+    "retiming",
+    "simulation",
+    "study",
+    "toolpaths",
+)
 
 __all__ = [
     "AssemblyError",
@@ -175,6 +192,7 @@ __all__ = [
     "UnreachableError",
     "VgtarmError",
     "case_study",
+    "check_path",
     "comparison_figure",
     "control",
     "export",
@@ -193,6 +211,8 @@ __all__ = [
     "plot_path_3d",
     "plot_tip_error",
     "reproduce",
+    "retime",
+    "retiming",
     "run_case",
     "run_study",
     "save_figure",

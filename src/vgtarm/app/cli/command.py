@@ -51,6 +51,7 @@ from ...simulation.scenario import senses
 from ...version import __version__
 from . import mujoco as cli_mujoco
 from . import presets
+from . import retime as cli_retime
 from . import stack as cli_stack
 from . import study as cli_study
 from . import visual as cli_visual
@@ -78,7 +79,7 @@ def _format_vector(values: Sequence[float] | np.ndarray, digits: int = 6) -> str
 def cmd_describe(args: argparse.Namespace) -> int:
     """Print the robot: dimensions, limits, home pose, tip at home, mass-matrix eigenvalues."""
     from ...model.stack import Stack
-    from .stack import describe_stack, home_figures, model_state, robot_description
+    from .stack import describe_stack, home_figures, model_state, print_actuators, robot_description
 
     p = robot_description(args.config)  # no model is built: see cli_stack
     if isinstance(p, Stack):
@@ -100,8 +101,9 @@ def cmd_describe(args: argparse.Namespace) -> int:
     for body in p.bodies:
         print(f"body       {body.name:<13} mass {body.mass:g} kg, com {_format_vector(body.com)} m")
     print(f"friction   {_format_vector(p.viscous)} (N s/m; N m s/rad for psi3)")
+    print_actuators(p.actuators)
     print(f"gravity    {_format_vector(p.gravity)} m/s^2")
-    print(f"tip @ home {_format_vector(figures.tip, 10)} m")
+    print(f"tip @ home {_format_vector(figures.tip, 10)} m; reach {float(np.linalg.norm(figures.tip)):.6g} m")
     if figures.eigenvalues is None:
         print(f"M @ home   {figures.mass_note}")
     else:
@@ -274,6 +276,8 @@ _SUMMARY_KEYS = (
     "actuator_energy_j",
     "ga_activations",
     "ga_time_s",
+    "actuator_peak_utilisation",
+    "actuator_time_at_limit_s",
     "path_centre_m",
     "path_scale",
     "ik_task",
@@ -288,7 +292,10 @@ def _print_summary(summary: dict[str, Any]) -> None:
         value = summary[key]
         if isinstance(value, list) and len(set(value)) == 1:
             value = value[0]  # one gain for every joint
-        text = f"{value:.6g}" if isinstance(value, float) else escape(str(value))
+        if isinstance(value, dict):  # per joint (the actuators'): "s1 0.905, v1 1, ..."
+            text = ", ".join(f"{escape(str(name))} {v:.3g}" for name, v in value.items() if v is not None)
+        else:
+            text = f"{value:.6g}" if isinstance(value, float) else escape(str(value))
         print(f"{key:<34} {text}")
 
 
@@ -816,6 +823,7 @@ def build_parser() -> argparse.ArgumentParser:
     cli_visual.add_parsers(sub)  # draw, animate, report
     cli_study.add_parsers(sub)  # study init, run, report
     cli_stack.add_parsers(sub)  # convert-robot
+    cli_retime.add_parser(sub)  # retime
     _add_quiet(sub)
     _accept_negative_numbers(parser)
 

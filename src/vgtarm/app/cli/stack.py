@@ -15,6 +15,7 @@ would cost (:func:`model_state`).
 from __future__ import annotations
 
 import argparse
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,6 +29,7 @@ from ...errors import ConfigError, cut, escape
 from ...fileio import atomic_write_text, check_output_file, parse_toml, read_text_limited
 from ...memory import size_text
 from ...model import budget, codegen, compiled
+from ...model.actuators import Actuators
 from ...model.parameters import ROBOT_FILE_LIMIT, RobotParameters, load_parameters
 from ...model.recursive import RecursiveModel
 from ...model.robot import default_model, definition_of, robot_parameters_from_dict
@@ -154,6 +156,7 @@ def describe_stack(stack: Stack) -> int:
     print(f"tool       {_vector(stack.tool)} m from the last mount point")
     print(f"tool axis  {_vector(stack.tool_axis)}, edge {_vector(stack.tool_edge)} in the end-effector frame")
     print(f"friction   {_vector(stack.viscous)} (N s/m legs; N m s/rad twists)")
+    print_actuators(stack.actuators)
     print(f"gravity    {_vector(stack.gravity)} m/s^2")
     print(f"tip @ home {_vector(tip, 10)} m; reach {float(np.linalg.norm(tip)):.6g} m")
     if figures.eigenvalues is None:
@@ -161,6 +164,26 @@ def describe_stack(stack: Stack) -> int:
     else:
         print(f"M @ home   eigenvalues {_vector(figures.eigenvalues, 5)} (kg, kg m^2)")
     return 0
+
+
+def print_actuators(actuators: Actuators | None) -> None:
+    """``vgtarm describe``'s lines of the actuators: one per joint that has one (peak force, no-load
+    speed, acceleration limit, whether the force-speed line holds), or that there are none."""
+    if actuators is None:
+        print("actuators  none (no limits: add an [actuators] table, docs/actuators.md)")
+        return
+    print("actuators  joint  force      speed      accel      force-speed line")
+    for name, actuator in zip(actuators.names, actuators.joints, strict=True):
+        if actuator is None:
+            print(f"           {name:<6} none")
+            continue
+        twist = name.startswith("psi")
+        units = ("N m", "rad/s", "rad/s^2") if twist else ("N", "m/s", "m/s^2")
+        accel = "none" if math.isinf(actuator.acceleration) else f"{actuator.acceleration:.6g}"
+        print(
+            f"           {name:<6} {actuator.force:<10.6g} {actuator.speed:<10.6g} {accel:<10} "
+            f"{'yes' if actuator.force_speed else 'no'}  ({', '.join(units)})"
+        )
 
 
 def cmd_convert_robot(args: argparse.Namespace) -> int:

@@ -635,8 +635,36 @@ def runs_markdown(
     for run in runs:
         *cells, folder = table_row(run.spec, run.result.summary(), run.folder)
         lines.append("| " + " | ".join(map(md_cell, cells)) + f" | {folder_cell(_relative(run.path, base), folder)} |")
+    lines += actuator_markdown([(run.label, run.result.summary()) for run in runs])
     lines += ["", f"## {FIGURES_HEADING}", ""]
     return "\n".join(lines) + "\n"
+
+
+def actuator_markdown(runs: Sequence[tuple[str, dict[str, Any]]]) -> list[str]:
+    """The lines of an "Actuators" section: per run with actuators and per joint with one, the peak
+    utilisation of its force limit and the time at a limit (none when no run has actuators). Run
+    labels and joint names are escaped."""
+    rows = [
+        (label, joint, value, summary.get("actuator_time_at_limit_s", {}).get(joint))
+        for label, summary in runs
+        for joint, value in (summary.get("actuator_peak_utilisation") or {}).items()
+    ]
+    if not rows:
+        return []
+    lines = [
+        "",
+        "## Actuators",
+        "",
+        "Peak utilisation: the effort over its actuator's limit in its direction at the velocity the controller"
+        " saw (the loop clips to 1); time at limit: the control periods spent clipped.",
+        "",
+        "| run | joint | peak utilisation | time at limit (s) |",
+        "| --- | --- | --- | --- |",
+    ]
+    for label, joint, value, time_at in rows:
+        cells = [label, joint, "" if value is None else f"{value:.3f}", "" if time_at is None else f"{time_at:.3f}"]
+        lines.append("| " + " | ".join(map(md_cell, cells)) + " |")
+    return lines
 
 
 def _relative(path: str, base: str | Path) -> str:
