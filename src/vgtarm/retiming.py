@@ -643,8 +643,10 @@ def _exceeded_intervals(timed: Retimed) -> NDArray[np.intp]:
     """The grid intervals in which the timed path, sampled every ``timed.dt`` s, exceeds a force,
     speed or acceleration bound by more than :data:`EXCESS_TOLERANCE` of it (friction and the tool
     force as the timing holds them)."""
-    reference = timed.reference()
-    q, qd, qdd = reference.q, reference.qd, reference.qdd
+    t = np.arange(int(math.ceil(timed.duration / timed.dt - 1e-9)) + 1, dtype=np.float64) * timed.dt
+    s_t, sd, sdd = timed.timing(t)
+    q, qs, qss = timed.geometry(s_t)  # the samples of Retimed.reference, without its tip path
+    qd, qdd = qs * sd[:, None], qs * sdd[:, None] + qss * (sd * sd)[:, None]
     robot, limits = timed.robot, timed.actuators
     F = robot.inverse_dynamics(q, qd, qdd) + tool_forces(robot, q, qd, timed.tool_force)
     if not timed.friction:  # the timing ignores the friction: so does its check
@@ -657,7 +659,7 @@ def _exceeded_intervals(timed: Retimed) -> NDArray[np.intp]:
     bad = (force | speed | acceleration).any(axis=1)
     if not bad.any():
         return np.zeros(0, dtype=np.intp)
-    s_bad = timed.timing(reference.t[bad])[0]
+    s_bad = s_t[bad]
     grid = timed.s
     return np.unique(np.clip(np.searchsorted(grid, s_bad, side="right") - 1, 0, len(grid) - 2))
 
