@@ -85,15 +85,18 @@ def test_a_stack_writes_its_actuators_back_and_reads_them_the_same():
     [
         (
             {"legs": {"force": 0.0, "speed": 0.05}},
-            "field 'actuators.legs.force' = 0.0: expected a number in (0, 1e+09] (N)",
+            "field 'actuators.legs.force' (joint s1) = 0.0: expected a number in (0, 1e+09] (N)",
         ),
-        ({"legs": {"force": -5.0, "speed": 0.05}}, "field 'actuators.legs.force' = -5.0"),
+        ({"legs": {"force": -5.0, "speed": 0.05}}, "field 'actuators.legs.force' (joint s1) = -5.0"),
         ({"s1": {"force": float("nan"), "speed": 0.05}}, "field 'actuators.s1.force' = nan"),
         (
             {"legs": {"force": 60.0, "speed": 0.0}},
-            "field 'actuators.legs.speed' = 0.0: expected a number in (0, 1e+06] (m/s)",
+            "field 'actuators.legs.speed' (joint s1) = 0.0: expected a number in (0, 1e+06] (m/s)",
         ),
-        ({"twists": {"force": 1.0, "speed": 1.0, "acceleration": -1.0}}, "'actuators.twists.acceleration' = -1.0"),
+        (
+            {"twists": {"force": 1.0, "speed": 1.0, "acceleration": -1.0}},
+            "'actuators.twists.acceleration' (joint psi3) = -1.0",
+        ),
         ({"legs": LEGS, "s1": {"force": 10.0}}, "field 'actuators.s1.force' = 10.0: expected at least 31.1412 N"),
         ({"legs": {"force": 20.0, "speed": 0.05}}, "field 'actuators.legs.force' = 20.0: expected at least 31.1412 N"),
         ({"s1": {"force": 60.0}}, "missing key 'actuators.s1.speed'"),
@@ -314,3 +317,26 @@ def test_the_page_s_actuator_table_escapes_what_a_user_named():
     rows = lines[lines.index("| --- | --- | --- | --- |") + 1 :]
     assert len(rows) == 2 and "<script>" not in "\n".join(lines) and rows[0].startswith("| mine \\| ")
     assert rows[1].endswith("| v1 | 1.000 | 0.250 |")
+
+
+def test_a_leg_too_weak_to_hold_the_arm_gives_its_peak_and_the_arm_sags_as_the_dynamics_say(robot):
+    """s1 needs 31.1 N to hold the arm still at home; limited to 20 N (in Python: a file refuses it),
+    the controller asks for more at every period and gets 20 N exactly, and the arm sags: the run's
+    states are those of the plant's forward dynamics under the efforts applied (SciPy's solve_ivp,
+    period by period from the loop's state), and s1 moves down (the leg shortens under the load)."""
+    plant = _with(robot, s1=Actuator(force=20.0, speed=0.05))
+    home = robot.parameters.home
+    t = np.arange(0.0, 0.3 + 1e-12, 1e-3)
+    hold = JointReference(t, np.tile(home, (len(t), 1)), np.zeros((len(t), 7)), np.zeros((len(t), 7)))
+    run = simulate(plant, hold, CFC, integrator="rk4", substeps=8)
+    np.testing.assert_array_equal(run.effort[:, 0], 20.0)
+    assert run.summary()["actuator_time_at_limit_s"]["s1"] == pytest.approx(0.301)
+    assert run.q[-1, 0] < home[0] - 1e-3
+    n = plant.n_joints
+    for k in (0, 100, 250):
+
+        def rhs(_t, x, F=run.effort[k]):
+            return np.concatenate([x[n:], plant.forward_dynamics(x[:n], x[n:], F)])
+
+        end = solve_ivp(rhs, (0.0, 1e-3), np.concatenate([run.q[k], run.qd[k]]), rtol=1e-12, atol=1e-14).y[:, -1]
+        assert_close(end[:n], run.q[k + 1], rtol=0, atol=1e-12, what=f"q at {k + 1}")

@@ -220,7 +220,8 @@ def _actuator(entry: Mapping[str, Any], name: str, group: str, own: Mapping[str,
     force_unit, speed_unit, acceleration_unit = _units(name)
 
     def given(key: str) -> str:
-        return name if key in own else group
+        """The field of ``key``, with the joint when it comes from the group (its first joint)."""
+        return f"{name}.{key}'" if key in own else f"{group}.{key}' (joint {name})"
 
     for key in ("force", "speed"):
         if key not in entry:
@@ -229,7 +230,7 @@ def _actuator(entry: Mapping[str, Any], name: str, group: str, own: Mapping[str,
                 f"(joint {name} needs a force and a speed, in its own entry or its group's, {group})"
             )
     force = checks.number(
-        f"{where}.{given('force')}.force'",
+        f"{where}.{given('force')}",
         entry["force"],
         above=0,
         maximum=MAX_FORCE,
@@ -237,7 +238,7 @@ def _actuator(entry: Mapping[str, Any], name: str, group: str, own: Mapping[str,
         error=ConfigError,
     )
     speed = checks.number(
-        f"{where}.{given('speed')}.speed'",
+        f"{where}.{given('speed')}",
         entry["speed"],
         above=0,
         maximum=MAX_SPEED,
@@ -247,16 +248,14 @@ def _actuator(entry: Mapping[str, Any], name: str, group: str, own: Mapping[str,
     acceleration = math.inf
     if "acceleration" in entry:
         acceleration = checks.number(
-            f"{where}.{given('acceleration')}.acceleration'",
+            f"{where}.{given('acceleration')}",
             entry["acceleration"],
             above=0,
             maximum=MAX_ACCELERATION,
             unit=acceleration_unit,
             error=ConfigError,
         )
-    line = checks.flag(
-        f"{where}.{given('force_speed')}.force_speed'", entry.get("force_speed", False), error=ConfigError
-    )
+    line = checks.flag(f"{where}.{given('force_speed')}", entry.get("force_speed", False), error=ConfigError)
     return Actuator(force=force, speed=speed, acceleration=acceleration, force_speed=line)
 
 
