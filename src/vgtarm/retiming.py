@@ -58,7 +58,7 @@ from numpy.typing import NDArray
 
 from . import checks
 from .errors import InputError, PathError
-from .model.actuators import Actuators
+from .model.actuators import Actuator, Actuators
 from .paths import MIN_DT
 from .simulation.reference import JointReference
 
@@ -86,11 +86,12 @@ SCHEMES = ("interval", "arrival", "departure")
 #: Rounds of grid refinement by default (:func:`retime`), and the most accepted.
 DEFAULT_REFINE = 12
 MAX_REFINE = 60
-#: A bound counts as exceeded between grid points when passed by more than this fraction of it (the
-#: peak force, the speed, the acceleration). Measured on case 1 and 2 under 60 N / 0.05 m/s legs
-#: (400 points): 1e-3 leaves 0.06 N (529 and 458 points, about 0.1 s); 1e-4 leaves 6 mN for
-#: 1,549 and 765 points (0.3 s); without refinement the excess is 1.8 N and 34 N.
-EXCESS_TOLERANCE = 1e-3
+#: With refinement the timing is solved under limits this fraction tighter (each peak force, speed
+#: and acceleration times ``1 - MARGIN``), and the grid refined until the 1 ms resampling is within
+#: the actuators' own limits: the margin absorbs what is left between grid points. Measured on case
+#: 1 and 2 under 60 N / 0.05 m/s legs (400 points): without refinement the excess is 1.8 N and 34 N;
+#: refined with 1e-3 of margin, none, for about 530 and 460 points (0.1 s) and a timing 0.1 % longer.
+MARGIN = 1e-3
 #: Most samples :meth:`Retimed.reference` builds.
 MAX_SAMPLES = 10_000_000
 
@@ -608,8 +609,9 @@ def retime(
         refine: rounds of grid refinement: the limits hold at the grid points, and between them a
             joint may exceed its force, speed or acceleration bound by an amount of the order of the
             grid's step (more where ``q'`` vanishes); each round resamples the timed path every
-            ``dt`` s and halves every interval where a bound is exceeded by more than
-            :data:`EXCESS_TOLERANCE` of it, then solves again (0: the uniform grid as given, as toppra's).
+            ``dt`` s and halves every interval where a bound is exceeded, then solves again; the
+            timing is solved under limits :data:`MARGIN` tighter, which absorb what is left between
+            grid points (0: the uniform grid and the limits as given, as toppra's).
 
     Raises:
         InputError: a bad argument (the message names it).
@@ -624,9 +626,10 @@ def retime(
     geometry = Geometry(t=source.t, q=source.q, qd=source.qd, qdd=source.qdd, tip=source.tip)
     chosen = checks.choice("scheme", scheme, SCHEMES)
     s = np.linspace(source.t[0], source.t[-1], points)
+    tighter = limits if rounds == 0 else _tightened(limits, 1.0 - MARGIN)
     for done in range(rounds + 1):
         dynamics = path_dynamics(robot, geometry, s, tool_force=force, friction=with_friction)
-        profile = solve(dynamics, limits, chosen)
+        profile = solve(dynamics, tighter, chosen)
         if not np.isfinite(profile.duration):
             raise PathError(
                 f"path: the actuators cannot move it (the limit curve is zero at s = {_stuck(profile):.6g} s)"
@@ -640,9 +643,9 @@ def retime(
 
 
 def _exceeded_intervals(timed: Retimed) -> NDArray[np.intp]:
-    """The grid intervals in which the timed path, sampled every ``timed.dt`` s, exceeds a force,
-    speed or acceleration bound by more than :data:`EXCESS_TOLERANCE` of it (friction and the tool
-    force as the timing holds them)."""
+    """The grid intervals in which the timed path, sampled every ``timed.dt`` s, exceeds one of the
+    actuators' own force, speed or acceleration bounds (friction and the tool force as the timing
+    holds them; beyond round-off, 1e-12 of the bound)."""
     t = np.arange(int(math.ceil(timed.duration / timed.dt - 1e-9)) + 1, dtype=np.float64) * timed.dt
     s_t, sd, sdd = timed.timing(t)
     q, qs, qss = timed.geometry(s_t)  # the samples of Retimed.reference, without its tip path
@@ -652,16 +655,28 @@ def _exceeded_intervals(timed: Retimed) -> NDArray[np.intp]:
     if not timed.friction:  # the timing ignores the friction: so does its check
         F = F - np.asarray(robot.parameters.viscous, dtype=float) * qd
     lower, upper = limits.bounds(qd)
+    round_off = 1e-12
     with np.errstate(invalid="ignore"):  # inf - inf where a joint has no limit: not exceeded
-        force = np.maximum(F - upper, lower - F) > EXCESS_TOLERANCE * limits.force
-        speed = np.abs(qd) > (1.0 + EXCESS_TOLERANCE) * limits.speed
-        acceleration = np.abs(qdd) > (1.0 + EXCESS_TOLERANCE) * limits.acceleration
+        force = np.maximum(F - upper, lower - F) > round_off * limits.force
+        speed = np.abs(qd) > (1.0 + round_off) * limits.speed
+        acceleration = np.abs(qdd) > (1.0 + round_off) * limits.acceleration
     bad = (force | speed | acceleration).any(axis=1)
     if not bad.any():
         return np.zeros(0, dtype=np.intp)
     s_bad = s_t[bad]
     grid = timed.s
     return np.unique(np.clip(np.searchsorted(grid, s_bad, side="right") - 1, 0, len(grid) - 2))
+
+
+def _tightened(actuators: Actuators, factor: float) -> Actuators:
+    """``actuators`` with every peak force, speed and acceleration times ``factor`` (the same lines)."""
+    joints = tuple(
+        None
+        if a is None
+        else Actuator(a.force * factor, a.speed * factor, a.acceleration * factor, a.force_speed)
+        for a in actuators.joints
+    )
+    return Actuators(names=actuators.names, joints=joints, origins=actuators.origins)
 
 
 def _stuck(profile: Profile) -> float:

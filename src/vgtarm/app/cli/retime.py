@@ -36,12 +36,20 @@ def add_parser(sub: Any) -> None:
             "Solve the path's inverse kinematics, then time its joint path as fast as the actuators of the "
             "robot file's [actuators] table allow (peak forces, force-speed lines, speeds, accelerations), "
             "viscous friction held exactly; write the retimed tip path (path.csv, for vgtarm simulate --path), "
-            "the joint reference (joints.csv) and the phase plane (phase_plane.png)."
+            "the joint reference (joints.csv) and the phase plane (phase_plane.png). With --axis or --entry-point "
+            "the joint path is that of the tool-axis task (vgtarm ik's flags)."
         ),
     )
     where = parser.add_mutually_exclusive_group(required=True)
     where.add_argument("--case", choices=("1", "2"), help="the paper's case study path 1 or 2")
     where.add_argument("--path", type=Path, metavar="FILE", help="a CSV file of t,x,y,z rows (s, m)")
+    parser.add_argument(
+        "--axis", default=None, metavar="X,Y,Z", help="the tool's axis held along this unit vector, its spin free"
+    )
+    parser.add_argument("--cone", default=None, metavar="DEG", help="with --axis: the axis within this half-angle")
+    parser.add_argument(
+        "--entry-point", default=None, metavar="X,Y,Z", help="the tool's axis through this point (m): keyhole work"
+    )
     parser.add_argument(
         "--grid", type=positive_int, default=DEFAULT_GRID, help=f"grid points of the path (default {DEFAULT_GRID})"
     )
@@ -70,7 +78,7 @@ def cmd_retime(args: argparse.Namespace) -> int:
             "examples/paper_robot_with_actuators.toml)"
         )
     path = paths.from_csv(args.path) if args.path is not None else getattr(paths, f"case{args.case}")()
-    ik = robot.inverse_kinematics(path)
+    ik = robot.inverse_kinematics(path, **_pointing(args, path))
     timed = retime(robot, ik, grid=args.grid, tool_force=args.tool_force or 0.0, dt=args.dt)
     reference = timed.reference()
     print(f"path       {escape(path.name)}: {len(path)} samples over {path.t[-1] - path.t[0]:.6g} s as given")
@@ -88,6 +96,18 @@ def cmd_retime(args: argparse.Namespace) -> int:
         timed.figure().savefig(folder / "phase_plane.png", dpi=110)
     print(f"written    {escape(str(args.out))}: {', '.join(RETIME_FILES)}")
     return 0
+
+
+def _pointing(args: argparse.Namespace, path: Any) -> dict[str, Any]:
+    """``--axis``, ``--cone`` and ``--entry-point``: the tool-axis task of the path, refused as
+    ``vgtarm ik`` refuses them (the same checks, naming the flag)."""
+    from ...ik.axis import entry_point_target
+    from .command import _ik_pointing  # vgtarm ik's parsing of the same flags
+
+    pointing = _ik_pointing(argparse.Namespace(axis=args.axis, entry_point=args.entry_point, cone=args.cone, pose=None))
+    if "entry_point" in pointing:
+        entry_point_target(pointing["entry_point"], path.position, path.velocity, path.acceleration, "--entry-point")
+    return pointing
 
 
 def _tip_csv(t: np.ndarray, tip: np.ndarray) -> str:
