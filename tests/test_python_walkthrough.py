@@ -4,6 +4,7 @@ notebook would run them; so do the README's Python examples: a page that stops w
 from __future__ import annotations
 
 import re
+import shutil
 from pathlib import Path
 
 import matplotlib
@@ -48,6 +49,7 @@ def test_every_cell_runs_in_order(tmp_path, monkeypatch):
 def test_the_readmes_python_examples_run(tmp_path, monkeypatch):
     matplotlib.use("Agg")
     monkeypatch.chdir(tmp_path)
+    shutil.copytree(REPO / "examples", tmp_path / "examples")  # the README's paths are from the repository's root
     cells = _cells(_readme_python_section())
     assert len(cells) >= 2
     namespace = _run(cells, "README.md, section Python")
