@@ -84,7 +84,7 @@ MAX_GRID = 1_000_000
 #: The discretisations (:func:`solve`): the interval whose ``u`` a grid point's constraints hold.
 SCHEMES = ("interval", "arrival", "departure")
 #: Rounds of grid refinement by default (:func:`retime`), and the most accepted.
-DEFAULT_REFINE = 12
+DEFAULT_REFINE = 20
 MAX_REFINE = 60
 #: With refinement the timing is solved under limits this fraction tighter (each peak force, speed
 #: and acceleration times ``1 - MARGIN``), and the grid refined until the 1 ms resampling is within
