@@ -266,8 +266,10 @@ def test_cli_within_generous_limits_gives_0_and_writes_its_folder(tmp_path: Path
         (["--case", "case1", "--config", "robot.toml", "--tool-force", "-5"], "--tool-force"),
         (["--case", "case3", "--config", "robot.toml"], "--case"),
         (["--config", "robot.toml"], "give exactly one"),
+        (["--case", "case1", "--config", "robot.toml", "--cone", "5"], "--cone '5': a cone needs its axis"),
+        (["--case", "case1", "--config", "robot.toml", "--axis", "0,0,2"], "--axis"),
     ],
-    ids=["no actuators", "tool force not a number", "negative tool force", "unknown case", "no path"],
+    ids=["no actuators", "tool force not a number", "negative tool force", "unknown case", "no path", "cone", "axis"],
 )
 def test_cli_bad_input_gives_2_in_one_line(tmp_path: Path, argv: list[str], message: str) -> None:
     _robot_file(tmp_path, "legs = { force = 60.0, speed = 0.05 }")
@@ -275,6 +277,19 @@ def test_cli_bad_input_gives_2_in_one_line(tmp_path: Path, argv: list[str], mess
     assert done.returncode == 2, done.stderr
     assert done.stderr.count("\n") == 1 and message in done.stderr, done.stderr
     assert done.stdout == "" and "Traceback" not in done.stderr
+
+
+def test_cli_checks_the_joints_of_a_tool_axis_task(robot: vgtarm.Robot, tmp_path: Path) -> None:
+    """``--axis`` (vgtarm ik's flag): the joint path of the drill's axis held along case 1, whose
+    efforts are those of that IK result (not the tip-only reference's)."""
+    _robot_file(tmp_path, "legs = { force = 500.0, speed = 1.0 }")
+    axis = "0,0.17364817766693,0.98480775301221"
+    done = _vgtarm(tmp_path, "check", "path", "--case", "1", "--axis", axis, "--config", "robot.toml", "--csv", "a.csv")
+    assert done.returncode == 0, done.stderr
+    ik = vgtarm.inverse_kinematics(robot, vgtarm.paths.case1(), axis=[0.0, 0.17364817766693, 0.98480775301221])
+    F = robot.inverse_dynamics(ik.q, ik.qd, ik.qdd)
+    peak = f"{np.abs(F[:, 1]).max():.4g} N"
+    assert peak in done.stdout, (peak, done.stdout)
 
 
 def test_cli_no_actuators_in_a_file_names_the_file_and_the_docs(tmp_path: Path) -> None:

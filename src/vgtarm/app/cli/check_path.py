@@ -92,15 +92,19 @@ def _robot(config: Path | None) -> Robot:
 
 
 def _reference(args: argparse.Namespace, robot: Robot, number: int | None) -> JointReference:
-    """The joint reference of ``--case`` (as ``vgtarm simulate --case``) or of the path file."""
-    if number is not None:
+    """The joint reference of ``--case`` (as ``vgtarm simulate --case``) or of the path file; with
+    ``--axis``, ``--cone`` or ``--entry-point``, that of the tool-axis task (as ``vgtarm ik``)."""
+    from .retime import tool_task
+
+    if number is not None and args.axis is None and args.entry_point is None and args.cone is None:
         from ...experiment.cases import joint_reference
 
         with progress_bar("inverse kinematics", "sample"):
             return joint_reference(robot, number)
-    desired = paths.from_csv(args.path)
+    desired = paths.from_csv(args.path) if number is None else getattr(paths, f"case{number}")()
+    task = tool_task(args, desired)
     with progress_bar("inverse kinematics", "sample", len(desired)):
-        return JointReference.of(robot.inverse_kinematics(desired), desired.name)
+        return JointReference.of(robot.inverse_kinematics(desired, **task), desired.name)
 
 
 def _write(args: argparse.Namespace, check: PathCheck, table: str) -> None:
@@ -152,6 +156,8 @@ def cmd_check_path(args: argparse.Namespace) -> int:
 
 def add_parser(kinds: Any) -> None:
     """Register ``path`` on the subcommands of ``vgtarm check``."""
+    from .retime import add_tool_task
+
     parser = kinds.add_parser(
         "path",
         help="a case's or a path file's joint reference against the robot's actuator limits",
@@ -174,6 +180,7 @@ def add_parser(kinds: Any) -> None:
         metavar="N",
         help="the tool force against the tip's motion (N; the paper's cutting force is 20; default 0: none)",
     )
+    add_tool_task(parser)
     parser.add_argument("--out", type=Path, default=None, metavar="FOLDER", help=f"write {', '.join(OUT_FILES)}")
     parser.add_argument("--figure", type=Path, default=None, metavar="FILE", help="write the figure (png, pdf, svg)")
     parser.add_argument("--csv", type=Path, default=None, metavar="FILE", help="write the arrays as CSV")

@@ -43,13 +43,7 @@ def add_parser(sub: Any) -> None:
     where = parser.add_mutually_exclusive_group(required=True)
     where.add_argument("--case", choices=("1", "2"), help="the paper's case study path 1 or 2")
     where.add_argument("--path", type=Path, metavar="FILE", help="a CSV file of t,x,y,z rows (s, m)")
-    parser.add_argument(
-        "--axis", default=None, metavar="X,Y,Z", help="the tool's axis held along this unit vector, its spin free"
-    )
-    parser.add_argument("--cone", default=None, metavar="DEG", help="with --axis: the axis within this half-angle")
-    parser.add_argument(
-        "--entry-point", default=None, metavar="X,Y,Z", help="the tool's axis through this point (m): keyhole work"
-    )
+    add_tool_task(parser)
     parser.add_argument(
         "--grid", type=positive_int, default=DEFAULT_GRID, help=f"grid points of the path (default {DEFAULT_GRID})"
     )
@@ -78,7 +72,7 @@ def cmd_retime(args: argparse.Namespace) -> int:
             "examples/paper_robot_with_actuators.toml)"
         )
     path = paths.from_csv(args.path) if args.path is not None else getattr(paths, f"case{args.case}")()
-    ik = robot.inverse_kinematics(path, **_pointing(args, path))
+    ik = robot.inverse_kinematics(path, **tool_task(args, path))
     timed = retime(robot, ik, grid=args.grid, tool_force=args.tool_force or 0.0, dt=args.dt)
     reference = timed.reference()
     print(f"path       {escape(path.name)}: {len(path)} samples over {path.t[-1] - path.t[0]:.6g} s as given")
@@ -98,9 +92,21 @@ def cmd_retime(args: argparse.Namespace) -> int:
     return 0
 
 
-def _pointing(args: argparse.Namespace, path: Any) -> dict[str, Any]:
-    """``--axis``, ``--cone`` and ``--entry-point``: the tool-axis task of the path, refused as
-    ``vgtarm ik`` refuses them (the same checks, naming the flag)."""
+def add_tool_task(parser: argparse.ArgumentParser) -> None:
+    """``--axis``, ``--cone`` and ``--entry-point``: a tool-axis task instead of the tip alone, as
+    ``vgtarm ik`` takes them (``vgtarm retime``, ``vgtarm check path``)."""
+    parser.add_argument(
+        "--axis", default=None, metavar="X,Y,Z", help="the tool's axis held along this unit vector, its spin free"
+    )
+    parser.add_argument("--cone", default=None, metavar="DEG", help="with --axis: the axis within this half-angle")
+    parser.add_argument(
+        "--entry-point", default=None, metavar="X,Y,Z", help="the tool's axis through this point (m): keyhole work"
+    )
+
+
+def tool_task(args: argparse.Namespace, path: Any) -> dict[str, Any]:
+    """The keywords of the tool-axis task of ``--axis``, ``--cone`` and ``--entry-point`` for ``path``,
+    refused as ``vgtarm ik`` refuses them (the same checks, naming the flag); none: the tip alone."""
     from ...ik.axis import entry_point_target
     from .command import _ik_pointing  # vgtarm ik's parsing of the same flags
 
