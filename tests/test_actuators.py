@@ -340,3 +340,26 @@ def test_a_leg_too_weak_to_hold_the_arm_gives_its_peak_and_the_arm_sags_as_the_d
 
         end = solve_ivp(rhs, (0.0, 1e-3), np.concatenate([run.q[k], run.qd[k]]), rtol=1e-12, atol=1e-14).y[:, -1]
         assert_close(end[:n], run.q[k + 1], rtol=0, atol=1e-12, what=f"q at {k + 1}")
+
+
+def test_the_exported_switching_control_clips_as_the_simulation_bit_for_bit(robot, tmp_path):
+    """The paper's switching control on case 2 with 1 um encoders, legs on 60 N (lines on v and p):
+    closed through the exported C (its controller clips, its GA predicts as the simulation's does,
+    without the clip), every effort, state and mode equals simulate's bit for bit."""
+    from vgtarm.experiment.cases import case_study, joint_reference
+    from vgtarm.export import export_controller, simulate_exported
+    from vgtarm.simulation import Scenario
+
+    case = case_study(2)
+    actuators = {name: Actuator(force=60.0, speed=0.05, force_speed=name[0] != "s") for name in robot.joint_names[:6]}
+    plant = _with(robot, **actuators)
+    scm = case.controller("scm", variant="paper")
+    scenario = Scenario(external_force=case.external_force, encoder_resolution=1e-6)
+    folder = export_controller(plant, tmp_path / "x", scenario=scenario, kp=case.kp, kv=case.kv, switching=scm).folder
+    reference = joint_reference(plant, 2, duration=0.25)
+    theirs = simulate(plant, reference, scm, scenario)
+    mine = simulate_exported(folder, plant, reference, scenario, controller=scm)
+    assert len(theirs.activations) > 30 and theirs.summary()["actuator_time_at_limit_s"]["s1"] > 0.05
+    np.testing.assert_array_equal(mine.effort, theirs.effort)
+    np.testing.assert_array_equal(mine.q, theirs.q)
+    np.testing.assert_array_equal(mine.mode, theirs.mode)
