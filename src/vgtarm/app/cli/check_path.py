@@ -21,6 +21,7 @@ from ...simulation.limits_check import PathCheck, check_path
 from ...simulation.reference import JointReference
 from .bars import progress_bar
 from .options import add_config
+from .tool_flags import add_tool_task, tool_task
 
 #: Exit status of a reference within every limit, of one that exceeds a limit, and of bad input.
 WITHIN, EXCEEDED, BAD_INPUT = 0, 1, 2
@@ -94,8 +95,6 @@ def _robot(config: Path | None) -> Robot:
 def _reference(args: argparse.Namespace, robot: Robot, number: int | None) -> JointReference:
     """The joint reference of ``--case`` (as ``vgtarm simulate --case``) or of the path file; with
     ``--axis``, ``--cone`` or ``--entry-point``, that of the tool-axis task (as ``vgtarm ik``)."""
-    from .retime import tool_task
-
     if number is not None and args.axis is None and args.entry_point is None and args.cone is None:
         from ...experiment.cases import joint_reference
 
@@ -156,7 +155,6 @@ def cmd_check_path(args: argparse.Namespace) -> int:
 
 def add_parser(kinds: Any) -> None:
     """Register ``path`` on the subcommands of ``vgtarm check``."""
-    from .retime import add_tool_task
 
     parser = kinds.add_parser(
         "path",

@@ -64,6 +64,7 @@ from .options import (
     positive_int_at_most,
     register_numbers,
 )
+from .tool_flags import ik_pointing, numbers
 
 if TYPE_CHECKING:
     from ...simulation.result import SimulationResult
@@ -474,48 +475,11 @@ def _criterion(args: argparse.Namespace) -> dict[str, Any]:
     }
 
 
-def _numbers(text: str, field: str, count: int, meaning: str) -> np.ndarray:
-    """``count`` comma-separated finite numbers of the option ``field``, or one line naming it."""
-    cells = text.split(",")
-    try:
-        values = np.array([float(cell) for cell in cells])
-    except ValueError:
-        values = np.array([np.nan])
-    if values.shape != (count,) or not np.isfinite(values).all():
-        raise InputError(f"{field} {shown(text)}: expected {count} finite numbers separated by commas ({meaning})")
-    return values
-
-
 def _ik_rotation(args: argparse.Namespace) -> np.ndarray | str | None:
     """``--pose``: None, ``"hold"`` or the rotation ``(3, 3)`` of its nine numbers."""
     if args.pose is None or args.pose == "hold":
         return args.pose
-    return _numbers(args.pose, "--pose", 9, "the rotation C03 row by row, R11,R12,...,R33").reshape(3, 3)
-
-
-def _ik_pointing(args: argparse.Namespace) -> dict[str, Any]:
-    """``--axis`` (a unit vector) and ``--entry-point`` (a point): the keywords of the tool-axis tasks."""
-    from ...ik.axis import unit_directions
-
-    out: dict[str, Any] = {}
-    if args.axis is not None:
-        values = _numbers(args.axis, "--axis", 3, "the direction of the tool's axis x,y,z, a unit vector")
-        out["axis"] = unit_directions(values, 1, "--axis")[0]
-    if args.entry_point is not None:
-        out["entry_point"] = _numbers(args.entry_point, "--entry-point", 3, "the entry point x,y,z in m")
-    if args.cone is not None:
-        if args.axis is None:
-            raise InputError(f"--cone {shown(args.cone)}: a cone needs its axis, --axis X,Y,Z")
-        degrees = _numbers(args.cone, "--cone", 1, "the cone's half-angle in degrees, in (0, 90)")[0]
-        if not 0.0 < degrees < 90.0:
-            raise InputError(f"--cone {shown(args.cone)}: expected a half-angle in (0, 90) degrees")
-        out["cone"] = float(np.radians(degrees))
-    given = [
-        flag for flag, on in (("--pose", args.pose), ("--axis", args.axis), ("--entry-point", args.entry_point)) if on
-    ]
-    if len(given) > 1:
-        raise InputError(f"{' and '.join(given)}: expected one of --pose, --axis and --entry-point")
-    return out
+    return numbers(args.pose, "--pose", 9, "the rotation C03 row by row, R11,R12,...,R33").reshape(3, 3)
 
 
 def _ik_task_line(rotation: object, pointing: dict[str, Any]) -> str:
@@ -539,7 +503,7 @@ def _ik_point(args: argparse.Namespace) -> tuple[float, np.ndarray] | None:
             raise InputError("give exactly one of --case 1|2, --path FILE and --point X,Y,Z")
         if args.dt is not None:
             raise InputError(f"--dt {shown(args.dt)}: a single --point has no sampling period; leave --dt out")
-        return 0.0, _numbers(args.point, "--point", 3, "the tip point x,y,z in m")
+        return 0.0, numbers(args.point, "--point", 3, "the tip point x,y,z in m")
     if args.path is not None and args.case is None:
         sample = paths.csv_point(args.path)
         if sample is not None and args.dt is not None:
@@ -556,7 +520,7 @@ def cmd_ik(args: argparse.Namespace) -> int:
     if args.output is not None:  # before the work; never over the path file it reads
         check_output_file(args.output, "-o", inputs=[args.path, args.config])
     rotation = _ik_rotation(args)
-    pointing = _ik_pointing(args)
+    pointing = ik_pointing(args)
     point = _ik_point(args)
     if point is not None:
         return _ik_one_point(args, point, rotation, pointing)

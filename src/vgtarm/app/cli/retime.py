@@ -22,6 +22,7 @@ from ...fileio import atomic_folder, atomic_write_text, check_output_folder
 from ...model.robot import load_robot
 from ...retiming import DEFAULT_GRID, MAX_GRID, retime
 from .options import add_config, positive_float, positive_int
+from .tool_flags import add_tool_task, tool_task
 
 #: The files ``vgtarm retime`` writes in its folder (and may replace there).
 RETIME_FILES = ("path.csv", "joints.csv", "phase_plane.png")
@@ -90,30 +91,6 @@ def cmd_retime(args: argparse.Namespace) -> int:
         timed.figure().savefig(folder / "phase_plane.png", dpi=110)
     print(f"written    {escape(str(args.out))}: {', '.join(RETIME_FILES)}")
     return 0
-
-
-def add_tool_task(parser: argparse.ArgumentParser) -> None:
-    """``--axis``, ``--cone`` and ``--entry-point``: a tool-axis task instead of the tip alone, as
-    ``vgtarm ik`` takes them (``vgtarm retime``, ``vgtarm check path``)."""
-    parser.add_argument(
-        "--axis", default=None, metavar="X,Y,Z", help="the tool's axis held along this unit vector, its spin free"
-    )
-    parser.add_argument("--cone", default=None, metavar="DEG", help="with --axis: the axis within this half-angle")
-    parser.add_argument(
-        "--entry-point", default=None, metavar="X,Y,Z", help="the tool's axis through this point (m): keyhole work"
-    )
-
-
-def tool_task(args: argparse.Namespace, path: Any) -> dict[str, Any]:
-    """The keywords of the tool-axis task of ``--axis``, ``--cone`` and ``--entry-point`` for ``path``,
-    refused as ``vgtarm ik`` refuses them (the same checks, naming the flag); none: the tip alone."""
-    from ...ik.axis import entry_point_target
-    from .command import _ik_pointing  # vgtarm ik's parsing of the same flags
-
-    pointing = _ik_pointing(argparse.Namespace(axis=args.axis, entry_point=args.entry_point, cone=args.cone, pose=None))
-    if "entry_point" in pointing:
-        entry_point_target(pointing["entry_point"], path.position, path.velocity, path.acceleration, "--entry-point")
-    return pointing
 
 
 def _tip_csv(t: np.ndarray, tip: np.ndarray) -> str:
