@@ -40,7 +40,9 @@ hold at the grid points as the scheme states them, exactly; between the points a
 bound by an amount of order the grid's step, more where the path's ``q'`` vanishes (its ends, a
 corner where it stops) and ``a`` with it: there a point's constraint lets a huge ``u`` through that
 the interval's other end would not (toppra's profiles too; ``"interval"`` catches the geometric
-part; measured in ``benchmarks/bench_retime.py``).
+part; measured in ``benchmarks/bench_retime.py``). So :func:`retime` by default solves under limits
+:data:`MARGIN` tighter and halves the intervals where the timing, resampled every ``dt``, passes one
+of the actuators' own limits, until none does (``refine`` rounds at most).
 
 The tool force is ``tool_force`` (N) against the motion, along the tip path's tangent
 ``J_P q' / |J_P q'|`` at every point (where the path rests, the nearest tangent): of constant
