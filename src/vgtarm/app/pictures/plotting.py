@@ -275,6 +275,7 @@ def plot_efforts(
             )
         only = names[twists[0]]
         twin.set_ylabel(f"twist torque τ_{only} (N m)" if len(twists) == 1 else "twist torques (N m)")
+    handles += _peak_lines(ax, result, legs)
     if _shade_ga(ax, result):
         handles.append(Patch(color=_GA_COLOR, alpha=0.2, label="GA gains"))
     ax.set_xlabel("time (s)")
@@ -283,6 +284,22 @@ def plot_efforts(
     ax.grid(True, alpha=0.3)
     _legend_above(ax, handles)
     return ax
+
+
+def _peak_lines(ax: Axes, result: SimulationResult, joints: Sequence[int]) -> list[Any]:
+    """Dashed lines at +-the peak force of the run's actuators on ``joints`` (one pair per distinct
+    value; none for a run without actuators or whose robot is unknown); their handles for a legend.
+    The force-speed line, where it holds, lowers the limit in the direction of motion below these."""
+    actuators = None if result.robot is None else result.robot.actuators
+    if actuators is None:
+        return []
+    peaks = sorted({float(actuators.force[j]) for j in joints if np.isfinite(actuators.force[j])})
+    handles: list[Any] = []
+    for peak in peaks:
+        for sign in (1.0, -1.0):
+            line = ax.axhline(sign * peak, color="0.45", ls="--", lw=0.8, label=f"actuator peak ±{peak:g}")
+        handles.append(line)
+    return handles
 
 
 def plot_joint_errors(result: SimulationResult, *, ax: Axes | None = None, title: str | None = None) -> Axes:
@@ -343,6 +360,7 @@ def plot_efforts_by_module(
         unit = "N m" if _is_twist(names[joints[0]]) else "N"
         for j, colour in zip(joints, _leg_colours(len(joints)), strict=True):
             ax.plot(result.t, result.effort[:, j], lw=1.0, color=colour, label=mpl_text(names[j]))
+        _peak_lines(ax, result, joints)
         shaded = _shade_ga(ax, result)
         handles, _ = ax.get_legend_handles_labels()
         if shaded and g == 0:
