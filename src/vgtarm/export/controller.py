@@ -298,8 +298,8 @@ class _Export:
         if not (math.isfinite(tolerance) and tolerance >= 0):
             raise InputError(f"limit_tolerance = {shown(given)}: expected a distance >= 0 (m, rad)")
         clip = _effort_max(effort_max, n)
-        if robot.actuators is not None:  # the robot's actuators clip as in the simulation (and a given
-            clip = np.minimum(clip, robot.actuators.force)  # effort_max tighter still)
+        if robot.actuators is not None:  # the controller clips to its actuators' peak forces, as in the
+            clip = np.minimum(clip, robot.actuators.force)  # simulation (a given effort_max tighter still)
         ga = None
         if switching is not None:
             scm = switching_controller(switching, gains.Kp, gains.Kv, n)
@@ -350,7 +350,6 @@ def _settings(
         **sensing_record(sensing),
         "limit_tolerance": tolerance,
         "effort_max": [None if math.isinf(v) else v for v in clip.tolist()],
-        **_speed_record(robot),
         "switching": ga.settings if ga is not None else None,
         "casadi": str(getattr(ca, "__version__", "unknown")),
     }
@@ -398,27 +397,6 @@ def _checked_model(robot: Robot, model: RobotParameters | Stack | Robot | None) 
     controller = robot.with_parameters(model.parameters if isinstance(model, Robot) else model)
     model_of_plant(robot, controller)  # simulate's check: a model off by more than its range is no model of the plant
     return controller
-
-
-def _speed_max(robot: Robot) -> np.ndarray:
-    """The actuators' no-load speeds (inf: none), ``(n,)``."""
-    return np.full(robot.n_joints, math.inf) if robot.actuators is None else np.array(robot.actuators.speed)
-
-
-def _force_speed(robot: Robot) -> np.ndarray:
-    """1 where an actuator's force-speed line holds, else 0, ``(n,)``."""
-    return np.zeros(robot.n_joints) if robot.actuators is None else robot.actuators.force_speed.astype(float)
-
-
-def _speed_record(robot: Robot) -> dict[str, Any]:
-    """The actuators' speeds and force-speed lines as ``export.json`` records them (none: not written,
-    so an export of a robot without actuators records what it did before)."""
-    if robot.actuators is None:
-        return {}
-    return {
-        "speed_max": [None if math.isinf(v) else v for v in _speed_max(robot).tolist()],
-        "force_speed": [bool(v) for v in robot.actuators.force_speed],
-    }
 
 
 def _effort_max(value: ArrayLike | None, n: int) -> np.ndarray:
@@ -598,8 +576,6 @@ def _defaults_source(
         _c_array("q_min", robot.parameters.lower),
         _c_array("q_max", robot.parameters.upper),
         _c_array("effort_max", clip),
-        _c_array("speed_max", _speed_max(robot)),
-        _c_array("force_speed", _force_speed(robot)),
         "    memset(params, 0, sizeof *params);",
         f"    params->dt = {_c_number(settings['dt_s'])};",
         "    memcpy(params->Kp, Kp, sizeof Kp);",
@@ -621,8 +597,6 @@ def _defaults_source(
         "    memcpy(params->q_max, q_max, sizeof q_max);",
         f"    params->limit_tolerance = {_c_number(settings['limit_tolerance'])};",
         "    memcpy(params->effort_max, effort_max, sizeof effort_max);",
-        "    memcpy(params->speed_max, speed_max, sizeof speed_max);",
-        "    memcpy(params->force_speed, force_speed, sizeof force_speed);",
         "}",
         "",
         *(ga.defaults if ga else ()),

@@ -78,7 +78,9 @@ class MujocoLoop(PythonLoop):
         for _ in range(steps):
             mujoco.mj_forward(m, d)
             _, velocity = self._tip_state(q, qd)
-            b.apply(F, self._tool_force(s, velocity, dist))
+            # the actuators' force-speed lines at each step's velocity (held over the step: MuJoCo
+            # has no velocity-dependent force range)
+            b.apply(self.delivered(s, b.joint_velocities(), F), self._tool_force(s, velocity, dist))
             if explicit:
                 # the efforts and the tool force enter at the acceleration stage only
                 mujoco.mj_forwardSkip(m, d, mujoco.mjtStage.mjSTAGE_VEL, 1)

@@ -36,6 +36,8 @@ class PythonLoop:
     def __init__(self, plant: Robot, model: Robot) -> None:
         self.plant = plant
         self.model = model
+        #: the actuators' peak forces, no-load speeds and force-speed lines of the run (LoopArrays)
+        self._limits: tuple[Array, Array, Array] = (np.zeros(0), np.zeros(0), np.zeros(0))
 
     def _tip_state(self, q: Array, qd: Array) -> tuple[Array, Array]:
         """The plant's tip point and tip velocity at ``(q, qd)``."""
@@ -51,7 +53,16 @@ class PythonLoop:
 
     def _acceleration(self, s: LoopSettings, q: Array, qd: Array, F: Array, dist: Array) -> Array:
         velocity, _ = self.plant.tip_velocity(q, qd)
-        return self.plant.forward_dynamics(q, qd, F, self._tool_force(s, velocity, dist))
+        return self.plant.forward_dynamics(q, qd, self.delivered(s, qd, F), self._tool_force(s, velocity, dist))
+
+    def delivered(self, s: LoopSettings, qd: Array, F: Array) -> Array:
+        """The effort the plant's actuators deliver for ``F`` at the joint velocities ``qd`` (their
+        force-speed lines, at every stage: ``acceleration`` in ``closed_loop.c``); ``F`` without them."""
+        if not s.saturation:
+            return F
+        limits = self._limits
+        lower, upper = effort_bounds(limits[0], limits[1], limits[2], qd)
+        return np.minimum(np.maximum(F, lower), upper)
 
     def _integrate(self, s: LoopSettings, q: Array, qd: Array, F: Array, dist: Array) -> tuple[Array, Array]:
         h = s.dt / max(s.substeps, 1)
@@ -167,6 +178,7 @@ class PythonLoop:
     ) -> tuple[int, int]:
         """Run samples ``k0 .. k1-1``; returns (status, stop sample) like the compiled driver."""
         inp = arrays.inputs
+        self._limits = (inp["force_limit"], inp["speed_limit"], inp["force_speed"])
         for k in range(k0, k1):
             q, qd = arrays.q[k], arrays.qd[k]
             try:
@@ -206,9 +218,9 @@ class PythonLoop:
                 except (AssemblyError, InputError):
                     return NOT_FINITE, k
                 arrays.F[k] = arrays.F[k] - J.T @ inp["tool_force_expected"][k]
-            if settings.saturation:  # the actuators' limits at the velocity the controller sees
-                lower, upper = effort_bounds(inp["force_limit"], inp["speed_limit"], inp["force_speed"], vm)
-                arrays.F[k] = np.minimum(np.maximum(arrays.F[k], lower), upper)
+            if settings.saturation:  # the controller's clip to its actuators' peak forces (vgt_clip)
+                peak = inp["force_limit"]
+                arrays.F[k] = np.minimum(np.maximum(arrays.F[k], -peak), peak)
             dist = inp["disturbance"][k]
             arrays.f_ext[k] = self._tool_force(settings, velocity, dist)
             if k + 1 >= arrays.n:

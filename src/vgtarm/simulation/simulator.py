@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import functools
 import time
+import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from dataclasses import replace as dataclass_replace
@@ -324,6 +325,7 @@ def prepare(
     dist_seed, ga_seed, sensor_seed = np.random.SeedSequence(int(scenario.seed)).spawn(3)
     arrays = _run_arrays(plant, model, ref, scenario, sensing, tip_d, dist_seed, sensor_seed)
     settings = _loop_settings(plant, controller, scenario, sensing, dt)
+    _warn_stiff_lines(plant, np.asarray(arrays.q[0]), dt / max(scenario.substeps, 1), scenario.integrator)
     job = Job(
         settings=settings,
         unswitched=dataclass_replace(settings, threshold=0.0),
@@ -489,18 +491,50 @@ def loop_arrays(
     )
 
 
+#: The largest step ratio ``h F_s / (v_max m)`` each integrator takes stably on a force-speed line
+#: (the stability limit of a damping ``-k v / m`` on the real axis: 2 for both Euler steps, about
+#: 2.785 for RK4).
+STABLE_STEP = {"euler": 2.0, "semi_implicit_euler": 2.0, "rk4": 2.785}
+
+
+def _warn_stiff_lines(plant: Robot, q0: np.ndarray, h: float, integrator: str) -> None:
+    """Warn when the actuators' force-speed lines are too stiff for the integration step: their
+    back-EMF is a damping ``K = diag(F_s / v_max)`` on the joints, whose fastest mode decays at the
+    largest eigenvalue ``lambda`` of ``M^-1 K``; an explicit step with ``h lambda`` beyond the
+    integrator's limit chatters (the run is then a numerical artefact: more substeps fix it)."""
+    actuators = plant.actuators
+    if actuators is None or not actuators.force_speed.any():
+        return
+    with np.errstate(invalid="ignore", divide="ignore"):
+        damping = np.where(actuators.force_speed, actuators.force / actuators.speed, 0.0)
+    rates = np.linalg.eigvals(np.linalg.solve(plant.mass_matrix(q0), np.diag(damping))).real
+    ratio = h * float(rates.max())
+    limit = STABLE_STEP.get(integrator, 2.0)
+    if ratio > limit:
+        needed = int(np.ceil(ratio / limit * 1.05))
+        warnings.warn(
+            f"actuators: their force-speed lines (damping F_s / v_max up to {damping.max():.4g} N s/m) are too "
+            f"stiff for {integrator} steps of {h:.3g} s: h lambda = {ratio:.3g} > {limit:g}, lambda the fastest "
+            f"rate of M^-1 K; the run would chatter; use {needed} times the substeps, or a smaller dt",
+            RuntimeWarning,
+            stacklevel=4,  # the caller of simulate
+        )
+
+
 def actuator_figures(plant: Robot, arrays: LoopArrays, mode: np.ndarray, dt: float) -> dict[str, Any]:
-    """Per joint with an actuator, the peak utilisation of its force limit (the effort over the limit
-    in its direction at the velocity the controller saw, as the loop clipped it: at most 1) and the
-    time spent at a limit (s); none for a robot without actuators."""
+    """Per joint with an actuator, at each sample: the force it delivers for the controller's effort
+    at the joint's velocity (its force-speed line, where it holds); the summary's peak utilisation of
+    the limit (at most 1) and the time spent at a limit (s: the samples where the effort asked was at
+    or beyond the limit in its direction); none for a robot without actuators."""
     actuators = plant.actuators
     if actuators is None:
         return {}
-    run = (mode != MODE_NOT_RUN) & np.isfinite(arrays.F).all(axis=1) & np.isfinite(arrays.qd_meas).all(axis=1)
-    F, v = arrays.F[run], arrays.qd_meas[run]
+    run = (mode != MODE_NOT_RUN) & np.isfinite(arrays.F).all(axis=1) & np.isfinite(arrays.qd).all(axis=1)
+    F, v = arrays.F[run], arrays.qd[run]
     lower, upper = actuators.bounds(v)
-    utilisation = actuators.utilisation(F, v)
-    at_limit = ((F == lower) | (F == upper)) & actuators.limited
+    delivered = np.minimum(np.maximum(F, lower), upper)
+    utilisation = actuators.utilisation(delivered, v)
+    at_limit = ((F >= upper) | (F <= lower)) & actuators.limited
     names = [name for name, limited in zip(plant.joint_names, actuators.limited, strict=True) if limited]
     index = np.flatnonzero(actuators.limited)
     return {

@@ -56,8 +56,6 @@ int vgtc_check_params(const vgtc_params *p, const char **field)
             if (!(isfinite(p->resolution[i]) && p->resolution[i] >= 0.0)) bad = "resolution";
             else if (!(isfinite(p->q_min[i]) && isfinite(p->q_max[i]) && p->q_min[i] <= p->q_max[i])) bad = "q_min/q_max";
             else if (!(p->effort_max[i] > 0.0)) bad = "effort_max";
-            else if (!(p->speed_max[i] > 0.0)) bad = "speed_max";
-            else if (p->force_speed[i] != 0.0 && p->force_speed[i] != 1.0) bad = "force_speed";
         }
     }
     if (field) *field = bad;
@@ -272,13 +270,12 @@ int vgtc_step_feedforward(vgtc_context *ctx, double t, const double *q_meas, con
     if (call(ctx, vgt_tip, 2, in_t, 1, out_t)) return fail(efforts, VGTC_FUNCTION_FAILED);
     const double e0 = tip_d[0] - tip[0], e1 = tip_d[1] - tip[1], e2 = tip_d[2] - tip[2];
 
-    /* 4. limits: the actuators' at the velocity the controller sees (the simulation's clip) */
+    /* 4. limits */
     int status = VGTC_OK;
-    double asked[VGTC_NJ];
-    memcpy(asked, F, sizeof F);
-    vgt_saturate(n, p->effort_max, p->speed_max, p->force_speed, vm, F);
-    for (int i = 0; i < n; ++i)
-        if (F[i] != asked[i]) status = VGTC_SATURATED;
+    for (int i = 0; i < n; ++i) {
+        if (F[i] > p->effort_max[i]) { F[i] = p->effort_max[i]; status = VGTC_SATURATED; }
+        else if (F[i] < -p->effort_max[i]) { F[i] = -p->effort_max[i]; status = VGTC_SATURATED; }
+    }
     if (!finite_all(n, F)) return fail(efforts, VGTC_FUNCTION_FAILED);
 
     /* remember this period */

@@ -84,12 +84,7 @@ typedef struct {
                                           /* position (1), velocity (1/s), disturbance (1/s^2)     */
     double q_min[VGTC_NJ], q_max[VGTC_NJ];/* joint limits (m, rad)                                 */
     double limit_tolerance;               /* a reading farther outside a limit stops the controller */
-    double effort_max[VGTC_NJ];           /* |F_i| is clipped to it (INFINITY: no limit): the      */
-                                          /* actuator's peak force (the robot file's [actuators])  */
-    double speed_max[VGTC_NJ];            /* the actuator's no-load speed (INFINITY: none)         */
-    double force_speed[VGTC_NJ];          /* 1: the force-speed line holds, F_i sign(v_i) <=       */
-                                          /* effort_max_i (1 - |v_i| / speed_max_i) at the        */
-                                          /* velocity the controller sees (vgt_saturate); 0: none  */
+    double effort_max[VGTC_NJ];           /* |F_i| is clipped to it (INFINITY: no limit)           */
 } vgtc_params;
 
 /* The controller's state: the parameters and what it remembers of the last two periods. */

@@ -76,8 +76,9 @@ static void tool_force(const vgt_settings *s, const double *V, const double *dis
     }
 }
 
-/* Joint acceleration of the plant at (q, qd) under effort F; the cutting force is evaluated at
- * this state (so RK4 stages see it change), the disturbance is held over the sample. */
+/* Joint acceleration of the plant at (q, qd) under effort F, as its actuators deliver it at this
+ * state (settings.saturation: the force-speed line at this velocity); the cutting force is
+ * evaluated at this state (so RK4 stages see both change), the disturbance is held over the sample. */
 static int acceleration(const vgt_model *m, const vgt_settings *s, const vgt_run *r, vgt_work *wk,
                         const double *q, const double *qd, const double *F, const double *dist,
                         double *qdd, double *f_used)
@@ -88,6 +89,12 @@ static int acceleration(const vgt_model *m, const vgt_settings *s, const vgt_run
     if (call(&m->tip_state, wk, 3, in_ts, 2, out_ts)) return VGT_FUNCTION_FAILED;
     tool_force(s, V, dist, f);
     if (f_used) memcpy(f_used, f, sizeof f);
+    double applied[s->n_joints];
+    if (s->saturation) { /* what the actuators deliver at this state: the force-speed line acts */
+        memcpy(applied, F, sizeof applied); /* continuously, at every stage's velocity          */
+        vgt_saturate(s->n_joints, r->force_limit, r->speed_limit, r->force_speed, qd, applied);
+        F = applied;
+    }
     const double *in_fd[5] = {q, qd, F, f, r->p_plant};
     double *out_fd[1] = {qdd};
     if (call(&m->fd, wk, 5, in_fd, 1, out_fd)) return VGT_FUNCTION_FAILED;
@@ -314,8 +321,8 @@ static int feed_forward(const vgt_model *m, const vgt_settings *s, const vgt_run
  * its error and what the controller sees, stop if the error exceeds the threshold (*stop = k,
  * before any control), estimate the external efforts, compute the effort (computed force control
  * minus the estimate and, with tool_feedforward, minus the expected tool force through J_P^T) and
- * the tool force, clip the effort to the actuators' limits (settings.saturation), and integrate to
- * sample k+1 (unless k is the last). On any other stop, *stop is the sample whose state failed. */
+ * the tool force, clip the effort to the actuators' peak forces (settings.saturation; the plant
+ * applies their force-speed lines at each stage), and integrate to sample k+1 (unless k is the last). On any other stop, *stop is the sample whose state failed. */
 int vgt_simulate(const vgt_model *m, const vgt_settings *s, const vgt_run *r,
                  const double *Kp, const double *Kv, long k0, long k1, long *stop)
 {
@@ -380,7 +387,7 @@ int vgt_simulate_slice(const vgt_model *m, const vgt_settings *s, const vgt_run 
             if (s->tool_feedforward && feed_forward(m, s, r, &wk, k, F)) {
                 status = VGT_FUNCTION_FAILED; *stop = k; break;
             }
-            if (s->saturation) vgt_saturate(nj, r->force_limit, r->speed_limit, r->force_speed, vm, F);
+            if (s->saturation) vgt_clip(nj, r->force_limit, F); /* the controller's own clip */
             tool_force(s, V, dist, r->f_ext + 3 * k);
             ++used;
             if (k + 1 >= r->n) continue;

@@ -80,11 +80,24 @@ static inline void vgt_subtract_estimate(int n, const double *tau, double *F)
     for (int i = 0; i < n; ++i) F[i] -= tau[i];
 }
 
-/* The actuators' limits on the effort F at the joint velocities v (vgtarm/model/actuators.py):
- * |F_i| <= force[i] (inf: no actuator) and, where line[i] != 0, the force-speed line of a motor whose
- * voltage is bounded, F_i sign(v_i) <= force[i] (1 - |v_i| / speed[i]) in the direction of motion
- * (braking keeps the full force; past twice the no-load speed both ends are the full braking
- * force). F is clipped in place, as NumPy's minimum(maximum(F, lower), upper). */
+/* The controller's clip of its effort F to its actuators' peak forces: |F_i| <= force[i] (INFINITY:
+ * no actuator), as NumPy's minimum(maximum(F, -force), force). The force-speed line is the plant's
+ * (vgt_saturate): a back-EMF acts continuously, and a controller that clipped to it at its sampled
+ * velocity would close a loop of gain dt F_s / (v_max m) that chatters once it passes 2. */
+static inline void vgt_clip(int n, const double *force, double *F)
+{
+    for (int i = 0; i < n; ++i) {
+        if (F[i] < -force[i]) F[i] = -force[i];
+        if (F[i] > force[i]) F[i] = force[i];
+    }
+}
+
+/* The force the actuators deliver for the effort F at the joint velocities v
+ * (vgtarm/model/actuators.py): |F_i| <= force[i] (inf: no actuator) and, where line[i] != 0, the
+ * force-speed line of a motor whose voltage is bounded, F_i sign(v_i) <= force[i] (1 - |v_i| /
+ * speed[i]) in the direction of motion (braking keeps the full force; past twice the no-load speed
+ * both ends are the full braking force). F is clipped in place, as NumPy's
+ * minimum(maximum(F, lower), upper). */
 static inline void vgt_saturate(int n, const double *force, const double *speed, const double *line,
                                 const double *v, double *F)
 {

@@ -85,9 +85,10 @@ typedef struct {
     int tool_feedforward;   /* 1: the expected tool force (vgt_run.tool_force_expected) is fed */
                             /* forward, F -= J_P(q_meas)^T f_exp_k, and the observer and the   */
                             /* Kalman process model take it as known (they estimate the rest)  */
-    int saturation;         /* 1: the effort is clipped to the actuators' limits at the        */
-                            /* velocity the controller sees (vgt_saturate, vgt_control.h), so  */
-                            /* F, the plant, the observer and the estimator get what is applied */
+    int saturation;         /* 1: the controller clips its effort to the actuators' peak forces */
+                            /* (vgt_clip, vgt_control.h: F, the observer and the estimator get */
+                            /* it), and the plant delivers it as the actuators can at each      */
+                            /* stage's velocity (vgt_saturate: the force-speed lines)           */
 } vgt_settings;
 
 /* One run: n samples of an n_joints robot (nj below). */
