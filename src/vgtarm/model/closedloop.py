@@ -76,8 +76,8 @@ class LoopSettings:
     kalman_gain: tuple[float, float, float] = (0.0, 0.0, 0.0)
     threshold_measured: bool = False
     tool_feedforward: bool = False
-    #: clip the effort to the actuators' limits (``LoopArrays``' ``force_limit``, ``speed_limit``,
-    #: ``force_speed``) at the velocity the controller sees
+    #: the actuators (``LoopArrays``' ``force_limit``, ``speed_limit``, ``force_speed``): the controller
+    #: clips its effort to the peak forces, the plant delivers it through the force-speed lines
     saturation: bool = False
 
     def struct(self, n_joints: int, n_margins: int) -> Any:

@@ -655,8 +655,8 @@ def actuator_markdown(runs: Sequence[tuple[str, dict[str, Any]]]) -> list[str]:
         "",
         "## Actuators",
         "",
-        "Peak utilisation: the effort over its actuator's limit in its direction at the velocity the controller"
-        " saw (the loop clips to 1); time at limit: the control periods spent clipped.",
+        "Peak utilisation: the force the actuator delivered over its limit in its direction at the joint's"
+        " velocity (at most 1); time at limit: the control periods whose effort was at or beyond that limit.",
         "",
         "| run | joint | peak utilisation | time at limit (s) |",
         "| --- | --- | --- | --- |",
