@@ -62,8 +62,10 @@ def toppra_path(geometry: retiming.Geometry) -> Any:
     return Path()
 
 
-def toppra_duration(robot: vgtarm.Robot, reference: Any, actuators: Actuators, grid: int) -> float:
-    """toppra's TOPP-RA duration (s) on the same geometry, grid and box limits."""
+def toppra_problem(robot: vgtarm.Robot, reference: Any, actuators: Actuators, grid: int) -> tuple[Any, Any]:
+    """toppra's TOPP-RA problem (``algorithm.TOPPRA``) on the retiming's geometry of ``reference``, a
+    uniform grid of ``grid`` points and the box limits of ``actuators`` (``robot``: its dynamics),
+    and that geometry; the one problem the benchmark times and the tests compare with."""
     from toppra import algorithm, constraint
 
     geometry = retiming.Geometry(reference.t, reference.q, reference.qd, reference.qdd)
@@ -75,6 +77,12 @@ def toppra_duration(robot: vgtarm.Robot, reference: Any, actuators: Actuators, g
     ]
     s = np.linspace(reference.t[0], reference.t[-1], grid)
     problem = algorithm.TOPPRA(constraints, toppra_path(geometry), gridpoints=s, parametrizer="ParametrizeConstAccel")
+    return problem, geometry
+
+
+def toppra_duration(robot: vgtarm.Robot, reference: Any, actuators: Actuators, grid: int) -> float:
+    """toppra's TOPP-RA duration (s) on the same geometry, grid and box limits."""
+    problem, _ = toppra_problem(robot, reference, actuators, grid)
     return float(problem.compute_trajectory(0, 0).duration)
 
 

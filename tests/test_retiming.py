@@ -28,21 +28,13 @@ from vgtarm.errors import InputError
 from vgtarm.model.actuators import Actuator, Actuators
 
 ta = pytest.importorskip("toppra")
-from toppra import algorithm, constraint  # noqa: E402
+from benchmarks.bench_retime import limits, toppra_problem  # noqa: E402  (the benchmark's problem and limits)
 
 logging.getLogger("toppra").setLevel(logging.WARNING)
 
 GRID = 300
 #: A joint force within its bound at a grid point: the solver's rounding (N, N m).
 FORCE_TOLERANCE = 1e-7
-
-
-def _actuators(robot: vgtarm.Robot, *, line: bool = False) -> Actuators:
-    legs = Actuator(force=60.0, speed=0.05, force_speed=line)
-    twist = Actuator(force=5.0, speed=3.0, force_speed=line)
-    return Actuators(
-        names=robot.joint_names, joints=tuple(twist if n.startswith("psi") else legs for n in robot.joint_names)
-    )
 
 
 @pytest.fixture(scope="module")
@@ -55,37 +47,9 @@ def paths(robot: vgtarm.Robot) -> dict[str, vgtarm.IKResult]:
     return {name: vgtarm.inverse_kinematics(robot, getattr(vgtarm.paths, name)()) for name in ("case1", "case2")}
 
 
-class _Path(ta.interpolator.AbstractGeometricPath):
-    """The retiming's own geometry (cubic Hermite with the exact rates) as a toppra path."""
-
-    def __init__(self, geometry: retiming.Geometry) -> None:
-        self.geometry = geometry
-
-    def __call__(self, s, order=0):
-        values = self.geometry(np.atleast_1d(np.asarray(s, dtype=float)))[order]
-        return values if np.ndim(s) else values[0]
-
-    @property
-    def dof(self) -> int:
-        return self.geometry.q.shape[1]
-
-    @property
-    def path_interval(self) -> np.ndarray:
-        return np.array([self.geometry.t[0], self.geometry.t[-1]])
-
-
 def _toppra(robot: vgtarm.Robot, reference, actuators: Actuators, grid: int):
     """toppra's TOPP-RA on the same geometry, grid and box limits (``robot``: its dynamics)."""
-    geometry = retiming.Geometry(reference.t, reference.q, reference.qd, reference.qdd)
-    path = _Path(geometry)
-    speed = np.stack([-actuators.speed, actuators.speed], axis=1)
-    force = np.stack([-actuators.force, actuators.force], axis=1)
-    constraints = [
-        constraint.JointVelocityConstraint(speed),
-        constraint.JointTorqueConstraint(robot.inverse_dynamics, force, np.zeros(robot.n_joints)),
-    ]
-    s = np.linspace(reference.t[0], reference.t[-1], grid)
-    problem = algorithm.TOPPRA(constraints, path, gridpoints=s, parametrizer="ParametrizeConstAccel")
+    problem, geometry = toppra_problem(robot, reference, actuators, grid)
     trajectory = problem.compute_trajectory(0, 0)
     assert trajectory is not None
     return trajectory, problem.problem_data, geometry
@@ -93,7 +57,7 @@ def _toppra(robot: vgtarm.Robot, reference, actuators: Actuators, grid: int):
 
 @pytest.mark.parametrize("case", ["case1", "case2"])
 def test_without_friction_the_duration_is_toppras(frictionless, paths, case):
-    actuators = _actuators(frictionless)
+    actuators = limits(frictionless)
     trajectory, _, _ = _toppra(frictionless, paths[case], actuators, GRID)
     ours = retiming.retime(frictionless, paths[case], actuators=actuators, grid=GRID, scheme="departure", refine=0)
     assert ours.duration == pytest.approx(trajectory.duration, rel=1e-3)
@@ -118,7 +82,7 @@ def _grid_motion(geometry: retiming.Geometry, data) -> retiming.GridMotion:
 def test_with_friction_toppras_profile_exceeds_the_force_and_ours_does_not(robot, frictionless, paths):
     """toppra cannot hold the legs' viscous friction (200 N s/m, first order in sdot): its profile,
     checked with the friction, asks more than 60 N somewhere; ours, with the friction exact, never."""
-    actuators = _actuators(robot)
+    actuators = limits(robot)
     _, data, geometry = _toppra(frictionless, paths["case1"], actuators, GRID)
     theirs = retiming.force_excess(robot, _grid_motion(geometry, data), actuators)
     assert theirs.max() > 1.0
@@ -136,11 +100,11 @@ def test_with_friction_toppras_profile_exceeds_the_force_and_ours_does_not(robot
 
 @pytest.mark.parametrize("case", ["case1", "case2"])
 def test_with_force_speed_lines_no_force_exceeds_its_bound(robot, paths, case):
-    lines = _actuators(robot, line=True)
+    lines = limits(robot, line=True)
     ours = retiming.retime(robot, paths[case], actuators=lines, grid=GRID, tool_force=5.0)
     assert retiming.force_excess(robot, ours.collocated(), lines, tool_force=5.0).max() <= FORCE_TOLERANCE
     # the lines only take force away: slower than with the box
-    box = retiming.retime(robot, paths[case], actuators=_actuators(robot), grid=GRID, tool_force=5.0)
+    box = retiming.retime(robot, paths[case], actuators=limits(robot), grid=GRID, tool_force=5.0)
     assert ours.duration > box.duration
 
 
@@ -184,7 +148,7 @@ def test_one_joint_against_a_force_on_its_force_speed_line_is_bang_bang(scheme):
 
 
 def test_the_retimed_reference_is_consistent_starts_and_ends_at_rest_and_simulates(robot, paths):
-    ours = retiming.retime(robot, paths["case1"], actuators=_actuators(robot), grid=200, refine=0)
+    ours = retiming.retime(robot, paths["case1"], actuators=limits(robot), grid=200, refine=0)
     dt = 1e-3
     ref = ours.reference(dt)
     assert isinstance(ref, vgtarm.JointReference)
@@ -210,7 +174,7 @@ def test_the_retimed_reference_is_consistent_starts_and_ends_at_rest_and_simulat
 
 
 def test_the_figure_has_the_phase_plane_and_the_utilisation(robot, paths):
-    ours = retiming.retime(robot, paths["case2"], actuators=_actuators(robot), grid=100)
+    ours = retiming.retime(robot, paths["case2"], actuators=limits(robot), grid=100)
     fig = ours.figure(dt=1e-2)
     assert len(fig.axes) == 2
     assert len(fig.axes[0].lines) == 3 and len(fig.axes[1].lines) == robot.n_joints + 1
@@ -234,7 +198,7 @@ def test_the_figure_has_the_phase_plane_and_the_utilisation(robot, paths):
     ],
 )
 def test_bad_input_is_refused_naming_the_field(robot, paths, change, field):
-    arguments = {"reference": paths["case2"], "actuators": _actuators(robot), "grid": 50, **change}
+    arguments = {"reference": paths["case2"], "actuators": limits(robot), "grid": 50, **change}
     reference = arguments.pop("reference")
     with pytest.raises(InputError, match=rf"^{field}\b") as raised:
         retiming.retime(robot, reference, **arguments)
@@ -248,7 +212,7 @@ def test_the_retimed_case_1_closed_loop_stays_within_its_actuators_and_on_the_pa
     actuators: no effort beyond its limit at the true joint velocity (the loop clips at the one it
     sees), and the tip within 0.05 mm of the path (measured 0.025 mm; 0.139 mm on the paper's own
     timing of the path, which starts at speed from rest)."""
-    actuators = _actuators(robot)
+    actuators = limits(robot)
     plant = robot.with_parameters(dataclasses.replace(robot.parameters, actuators=actuators))
     reference = vgtarm.retime(plant, paths["case1"], grid=800).reference(1e-3)
     options = vgtarm.PRESETS["low-force"]
@@ -278,7 +242,7 @@ def test_refinement_keeps_the_resampled_path_within_its_limits_between_grid_poin
     exceeds an actuator's own bound are halved until none does: then no force, speed or
     acceleration is beyond its limit (force-speed lines too, and with the friction held), and the
     timing is no slower than the uniform grid's by more than the margin's 0.1 % and round-off."""
-    actuators = _actuators(robot, line=line)
+    actuators = limits(robot, line=line)
     coarse = retiming.retime(robot, paths[case], actuators=actuators, grid=400, refine=0)
     if not line:
         assert retiming.force_excess(robot, coarse.reference(1e-3), actuators).max() > 1.0
