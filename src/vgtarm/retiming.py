@@ -487,11 +487,9 @@ class Retimed:
         u = np.append(self.u, 0.0) if self.scheme == "departure" else np.insert(self.u, 0, 0.0)
         return collocated(self.geometry, self.s, self.x, u)
 
-    def reference(self, dt: float | None = None) -> JointReference:
-        """The retimed joints sampled every ``dt`` s (default :attr:`dt`) from 0 past the duration
-        (then at rest): ``qd = q' sdot``, ``qdd = q' sddot + q'' sdot^2``, and the source's tip
-        path (cubic Hermite in ``s``), robot and task."""
-
+    def sampled(self, dt: float | None = None) -> tuple[Array, Array, Array, Array, Array]:
+        """The retimed joints every ``dt`` s (default :attr:`dt`) from 0 past the duration (then at
+        rest): ``t``, ``s(t)``, ``q``, ``qd = q' sdot`` and ``qdd = q' sddot + q'' sdot^2``."""
         step = self.dt if dt is None else checks.number("dt", dt, minimum=MIN_DT, unit="s")
         count = int(math.ceil(self.duration / step - 1e-9)) + 1
         if count > MAX_SAMPLES:
@@ -499,12 +497,18 @@ class Retimed:
         t = np.arange(count, dtype=np.float64) * step
         s, sd, sdd = self.timing(t)
         q, qs, qss = self.geometry(s)
+        return t, s, q, qs * sd[:, None], qs * sdd[:, None] + qss * (sd * sd)[:, None]
+
+    def reference(self, dt: float | None = None) -> JointReference:
+        """The retimed joints of :meth:`sampled` as a reference, with the source's tip path (cubic
+        Hermite in ``s``), robot and task."""
+        t, s, q, qd, qdd = self.sampled(dt)
         src = self.source
         return JointReference(
             t=t,
             q=q,
-            qd=qs * sd[:, None],
-            qdd=qs * sdd[:, None] + qss * (sd * sd)[:, None],
+            qd=qd,
+            qdd=qdd,
             rates="exact",
             name=f"{src.name} (retimed)",
             tip=self.geometry.tip_at(s, self.robot),
@@ -648,10 +652,7 @@ def _exceeded_intervals(timed: Retimed) -> NDArray[np.intp]:
     """The grid intervals in which the timed path, sampled every ``timed.dt`` s, exceeds one of the
     actuators' own force, speed or acceleration bounds (friction and the tool force as the timing
     holds them; beyond round-off, 1e-12 of the bound)."""
-    t = np.arange(int(math.ceil(timed.duration / timed.dt - 1e-9)) + 1, dtype=np.float64) * timed.dt
-    s_t, sd, sdd = timed.timing(t)
-    q, qs, qss = timed.geometry(s_t)  # the samples of Retimed.reference, without its tip path
-    qd, qdd = qs * sd[:, None], qs * sdd[:, None] + qss * (sd * sd)[:, None]
+    _, s_t, q, qd, qdd = timed.sampled()  # the samples of Retimed.reference, without its tip path
     robot, limits = timed.robot, timed.actuators
     F = robot.inverse_dynamics(q, qd, qdd) + tool_forces(robot, q, qd, timed.tool_force)
     if not timed.friction:  # the timing ignores the friction: so does its check
@@ -673,9 +674,7 @@ def _exceeded_intervals(timed: Retimed) -> NDArray[np.intp]:
 def _tightened(actuators: Actuators, factor: float) -> Actuators:
     """``actuators`` with every peak force, speed and acceleration times ``factor`` (the same lines)."""
     joints = tuple(
-        None
-        if a is None
-        else Actuator(a.force * factor, a.speed * factor, a.acceleration * factor, a.force_speed)
+        None if a is None else Actuator(a.force * factor, a.speed * factor, a.acceleration * factor, a.force_speed)
         for a in actuators.joints
     )
     return Actuators(names=actuators.names, joints=joints, origins=actuators.origins)
