@@ -15,7 +15,6 @@ from numpy.typing import NDArray
 from ..control.law import computed_force
 from ..control.scm import predict_tip_error
 from ..errors import AssemblyError, InputError
-from ..model.actuators import effort_bounds
 from ..model.closedloop import (
     ABOVE_THRESHOLD,
     DONE,
@@ -36,8 +35,6 @@ class PythonLoop:
     def __init__(self, plant: Robot, model: Robot) -> None:
         self.plant = plant
         self.model = model
-        #: the actuators' peak forces, no-load speeds and force-speed lines of the run (LoopArrays)
-        self._limits: tuple[Array, Array, Array] = (np.zeros(0), np.zeros(0), np.zeros(0))
 
     def _tip_state(self, q: Array, qd: Array) -> tuple[Array, Array]:
         """The plant's tip point and tip velocity at ``(q, qd)``."""
@@ -58,11 +55,8 @@ class PythonLoop:
     def delivered(self, s: LoopSettings, qd: Array, F: Array) -> Array:
         """The effort the plant's actuators deliver for ``F`` at the joint velocities ``qd`` (their
         force-speed lines, at every stage: ``acceleration`` in ``closed_loop.c``); ``F`` without them."""
-        if not s.saturation:
-            return F
-        limits = self._limits
-        lower, upper = effort_bounds(limits[0], limits[1], limits[2], qd)
-        return np.minimum(np.maximum(F, lower), upper)
+        actuators = self.plant.actuators
+        return F if not s.saturation or actuators is None else actuators.saturate(F, qd)
 
     def _integrate(self, s: LoopSettings, q: Array, qd: Array, F: Array, dist: Array) -> tuple[Array, Array]:
         h = s.dt / max(s.substeps, 1)
@@ -178,7 +172,6 @@ class PythonLoop:
     ) -> tuple[int, int]:
         """Run samples ``k0 .. k1-1``; returns (status, stop sample) like the compiled driver."""
         inp = arrays.inputs
-        self._limits = (inp["force_limit"], inp["speed_limit"], inp["force_speed"])
         for k in range(k0, k1):
             q, qd = arrays.q[k], arrays.qd[k]
             try:
