@@ -30,6 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 from .. import checks
 from ..errors import InputError, shown
 from ..ga import GAOptions, GAResult, decode, encode, minimize
+from ..model.actuators import Actuators
 from ..model.closedloop import PREDICTIONS
 from ..model.parameters import N_JOINTS
 from ..model.robot import Robot
@@ -320,13 +321,19 @@ def predict_tip_error(
     tip_d: ArrayLike,
     Kp: ArrayLike,
     Kv: ArrayLike,
+    actuators: Actuators | None = None,
 ) -> Array:
-    """NumPy reference of the GA's fitness (the compiled ``vgt_ga_fitness`` computes the same).
+    """NumPy reference of the GA's fitness (the compiled ``vgt_ga_fitness_limited`` computes the same).
 
-    ``q0``, ``qd0`` (7,): the state at sample k; ``q_d``, ``qd_d``, ``qdd_d`` (H+1, 7) and
-    ``tip_d`` (H+1, 3): the reference at samples k .. k+H; ``Kp``, ``Kv`` (P, 7, 7). Returns the
+    ``q0``, ``qd0`` (n,): the state at sample k; ``q_d``, ``qd_d``, ``qdd_d`` (H+1, n) and
+    ``tip_d`` (H+1, 3): the reference at samples k .. k+H; ``Kp``, ``Kv`` (P, n, n). Returns the
     predicted tip-error norm of each candidate, (P,); +inf where the prediction leaves the set of
     assemblable configurations (or, absurdly far, the accepted joint range of ``Robot.joint_range``).
+
+    Under its own model computed force control gives ``qdd = qdd_d + Kp e + Kv e_dot``; with
+    ``actuators`` its effort ``M a + C`` is first clipped to what they deliver at the predicted
+    velocity (:meth:`Actuators.saturate`: the peak forces and the force-speed lines), and the joints
+    follow the model's forward dynamics under the clipped effort.
     """
     Kp_a, Kv_a = np.asarray(Kp, dtype=float), np.asarray(Kv, dtype=float)
     refs = [np.asarray(a, dtype=float) for a in (q_d, qd_d, qdd_d, tip_d)]
@@ -339,6 +346,8 @@ def predict_tip_error(
         e = refs[0][j] - q
         e_dot = refs[1][j] - qd
         a = commanded_acceleration(refs[2][j], e, e_dot, Kp_a, Kv_a)
+        if actuators is not None:
+            a = _limited_acceleration(model, actuators, q, qd, a, alive)
         q = q + dt * qd
         qd = qd + dt * a
         finite = np.where(np.isfinite(q), q, 0.0)
@@ -346,3 +355,14 @@ def predict_tip_error(
         safe = np.where(alive[:, None], q, model.parameters.home)
         total += ((refs[3][j + 1] - model.tip_position(safe)) ** 2).sum(axis=1)
     return np.where(alive, np.sqrt(total), np.inf)
+
+
+def _limited_acceleration(model: Robot, actuators: Actuators, q: Array, qd: Array, a: Array, alive: Array) -> Array:
+    """The model's acceleration under the effort ``M a + C`` of computed force control clipped by
+    ``actuators`` at ``qd`` (candidates no longer ``alive`` keep ``a``: their cost is infinite)."""
+    out = a.copy()
+    if alive.any():
+        qa, qda = q[alive], qd[alive]
+        F = (model.mass_matrix(qa) @ a[alive][..., None])[..., 0] + model.bias_forces(qa, qda)
+        out[alive] = model.forward_dynamics(qa, qda, actuators.saturate(F, qda))
+    return out

@@ -304,7 +304,8 @@ class _Export:
         if switching is not None:
             scm = switching_controller(switching, gains.Kp, gains.Kv, n)
             fuses = simulator_fuses() if fused_multiply_add is None else bool(fused_multiply_add)
-            ga = ga_export(scm, n, float(dt), sensing.velocity_filter if sensing.active else None, fuses)
+            filtered = sensing.velocity_filter if sensing.active else None
+            ga = ga_export(scm, n, float(dt), filtered, fuses, robot.actuators)
         compiler: str | None = None
         limit: float | None = None
         if check_build:

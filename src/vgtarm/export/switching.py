@@ -21,6 +21,7 @@ import numpy as np
 from ..control.scm import SwitchingControl
 from ..errors import InputError, shown
 from ..ga import GAOptions
+from ..model.actuators import Actuators
 from ..model.closedloop import bit_words, pack_bits
 
 #: Flags an x86-64 CPU needs for the x86-64-v3 kernel of the simulation's GA (``vgt_ga.h``, picked
@@ -71,9 +72,17 @@ def switching_controller(switching: str | SwitchingControl, kp: Any, kv: Any, n:
     return SwitchingControl.with_gains(kp, kv, n, kp_bounds=(0.0, kp_top), kv_bounds=(0.0, kv_top), variant=switching)
 
 
-def ga_export(controller: SwitchingControl, n: int, dt: float, velocity_filter: float | None, fuses: bool) -> GAExport:
+def ga_export(
+    controller: SwitchingControl,
+    n: int,
+    dt: float,
+    velocity_filter: float | None,
+    fuses: bool,
+    actuators: Actuators | None = None,
+) -> GAExport:
     """The GA's part of an export for a robot of ``n`` joints at period ``dt``; the safe variant is
-    admitted on a loop whose velocities are filtered with ``velocity_filter`` (None: measured).
+    admitted on a loop whose velocities are filtered with ``velocity_filter`` (None: measured); with
+    ``actuators`` (the robot's) the prediction clips the effort to them, as the simulation's does.
     What the export does not reproduce is refused in one line."""
     _check_exportable(controller, n)
     options = controller.ga
@@ -97,8 +106,24 @@ def ga_export(controller: SwitchingControl, n: int, dt: float, velocity_filter: 
         f"#define VGTC_GA_FMA {int(fuses)}     /* the simulation's kernel fuses multiply-adds here */",
     )
     bits = seeded.ravel() if n_seeded else np.zeros(1, dtype=np.uint64)
-    lines = _default_params(controller, lower, upper, bits, n_seeded, dt, safe)
+    lines = _default_params(controller, lower, upper, bits, n_seeded, dt, safe, _limit_lines(actuators))
     return GAExport(config, (*(line for line in lines if line), ""), _settings(controller, fuses))
+
+
+def _limit_lines(actuators: Actuators | None) -> list[str]:
+    """The lines of ``vgtc_ga_default_params`` that set the actuators the prediction clips to (the
+    robot's; ``saturation`` stays 0 without)."""
+    if actuators is None:
+        return []
+    return [
+        _array("force_limit", actuators.force),
+        _array("speed_limit", actuators.speed),
+        _array("force_speed", actuators.force_speed.astype(float)),
+        "    params->saturation = 1;",
+        "    memcpy(params->force_limit, force_limit, sizeof force_limit);",
+        "    memcpy(params->speed_limit, speed_limit, sizeof speed_limit);",
+        "    memcpy(params->force_speed, force_speed, sizeof force_speed);",
+    ]
 
 
 def _check_exportable(controller: SwitchingControl, n: int) -> None:
@@ -169,9 +194,10 @@ def _default_params(
     n_seeded: int,
     dt: float,
     safe: _SafeTerms,
+    limits: list[str],
 ) -> list[str]:
     """The C functions ``vgtc_ga_default_params`` and ``vgtc_switching_default_params``, line by line
-    (an empty line: none; ``bits``: the seeded individuals' words)."""
+    (an empty line: none; ``bits``: the seeded individuals' words; ``limits``: the actuators' lines)."""
     options = controller.ga
     lines = [
         "void vgtc_ga_default_params(vgtc_ga_params *params)",
@@ -210,16 +236,20 @@ def _default_params(
             "    memcpy(params->safe_lo_tab, kv_lo, sizeof kv_lo);",
             "    memcpy(params->safe_hi_tab, kv_hi, sizeof kv_hi);",
         ]
-    return lines + [
-        "}",
-        "void vgtc_switching_default_params(vgtc_switching_params *params)",
-        "{",
-        "    memset(params, 0, sizeof *params);",
-        f"    params->threshold = {_hex(controller.threshold)};",
-        f"    params->hold = {controller.hold_periods};",
-        f"    params->watch_from = {_watch_from(controller)};",
-        "}",
-    ]
+    return (
+        lines
+        + limits
+        + [
+            "}",
+            "void vgtc_switching_default_params(vgtc_switching_params *params)",
+            "{",
+            "    memset(params, 0, sizeof *params);",
+            f"    params->threshold = {_hex(controller.threshold)};",
+            f"    params->hold = {controller.hold_periods};",
+            f"    params->watch_from = {_watch_from(controller)};",
+            "}",
+        ]
+    )
 
 
 def _settings(controller: SwitchingControl, fuses: bool) -> dict[str, Any]:

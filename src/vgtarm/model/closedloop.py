@@ -352,28 +352,40 @@ class ClosedLoopDriver:
             self._bind_run(None, None)
 
     def ga_predictor(
-        self, p_ctrl: Array, dt: float, q0: Array, qd0: Array, q_d: Array, qd_d: Array, qdd_d: Array, tip_d: Array
+        self,
+        p_ctrl: Array,
+        dt: float,
+        q0: Array,
+        qd0: Array,
+        q_d: Array,
+        qd_d: Array,
+        qdd_d: Array,
+        tip_d: Array,
+        actuators: tuple[Array, Array, Array] | None = None,
     ) -> Callable[[Array, Array], Array]:
         """The GA's fitness for one state and reference window, bound once for many calls.
 
         ``q0``, ``qd0`` (n,): the state at sample k; ``q_d``, ``qd_d``, ``qdd_d`` (H+1, n) and
-        ``tip_d`` (H+1, 3): the reference at samples k .. k+H. The returned function maps
-        ``Kp``, ``Kv`` (P, n, n) to the predicted tip-error norms (P,).
+        ``tip_d`` (H+1, 3): the reference at samples k .. k+H; ``actuators``: ``(force, speed,
+        line)`` the effort is clipped to (``vgt_ga_fitness_limited``), or ``None``. The returned
+        function maps ``Kp``, ``Kv`` (P, n, n) to the predicted tip-error norms (P,).
         """
         fixed = [np.ascontiguousarray(a, dtype=np.float64) for a in (p_ctrl, q0, qd0, q_d, qd_d, qdd_d, tip_d)]
+        limits = [np.ascontiguousarray(a, dtype=np.float64) for a in actuators] if actuators is not None else []
         self.bind(fixed[0])
         settings = ffi().new("vgt_settings *", {"n_joints": len(fixed[1]), "dt": dt})
         head = (self._model, settings, _ptr(fixed[0]), len(fixed[3]) - 1, *[_ptr(a) for a in fixed[1:]])
+        head += tuple(_ptr(a) for a in limits) if limits else (ffi().NULL,) * 3
         lib = self._lib
 
         def predict(Kp: Array, Kv: Array) -> Array:
             kp = np.ascontiguousarray(Kp, dtype=np.float64)
             kv = np.ascontiguousarray(Kv, dtype=np.float64)
             fitness = np.empty(kp.shape[0])
-            status = lib.vgt_ga_fitness(*head, kp.shape[0], _ptr(kp), _ptr(kv), _ptr(fitness))
+            status = lib.vgt_ga_fitness_limited(*head, kp.shape[0], _ptr(kp), _ptr(kv), _ptr(fitness))
             if status != DONE:
                 raise MemoryError("the compiled GA fitness could not allocate its work arrays")
-            assert fixed  # the bound arrays live as long as this function
+            assert fixed and (limits or actuators is None)  # the bound arrays live as long as this function
             return fitness
 
         return predict
@@ -430,13 +442,31 @@ def ga_threads() -> int:
 
 
 def _ga_arrays(
-    lower: Array, upper: Array, p_ctrl: Array, reference: dict[str, Array], quadratic: bool
+    lower: Array,
+    upper: Array,
+    p_ctrl: Array,
+    reference: dict[str, Array],
+    quadratic: bool,
+    actuators: tuple[Array, Array, Array] | None = None,
 ) -> dict[str, Array]:
     """The arrays the compiled GA reads and fills, C-contiguous float64: the gene bounds, the
     controller's parameters, the reference ``q_d, qd_d, qdd_d`` ``(N, n)`` and ``tip_d`` ``(N, 3)``,
     and room for the tip offsets ``(N, 3)``, Jacobians ``(N, 3, n)`` and, with ``quadratic``, Hessians
-    ``(N, 3, n, n)`` at the reference (one element without)."""
+    ``(N, 3, n, n)`` at the reference (one element without); with ``actuators`` (peak force, no-load
+    speed, force-speed line flags, each ``(n,)``) those and room for the model's effort ``(N, n)``,
+    mass matrix, its inverse and the effort's velocity Jacobian ``(N, n, n)`` along the reference."""
     n, n_joints = np.shape(reference["q_d"])
+    limited: dict[str, Any] = {}
+    if actuators is not None:
+        limited = dict(
+            force_limit=actuators[0],
+            speed_limit=actuators[1],
+            force_speed=actuators[2],
+            F_d=np.zeros((n, n_joints)),
+            M_d=np.zeros((n, n_joints, n_joints)),
+            Minv_d=np.zeros((n, n_joints, n_joints)),
+            D_d=np.zeros((n, n_joints, n_joints)),
+        )
     return {
         name: np.ascontiguousarray(value, dtype=np.float64)
         for name, value in dict(
@@ -447,6 +477,7 @@ def _ga_arrays(
             tip_offset=np.zeros((n, 3)),
             J_d=np.zeros((n, 3, n_joints)),
             H_d=np.zeros((n, 3, n_joints, n_joints) if quadratic else 1),
+            **limited,
         ).items()
     }
 
@@ -511,6 +542,9 @@ class CompiledGA:
         damping: with ``safe``, ``(step, lo, hi)``: the damping is tuned on the grid ``j step`` with
             the admitted interval ``[lo[j], hi[j]]`` of each grid point (``SwitchingControl.
             damping_table``); ``None``: ``Kv = kv I`` held.
+        actuators: ``(force, speed, line)``, each ``(n,)``: the peak forces, no-load speeds and
+            force-speed line flags (1 or 0) the prediction clips the effort to, as the run's
+            controller and plant do (``LoopSettings.saturation``); ``None``: no actuators.
     """
 
     def __init__(
@@ -524,6 +558,7 @@ class CompiledGA:
         threads: int | None = None,
         safe: tuple[float, float, float] | None = None,
         damping: tuple[float, tuple[float, ...], tuple[float, ...]] | None = None,
+        actuators: tuple[Array, Array, Array] | None = None,
     ) -> None:
         prediction = switching.prediction
         if prediction not in PREDICTIONS:
@@ -538,7 +573,7 @@ class CompiledGA:
         words = bit_words(n_genes * options.n_bits)
         quadratic = prediction == "quadratic"
         rows = {name: reference[name] for name in ("q_d", "qd_d", "qdd_d", "tip_d")}
-        self._arrays = _ga_arrays(lower, upper, p_ctrl, rows, quadratic)
+        self._arrays = _ga_arrays(lower, upper, p_ctrl, rows, quadratic, actuators)
         self._ready = np.zeros(n, dtype=np.uint8)  # rows whose tip derivatives ga.c has computed
         self._initial = pack_bits(np.atleast_2d(switching.initial_bits()), words)
         self._settings = ffi().new("vgt_settings *", {"n_joints": n_joints, "dt": dt})
@@ -596,6 +631,17 @@ class CompiledGA:
         self._row["J_d"] = 3 * n_joints
         self._row["H_d"] = 3 * n_joints * n_joints if quadratic else 0
         self._row["ready"] = 1
+        if "force_limit" in self._arrays:  # the actuators: their limits, and rows moved as the others
+            for name in ("force_limit", "speed_limit", "force_speed"):
+                setattr(self._problem, name, _ptr(self._arrays[name]))
+            for name, length in (
+                ("F_d", n_joints),
+                ("M_d", n_joints**2),
+                ("Minv_d", n_joints**2),
+                ("D_d", n_joints**2),
+            ):
+                self._base[name] = _ptr(self._arrays[name])
+                self._row[name] = length
 
     def _window(self, k: int, q0: Array, qd0: Array) -> int:
         """Point the problem at samples ``k .. k+h``; returns the horizon ``h`` left."""

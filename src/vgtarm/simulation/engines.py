@@ -213,6 +213,7 @@ class _SteppedLoop:
             inp["qd_d"][window],
             inp["qdd_d"][window],
             inp["tip_d"][window],
+            actuators=_limits(job.settings, inp),
         )
         fixed_fitness = float(predict(controller.gains.Kp[None], controller.gains.Kv[None])[0])
         gains, result = controller.tune(predict, job.ga_rng)
@@ -297,6 +298,16 @@ def engine_for(plant: Robot, plant_engine: str, job: Job) -> Engine:
     return CompiledLoop(plant, job)
 
 
+def _limits(
+    settings: LoopSettings | None, inputs: dict[str, np.ndarray]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The actuators the GA's prediction clips to: with saturation, the run's own (its controller
+    clips to them and its plant delivers through them); ``None`` without."""
+    if settings is None or not settings.saturation:
+        return None
+    return inputs["force_limit"], inputs["speed_limit"], inputs["force_speed"]
+
+
 def compiled_ga(
     controller: SwitchingControl,
     loop: ClosedLoopDriver,
@@ -330,6 +341,7 @@ def compiled_ga(
         reference=inp,
         safe=safe,
         damping=damping,
+        actuators=_limits(settings, inp),
         # the safe variant's GA runs at about 6 % of the samples (its sets are held): a second thread
         # would save under 0.1 s a run, one stall of it on a busy machine costs 0.1-0.6 s; so one
         # thread unless $VGTARM_THREADS asks (the run is the same bit for bit with any count)

@@ -231,11 +231,22 @@ class PythonLoop:
         return DONE, k1
 
     def ga_predictor(
-        self, p_ctrl: Array, dt: float, q0: Array, qd0: Array, q_d: Array, qd_d: Array, qdd_d: Array, tip_d: Array
+        self,
+        p_ctrl: Array,
+        dt: float,
+        q0: Array,
+        qd0: Array,
+        q_d: Array,
+        qd_d: Array,
+        qdd_d: Array,
+        tip_d: Array,
+        actuators: tuple[Array, Array, Array] | None = None,
     ) -> Callable[[Array, Array], Array]:
-        """The GA's fitness for one state and window, as :func:`vgtarm.control.scm.predict_tip_error`."""
+        """The GA's fitness for one state and window, as :func:`vgtarm.control.scm.predict_tip_error`;
+        with ``actuators`` (the run's limits, which are the plant's) its effort clipped to them."""
+        limits = None if actuators is None else self.plant.actuators
 
         def predict(Kp: Array, Kv: Array) -> Array:
-            return predict_tip_error(self.model, dt, q0, qd0, q_d, qd_d, qdd_d, tip_d, Kp, Kv)
+            return predict_tip_error(self.model, dt, q0, qd0, q_d, qd_d, qdd_d, tip_d, Kp, Kv, limits)
 
         return predict

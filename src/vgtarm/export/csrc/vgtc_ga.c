@@ -40,6 +40,11 @@ static int model_tip_hessian(const double **arg, double **res, long long *iw, do
     return vgt_tip_hessian(arg, res, iw, w, mem);
 }
 
+static int model_id(const double **arg, double **res, long long *iw, double *w, int mem)
+{
+    return vgt_id(arg, res, iw, w, mem);
+}
+
 /* What the prediction of an activation reads and writes. */
 typedef struct {
     ga_window window;
@@ -85,6 +90,12 @@ static void predictor_on(vgtc_ga *ga, predictor *x, long horizon)
     w->r = ga->r, w->s = ga->s, w->jac_f = ga->jac_f, w->off_f = ga->off_f, w->coef = ga->coef;
     w->row_used = ga->row_used, w->moves = ga->moves;
     w->lo = ga->lo, w->step = ga->step, w->hi = ga->hi;
+    if (ga->p.saturation) {
+        w->force_limit = ga->p.force_limit, w->speed_limit = ga->p.speed_limit, w->force_speed = ga->p.force_speed;
+        w->F_d = ga->F_d, w->M_d = ga->M_d, w->Minv_d = ga->Minv_d, w->D_d = ga->D_d;
+        w->force_f = ga->force_f, w->mass_f = ga->mass_f, w->minv_f = ga->minv_f, w->damp_f = ga->damp_f;
+        w->act_f = ga->act_f;
+    }
     safe->on = ga->p.safe;
     safe->kv = ga->p.safe_kv, safe->lo = ga->p.safe_lo, safe->hi = ga->p.safe_hi;
     safe->nkv = ga->p.safe_nkv, safe->kv_step = ga->p.safe_kv_step;
@@ -125,6 +136,11 @@ static int window(vgtc_ga *ga, predictor *x, long horizon, const double *q0, con
             ga->tip_d[3 * j + k] = tip_d ? tip_d[3 * j + k] : tip[k];
             ga->tip_offset[3 * j + k] = ga->tip_d[3 * j + k] - tip[k];
         }
+        if (ga->p.saturation
+            && ga_dynamics_row(model_id, &x->lanes.work, nj, ga->q_d + j * nj, ga->qd_d + j * nj,
+                               ga->qdd_d + j * nj, ga->p.model, ga->F_d + j * nj, ga->M_d + j * nn,
+                               ga->Minv_d + j * nn, ga->D_d + j * nn, ga->dynamics_tmp))
+            return VGTC_GA_FUNCTION_FAILED;
     }
     ga_window_terms(&x->window);
     return VGTC_GA_OK;
@@ -156,6 +172,10 @@ int vgtc_ga_init(vgtc_ga *ga, const vgtc_ga_params *p)
         return VGTC_GA_BAD_PARAMETER;
     for (gi = 0; gi < VGTC_GA_GENES; ++gi)
         if (!(p->lower[gi] <= p->upper[gi])) return VGTC_GA_BAD_PARAMETER;
+    for (gi = 0; p->saturation && gi < VGTC_NJ; ++gi) /* limits > 0 (INFINITY: none), lines 0 or 1 */
+        if (!(p->force_limit[gi] > 0.0) || !(p->speed_limit[gi] > 0.0)
+            || !(p->force_speed[gi] == 0.0 || p->force_speed[gi] == 1.0))
+            return VGTC_GA_BAD_PARAMETER;
     max_flips = ga_max_flips((long)p->population - p->elite, L, p->p_mutation);
     if (max_flips > VGTC_GA_MAX_FLIPS) return VGTC_GA_BAD_PARAMETER;
     memset(ga, 0, sizeof *ga);

@@ -67,6 +67,10 @@ typedef struct {
     int safe_nkv;                        /* > 0: the damping grid's points (<= VGTC_GA_NKV)       */
     double safe_kv_step;                 /* its step (1/s)                                       */
     double safe_lo_tab[VGTC_GA_NKV], safe_hi_tab[VGTC_GA_NKV]; /* admitted interval per point     */
+    int saturation;                      /* 1: the prediction clips the effort to the actuators   */
+    double force_limit[VGTC_NJ];         /* peak force of each joint (INFINITY: none; N, N m)     */
+    double speed_limit[VGTC_NJ];         /* no-load speed (m/s, rad/s)                            */
+    double force_speed[VGTC_NJ];         /* 1 where the force-speed line holds, else 0            */
 } vgtc_ga_params;
 
 /* What an activation reports. */
@@ -100,6 +104,13 @@ typedef struct {
     float coef[VGTC_GA_HORIZON * 3 * VGTC_NJ * VGTC_NJ];
     unsigned char row_used[3 * VGTC_NJ];
     int moves[VGTC_NJ];
+    /* with saturation: the model's effort, mass matrix, its inverse and dID/dqd along the window */
+    double F_d[(VGTC_GA_HORIZON + 1) * VGTC_NJ], M_d[(VGTC_GA_HORIZON + 1) * VGTC_NJ * VGTC_NJ];
+    double Minv_d[(VGTC_GA_HORIZON + 1) * VGTC_NJ * VGTC_NJ], D_d[(VGTC_GA_HORIZON + 1) * VGTC_NJ * VGTC_NJ];
+    float force_f[VGTC_GA_HORIZON * VGTC_NJ], mass_f[VGTC_GA_HORIZON * VGTC_NJ * VGTC_NJ];
+    float minv_f[VGTC_GA_HORIZON * VGTC_NJ * VGTC_NJ], damp_f[VGTC_GA_HORIZON * VGTC_NJ * VGTC_NJ];
+    float act_f[3 * VGTC_NJ];
+    double dynamics_tmp[5 * VGTC_NJ + 3 + VGTC_NJ * VGTC_NJ];
     /* the population */
     uint64_t pop[VGTC_GA_POPULATION * VGTC_GA_WORDS], next[VGTC_GA_POPULATION * VGTC_GA_WORDS];
     uint64_t best_bits[VGTC_GA_WORDS];

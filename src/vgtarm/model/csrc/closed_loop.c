@@ -413,10 +413,35 @@ int vgt_simulate_slice(const vgt_model *m, const vgt_settings *s, const vgt_run 
     return status;
 }
 
-/* Predicted tip-error norm of one candidate (see vgt_ga_fitness). */
+/* The actuators of a prediction (vgt_ga_fitness_limited): peak force, no-load speed, line flag. */
+typedef struct {
+    const double *force, *speed, *line;
+} limits;
+
+/* With actuators, the acceleration of the controller's model under computed force control whose
+ * effort is clipped as the controller and the plant's motors clip it: F = CFC(q, qd, row j),
+ * vgt_saturate(F) at qd (within the peak forces: vgt_clip changes nothing after it), a = FD(q, qd,
+ * F). Nonzero when a function fails. */
+static int limited_acceleration(const vgt_model *m, vgt_work *wk, const double *p_ctrl, const limits *act, int nj,
+                                const double *q, const double *qd, const double *q_d, const double *qd_d,
+                                const double *qdd_d, const double *kp, const double *kv, double *a)
+{
+    double F[nj];
+    const double zero[3] = {0.0, 0.0, 0.0};
+    const double *in_c[8] = {q, qd, q_d, qd_d, qdd_d, kp, kv, p_ctrl};
+    double *out_c[1] = {F};
+    if (call(&m->cfc, wk, 8, in_c, 1, out_c)) return 1;
+    vgt_saturate(nj, act->force, act->speed, act->line, qd, F);
+    const double *in_f[5] = {q, qd, F, zero, p_ctrl};
+    double *out_f[1] = {a};
+    return call(&m->fd, wk, 5, in_f, 1, out_f) != 0;
+}
+
+/* Predicted tip-error norm of one candidate (see vgt_ga_fitness_limited). */
 static double predict_one(const vgt_model *m, const vgt_settings *s, vgt_work *wk, const double *p_ctrl, long horizon,
                           const double *q0, const double *qd0, const double *q_d, const double *qd_d,
-                          const double *qdd_d, const double *tip_d, const double *kp, const double *kv)
+                          const double *qdd_d, const double *tip_d, const limits *act, const double *kp,
+                          const double *kv)
 {
     const int nj = s->n_joints;
     const double dt = s->dt;
@@ -429,10 +454,16 @@ static double predict_one(const vgt_model *m, const vgt_settings *s, vgt_work *w
             e[i] = q_d[nj * j + i] - q[i];
             ed[i] = qd_d[nj * j + i] - qd[i];
         }
-        for (int i = 0; i < nj; ++i) {
-            double acc = qdd_d[nj * j + i];
-            for (int l = 0; l < nj; ++l) acc += kp[nj * i + l] * e[l] + kv[nj * i + l] * ed[l];
-            a[i] = acc;
+        if (act) {
+            const long at = (long)nj * j;
+            if (limited_acceleration(m, wk, p_ctrl, act, nj, q, qd, q_d + at, qd_d + at, qdd_d + at, kp, kv, a))
+                return INFINITY;
+        } else {
+            for (int i = 0; i < nj; ++i) {
+                double acc = qdd_d[nj * j + i];
+                for (int l = 0; l < nj; ++l) acc += kp[nj * i + l] * e[l] + kv[nj * i + l] * ed[l];
+                a[i] = acc;
+            }
         }
         for (int i = 0; i < nj; ++i) {
             q[i] += dt * qd[i];
@@ -460,6 +491,20 @@ int vgt_ga_fitness(const vgt_model *m, const vgt_settings *s, const double *p_ct
                    const double *qdd_d, const double *tip_d, long n_cand, const double *Kp,
                    const double *Kv, double *fitness)
 {
+    return vgt_ga_fitness_limited(m, s, p_ctrl, horizon, q0, qd0, q_d, qd_d, qdd_d, tip_d, NULL, NULL, NULL, n_cand,
+                                  Kp, Kv, fitness);
+}
+
+/* vgt_ga_fitness with actuators (force_limit not NULL): the controller's effort is clipped to the
+ * peak forces and the force-speed lines at the predicted velocity, and the joints follow the
+ * model's forward dynamics under it (limited_acceleration) instead of qdd_d + Kp e + Kv e_dot. */
+int vgt_ga_fitness_limited(const vgt_model *m, const vgt_settings *s, const double *p_ctrl, long horizon,
+                           const double *q0, const double *qd0, const double *q_d, const double *qd_d,
+                           const double *qdd_d, const double *tip_d, const double *force_limit,
+                           const double *speed_limit, const double *force_speed, long n_cand, const double *Kp,
+                           const double *Kv, double *fitness)
+{
+    const limits act = {force_limit, speed_limit, force_speed};
     /* Serial on purpose: a candidate costs a few microseconds, and threads that spin-wait for
      * the next generation lose far more than they gain when the other core is busy. */
     const int nj = s->n_joints;
@@ -467,7 +512,7 @@ int vgt_ga_fitness(const vgt_model *m, const vgt_settings *s, const double *p_ct
     int ok = work_alloc(&wk, m);
     for (long c = 0; c < n_cand; ++c)
         fitness[c] = ok ? predict_one(m, s, &wk, p_ctrl, horizon, q0, qd0, q_d, qd_d, qdd_d, tip_d,
-                                      Kp + (long)nj * nj * c, Kv + (long)nj * nj * c)
+                                      force_limit ? &act : NULL, Kp + (long)nj * nj * c, Kv + (long)nj * nj * c)
                         : INFINITY;
     work_free(&wk);
     return ok ? VGT_DONE : VGT_NO_MEMORY;

@@ -197,8 +197,9 @@ static int predict_exact(const predictor *x, long n, const long *which, const do
             memcpy(kp + c * nn, genes + row * 2 * nn, sizeof(double) * (size_t)nn);
             memcpy(kv + c * nn, genes + row * 2 * nn + nn, sizeof(double) * (size_t)nn);
         }
-        status = vgt_ga_fitness(x->m, x->s, pb->p_ctrl, x->w.horizon, pb->q0, pb->qd0, pb->q_d, pb->qd_d, pb->qdd_d,
-                                pb->tip_d, n, kp, kv, out);
+        status = vgt_ga_fitness_limited(x->m, x->s, pb->p_ctrl, x->w.horizon, pb->q0, pb->qd0, pb->q_d, pb->qd_d,
+                                        pb->qdd_d, pb->tip_d, pb->force_limit, pb->speed_limit, pb->force_speed, n,
+                                        kp, kv, out);
         for (long c = 0; c < n && status == VGT_DONE; ++c) cost[which ? which[c] : c] = out[c];
     }
     free(kp);
@@ -249,9 +250,9 @@ static int predict(const predictor *x, long n, const double *genes, const uint64
 static int ensure_rows(const vgt_model *m, const vgt_ga_problem *pb, int nj, long rows, int quadratic)
 {
     if (!pb->ready) return VGT_DONE;
-    const vgt_call *calls[3] = {&m->tip, &m->jac, &m->tip_hessian};
-    vgt_int sz_arg = 2, sz_res = 2, sz_iw = 1, sz_w = 1;
-    for (int f = 0; f < 3; ++f) {
+    const vgt_call *calls[4] = {&m->tip, &m->jac, &m->tip_hessian, &m->id};
+    vgt_int sz_arg = 5, sz_res = 2, sz_iw = 1, sz_w = 1;
+    for (int f = 0; f < 4; ++f) {
         if (calls[f]->sz_arg > sz_arg) sz_arg = calls[f]->sz_arg;
         if (calls[f]->sz_res > sz_res) sz_res = calls[f]->sz_res;
         if (calls[f]->sz_iw > sz_iw) sz_iw = calls[f]->sz_iw;
@@ -261,8 +262,9 @@ static int ensure_rows(const vgt_model *m, const vgt_ga_problem *pb, int nj, lon
     double **res = malloc(sizeof(double *) * (size_t)sz_res);
     vgt_int *iw = malloc(sizeof(vgt_int) * (size_t)sz_iw);
     double *w = malloc(sizeof(double) * (size_t)(sz_w + 3 * nj));
+    double *tmp = malloc(sizeof(double) * (size_t)GA_DYNAMICS_TMP(nj));
     const ga_work work = {arg, res, iw, w, w + sz_w};
-    int status = arg && res && iw && w ? VGT_DONE : VGT_NO_MEMORY;
+    int status = arg && res && iw && w && tmp ? VGT_DONE : VGT_NO_MEMORY;
     for (long j = 0; j < rows && status == VGT_DONE; ++j) {
         if (pb->ready[j]) continue;
         double tip[3];
@@ -272,8 +274,17 @@ static int ensure_rows(const vgt_model *m, const vgt_ga_problem *pb, int nj, lon
             break;
         }
         for (int k = 0; k < 3; ++k) pb->tip_offset[3 * j + k] = pb->tip_d[3 * j + k] - tip[k];
+        if (pb->force_limit) {
+            const long at = (long)nj * j, at2 = (long)nj * nj * j;
+            if (ga_dynamics_row(m->id.f, &work, nj, pb->q_d + at, pb->qd_d + at, pb->qdd_d + at, pb->p_ctrl,
+                                pb->F_d + at, pb->M_d + at2, pb->Minv_d + at2, pb->D_d + at2, tmp)) {
+                status = VGT_FUNCTION_FAILED;
+                break;
+            }
+        }
         pb->ready[j] = 1;
     }
+    free(tmp);
     free((void *)arg);
     free(res);
     free(iw);
@@ -295,6 +306,14 @@ static int window_alloc(ga_window *w, const vgt_ga_settings *g, const vgt_ga_pro
     if (w->quadratic) w->coef = calloc((size_t)(H * 3 * nj * nj + 1), sizeof(float));
     if (!w->r || !w->s || !w->jac_f || !w->off_f || !w->row_used || !w->moves || (w->quadratic && !w->coef))
         return VGT_NO_MEMORY;
+    if (w->force_limit) {
+        w->force_f = malloc(sizeof(float) * (size_t)(H * nj + 1));
+        w->mass_f = malloc(sizeof(float) * (size_t)(H * nj * nj + 1));
+        w->minv_f = malloc(sizeof(float) * (size_t)(H * nj * nj + 1));
+        w->damp_f = malloc(sizeof(float) * (size_t)(H * nj * nj + 1));
+        w->act_f = malloc(sizeof(float) * (size_t)(3 * nj));
+        if (!w->force_f || !w->mass_f || !w->minv_f || !w->damp_f || !w->act_f) return VGT_NO_MEMORY;
+    }
     if (g->n_bits == 8 && g->prediction != VGT_PREDICT_EXACT) {
         w->lo = malloc(sizeof(float) * (size_t)g->n_genes);
         w->step = malloc(sizeof(float) * (size_t)g->n_genes);
@@ -339,6 +358,8 @@ static int predictor_init(predictor *x, const vgt_model *m, const vgt_settings *
     w->q0 = pb->q0, w->qd0 = pb->qd0, w->q_d = pb->q_d, w->qd_d = pb->qd_d, w->qdd_d = pb->qdd_d;
     w->tip_d = pb->tip_d, w->tip_offset = pb->tip_offset, w->J_d = pb->J_d, w->H_d = pb->H_d;
     w->p = pb->p_ctrl, w->tip = m->tip.f;
+    w->force_limit = pb->force_limit, w->speed_limit = pb->speed_limit, w->force_speed = pb->force_speed;
+    w->F_d = pb->F_d, w->M_d = pb->M_d, w->Minv_d = pb->Minv_d, w->D_d = pb->D_d;
     w->safe = (ga_safe){g->safe, g->safe_kv, g->safe_lo, g->safe_hi, g->safe_nkv, g->safe_kv_step, g->safe_lo_tab,
                         g->safe_hi_tab};
     int status = window_alloc(w, g, pb);
@@ -367,6 +388,11 @@ static void predictor_free(predictor *x)
     free(w->row_used);
     free(w->moves);
     free(w->coef);
+    free(w->force_f);
+    free(w->mass_f);
+    free(w->minv_f);
+    free(w->damp_f);
+    free(w->act_f);
     for (int t = 0; x->sc && t < x->n_scratch; ++t) {
         ga_lanes *sc = x->sc + t;
         free(sc->K);
@@ -663,6 +689,12 @@ int vgt_simulate_switching(const vgt_model *m, const vgt_settings *s, const vgt_
             pb.tip_d = base->tip_d + 3 * k;
             pb.tip_offset = base->tip_offset + 3 * k;
             pb.J_d = base->J_d + 3L * nj * k;
+            if (base->force_limit) {
+                pb.F_d = base->F_d + (long)nj * k;
+                pb.M_d = base->M_d + (long)nn * k;
+                pb.Minv_d = base->Minv_d + (long)nn * k;
+                pb.D_d = base->D_d + (long)nn * k;
+            }
             if (g.prediction == VGT_PREDICT_QUADRATIC) pb.H_d = base->H_d + 3L * nn * k;
             if (base->ready) pb.ready = base->ready + k;
             g.horizon = horizon;

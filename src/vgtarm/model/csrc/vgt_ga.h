@@ -479,6 +479,14 @@ typedef struct {
                          /*   column of J or its row of H): only these count for the region       */
     float *lo, *step, *hi; /* (n_genes) 8-bit genes in the prediction: lo + code step, at most hi */
     ga_safe safe;
+    /* the actuators (force_limit not NULL; see ga_kernel_saturate): the peak force, the no-load
+     * speed and the force-speed line of each joint (INFINITY, any, 0: none), and along the window
+     * the controller model's effort F_d = ID(q_d, qd_d, qdd_d), M(q_d), M(q_d)^-1 and dID/dqd
+     * (double rows from ga_dynamics_row) with their single-precision copies */
+    const double *force_limit, *speed_limit, *force_speed;  /* (nj)                             */
+    const double *F_d, *M_d, *Minv_d, *D_d; /* (H+1, nj), then (H+1, nj, nj) each; D = dID/dqd  */
+    float *force_f, *mass_f, *minv_f, *damp_f; /* (H, nj), then (H, nj, nj) each (damp_f: -D)   */
+    float *act_f;                       /* (3, nj): peak force, 1 / no-load speed, line (1 or 0) */
 } ga_window;
 
 /* lo, step, hi of 8-bit genes in single precision (see ga_gains_from_bytes). */
@@ -507,6 +515,76 @@ static inline int ga_tip_terms(ga_fn tip_f, ga_fn jac_f, ga_fn hessian_f, const 
     if (!H) return 0;
     w->res[0] = H;
     return hessian_f(w->arg, w->res, w->iw, w->w, 0) != 0;
+}
+
+/* The controller model's effort F = ID(q, qd, qdd) of a reference row (no tool force), its mass
+ * matrix M(q), column i = ID(q, 0, e_i) - ID(q, 0, 0) (gravity and friction cancel exactly: the
+ * same terms of the same call), M^-1 by Cholesky and one solve per column, and the effort's
+ * velocity Jacobian D = dID/dqd, column i = (ID(q, qd + e_i, qdd) - ID(q, qd - e_i, qdd)) / 2: exact
+ * for any step, the effort being quadratic in qd (Coriolis) plus linear (viscous friction); all in
+ * double. id: the model's inverse dynamics (q, qd, qdd, f, p -> F); tmp: GA_DYNAMICS_TMP(nj)
+ * doubles. Nonzero when the function fails or M is not positive definite. */
+#define GA_DYNAMICS_TMP(nj) (5 * (nj) + 3 + (nj) * (nj))
+static inline int ga_dynamics_row(ga_fn id, const ga_work *w, int nj, const double *q, const double *qd,
+                                  const double *qdd, const double *p, double *F, double *M, double *Minv,
+                                  double *D, double *tmp)
+{
+    double *zero = tmp, *unit = tmp + nj, *base = tmp + 2 * nj, *f = tmp + 3 * nj, *L = tmp + 3 * nj + 3;
+    double *plus = L + nj * nj, *minus = plus + nj;
+    int i, l, k;
+    for (i = 0; i < nj; ++i) zero[i] = unit[i] = 0.0;
+    f[0] = f[1] = f[2] = 0.0;
+    w->arg[0] = q, w->arg[1] = qd, w->arg[2] = qdd, w->arg[3] = f, w->arg[4] = p;
+    w->res[0] = F;
+    if (id(w->arg, w->res, w->iw, w->w, 0)) return 1;
+    w->arg[1] = zero, w->arg[2] = zero;
+    w->res[0] = base;
+    if (id(w->arg, w->res, w->iw, w->w, 0)) return 1;
+    w->arg[2] = unit;
+    for (l = 0; l < nj; ++l) { /* column l into row l of Minv (M is symmetric), then M */
+        unit[l] = 1.0;
+        w->res[0] = Minv + l * nj;
+        if (id(w->arg, w->res, w->iw, w->w, 0)) return 1;
+        unit[l] = 0.0;
+        for (i = 0; i < nj; ++i) M[i * nj + l] = Minv[l * nj + i] - base[i];
+    }
+    w->arg[1] = unit, w->arg[2] = qdd;
+    for (l = 0; l < nj; ++l) { /* column l of D */
+        for (i = 0; i < nj; ++i) unit[i] = qd[i];
+        unit[l] = qd[l] + 1.0;
+        w->res[0] = plus;
+        if (id(w->arg, w->res, w->iw, w->w, 0)) return 1;
+        unit[l] = qd[l] - 1.0;
+        w->res[0] = minus;
+        if (id(w->arg, w->res, w->iw, w->w, 0)) return 1;
+        for (i = 0; i < nj; ++i) D[i * nj + l] = 0.5 * (plus[i] - minus[i]);
+    }
+    for (l = 0; l < nj; ++l) /* M = L L^T */
+        for (i = l; i < nj; ++i) {
+            double v = 0.5 * (M[i * nj + l] + M[l * nj + i]);
+            for (k = 0; k < l; ++k) v -= L[i * nj + k] * L[l * nj + k];
+            if (i == l) {
+                if (!(v > 0.0)) return 1;
+                L[l * nj + l] = sqrt(v);
+            } else {
+                L[i * nj + l] = v / L[l * nj + l];
+            }
+        }
+    for (l = 0; l < nj; ++l) { /* column l of M^-1: L y = e_l, L^T x = y */
+        double *x = base;
+        for (i = 0; i < nj; ++i) {
+            double v = i == l ? 1.0 : 0.0;
+            for (k = 0; k < i; ++k) v -= L[i * nj + k] * x[k];
+            x[i] = v / L[i * nj + i];
+        }
+        for (i = nj - 1; i >= 0; --i) {
+            double v = x[i];
+            for (k = i + 1; k < nj; ++k) v -= L[k * nj + i] * x[k];
+            x[i] = v / L[i * nj + i];
+        }
+        for (i = 0; i < nj; ++i) Minv[i * nj + l] = x[i];
+    }
+    return 0;
 }
 
 /* The window's terms in single precision from its rows (J_d, tip_offset, H_d, the reference).
@@ -542,6 +620,18 @@ static inline void ga_window_terms(ga_window *x)
             x->r[now] = (float)(x->q_d[next] - x->q_d[now] - x->dt * x->qd_d[now]);
             x->s[now] = (float)(x->qd_d[next] - x->qd_d[now] - x->dt * x->qdd_d[now]);
         }
+    if (!x->force_limit) return;
+    for (l = 0; l < nj; ++l) {
+        x->act_f[l] = (float)x->force_limit[l];
+        x->act_f[nj + l] = (float)(1.0 / x->speed_limit[l]);
+        x->act_f[2 * nj + l] = x->force_speed[l] != 0.0 ? 1.0f : 0.0f;
+    }
+    for (i = 0; i < x->horizon * nj; ++i) x->force_f[i] = (float)x->F_d[i];
+    for (i = 0; i < x->horizon * nn; ++i) {
+        x->mass_f[i] = (float)x->M_d[i];
+        x->minv_f[i] = (float)x->Minv_d[i];
+        x->damp_f[i] = (float)-x->D_d[i];
+    }
 }
 
 /* What the prediction of one block writes (one per thread). */
@@ -834,6 +924,15 @@ typedef ga_li ga_lm; /* a lane mask */
  * loaded with the condition's 0/1, i.e. lane 0 only: the other lanes' steps all fell inside the
  * trust region, and the recursive model's library (built -O3) left the symbolic one's (-O2) runs. */
 #define LF_ADD_MASKED(r, a, m) ((r) = (r) + (ga_lf)((ga_li)(a) & (int32_t)(m)))
+#define LF_SUB(r, a, b) ((r) = (a) - (b))
+/* r = b where a < b (LF_MAX) or b < a (LF_MIN), else a: a select, so a NaN in a stays */
+#define LF_SELECT_(r, a, b, below)                                                                  \
+    do {                                                                                            \
+        const ga_li m_ = (ga_li)(below);                                                            \
+        (r) = (ga_lf)(((ga_li)(a) & ~m_) | ((ga_li)(b) & m_));                                      \
+    } while (0)
+#define LF_MAX(r, a, b) LF_SELECT_(r, a, b, (a) < (b))
+#define LF_MIN(r, a, b) LF_SELECT_(r, a, b, (b) < (a))
 #else
 typedef float ga_lf[GA_LANES];
 #define GA_EACH(body)                                                                               \
@@ -854,7 +953,16 @@ typedef int ga_lm[GA_LANES];
 #define LF_OUTSIDE(outside, norm2, limit) GA_EACH((outside)[c_] = (norm2)[c_] > (limit))
 #define LF_ADD_INSIDE(total, square, outside) GA_EACH((total)[c_] += (outside)[c_] ? 0.0f : (square)[c_])
 #define LF_ADD_MASKED(r, a, m) GA_EACH((r)[c_] += (m) ? (a)[c_] : 0.0f)
+#define LF_SUB(r, a, b) GA_EACH((r)[c_] = (a)[c_] - (b)[c_])
+#define LF_MAX(r, a, b) GA_EACH((r)[c_] = (a)[c_] < (b)[c_] ? (b)[c_] : (a)[c_])
+#define LF_MIN(r, a, b) GA_EACH((r)[c_] = (b)[c_] < (a)[c_] ? (b)[c_] : (a)[c_])
 #endif
+/* any |= a lane of v is not zero (a statement: see above) */
+#define LF_ANY_NONZERO(any, v)                                                                      \
+    do {                                                                                            \
+        int c_;                                                                                     \
+        for (c_ = 0; c_ < GA_LANES; ++c_) (any) |= (v)[c_] != 0.0f;                                 \
+    } while (0)
 
 /* a = Kp E + Kv Ed: each row's first product fused with its second (as GCC contracts a*b + c*d
  * into fma(a, b, c*d)), then one multiply-add per column. */
@@ -943,6 +1051,55 @@ GA_INLINE void ga_kernel_tip(const ga_window *x, long j, const int nj, const int
         }
 }
 
+/* The actuators in the prediction (x->force_limit): the controller's effort for the acceleration
+ * a, linearised about the reference, F = F_d + M_d a - D_d Ed (D = dID/dqd: friction and Coriolis
+ * at the predicted velocity qd_d - Ed; without it a saturated prediction, which drifts from the
+ * reference, is off by tens of per cent), clipped as the controller and the plant's motors would
+ * clip it at that velocity (vgt_clip, then vgt_saturate's force-speed lines: together the bounds
+ * of vgt_saturate, which lie within the peak forces), and the acceleration the clipped effort
+ * gives, a + M_d^-1 (clip(F) - F): under computed force control the model's own effort cancels,
+ * so only the clipped part changes the error dynamics. A block none of whose efforts is clipped
+ * keeps a as it is (the prediction without actuators, bit for bit). */
+GA_INLINE void ga_kernel_saturate(const ga_window *x, long j, const int nj, const int fused, ga_lf *Ed, ga_lf *a)
+{
+    const int nn = nj * nj;
+    const float *M = x->mass_f + j * nn, *W = x->minv_f + j * nn, *Fd = x->force_f + j * nj;
+    const float *B = x->damp_f + j * nn;
+    const float *peak = x->act_f, *rate = x->act_f + nj, *line = x->act_f + 2 * nj;
+    const double *qd_d = x->qd_d + j * nj;
+    ga_lf delta[GA_NJ(nj)], F, v, lower, upper, t, one, clipped;
+    int i, l, any = 0;
+    LF_SET(one, 1.0f);
+    for (i = 0; i < nj; ++i) {
+        LF_SET(F, Fd[i]);
+        for (l = 0; l < nj; ++l) LF_FMA_S(F, M[i * nj + l], a[l], fused);
+        for (l = 0; l < nj; ++l) LF_FMA_S(F, B[i * nj + l], Ed[l], fused);
+        LF_SET(lower, -peak[i]);
+        LF_SET(upper, peak[i]);
+        if (line[i] != 0.0f) { /* upper = max(F_s min(1, 1 - r), -F_s), lower = min(-F_s min(1, 1 + r), F_s) */
+            LF_SET(v, (float)qd_d[i]);
+            LF_SUB(v, v, Ed[i]);
+            LF_MUL_S(v, rate[i], v);
+            LF_SUB(t, one, v);
+            LF_MIN(t, t, one);
+            LF_MUL_S(t, peak[i], t);
+            LF_MAX(upper, t, lower);
+            LF_ADD(t, one, v);
+            LF_MIN(t, t, one);
+            LF_MUL_S(t, -peak[i], t);
+            LF_SET(clipped, peak[i]);
+            LF_MIN(lower, t, clipped);
+        }
+        LF_MAX(clipped, F, lower);
+        LF_MIN(clipped, clipped, upper);
+        LF_SUB(delta[i], clipped, F);
+        LF_ANY_NONZERO(any, delta[i]);
+    }
+    if (!any) return;
+    for (i = 0; i < nj; ++i)
+        for (l = 0; l < nj; ++l) LF_FMA_S(a[i], W[i * nj + l], delta[l], fused);
+}
+
 /* The squared tip error of step j + 1 into total where the joint error is inside the trust region;
  * the steps outside are recorded for the exact forward kinematics (sc->far, sc->far_at). */
 GA_INLINE void ga_kernel_sum(const ga_window *x, ga_lanes *sc, long j, const int nj, const int fused, int count,
@@ -983,6 +1140,7 @@ GA_INLINE void ga_kernel(const ga_window *x, ga_lanes *sc, const int nj, const i
     *n_far = 0;
     for (j = 0; j < x->horizon; ++j) {
         ga_kernel_accel(sc->K, nj, fused, E, Ed, a);
+        if (x->force_limit) ga_kernel_saturate(x, j, nj, fused, Ed, a);
         ga_kernel_step(x, j, nj, fused, E, Ed, a, &norm2);
         ga_kernel_tip(x, j, nj, fused, E, t);
         ga_kernel_sum(x, sc, j, nj, fused, count, E, t, &norm2, limit, &total, n_far);

@@ -182,6 +182,12 @@ int vgt_ga_fitness(const vgt_model *m, const vgt_settings *s, const double *p_ct
                    const double *qdd_d, const double *tip_d, long n_cand, const double *Kp,
                    const double *Kv, double *fitness);
 
+int vgt_ga_fitness_limited(const vgt_model *m, const vgt_settings *s, const double *p_ctrl, long horizon,
+                           const double *q0, const double *qd0, const double *q_d, const double *qd_d,
+                           const double *qdd_d, const double *tip_d, const double *force_limit,
+                           const double *speed_limit, const double *force_speed, long n_cand, const double *Kp,
+                           const double *Kv, double *fitness);
+
 /* Size and field offsets of the interface's structures as this compiler lays them out,
  * written into out in the order interface.py asks (generated at build time: layout.c). */
 void vgt_layout(long *out);
@@ -244,6 +250,13 @@ typedef struct {
     unsigned char *ready;                   /* (H+1) 1 where the three rows above are computed: */
                                             /* the GA computes the others when it needs them   */
                                             /* and sets the flag (NULL: all given)              */
+    const double *force_limit;              /* (nj) actuators the prediction clips to: peak   */
+    const double *speed_limit;              /*   force, no-load speed, 1 where the force-speed */
+    const double *force_speed;              /*   line holds (force_limit NULL: no actuators)  */
+    double *F_d, *M_d, *Minv_d, *D_d;       /* with force_limit: (H+1, nj), (H+1, nj, nj) x3: */
+                                            /* the model's effort ID(q_d, qd_d, qdd_d), M(q_d),*/
+                                            /* M(q_d)^-1 and dID/dqd, rows computed with the   */
+                                            /* rows above                                      */
 } vgt_ga_problem;
 
 typedef struct {
