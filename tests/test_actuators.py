@@ -376,8 +376,10 @@ def test_a_leg_too_weak_to_hold_the_arm_gives_its_peak_and_the_arm_sags_as_the_d
 
 def test_the_exported_switching_control_clips_as_the_simulation_bit_for_bit(robot, tmp_path):
     """The paper's switching control on case 2 with 1 um encoders, legs on 60 N (lines on v and p):
-    closed through the exported C (its controller clips, its GA predicts as the simulation's does,
-    without the clip), every effort, state and mode equals simulate's bit for bit."""
+    closed through the exported C (its controller clips, its GA predicts with the clip as the
+    simulation's does), every effort, state and mode equals simulate's bit for bit; and the exported
+    GA built with plain arrays (no vector extensions) gives the simulation's activations on the
+    run's own states bit for bit (the lanes' clip is selects, no arithmetic that may differ)."""
     from vgtarm.experiment.cases import case_study, joint_reference
     from vgtarm.export import export_controller, simulate_exported
     from vgtarm.simulation import Scenario
@@ -395,3 +397,27 @@ def test_the_exported_switching_control_clips_as_the_simulation_bit_for_bit(robo
     np.testing.assert_array_equal(mine.effort, theirs.effort)
     np.testing.assert_array_equal(mine.q, theirs.q)
     np.testing.assert_array_equal(mine.mode, theirs.mode)
+    from vgtarm.export.galoop import FLAGS, ExportedGA
+    from vgtarm.model.closedloop import ClosedLoopDriver, LoopSettings
+    from vgtarm.simulation.engines import compiled_ga
+    from vgtarm.simulation.simulator import loop_arrays
+
+    arrays = loop_arrays(plant, plant, reference, initial_state=(reference.q[0], reference.qd[0]))
+    settings = LoopSettings(reference.dt, "euler", 1, False, 0.0, 0.0, 0.0, 0.0, saturation=True)  # the GA reads
+    # only the saturation of a paper variant's settings
+    simulation_ga = compiled_ga(scm, ClosedLoopDriver(plant.backend), plant, arrays, reference.dt, settings)
+    ks = [a.sample for a in theirs.activations[:: max(len(theirs.activations) // 4, 1)]][:4]
+    rng = np.random.default_rng(2)
+    q0 = np.array([theirs.q[k] + rng.normal(scale=1e-6, size=plant.n_joints) for k in ks])
+    qd0 = np.array([theirs.qd[k] for k in ks])
+    seeds = rng.integers(0, 2**63, size=len(ks))
+    horizons = [min(scm.horizon, len(reference.t) - 1 - k) for k in ks]
+    inp = arrays.inputs
+    rows = np.hstack([inp["q_d"], inp["qd_d"], inp["qdd_d"]])
+    exported = ExportedGA(folder, flags=(*FLAGS, "-DVGTC_GA_NO_VECTORS")).run(
+        ks, horizons, q0, qd0, rows, inp["tip_d"], seeds
+    )
+    for i, k in enumerate(ks):
+        r = simulation_ga.activate(k, q0[i], qd0[i], int(seeds[i]))
+        np.testing.assert_array_equal(exported.genes[i], r.genes)
+        assert (exported.best_cost[i], exported.seeded_cost[i]) == (r.best_cost, r.seeded_cost)
