@@ -24,6 +24,7 @@ from typing import Any, NoReturn
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import checks
 from ..errors import ConfigError, cut, shown
 from ..fileio import parse_toml, read_text_limited
 from ..kinds import other_toml
@@ -66,6 +67,8 @@ MAX_INERTIA = 1e6
 MAX_FRICTION = 1e9
 #: Largest gravity component (m/s^2).
 MAX_GRAVITY = 1e3
+#: Largest joint stiffness (N/m, N m/rad): far beyond any leg, it keeps ``K (q - q0)`` finite.
+MAX_STIFFNESS = 1e12
 
 
 @dataclass(frozen=True)
@@ -120,6 +123,9 @@ class RobotParameters:
     source: str = field(default="<parameters>", compare=False)
     #: The joints' actuators (:mod:`vgtarm.model.actuators`), or ``None``: no limits (the paper).
     actuators: Actuators | None = None
+    #: The joints' stiffness (the ``[stiffness]`` table, :class:`JointStiffness`), or ``None``:
+    #: rigid joints (the paper). Not a parameter of the compiled model (nor of the fingerprint).
+    stiffness: JointStiffness | None = None
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -260,7 +266,7 @@ def parameters_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> 
         data,
         "",
         required={"geometry", "limits", "home", "bodies"},
-        optional={"name", "friction", "environment", "actuators"},
+        optional={"name", "friction", "environment", "actuators", "stiffness"},
     )
     geometry = data["geometry"]
     reader.keys(geometry, "geometry", required={"module1", "module2", "h1"})
@@ -322,7 +328,103 @@ def parameters_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> 
         gravity=tuple(reader.vector(environment["gravity"], "environment.gravity", 3, "[gx, gy, gz]")),  # type: ignore[arg-type]
         source=source,
         actuators=None if "actuators" not in data else read_actuators(data["actuators"], JOINT_NAMES, source),
+        stiffness=None if "stiffness" not in data else read_stiffness(data["stiffness"], JOINT_NAMES, source),
     )
+
+
+# -- the [stiffness] table ---------------------------------------------------------------------------
+
+#: The groups of the ``[stiffness]`` table: every leg (N/m) and every twist joint (N m/rad).
+STIFFNESS_GROUPS = ("legs", "twists")
+
+
+@dataclass(frozen=True)
+class JointStiffness:
+    """The stiffness of each actuated joint, from a robot file's ``[stiffness]`` table::
+
+        [stiffness]
+        legs = 2.0e5        # every leg (N/m)
+        twists = 500.0      # every twist joint (N m/rad)
+        p1 = 3.0e5          # one joint: overrides its group
+
+    ``names`` are the joint names and ``values`` their stiffness in the same order (N/m for a
+    leg, N m/rad for a twist), every one finite and > 0; ``origins`` says which entry of the
+    table gave each (its group or its own name: what a refusal names). Like the actuators, the
+    stiffness is not in the parameter vector of the compiled model nor in the fingerprint.
+    """
+
+    names: tuple[str, ...]
+    values: tuple[float, ...]
+    origins: tuple[str, ...] = field(default=(), compare=False)
+
+    @property
+    def array(self) -> NDArray[np.float64]:
+        """The joint stiffnesses, ``(n,)`` (N/m, N m/rad)."""
+        array = np.array(self.values, dtype=float)
+        array.flags.writeable = False
+        return array
+
+    def entries(self) -> dict[str, float]:
+        """The ``[stiffness]`` table of a robot file, one entry per joint."""
+        return dict(zip(self.names, self.values, strict=True))
+
+
+def _stiffness_unit(name: str) -> str:
+    return "N m/rad" if name.startswith("psi") else "N/m"
+
+
+def read_stiffness(table: object, names: Sequence[str], source: str) -> JointStiffness:
+    """The ``[stiffness]`` table of a robot file whose joints are ``names``: a group's value
+    (``legs``, ``twists``) or a joint's own. Every joint needs one; an unknown key, a value that is
+    not a finite number > 0 (zero, negative, NaN, text) or a joint left without one is refused with
+    one :class:`ConfigError` line naming the field (``stiffness.p1``)."""
+    head = cut(str(source), _SOURCE_LENGTH)
+    if not isinstance(table, Mapping):
+        checks.refuse(f"{head}: field 'stiffness'", table, "a table of joints and groups (legs, twists)", ConfigError)
+    for key in table:
+        if key not in STIFFNESS_GROUPS and key not in names:
+            raise ConfigError(
+                f"{head}: unknown key 'stiffness.{cut(str(key))}'; expected a joint "
+                f"({', '.join(names[:8])}{', ...' if len(names) > 8 else ''}) or a group (legs, twists)"
+            )
+    values: list[float] = []
+    origins: list[str] = []
+    for name in names:
+        group = "twists" if name.startswith("psi") else "legs"
+        key = name if name in table else group
+        if key not in table:
+            raise ConfigError(
+                f"{head}: missing key 'stiffness.{name}' (joint {name} needs a stiffness, in its own entry "
+                f"or its group's, {group})"
+            )
+        given = f"{head}: field 'stiffness.{key}'" + ("" if key == name else f" (joint {name})")
+        values.append(
+            checks.number(
+                given,
+                table[key],
+                above=0,
+                maximum=MAX_STIFFNESS,
+                unit=_stiffness_unit(name),
+                error=ConfigError,
+            )
+        )
+        origins.append(key)
+    return JointStiffness(names=tuple(names), values=tuple(values), origins=tuple(origins))
+
+
+def check_stiffness(source: str, stiffness: object, names: tuple[str, ...]) -> None:
+    """``stiffness`` is ``None`` or a :class:`JointStiffness` of the joints ``names``, each value a
+    finite number in (0, :data:`MAX_STIFFNESS`]."""
+    if stiffness is None:
+        return
+    if not isinstance(stiffness, JointStiffness) or tuple(stiffness.names) != tuple(names):
+        fail_field(source, "stiffness", stiffness, f"None or JointStiffness of the joints {', '.join(names)}")
+    if len(stiffness.values) != len(names):
+        fail_field(source, "stiffness", list(stiffness.values), f"{len(names)} values, one per joint")
+    for name, value in zip(names, stiffness.values, strict=True):
+        unit = _stiffness_unit(name)
+        head = f"{cut(str(source), _SOURCE_LENGTH)}: field 'stiffness.{name}'"
+        checks.number(head, value, above=0, maximum=MAX_STIFFNESS, unit=unit, error=ConfigError)
 
 
 class _Reader:
@@ -482,6 +584,7 @@ def _validate(p: RobotParameters) -> None:
     if len(p.gravity) != 3 or not _finite(p.gravity, MAX_GRAVITY):
         _fail(p, "environment.gravity", list(p.gravity), f"a 3-vector with entries within +-{MAX_GRAVITY:g} (m/s^2)")
     check_actuators(p.source, p.actuators, JOINT_NAMES)
+    check_stiffness(p.source, p.stiffness, JOINT_NAMES)
 
 
 def check_actuators(source: str, actuators: object, names: tuple[str, ...]) -> None:

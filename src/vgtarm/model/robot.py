@@ -38,7 +38,7 @@ from .assembly import check_margins
 from .backends import checked_single_call, single_call
 from .compiled import Backend, CompiledBackend, InterpretedBackend, get_backend
 from .definition import PAPER, Definition, StackDefinition
-from .parameters import ROBOT_FILE_LIMIT, RobotParameters, load_parameters, parameters_from_dict
+from .parameters import ROBOT_FILE_LIMIT, JointStiffness, RobotParameters, load_parameters, parameters_from_dict
 from .recursive.backend import RecursiveBackend
 from .sanity import (
     FORCE_NAMES,
@@ -725,6 +725,12 @@ class Robot:
         the robot file's ``[actuators]`` table, or ``None`` (no limits, the paper's robot); see
         :mod:`vgtarm.model.actuators`."""
         return self.parameters.actuators
+
+    @property
+    def stiffness(self) -> JointStiffness | None:
+        """The joints' stiffness of the robot file's ``[stiffness]`` table (N/m, N m/rad), or ``None``
+        (rigid joints, the paper's robot); see :mod:`vgtarm.design.stiffness`."""
+        return self.parameters.stiffness
 
     @property
     def tool_rotation(self) -> Array:

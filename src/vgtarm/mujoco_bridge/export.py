@@ -29,6 +29,11 @@ actuated joints' positions are the paper's joint values. What MuJoCo needs that 
 model does not (documented in ``docs/mujoco.md``): a tiny mass on each leg (the paper's legs are
 massless) and on a twist without a part of its own, and constraint solver settings that make the
 loop closures as stiff as MuJoCo allows.
+
+A robot file with a ``[stiffness]`` table makes every actuated joint a spring about a reference
+configuration (``spring_reference``, by default the home pose): the stiffness and ``springref`` of
+the slide ``s`` and of each twist, the stiffness and ``springlength`` of each closed leg's tendon
+(``docs/stiffness.md``). Without the table nothing is written (the file is as before).
 """
 
 from __future__ import annotations
@@ -234,7 +239,8 @@ def _check_export(
     leg_mass: object,
     leg_inertia: object,
     digits: object,
-) -> None:
+    spring_reference: object = None,
+) -> Array | None:
     if not isinstance(robot, Robot):
         raise InputError(f"robot = {shown(robot)}: expected a vgtarm.Robot (see vgtarm.load_robot)")
     checks.number("timestep", timestep, above=0, maximum=MAX_TIMESTEP, unit="s")
@@ -243,6 +249,11 @@ def _check_export(
     checks.number("leg_inertia", leg_inertia, above=MJ_MINVAL, unit="kg m^2")
     digits_unit = f"significant digits; {MAX_DIGITS}: every number as it is"
     checks.whole("digits", digits, MIN_DIGITS, MAX_DIGITS, unit=digits_unit)
+    if spring_reference is None:
+        return None
+    reference = checks.finite_array("spring_reference", spring_reference, (robot.n_joints,))
+    robot.check_assembly(reference, where="spring_reference")
+    return reference
 
 
 #: Colours of the scene (RGBA): the legs ``s`` and ``v``, the diagonals ``p``, the platforms,
@@ -271,13 +282,15 @@ def to_spec(
     leg_inertia: float = LEG_INERTIA,
     digits: int = DIGITS,
     scene: bool = True,
+    spring_reference: ArrayLike | None = None,
 ) -> Any:
     """The robot (the paper's or any stack of modules) as a ``mujoco.MjSpec``, MuJoCo's own model
     (see :func:`to_mjcf`, which writes it). Needs MuJoCo (``vgtarm[mujoco]``)."""
-    _check_export(robot, timestep, solver_tolerance, leg_mass, leg_inertia, digits)
+    reference = _check_export(robot, timestep, solver_tolerance, leg_mass, leg_inertia, digits, spring_reference)
     builder = _SpecBuilder(
         robot, require_mujoco(), leg_mass=leg_mass, leg_inertia=leg_inertia, digits=digits, scene=scene
     )
+    builder.springs(reference)
     return builder.build(timestep, solver_tolerance)
 
 
@@ -305,6 +318,26 @@ class _SpecBuilder:
         self.digits = digits
         self.scene = scene
         self.spec = mujoco.MjSpec()
+        #: Per joint, its stiffness and spring reference (empty: rigid joints, no springs written).
+        self.spring: dict[str, tuple[float, float]] = {}
+
+    def springs(self, reference: Array | None) -> None:
+        """Every actuated joint a spring about ``reference`` (the home pose if ``None``) when the
+        robot has a ``[stiffness]`` table."""
+        table = self.stack.stiffness
+        if table is None:
+            return
+        at = self.q if reference is None else reference
+        self.spring = {n: (float(k), float(x)) for n, k, x in zip(self.names, table.values, at, strict=True)}
+
+    def spring_on(self, element: Any, name: str, reference: str) -> None:
+        """The joint ``name``'s spring on ``element`` (a joint: ``springref``; a tendon:
+        ``springlength``, its dead band closed), if it has one."""
+        if name not in self.spring:
+            return
+        k, at = self.spring[name]
+        element.stiffness = [self.r1(k), 0.0, 0.0]
+        setattr(element, reference, self.r1(at) if reference == "springref" else [self.r1(at)] * 2)
 
     def r(self, x: ArrayLike) -> list[float]:
         return rounded(x, self.digits)
@@ -392,6 +425,7 @@ class _SpecBuilder:
         slide = rod.add_joint(name=name, type=mujoco.mjtJoint.mjJNT_SLIDE, axis=r(direction), ref=r1(length))
         if name not in self.closed:
             slide.damping = [r1(self.damping[name]), 0.0, 0.0]
+            self.spring_on(slide, name, "springref")
         material = "diagonal" if name.startswith("p") else "leg"
         self.visual(rod, mujoco.mjtGeom.mjGEOM_CAPSULE, [0.006], material, fromto=[0.0] * 3 + r(direction * length))
         return rod
@@ -444,13 +478,14 @@ class _SpecBuilder:
             self.light(body)
         else:
             self.part(body, twist.body, mod.centre, twist.rotation, mod.centre)
-        body.add_joint(
+        hinge = body.add_joint(
             name=twist.joint,
             type=mujoco.mjtJoint.mjJNT_HINGE,
             axis=r(mod.rotation[:, 2]),
             ref=r1(twist.home),
             damping=[r1(twist.viscous), 0.0, 0.0],
         )
+        self.spring_on(hinge, twist.joint, "springref")
         self.visual(body, mujoco.mjtGeom.mjGEOM_CYLINDER, [0.03], "tool", fromto=[0.0] * 3 + r(twist.mount))
         if lumped:
             return
@@ -509,6 +544,7 @@ class _SpecBuilder:
             tendon = spec.add_tendon(name=f"{n}_leg", damping=[self.r1(self.damping[n]), 0.0, 0.0], width=0.004)
             tendon.wrap_site(f"{n}_foot")
             tendon.wrap_site(f"{n}_head")
+            self.spring_on(tendon, n, "springlength")
         actuators = self.stack.actuators
         peak = dict(zip(self.names, actuators.force, strict=True)) if actuators is not None else {}
         for n in self.names:
@@ -530,6 +566,7 @@ def to_mjcf(
     leg_inertia: float = LEG_INERTIA,
     digits: int = DIGITS,
     scene: bool = True,
+    spring_reference: ArrayLike | None = None,
 ) -> str:
     """The robot (the paper's or any stack of modules) as an MJCF document (text), built with
     MuJoCo's model-editing API (:func:`to_spec`, ``mujoco.MjSpec``) and written by it, indented.
@@ -552,6 +589,12 @@ def to_mjcf(
     light, a sky and the camera ``tool`` that follows the end-effector, all drawing only (no
     contact, no mass: the dynamics are those of ``scene=False``). Needs MuJoCo
     (``vgtarm[mujoco]``).
+
+    A robot with a ``[stiffness]`` table gets a spring on every actuated joint (stiffness and
+    ``springref`` on the slides ``s`` and the twists, stiffness and ``springlength`` on the closed
+    legs' tendons) about ``spring_reference`` ``(n,)`` (m, rad; default the home pose): the
+    compliant arm of :mod:`vgtarm.design.stiffness`. A robot without one has no springs (and the
+    argument changes nothing).
     """
     return str(
         to_spec(
@@ -562,6 +605,7 @@ def to_mjcf(
             leg_inertia=leg_inertia,
             digits=digits,
             scene=scene,
+            spring_reference=spring_reference,
         ).to_xml()
     )
 

@@ -30,7 +30,7 @@ from ...fileio import atomic_write_text, check_output_file, parse_toml, read_tex
 from ...memory import size_text
 from ...model import budget, codegen, compiled
 from ...model.actuators import Actuators
-from ...model.parameters import ROBOT_FILE_LIMIT, RobotParameters, load_parameters
+from ...model.parameters import ROBOT_FILE_LIMIT, JointStiffness, RobotParameters, load_parameters
 from ...model.recursive import RecursiveModel
 from ...model.robot import default_model, definition_of, robot_parameters_from_dict
 from ...model.stack import Stack, stack_from_parameters, stack_to_toml
@@ -157,6 +157,7 @@ def describe_stack(stack: Stack) -> int:
     print(f"tool axis  {_vector(stack.tool_axis)}, edge {_vector(stack.tool_edge)} in the end-effector frame")
     print(f"friction   {_vector(stack.viscous)} (N s/m legs; N m s/rad twists)")
     print_actuators(stack.actuators)
+    print_stiffness(stack.stiffness)
     print(f"gravity    {_vector(stack.gravity)} m/s^2")
     print(f"tip @ home {_vector(tip, 10)} m; reach {float(np.linalg.norm(tip)):.6g} m")
     if figures.eigenvalues is None:
@@ -164,6 +165,20 @@ def describe_stack(stack: Stack) -> int:
     else:
         print(f"M @ home   eigenvalues {_vector(figures.eigenvalues, 5)} (kg, kg m^2)")
     return 0
+
+
+def print_stiffness(stiffness: JointStiffness | None) -> None:
+    """The joints' stiffness of the ``[stiffness]`` table (``vgtarm describe``), or that there is none."""
+    if stiffness is None:
+        print("stiffness  none (rigid joints: add a [stiffness] table, docs/stiffness.md)")
+        return
+    print(
+        "stiffness  "
+        + ", ".join(
+            f"{name} {k:.6g} {'N m/rad' if name.startswith('psi') else 'N/m'}"
+            for name, k in zip(stiffness.names, stiffness.values, strict=True)
+        )
+    )
 
 
 def print_actuators(actuators: Actuators | None) -> None:
