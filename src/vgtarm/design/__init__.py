@@ -1,0 +1,41 @@
+"""The designer's tools for any robot file: the reachable and dexterous workspace (:mod:`.workspace`:
+``vgtarm workspace``), manipulability, condition number and the distance of each module from its
+flat-truss singularity (:mod:`.measures`), and the tool's Cartesian stiffness and deflection under
+load with the leg stiffnesses of the ``[stiffness]`` table (:mod:`.stiffness`: ``vgtarm stiffness``).
+"""
+
+from .measures import Dexterity, dexterity, joint_grid, module_distance
+from .stiffness import CartesianStiffness, Deflection, Equilibrium, cartesian_stiffness, deflection, static_equilibrium
+from .workspace import (
+    MonteCarloVolume,
+    ReachTest,
+    Slice,
+    WorkspaceVolume,
+    monte_carlo_volume,
+    plot_slices,
+    plot_workspace_3d,
+    workspace_slices,
+    workspace_volume,
+)
+
+__all__ = [
+    "CartesianStiffness",
+    "Deflection",
+    "Dexterity",
+    "Equilibrium",
+    "MonteCarloVolume",
+    "ReachTest",
+    "Slice",
+    "WorkspaceVolume",
+    "cartesian_stiffness",
+    "deflection",
+    "dexterity",
+    "joint_grid",
+    "module_distance",
+    "monte_carlo_volume",
+    "plot_slices",
+    "plot_workspace_3d",
+    "static_equilibrium",
+    "workspace_slices",
+    "workspace_volume",
+]
