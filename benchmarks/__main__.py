@@ -16,6 +16,7 @@ from vgtarm._entry import single_threaded_blas
 single_threaded_blas()  # as the vgtarm command does, before NumPy is imported
 
 from . import (  # noqa: E402
+    bench_calibration,
     bench_export,
     bench_export_ga,
     bench_footprint,
@@ -56,6 +57,7 @@ MODULES: dict[str, Any] = {
     "single": bench_single,
     "tools": bench_tool_tasks,
     "retime": bench_retime,
+    "calibration": bench_calibration,
 }
 #: Groups run when none is named (``stacks`` is long: it compiles ten libraries from cold).
 DEFAULT = [name for name in MODULES if name not in ("stacks", "pathwide", "recursive-control")]

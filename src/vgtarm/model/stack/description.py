@@ -41,6 +41,9 @@ The file format (see ``examples/paper_robot.toml``)::
     tool_edge = [1.0, 0.0, 0.0]        # optional: its edge, a unit vector in F3 perpendicular to the axis
     [environment]
     gravity = [0.0, 0.0, -9.81]        # optional
+    [actuators]                        # optional: vgtarm.model.actuators
+    [stiffness]                        # optional: each joint's stiffness (N/m, N m/rad), by group
+    legs = 2.0e5                       # or by joint (p1 = 3.0e5); see vgtarm.model.parameters.JointStiffness
 
 Validation happens when a :class:`Stack` is built (from a file or directly), so a bad stack fails
 with a :class:`~vgtarm.errors.ConfigError` of one line naming the module and the field
@@ -77,12 +80,15 @@ from ..parameters import (
     NAME_LENGTH,
     ROBOT_FILE_LIMIT,
     Body,
+    JointStiffness,
     RobotParameters,
     _Reader,
     check_actuators,
     check_body,
+    check_stiffness,
     fail_field,
     load_parameters,
+    read_stiffness,
 )
 
 #: Most modules a stack may have (a bound on the size of the model, far beyond any arm built).
@@ -154,6 +160,8 @@ class Stack:
     source: str = field(default="<stack>", compare=False)
     #: The joints' actuators (:mod:`vgtarm.model.actuators`), or ``None``: no limits.
     actuators: Actuators | None = None
+    #: The joints' stiffness (the ``[stiffness]`` table), or ``None``: rigid joints.
+    stiffness: JointStiffness | None = None
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -416,7 +424,7 @@ def stack_margins(stack: Stack, q: NDArray[np.float64]) -> NDArray[np.float64]:
 # -- reading a file ------------------------------------------------------------------------
 
 _TOP_KEYS = {"modules", "end_effector"}
-_TOP_OPTIONAL = {"name", "environment", "actuators"}
+_TOP_OPTIONAL = {"name", "environment", "actuators", "stiffness"}
 _MODULE_KEYS = {"b", "d", "plane", "limits", "home", "platform"}
 _MODULE_OPTIONAL = {"viscous", "twist"}
 _TWIST_KEYS = {"height", "limits"}
@@ -468,6 +476,9 @@ def stack_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> Stack
     if "actuators" in data:
         names = _joint_names(modules)
         actuators = read_actuators(data["actuators"], names, source)
+    stiffness = None
+    if "stiffness" in data:
+        stiffness = read_stiffness(data["stiffness"], _joint_names(modules), source)
     return Stack(
         name=name,
         modules=tuple(modules),
@@ -478,6 +489,7 @@ def stack_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> Stack
         gravity=(gravity[0], gravity[1], gravity[2]),
         source=source,
         actuators=actuators,
+        stiffness=stiffness,
     )
 
 
@@ -580,6 +592,7 @@ def _validate(stack: Stack) -> None:
     gravity = _field(source, "environment.gravity")
     checks.vector(gravity, stack.gravity, 3, minimum=-MAX_GRAVITY, maximum=MAX_GRAVITY, unit="m/s^2", error=ConfigError)
     check_actuators(source, stack.actuators, _joint_names(list(modules)))
+    check_stiffness(source, stack.stiffness, _joint_names(list(modules)))
 
 
 def _validate_tool_frame(source: str, axis: object, edge: object) -> None:
@@ -734,6 +747,7 @@ def stack_from_parameters(parameters: RobotParameters) -> Stack:
         gravity=p.gravity,
         source=p.source,
         actuators=p.actuators,
+        stiffness=p.stiffness,
     )
 
 
@@ -752,6 +766,38 @@ def _toml_body(body: Body) -> str:
     return (
         f"{{ mass = {_toml_value(body.mass)}, com = {_toml_value(body.com)}, inertia = {_toml_value(body.inertia)} }}"
     )
+
+
+def parameters_to_toml(parameters: RobotParameters, *, header: str = "") -> str:
+    """The TOML text of the paper robot's format (the reference robot file's tables, with its
+    ``[actuators]`` and ``[stiffness]`` when it has them); :func:`vgtarm.load_robot` reads it back to
+    equal parameters, bit for bit. ``header`` (comment lines, without ``#``) opens the file."""
+    p = parameters
+    lines = [f"# {line}".rstrip() for line in header.splitlines()]
+    lines += [""] if lines else []
+    lines += [f"name = {_toml_value(p.name)}", "", "[geometry]"]
+    lines += [f"module{k} = {{ b = {_toml_value(m.b)}, d = {_toml_value(m.d)} }}" for k, m in enumerate(p.modules, 1)]
+    lines += [f"h1 = {_toml_value(p.h1)}", "", "[limits]"]
+    lines += [f"{name} = {_toml_value(pair)}" for name, pair in zip(p.joint_names, p.limits, strict=True)]
+    lines += ["", "[home]", f"q = {_toml_value(p.q_home)}", "", "[bodies]"]
+    lines += [f"{body.name} = {_toml_body(body)}" for body in p.bodies]
+    lines += ["", "[friction]", f"viscous = {_toml_value(p.viscous)}"]
+    lines += ["", "[environment]", f"gravity = {_toml_value(p.gravity)}"]
+    if p.actuators is not None:
+        lines += ["", "[actuators]"]
+        for joint, entry in p.actuators.entries().items():
+            lines.append(f"{joint} = {{ " + ", ".join(f"{k} = {_toml_value(v)}" for k, v in entry.items()) + " }")
+    if p.stiffness is not None:
+        lines += ["", "[stiffness]", *(f"{joint} = {_toml_value(v)}" for joint, v in p.stiffness.entries().items())]
+    return "\n".join(lines) + "\n"
+
+
+def robot_to_toml(parameters: RobotParameters | Stack, *, header: str = "") -> str:
+    """The robot file of ``parameters`` in its own format: :func:`stack_to_toml` for a stack,
+    :func:`parameters_to_toml` for the paper robot's."""
+    if isinstance(parameters, Stack):
+        return stack_to_toml(parameters, header=header)
+    return parameters_to_toml(parameters, header=header)
 
 
 def stack_to_toml(stack: Stack, *, header: str = "") -> str:
@@ -809,6 +855,9 @@ def stack_to_toml(stack: Stack, *, header: str = "") -> str:
         for joint, entry in stack.actuators.entries().items():
             fields = ", ".join(f"{key} = {_toml_value(value)}" for key, value in entry.items())
             lines.append(f"{joint} = {{ {fields} }}")
+    if stack.stiffness is not None:
+        lines += ["", "[stiffness]"]
+        lines += [f"{joint} = {_toml_value(value)}" for joint, value in stack.stiffness.entries().items()]
     return "\n".join(lines) + "\n"
 
 
