@@ -20,7 +20,22 @@ from typing import TYPE_CHECKING, Any
 from .version import __version__ as __version__
 
 if TYPE_CHECKING:  # the names as static type checkers and editors see them
-    from . import control, export, ga, ik, model, mujoco_bridge, paths, retiming, simulation, study, toolpaths
+    from . import (
+        calibration,
+        control,
+        design,
+        drilling,
+        export,
+        ga,
+        ik,
+        model,
+        mujoco_bridge,
+        paths,
+        retiming,
+        simulation,
+        study,
+        toolpaths,
+    )
     from .app.library import run_study
     from .app.pictures.plotting import (
         comparison_figure,
@@ -31,7 +46,10 @@ if TYPE_CHECKING:  # the names as static type checkers and editors see them
         save_figure,
     )
     from .app.reports.reproduce import reproduce
+    from .calibration import calibrate, exciting_trajectory, identify, plan_poses
     from .control import ComputedForceControl, Gains, SwitchingControl
+    from .design import cartesian_stiffness, deflection, dexterity, workspace_volume
+    from .drilling import load_bone
     from .errors import (
         AssemblyError,
         ConfigError,
@@ -120,6 +138,17 @@ _SOURCES: dict[str, tuple[str, str]] = {
     # actuators: a path checked against their limits, and its fastest timing under them
     "check_path": ("simulation.limits_check", "check_path"),
     "retime": ("retiming", "retime"),
+    # the designer's and the calibrator's tools
+    "workspace_volume": ("design", "workspace_volume"),
+    "dexterity": ("design", "dexterity"),
+    "cartesian_stiffness": ("design", "cartesian_stiffness"),
+    "deflection": ("design", "deflection"),
+    "calibrate": ("calibration", "calibrate"),
+    "plan_poses": ("calibration", "plan_poses"),
+    "identify": ("calibration", "identify"),
+    "exciting_trajectory": ("calibration", "exciting_trajectory"),
+    # bone drilling: the tool's thrust and torque through a layered bone
+    "load_bone": ("drilling", "load_bone"),
     # one run as a record (every option declared once), the presets
     "Experiment": ("experiment", "Experiment"),
     "PRESETS": ("experiment", "PRESETS"),
@@ -149,7 +178,10 @@ _SOURCES: dict[str, tuple[str, str]] = {
 
 #: Subpackages a user reaches by attribute (``vgtarm.paths.case1``), imported on first use.
 _MODULES = (
+    "calibration",
     "control",
+    "design",
+    "drilling",
     "export",
     "ga",
     "ik",
@@ -191,21 +223,32 @@ __all__ = [
     "SwitchingControl",
     "UnreachableError",
     "VgtarmError",
+    "calibrate",
+    "calibration",
+    "cartesian_stiffness",
     "case_study",
     "check_path",
     "comparison_figure",
     "control",
+    "deflection",
+    "design",
+    "dexterity",
+    "drilling",
+    "exciting_trajectory",
     "export",
     "export_controller",
     "ga",
+    "identify",
     "ik",
     "inverse_kinematics",
+    "load_bone",
     "load_parameters",
     "load_robot",
     "load_study",
     "model",
     "mujoco_bridge",
     "paths",
+    "plan_poses",
     "plot_efforts",
     "plot_joint_errors",
     "plot_path_3d",
@@ -220,8 +263,9 @@ __all__ = [
     "simulation",
     "solve_point",
     "study",
-    "toolpaths",
     "to_mjcf",
+    "toolpaths",
+    "workspace_volume",
 ]
 
 

@@ -49,12 +49,16 @@ from ...model.robot import Robot, load_robot
 from ...paths import TipPath as DesiredPath
 from ...simulation.scenario import senses
 from ...version import __version__
+from . import calibrate as cli_calibrate
+from . import identify as cli_identify
 from . import mujoco as cli_mujoco
 from . import presets
 from . import retime as cli_retime
 from . import stack as cli_stack
+from . import stiffness as cli_stiffness
 from . import study as cli_study
 from . import visual as cli_visual
+from . import workspace as cli_workspace
 from .bars import progress_bar
 from .options import (
     add_config,
@@ -788,6 +792,10 @@ def build_parser() -> argparse.ArgumentParser:
     cli_study.add_parsers(sub)  # study init, run, report
     cli_stack.add_parsers(sub)  # convert-robot
     cli_retime.add_parser(sub)  # retime
+    cli_workspace.add_parser(sub)  # workspace
+    cli_stiffness.add_parser(sub)  # stiffness
+    cli_calibrate.add_parser(sub)  # calibrate
+    cli_identify.add_parser(sub)  # identify
     _add_quiet(sub)
     _accept_negative_numbers(parser)
 
