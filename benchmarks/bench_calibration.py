@@ -80,4 +80,3 @@ def run() -> None:
     print("|---|---|---|---|---|---|")
     _rows("paper", None)
     _rows("stack", str(EXAMPLES / "paper_robot.toml"))
-
