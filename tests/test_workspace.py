@@ -257,5 +257,22 @@ def test_command_writes_the_summary_and_figures(tmp_path, capsys):
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["home"]["condition_number"] == pytest.approx(3.0559, abs=1e-4)
     assert summary["workspaces"]["dexterous"]["volume_m3"] < summary["workspaces"]["reachable"]["volume_m3"]
-    for name in ("slices.png", "workspace_3d.png", "slices.csv"):
+    for name in ("slices.png", "workspace_3d.png", "slices.csv", "workspace.html"):
         assert (tmp_path / "out" / name).stat().st_size > 0
+    _the_page_renders_in_a_real_browser(tmp_path / "out" / "workspace.html", summary)
+
+
+def _the_page_renders_in_a_real_browser(page, summary):
+    """The page opens in headless Chromium with its one 3-D plot drawn (both sets' boundaries and
+    slices), its PNG figures inlined, its table giving the volumes, and no error or request outside."""
+    from tests.test_html_report import browser_tab
+
+    with browser_tab(page, 1) as (tab, problems):
+        traces = tab.evaluate("document.getElementById('workspace-3d').data.map(t => t.name)")
+        text = tab.inner_text("body")
+        images = tab.evaluate("Array.from(document.images).map(i => i.naturalWidth)")
+    assert traces == ["reachable: boundary", "reachable: slices", "dexterous: boundary", "dexterous: slices"]
+    assert f"{1e3 * summary['workspaces']['reachable']['volume_m3']:.4f}" in text
+    assert "condition number of the tip Jacobian 3.0559" in text
+    assert len(images) == 2 and min(images) > 0
+    assert problems == []

@@ -2,8 +2,9 @@
 
 The folder ``--out`` gets ``summary.json`` (the volumes, the Monte Carlo check of each, the
 dexterity measures at home), ``slices.png`` (the boundary of both workspaces at six heights),
-``workspace_3d.png`` (their boundary surfaces) and ``slices.csv`` (``set,z,loop,x,y`` rows, m).
-The numbers are printed too. Methods: docs/workspace.md.
+``workspace_3d.png`` (their boundary surfaces), ``slices.csv`` (``set,z,loop,x,y`` rows, m) and
+``workspace.html`` (one self-contained page: the summary and an interactive 3-D figure of both
+workspaces, :mod:`vgtarm.app.reports.workspace_page`). The numbers are printed too. Methods: docs/workspace.md.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from ...model.robot import load_robot
 from .options import add_config, positive_float, positive_int_at_most, seed_number
 
 #: The files ``vgtarm workspace`` writes in its folder (and may replace there).
-WORKSPACE_FILES = ("summary.json", "slices.png", "workspace_3d.png", "slices.csv")
+WORKSPACE_FILES = ("summary.json", "slices.png", "workspace_3d.png", "slices.csv", "workspace.html")
 #: Default Monte Carlo samples of the check (``--samples``).
 DEFAULT_SAMPLES = 20_000
 
@@ -77,7 +78,7 @@ def add_parser(sub: Any) -> None:
             "dexterous workspace (the tool axis within --cone degrees of --axis) by grown voxels, check each "
             "against a Monte Carlo estimate of --samples points, trace their boundaries at six heights and "
             "evaluate the manipulability, condition number and flat-truss distances at home; write "
-            "summary.json, slices.png, workspace_3d.png and slices.csv."
+            "summary.json, slices.png, workspace_3d.png, slices.csv and the page workspace.html."
         ),
     )
     parser.add_argument(
@@ -169,6 +170,7 @@ def _summary(robot: Any, found: dict[str, Any], cone: float, axis: Any, seed: in
 def cmd_workspace(args: argparse.Namespace) -> int:
     """Analyse the workspace, print the numbers, write the folder."""
     from ...design import workspace as ws
+    from ..reports.workspace_page import workspace_html
 
     inputs = [args.config]
     check_output_folder(args.out, "--out", inputs=inputs, owned=WORKSPACE_FILES)  # before the work
@@ -202,5 +204,7 @@ def cmd_workspace(args: argparse.Namespace) -> int:
             ("workspace_3d.png", ws.plot_workspace_3d(found["volumes"], found["slices"])),
         ):
             figure.savefig(folder / name, dpi=100)
+        page = workspace_html(summary, found["volumes"], found["slices"], folder, ("slices.png", "workspace_3d.png"))
+        atomic_write_text(folder / "workspace.html", page)
     print(f"written    {escape(str(args.out))}: {', '.join(WORKSPACE_FILES)}")
     return 0
