@@ -134,16 +134,23 @@ def test_the_ramp_is_c1_at_both_ends_by_one_sided_differences():
     np.testing.assert_allclose(engagement_slope(u, length), fd, rtol=1e-6)
 
 
+def _ramp_ends(bone):
+    """Every depth where a ramp starts or ends: the interfaces and one chisel length and one point
+    length past each."""
+    return sorted({*bone.boundaries, *(bone.boundaries + bone.chisel_length), *(bone.boundaries + bone.point_length)})
+
+
 def test_the_thrust_is_c1_across_every_interface_and_the_breakthrough(femur, tibia):
-    """At each interface and one point length past it (the ends of every ramp) the thrust is
-    continuous and its one-sided slopes agree to O(h)."""
-    h = 1e-8
+    """At each interface, one chisel length and one point length past it (the ends of every ramp)
+    the thrust is continuous and its one-sided slopes agree to O(h)."""
     for bone in (femur, tibia):
-        scale = 20.0 / bone.point_length  # a slope of the size of the steepest ramp
-        for z in [*bone.boundaries, *(bone.boundaries + bone.point_length)]:
+        assert bone.chisel_share > 0.0
+        h = 1e-4 * bone.chisel_length
+        scale = 20.0 / bone.chisel_length  # a slope of the size of the steepest ramp
+        for z in _ramp_ends(bone):
             left = (_thrust(bone, z) - _thrust(bone, z - h)) / h
             right = (_thrust(bone, z + h) - _thrust(bone, z)) / h
-            assert abs(left - right) < 1e-4 * scale, (bone.name, z, left, right)
+            assert abs(left - right) < 1e-3 * scale, (bone.name, z, left, right)
             assert abs(_thrust(bone, z + 1e-12) - _thrust(bone, z - 1e-12)) < 1e-6
 
 
@@ -192,13 +199,14 @@ def test_the_ramp_has_the_mean_of_the_straight_one():
 @pytest.mark.parametrize("feed", [0.5e-3, 1.7e-3])
 def test_the_work_of_a_hole_is_the_sum_of_thrust_times_thickness(name, feed, request):
     """At a constant feed the work of the thrust over the whole travel (quadrature, split at every
-    ramp's ends) equals sum_i F_i h_i: each ramp in gives what the ramp out takes, whatever its
-    shape; and each layer's own share integrates to F_i h_i."""
+    ramp's ends) equals sum_i F_i h_i: each ramp in (the lips' and the chisel's) gives what the
+    ramp out takes, whatever its shape and the chisel's share; and each layer's own share
+    integrates to F_i h_i."""
     bone = request.getfixturevalue(name)
     speed = 2200 * RPM
     full = np.array([_thrust_of_layer(bone, i, feed, speed) for i in range(len(bone.layers))])
     thickness = np.diff(bone.boundaries)
-    breaks = sorted({*bone.boundaries, *(bone.boundaries + bone.point_length)})
+    breaks = _ramp_ends(bone)
     work = sum(
         quad(lambda z: _thrust(bone, z, feed, speed), a, b, epsabs=0, epsrel=1e-12)[0]
         for a, b in zip(breaks[:-1], breaks[1:], strict=True)
@@ -318,11 +326,12 @@ _SHIM = r"""
 
 void drill_many(int m, const double *depth, const double *feed, const double *speed, int n,
                 const double *boundaries, const double *coefficients, double point_length,
-                double feed_ref, double speed_ref, double feed_floor, double *out)
+                double chisel_length, double chisel_share, double feed_ref, double speed_ref,
+                double feed_floor, double *out)
 {
     for (int k = 0; k < m; ++k)
-        vgt_drill_forces(n, boundaries, coefficients, point_length, feed_ref, speed_ref, feed_floor,
-                         depth[k], feed[k], speed[k], out + 4 * k);
+        vgt_drill_forces(n, boundaries, coefficients, point_length, chisel_length, chisel_share, feed_ref,
+                         speed_ref, feed_floor, depth[k], feed[k], speed[k], out + 4 * k);
 }
 """
 
@@ -362,6 +371,8 @@ def _c_forces(lib, bone, depth, feed, speed):
         edges.ctypes.data_as(p),
         table.ctypes.data_as(p),
         d(bone.point_length),
+        d(bone.chisel_length),
+        d(bone.chisel_share),
         d(bone.reference_feed),
         d(bone.reference_speed),
         d(bone.feed_floor),
@@ -402,3 +413,82 @@ def test_the_header_is_c99_without_heap_or_state():
     text = HEADER.read_text()
     for banned in ("malloc", "calloc", "free(", "static double", "static int", "printf"):
         assert banned not in text, banned
+
+
+# -- the chisel edge ----------------------------------------------------------------------------------
+
+
+def _with_drill(bone, **drill):
+    data = bone.to_dict()
+    data["drill"].update(drill)
+    return bone_from_dict(data, source="drill changed")
+
+
+def _smoothstep(u, length):
+    """The cubic smoothstep written out again: 0 before 0, 1 after ``length``."""
+    s = min(max(u / length, 0.0), 1.0)
+    return 3.0 * s**2 - 2.0 * s**3
+
+
+def test_the_example_drill_has_its_chisel_of_the_file(femur):
+    """0.5 of the thrust on a chisel of web 0.32 mm: axial length 0.16 mm at a 90 degree point."""
+    assert femur.chisel_share == 0.5
+    assert femur.chisel_length == pytest.approx(0.16e-3, rel=1e-12)
+    assert femur.point_length == pytest.approx(1.6e-3, rel=1e-12)
+
+
+def test_the_thrust_at_the_far_surface_falls_with_the_chisel_in_closed_form(femur):
+    """Past the far surface by u the last layer's thrust is F (1 - c E_l(u) - (1 - c) E_L(u)) (the
+    other layers long left): the chisel's share leaves over its 0.16 mm, the lips' over 1.6 mm."""
+    far = femur.thickness
+    force = 20.0
+    c, small, big = femur.chisel_share, femur.chisel_length, femur.point_length
+    for u in (0.0, 0.02e-3, 0.08e-3, 0.16e-3, 0.5e-3, 1.2e-3):
+        expected = force * (1.0 - c * _smoothstep(u, small) - (1.0 - c) * _smoothstep(u, big))
+        assert _thrust(femur, far + u) == pytest.approx(expected, rel=1e-12, abs=1e-12)
+    # one chisel length past the surface the thrust has lost the chisel's share and a little more
+    assert _thrust(femur, far + small) / force == pytest.approx(0.5 - 0.5 * _smoothstep(small, big), rel=1e-12)
+
+
+def test_without_a_chisel_share_the_model_is_the_lips_alone_bit_for_bit(femur):
+    """``chisel_share = 0`` (and a file without the key) gives the lips' model of before: the same
+    bits whatever the web, the thrust equal to sum_i F_i (E_L(z - z_i) - E_L(z - z_i+1)) written
+    out, and the torque does not depend on the chisel share."""
+    lips = _with_drill(femur, chisel_share=0.0)
+    other_web = _with_drill(femur, chisel_share=0.0, web_thickness=0.9e-3)
+    data = femur.to_dict()
+    del data["drill"]["chisel_share"], data["drill"]["web_thickness"]
+    old_file = bone_from_dict(data, source="old file")
+    assert old_file.chisel_share == 0.0 and old_file.drill.web_thickness == pytest.approx(0.1 * 3.2e-3)
+    z = np.linspace(-0.5e-3, femur.breakthrough_depth + 0.5e-3, 301)
+    a, b, c = (drilling_forces(x, z, 1e-3, RPM_1500) for x in (lips, other_web, old_file))
+    for x, y in ((a, b), (a, c)):
+        for name in ("thrust", "torque", "thrust_depth_slope", "thrust_feed_slope"):
+            np.testing.assert_array_equal(getattr(x, name), getattr(y, name))
+    edges, big = femur.boundaries, femur.point_length
+    expected = [
+        sum(
+            _thrust_of_layer(femur, i, 1e-3, RPM_1500)
+            * (_smoothstep(x - edges[i], big) - _smoothstep(x - edges[i + 1], big))
+            for i in range(len(femur.layers))
+        )
+        for x in z
+    ]
+    np.testing.assert_allclose(a.thrust, expected, rtol=1e-13, atol=1e-12)
+    np.testing.assert_array_equal(a.torque, drilling_forces(femur, z, 1e-3, RPM_1500).torque)
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "message"),
+    [
+        ("chisel_share", 1.0, r"field 'drill\.chisel_share' = 1\.0: expected a number in \[0, 1\)"),
+        ("chisel_share", -0.1, r"field 'drill\.chisel_share' = -0\.1: expected"),
+        ("chisel_share", math.nan, r"field 'drill\.chisel_share' = nan: expected"),
+        ("web_thickness", 3.2e-3, r"field 'drill\.web_thickness' = 0\.0032: expected a number in \(0, 0\.0032\) \(m\)"),
+        ("web_thickness", 0.0, r"field 'drill\.web_thickness' = 0\.0: expected"),
+    ],
+)
+def test_a_bad_chisel_is_refused_naming_the_field(femur, key, value, message):
+    with pytest.raises(ConfigError, match=message) as caught:
+        _with_drill(femur, **{key: value})
+    assert "\n" not in str(caught.value)

@@ -18,9 +18,14 @@ still) nothing is cut and both are zero.
 The point (a cone of length ``L = (D / 2) / tan(point_angle / 2)``) enters each layer gradually:
 past an interface by ``u``, the engaged share of the lips is the cubic smoothstep ``E(u / L)``
 (``E(s) = s^2 (3 - 2 s)`` on [0, 1], 0 before, 1 after; C1, with the same mean as the straight
-ramp of a uniformly loaded lip), and a layer between the depths ``z0 < z1`` weighs
-``E(z - z0) - E(z - z1)`` at the tip depth ``z``. The forces are zero before contact (``z <= 0``)
-and after breakthrough (``z >= depth of the far surface + L``), and drop smoothly in between.
+ramp of a uniformly loaded lip). The chisel edge at the very tip carries the share ``c`` of the
+thrust (``Drill.chisel_share``) and enters over its own, shorter axial length
+``l = (web / 2) / tan(point_angle / 2)``. A layer between the depths ``z0 < z1`` weighs, in the
+thrust, ``(1 - c) (E_L(z - z0) - E_L(z - z1)) + c (E_l(z - z0) - E_l(z - z1))`` at the tip depth
+``z``, and in the torque the lips' part alone; each part integrates to ``z1 - z0`` over the travel,
+so the work of a layer does not depend on ``c``, and ``c = 0`` is the lips' model exactly. The
+forces are zero before contact (``z <= 0``) and after breakthrough (``z >= depth of the far
+surface + L``), and drop smoothly in between.
 
 Every power is the C library's ``pow`` (:func:`math.pow`, element by element), not NumPy's
 ``power``, which on machines with AVX-512 takes SIMD routines that differ from it in the last bit
@@ -105,16 +110,28 @@ class Layer:
 
 @dataclass(frozen=True)
 class Drill:
-    """A twist drill: its ``diameter`` (m) and ``point_angle`` (rad, the full angle of the cone)."""
+    """A twist drill: its ``diameter`` (m), ``point_angle`` (rad, the full angle of the cone), the
+    share of the thrust its chisel edge carries (``chisel_share``, 0 to < 1; 0 gives the lips
+    alone, the model before the chisel was added) and its ``web_thickness`` (m, < diameter: the
+    width of the chisel edge, which sets the chisel's axial length)."""
 
     diameter: float
     point_angle: float
+    chisel_share: float
+    web_thickness: float
 
     @property
     def point_length(self) -> float:
         """Length of the drill point along the axis (m): ``(D / 2) / tan(point_angle / 2)``, the
         distance over which the lips enter a layer."""
         return 0.5 * self.diameter / math.tan(0.5 * self.point_angle)
+
+    @property
+    def chisel_length(self) -> float:
+        """Axial length of the chisel edge's region at the tip (m): ``(web / 2) / tan(point_angle / 2)``,
+        the depth of the cone under the web, over which the chisel's share enters a layer (shorter
+        than :attr:`point_length` since the web is thinner than the drill)."""
+        return 0.5 * self.web_thickness / math.tan(0.5 * self.point_angle)
 
 
 @dataclass(frozen=True)
@@ -142,6 +159,16 @@ class Bone:
     def point_length(self) -> float:
         """Length of the drill point (m), :attr:`Drill.point_length`."""
         return self.drill.point_length
+
+    @property
+    def chisel_length(self) -> float:
+        """Axial length of the chisel edge (m), :attr:`Drill.chisel_length`."""
+        return self.drill.chisel_length
+
+    @property
+    def chisel_share(self) -> float:
+        """Share of the thrust the chisel edge carries, :attr:`Drill.chisel_share`."""
+        return self.drill.chisel_share
 
     @cached_property
     def boundaries(self) -> Array:
@@ -193,7 +220,7 @@ class Bone:
         }
         return {
             "name": self.name,
-            "drill": {"diameter": self.drill.diameter, "point_angle": self.drill.point_angle},
+            "drill": {key: getattr(self.drill, key) for key in (*_DRILL_BOUNDS, *_DRILL_OPTIONAL)},
             "model": {
                 "reference_feed": self.reference_feed,
                 "reference_speed": self.reference_speed,
@@ -246,6 +273,11 @@ _DRILL_BOUNDS: dict[str, dict[str, Any]] = {
     "diameter": {"above": 0.0, "maximum": _MAX_DIAMETER, "unit": "m"},
     "point_angle": {"above": 0.0, "below": math.pi, "unit": "rad"},
 }
+#: The drill's optional keys: without ``chisel_share`` the lips carry all the thrust (the model of
+#: files written before the chisel edge was added); without ``web_thickness`` the web is this share
+#: of the diameter (the lower end of the 0.1-0.2 D of twist drills; it matters only with a chisel share).
+_DRILL_OPTIONAL = ("chisel_share", "web_thickness")
+DEFAULT_WEB_RATIO = 0.1
 
 
 class _Reader:
@@ -306,11 +338,30 @@ def bone_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> Bone:
     name = data.get("name", "bone")
     if not isinstance(name, str) or not name.strip() or len(name) > 200:
         checks.refuse(reader.field("name"), name, "a text of 1 to 200 characters", ConfigError)
-    drill = Drill(**reader.numbers(data["drill"], "drill", _DRILL_BOUNDS))
+    drill = _read_drill(reader, data["drill"])
     model = reader.numbers(data["model"], "model", _MODEL_BOUNDS)
     materials = _read_materials(reader, data["materials"])
     layers = _read_layers(reader, data["layers"], {m.name: m for m in materials})
     return Bone(name.strip(), layers, drill, materials, **model)
+
+
+def _read_drill(reader: _Reader, table: object) -> Drill:
+    """The ``[drill]`` table: diameter and point angle, and the optional chisel share (in [0, 1))
+    and web thickness (in (0, diameter))."""
+    reader.table(table, "drill", set(_DRILL_BOUNDS), frozenset(_DRILL_OPTIONAL))
+    assert isinstance(table, Mapping)
+    values = {
+        key: checks.number(reader.field(f"drill.{key}"), table[key], error=ConfigError, **spec)
+        for key, spec in _DRILL_BOUNDS.items()
+    }
+    diameter = values["diameter"]
+    share = table.get("chisel_share", 0.0)
+    share = checks.number(reader.field("drill.chisel_share"), share, minimum=0.0, below=1.0, error=ConfigError)
+    web = table.get("web_thickness", DEFAULT_WEB_RATIO * diameter)
+    web = checks.number(
+        reader.field("drill.web_thickness"), web, above=0.0, below=diameter, unit="m", error=ConfigError
+    )
+    return Drill(diameter, values["point_angle"], share, web)
 
 
 def _read_materials(reader: _Reader, table: object) -> tuple[Material, ...]:
@@ -417,13 +468,26 @@ def _inputs(depth: ArrayLike, feed: ArrayLike, spindle_speed: ArrayLike) -> tupl
 
 
 def layer_weights(bone: Bone, depth: ArrayLike) -> tuple[Array, Array]:
-    """Each layer's engagement at the tip depths ``depth`` (m, from the entry surface along the
-    axis) and its derivative in the depth (1/m), each ``(..., n_layers)``:
-    ``E(z - z_i) - E(z - z_{i+1})`` for the layer between the interfaces ``z_i`` and ``z_{i+1}``."""
+    """Each layer's share of the thrust at the tip depths ``depth`` (m, from the entry surface along
+    the axis) and its derivative in the depth (1/m), each ``(..., n_layers)``: for the layer between
+    the interfaces ``z_i`` and ``z_{i+1}``, ``(1 - c) (E_L(z - z_i) - E_L(z - z_{i+1})) +
+    c (E_l(z - z_i) - E_l(z - z_{i+1}))``, the lips' ramp over the point length ``L`` and the chisel
+    edge's over its length ``l``, ``c`` the chisel share. The torque's weight is the lips' alone
+    (``c = 0``)."""
     z = checks.finite_array("depth", depth)[..., None]
-    edges, length = bone.boundaries, bone.point_length
-    weight = engagement(z - edges[:-1], length) - engagement(z - edges[1:], length)
-    slope = engagement_slope(z - edges[:-1], length) - engagement_slope(z - edges[1:], length)
+    edges = bone.boundaries
+    lips, lips_slope = _ramp_pair(z - edges[:-1], z - edges[1:], bone.point_length)
+    chisel, chisel_slope = _ramp_pair(z - edges[:-1], z - edges[1:], bone.chisel_length)
+    share = bone.chisel_share
+    keep = 1.0 - share
+    return keep * lips + share * chisel, keep * lips_slope + share * chisel_slope
+
+
+def _ramp_pair(top: Array, bottom: Array, length: float) -> tuple[Array, Array]:
+    """``E(top) - E(bottom)`` and its slope over a ramp of ``length`` (m): a layer's weight of one
+    edge of the drill with the tip ``top`` past its near side and ``bottom`` past its far side."""
+    weight = engagement(top, length) - engagement(bottom, length)
+    slope = engagement_slope(top, length) - engagement_slope(bottom, length)
     return weight, slope
 
 
@@ -439,18 +503,24 @@ def drilling_forces(bone: Bone, depth: ArrayLike, feed: ArrayLike, spindle_speed
     axis from the entry surface), fed at ``feed`` (m/s, into the bone; <= 0 cuts nothing) with
     the spindle at ``spindle_speed`` (rad/s, > 0); the three broadcast together.
 
-    Per layer, in the order of ``vgt_drill_forces``: its weight ``w`` and weight slope, the feed
-    factors and speed factors of thrust and torque, and the sums ``thrust += F w``,
-    ``d thrust / d depth += F dw``, ``d thrust / d feed += K g' s w``, ``torque += T w``.
+    Per layer, in the order of ``vgt_drill_forces``: the lips' weight ``w_L`` and slope and the
+    chisel's ``w_l`` and slope (:func:`layer_weights`), the thrust's weight
+    ``w = (1 - c) w_L + c w_l`` and slope, the feed factors and speed factors of thrust and torque,
+    and the sums ``thrust += F w``, ``d thrust / d depth += F dw``, ``d thrust / d feed += K g' s w``,
+    ``torque += T w_L`` (the chisel edge is taken to cut no torque: it scrapes near the axis).
     """
     z, v, w = _inputs(depth, feed, spindle_speed)
     edges, length, table = bone.boundaries, bone.point_length, bone.coefficients
+    chisel_length, share = bone.chisel_length, bone.chisel_share
+    keep = 1.0 - share
     thrust, torque = np.zeros(z.shape), np.zeros(z.shape)
     depth_slope, feed_slope = np.zeros(z.shape), np.zeros(z.shape)
     speed_ratio = w / bone.reference_speed
     for i, (k, a, b, k_torque, a_torque, b_torque) in enumerate(table):
-        weight = engagement(z - edges[i], length) - engagement(z - edges[i + 1], length)
-        slope = engagement_slope(z - edges[i], length) - engagement_slope(z - edges[i + 1], length)
+        lips, lips_slope = _ramp_pair(z - edges[i], z - edges[i + 1], length)
+        chisel, chisel_slope = _ramp_pair(z - edges[i], z - edges[i + 1], chisel_length)
+        weight = keep * lips + share * chisel
+        slope = keep * lips_slope + share * chisel_slope
         g, dg = feed_law(v, a, bone.reference_feed, bone.feed_floor)
         g_torque, _ = feed_law(v, a_torque, bone.reference_feed, bone.feed_floor)
         s = _power(speed_ratio, b)
@@ -459,7 +529,7 @@ def drilling_forces(bone: Bone, depth: ArrayLike, feed: ArrayLike, spindle_speed
         thrust = thrust + force * weight
         depth_slope = depth_slope + force * slope
         feed_slope = feed_slope + k * dg * s * weight
-        torque = torque + k_torque * g_torque * s_torque * weight
+        torque = torque + k_torque * g_torque * s_torque * lips
     return DrillingForces(thrust, torque, depth_slope, feed_slope)
 
 
@@ -489,13 +559,19 @@ def drilling_forces_at(
     ``(thrust, torque, thrust_depth_slope, thrust_feed_slope)``, the same bits as the arrays and the
     C header. The arguments are not checked (finite; speed > 0): the loop checks its inputs once."""
     edges = bone.boundaries.tolist()
-    length = bone.point_length
+    length, chisel_length, share = bone.point_length, bone.chisel_length, bone.chisel_share
+    keep = 1.0 - share
     thrust = torque = depth_slope = feed_slope = 0.0
     speed_ratio = spindle_speed / bone.reference_speed
     for i, (k, a, b, k_torque, a_torque, b_torque) in enumerate(bone.coefficients.tolist()):
         e_top, slope_top = _scalar_engagement(depth - edges[i], length)
         e_bottom, slope_bottom = _scalar_engagement(depth - edges[i + 1], length)
-        weight, slope = e_top - e_bottom, slope_top - slope_bottom
+        lips, lips_slope = e_top - e_bottom, slope_top - slope_bottom
+        e_top, slope_top = _scalar_engagement(depth - edges[i], chisel_length)
+        e_bottom, slope_bottom = _scalar_engagement(depth - edges[i + 1], chisel_length)
+        chisel, chisel_slope = e_top - e_bottom, slope_top - slope_bottom
+        weight = keep * lips + share * chisel
+        slope = keep * lips_slope + share * chisel_slope
         g, dg = _scalar_feed_law(feed, a, bone.reference_feed, bone.feed_floor)
         g_torque, _ = _scalar_feed_law(feed, a_torque, bone.reference_feed, bone.feed_floor)
         s = math.pow(speed_ratio, b)
@@ -504,5 +580,5 @@ def drilling_forces_at(
         thrust = thrust + force * weight
         depth_slope = depth_slope + force * slope
         feed_slope = feed_slope + k * dg * s * weight
-        torque = torque + k_torque * g_torque * s_torque * weight
+        torque = torque + k_torque * g_torque * s_torque * lips
     return thrust, torque, depth_slope, feed_slope

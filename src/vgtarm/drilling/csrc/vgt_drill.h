@@ -8,8 +8,11 @@
  *   coefficients  n_layers rows of VGT_DRILL_COEFFICIENTS numbers (Bone.coefficients): thrust (N)
  *                 and its feed and speed exponents, torque (N m) and its feed and speed exponents,
  *                 at the reference feed and speed, density scaling applied;
- *   point_length  length of the drill point (m); feed_ref (m/s), speed_ref (rad/s) the law's
- *                 references; feed_floor (m/s) the feed below which the power law is a quadratic.
+ *   point_length  length of the drill point (m), over which the lips enter a layer;
+ *   chisel_length axial length of the chisel edge (m, Bone.chisel_length), over which its share
+ *                 chisel_share (0 to < 1, Bone.chisel_share) of the thrust enters a layer;
+ *   feed_ref (m/s), speed_ref (rad/s) the law's references; feed_floor (m/s) the feed below which
+ *                 the power law is a quadratic.
  * The caller checks its arguments (finite; speed > 0; lengths > 0): nothing is checked here.
  */
 #ifndef VGT_DRILL_H
@@ -59,23 +62,35 @@ static inline void vgt_drill_feed_law(double feed, double a, double feed_ref, do
     }
 }
 
+/* A layer's weight E(top) - E(bottom) and its slope (1/m) over a ramp of `length` (m), the tip `top`
+ * past the layer's near side and `bottom` past its far side (E: vgt_drill_engagement). */
+static inline void vgt_drill_ramp_pair(double top, double bottom, double length, double *weight, double *slope)
+{
+    *weight = vgt_drill_engagement(top, length) - vgt_drill_engagement(bottom, length);
+    *slope = vgt_drill_engagement_slope(top, length) - vgt_drill_engagement_slope(bottom, length);
+}
+
 /* The drilling forces with the tip at `depth` (m, along the axis from the entry surface), fed at
  * `feed` (m/s) with the spindle at `speed` (rad/s, > 0): out[0] the thrust (N), out[1] the torque
  * (N m), out[2] the thrust's derivative in the depth (N/m), out[3] in the feed (N s/m). Each layer
- * i between boundaries[i] and boundaries[i + 1] weighs E(depth - boundaries[i]) -
- * E(depth - boundaries[i + 1]) (E: vgt_drill_engagement over point_length). */
+ * i between boundaries[i] and boundaries[i + 1] weighs, in the thrust, (1 - c) w_L + c w_l, with
+ * w_L = E(depth - boundaries[i]) - E(depth - boundaries[i + 1]) over point_length (the lips),
+ * w_l the same over chisel_length (the chisel edge) and c = chisel_share; in the torque w_L alone. */
 static inline void vgt_drill_forces(int n_layers, const double *boundaries, const double *coefficients,
-                                    double point_length, double feed_ref, double speed_ref, double feed_floor,
-                                    double depth, double feed, double speed, double out[4])
+                                    double point_length, double chisel_length, double chisel_share,
+                                    double feed_ref, double speed_ref, double feed_floor, double depth,
+                                    double feed, double speed, double out[4])
 {
     double thrust = 0.0, torque = 0.0, depth_slope = 0.0, feed_slope = 0.0;
     const double speed_ratio = speed / speed_ref;
+    const double keep = 1.0 - chisel_share;
     for (int i = 0; i < n_layers; ++i) {
         const double *c = coefficients + VGT_DRILL_COEFFICIENTS * i;
-        const double weight = vgt_drill_engagement(depth - boundaries[i], point_length) -
-                              vgt_drill_engagement(depth - boundaries[i + 1], point_length);
-        const double slope = vgt_drill_engagement_slope(depth - boundaries[i], point_length) -
-                             vgt_drill_engagement_slope(depth - boundaries[i + 1], point_length);
+        double lips, lips_slope, chisel, chisel_slope;
+        vgt_drill_ramp_pair(depth - boundaries[i], depth - boundaries[i + 1], point_length, &lips, &lips_slope);
+        vgt_drill_ramp_pair(depth - boundaries[i], depth - boundaries[i + 1], chisel_length, &chisel, &chisel_slope);
+        const double weight = keep * lips + chisel_share * chisel;
+        const double slope = keep * lips_slope + chisel_share * chisel_slope;
         double g, dg, g_torque, dg_torque;
         vgt_drill_feed_law(feed, c[1], feed_ref, feed_floor, &g, &dg);
         vgt_drill_feed_law(feed, c[4], feed_ref, feed_floor, &g_torque, &dg_torque);
@@ -85,7 +100,7 @@ static inline void vgt_drill_forces(int n_layers, const double *boundaries, cons
         thrust = thrust + force * weight;
         depth_slope = depth_slope + force * slope;
         feed_slope = feed_slope + c[0] * dg * s * weight;
-        torque = torque + c[3] * g_torque * s_torque * weight;
+        torque = torque + c[3] * g_torque * s_torque * lips;
     }
     out[0] = thrust;
     out[1] = torque;
