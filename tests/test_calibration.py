@@ -256,3 +256,19 @@ def test_the_calibrated_model_brings_the_closed_loop_near_the_exact_models():
     found = {name: figures["max_m"] for name, figures in module.run_settings("observer, ideal sensing", 1).items()}
     assert found["calibrated"] <= found["exact"] + 10e-6, found
     assert found["nominal"] >= 20 * found["calibrated"], found
+
+
+def test_the_reports_escape_the_robots_name_as_markdown():
+    """A robot named with Markdown and HTML in it: the report shows the name as written, no markup."""
+    import dataclasses
+
+    from vgtarm.app.cli.calibrate import _plan_report
+    from vgtarm.markup import md_text
+
+    robot = vgtarm.load_robot()
+    odd = "*bold* [link](http://x) <b>tag</b> `code`"
+    named = robot.with_parameters(dataclasses.replace(robot.parameters, name=odd))
+    plan = K.plan_poses(named, 12, seed=0, candidates=300)
+    text = _plan_report(named, plan, 0.05e-3)
+    assert f"# Measurement poses for {md_text(odd)}" in text.splitlines()[0]
+    assert odd not in text

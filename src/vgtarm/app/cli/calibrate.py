@@ -35,6 +35,7 @@ from ...calibration.kinematic import (
 )
 from ...errors import escape
 from ...fileio import atomic_folder, atomic_write_text, check_output_folder
+from ...markup import md_code, md_text
 from ...model.robot import Robot, load_robot
 from .options import add_config, positive_float, positive_int
 
@@ -141,9 +142,9 @@ def _plan(args: argparse.Namespace) -> int:
 def _report(robot: Robot, result: Calibration, source: str) -> str:
     analysis = result.identifiability
     lines = [
-        f"# Kinematic calibration of {escape(robot.parameters.name)}",
+        f"# Kinematic calibration of {md_text(robot.parameters.name)}",
         "",
-        f"- measurements: `{escape(source)}`, {len(result.residuals)} poses",
+        f"- measurements: {md_code(source)}, {len(result.residuals)} poses",
         f"- fit: {result.message} after {result.iterations} iterations ({result.evaluations} evaluations)",
         f"- RMS position residual: {1e3 * result.rms_residual:.4f} mm per coordinate "
         f"(nominal model: {1e3 * float(np.sqrt(np.mean(result.nominal_residuals[:, :3] ** 2))):.4f} mm)",
@@ -166,7 +167,7 @@ def _report(robot: Robot, result: Calibration, source: str) -> str:
 def _plan_report(robot: Robot, plan: PosePlan, noise: float) -> str:
     randoms = plan.random_condition_numbers
     lines = [
-        f"# Measurement poses for {escape(robot.parameters.name)}",
+        f"# Measurement poses for {md_text(robot.parameters.name)}",
         "",
         f"- {len(plan.q)} poses chosen greedily (D-optimal, then exchanges that lower the condition number) "
         f"from {plan.candidates} random configurations (seed {plan.seed})",
