@@ -50,6 +50,7 @@ from ...paths import TipPath as DesiredPath
 from ...simulation.scenario import senses
 from ...version import __version__
 from . import calibrate as cli_calibrate
+from . import drill as cli_drill
 from . import identify as cli_identify
 from . import mujoco as cli_mujoco
 from . import presets
@@ -796,6 +797,7 @@ def build_parser() -> argparse.ArgumentParser:
     cli_stiffness.add_parser(sub)  # stiffness
     cli_calibrate.add_parser(sub)  # calibrate
     cli_identify.add_parser(sub)  # identify
+    cli_drill.add_parser(sub)  # drill
     _add_quiet(sub)
     _accept_negative_numbers(parser)
 

@@ -1,0 +1,135 @@
+"""``vgtarm drill``: drill a layered bone under hybrid force and position control in the tool frame
+(:func:`vgtarm.drilling.drilling_run`, in NumPy), the thrust regulated from the observer's estimate,
+the layers and the breakthrough detected, then the drill retracted.
+
+The folder ``--out`` gets ``timeseries.csv`` (the run's series, SI units, a column per
+:data:`vgtarm.drilling.SERIES` entry), ``events.csv`` (the detector's detections: ``t,kind,layer``),
+``summary.json`` (the measures against the issue's targets) and ``drilling.png`` (thrust, depth and
+the specific thrust against time with the detections marked). Methods: docs/drilling_control.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...errors import escape
+from ...fileio import atomic_folder, atomic_write_text, check_output_folder
+from ...model.robot import load_robot
+from .options import add_config, positive_float
+
+#: The files ``vgtarm drill`` writes in its folder (and may replace there).
+DRILL_FILES = ("timeseries.csv", "events.csv", "summary.json", "drilling.png")
+RPM = 2.0 * math.pi / 60.0
+
+
+def add_parser(sub: Any) -> None:
+    """Register ``vgtarm drill`` on the ``vgtarm`` command's subparsers."""
+    parser = sub.add_parser(
+        "drill",
+        help="drill a layered bone under force control (thrust from the observer), detect breakthrough",
+        description=(
+            "Drill the bone of a bone file (layers, drill) along the robot's tool axis at home: the thrust "
+            "regulated to its set point from the momentum observer's estimate (1 um encoders, model 10 %% heavy), "
+            "the tip held on the axis, each layer and the breakthrough detected, then the feed stopped and the "
+            "drill retracted; print the measures against the targets and write timeseries.csv, events.csv, "
+            "summary.json and drilling.png."
+        ),
+    )
+    parser.add_argument("--bone", type=Path, required=True, metavar="FILE", help="a bone file (examples/bones/)")
+    parser.add_argument(
+        "--mode", choices=("admittance", "explicit"), default="admittance", help="the force loop (default admittance)"
+    )
+    parser.add_argument("--set-point", type=positive_float, default=20.0, metavar="N", help="thrust (N, default 20)")
+    parser.add_argument(
+        "--feed", type=positive_float, default=1.0, metavar="MM_S", help="feed-rate limit (mm/s, default 1)"
+    )
+    parser.add_argument(
+        "--spindle", type=positive_float, default=1000.0, metavar="RPM", help="spindle speed (rpm, default 1000)"
+    )
+    parser.add_argument(
+        "--feedback", choices=("observer", "sensor"), default="observer", help="the thrust fed back (default observer)"
+    )
+    parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="the folder to write")
+    add_config(parser)
+    parser.set_defaults(run=cmd_drill)
+
+
+def _series_csv(result: Any, names: tuple[str, ...]) -> str:
+    stream = io.StringIO()
+    stream.write(",".join(names) + "\n")
+    np.savetxt(stream, result.series, delimiter=",", fmt="%.17g")  # every double as it is
+    return stream.getvalue()
+
+
+def _events_csv(events: tuple[tuple[float, str, int], ...]) -> str:
+    stream = io.StringIO()
+    writer = csv.writer(stream, lineterminator="\n")
+    writer.writerow(["t", "kind", "layer"])
+    for t, kind, layer in events:
+        writer.writerow([f"{t:.6g}", kind, layer])  # the detector's own names, no user text
+    return stream.getvalue()
+
+
+def _plain(value: Any) -> Any:
+    """``value`` as JSON data (NumPy numbers and arrays as Python ones, NaN as None)."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, np.integer | np.bool_):
+        return value.item()
+    if isinstance(value, float | np.floating):
+        return None if not math.isfinite(float(value)) else float(value)
+    return value
+
+
+def cmd_drill(args: argparse.Namespace) -> int:
+    """Run the drilling, print its measures, write the folder."""
+    from ...drilling import SERIES, TARGETS, DrillingSettings, drilling_run, load_bone
+
+    inputs = [args.config, args.bone]
+    check_output_folder(args.out, "--out", inputs=inputs, owned=DRILL_FILES)  # before the work
+    robot = load_robot(args.config)
+    bone = load_bone(args.bone)
+    settings = DrillingSettings(
+        set_point=args.set_point,
+        feed_limit=1e-3 * args.feed,
+        spindle_speed=RPM * args.spindle,
+        mode=args.mode,
+        feedback=args.feedback,
+    )
+    result = drilling_run(robot, bone, settings)
+    summary = result.summary()
+    print(f"bone       {escape(str(args.bone))}: {len(bone.layers)} layers, {1e3 * bone.thickness:.2f} mm")
+    print(f"run        {args.mode} force control, {args.feedback}; {escape(result.reason)}")
+    for layer in summary["layers"]:
+        limited = f", {100 * layer['at_feed_limit']:.0f} % of it at the feed limit" if layer["at_feed_limit"] else ""
+        print(
+            f"layer {int(layer['layer'])}    thrust {layer['thrust_mean']:.3g} N mean, "
+            f"error RMS {layer['thrust_error_rms']:.3g} N{limited}"
+        )
+    for name, target in TARGETS.items():
+        value = summary.get(f"{name}_max", summary.get(name))
+        if isinstance(value, int | float) and math.isfinite(value):
+            scale, unit = (1.0, "N") if name.startswith("thrust") else (1e3, "ms" if "delay" in name else "mm")
+            if name == "axis_error":
+                unit = "mrad"
+            mark = "ok" if value <= target else "over"
+            print(f"{name:<20} {scale * value:.4g} {unit} (target {scale * target:g} {unit}: {mark})")
+    with atomic_folder(args.out, "--out", inputs=inputs, owned=DRILL_FILES, checked=True) as folder:
+        atomic_write_text(folder / "timeseries.csv", _series_csv(result, SERIES))
+        atomic_write_text(folder / "events.csv", _events_csv(result.events))
+        atomic_write_text(folder / "summary.json", json.dumps(_plain(summary), indent=2) + "\n")
+        result.figure().savefig(folder / "drilling.png", dpi=100)
+    print(f"written    {escape(str(args.out))}: {', '.join(DRILL_FILES)}")
+    return 0 if result.success else 1
