@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import escape
-from ...fileio import atomic_folder, atomic_write_text, check_output_folder
+from ...fileio import atomic_folder, atomic_write_text, check_output_folder, json_value
 from ...model.robot import load_robot
 from .options import add_config, positive_float
 
@@ -78,21 +78,6 @@ def _events_csv(events: tuple[tuple[float, str, int], ...]) -> str:
     return stream.getvalue()
 
 
-def _plain(value: Any) -> Any:
-    """``value`` as JSON data (NumPy numbers and arrays as Python ones, NaN as None)."""
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _plain(value.tolist())
-    if isinstance(value, np.integer | np.bool_):
-        return value.item()
-    if isinstance(value, float | np.floating):
-        return None if not math.isfinite(float(value)) else float(value)
-    return value
-
-
 def cmd_drill(args: argparse.Namespace) -> int:
     """Run the drilling, print its measures, write the folder."""
     from ...drilling import SERIES, TARGETS, DrillingSettings, drilling_run, load_bone
@@ -129,7 +114,7 @@ def cmd_drill(args: argparse.Namespace) -> int:
     with atomic_folder(args.out, "--out", inputs=inputs, owned=DRILL_FILES, checked=True) as folder:
         atomic_write_text(folder / "timeseries.csv", _series_csv(result, SERIES))
         atomic_write_text(folder / "events.csv", _events_csv(result.events))
-        atomic_write_text(folder / "summary.json", json.dumps(_plain(summary), indent=2) + "\n")
+        atomic_write_text(folder / "summary.json", json.dumps(json_value(summary), indent=2) + "\n")
         result.figure().savefig(folder / "drilling.png", dpi=100)
     print(f"written    {escape(str(args.out))}: {', '.join(DRILL_FILES)}")
     return 0 if result.success else 1
