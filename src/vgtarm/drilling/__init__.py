@@ -1,5 +1,5 @@
 """Bone drilling: the layered bone, the drill, and the thrust and torque of the cutting law
-(:mod:`vgtarm.drilling.bone`; the same arithmetic in C in ``csrc/vgt_drill.h``; ``docs/drilling.md``),
+(:mod:`vgtarm.drilling.bone`; the same arithmetic in C in ``model/csrc/vgt_drill.h``; ``docs/drilling.md``),
 and a first drilling loop under hybrid force and position control in the tool frame with layer
 and breakthrough detection from the observer's estimate (:mod:`.control`, :mod:`.loop`, in NumPy;
 ``docs/drilling_control.md``)."""

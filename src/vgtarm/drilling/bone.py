@@ -30,7 +30,7 @@ surface + L``), and drop smoothly in between.
 Every power is the C library's ``pow`` (:func:`math.pow`, element by element), not NumPy's
 ``power``, which on machines with AVX-512 takes SIMD routines that differ from it in the last bit
 (5,204 of 100,000 random feeds, measured on the project's machine): the C header
-``csrc/vgt_drill.h`` does the same arithmetic in the same order, so a compiled loop gives the same
+``model/csrc/vgt_drill.h`` does the same arithmetic in the same order, so a compiled loop gives the same
 bits as the NumPy one (``tests/test_drilling_model.py``).
 """
 
@@ -54,7 +54,7 @@ from ..fileio import parse_toml, read_text_limited
 Array = NDArray[np.float64]
 
 #: The C header with the same arithmetic (static inline functions, C99, no heap).
-HEADER = Path(__file__).resolve().parent / "csrc" / "vgt_drill.h"
+HEADER = Path(__file__).resolve().parent.parent / "model" / "csrc" / "vgt_drill.h"
 #: Largest bone file read (bytes).
 BONE_FILE_LIMIT = 2**20
 #: Most layers a bone may have.

@@ -31,6 +31,9 @@ FEEDBACKS = ("observer", "sensor")
 #: Phases of a run, as recorded in :attr:`DrillingResult.phase`.
 PHASES = ("tare", "drilling", "stopping", "retracting", "done")
 TARE, DRILLING, STOPPING, RETRACTING, DONE = range(len(PHASES))
+#: Hold after the stop before retracting, and after the retract before the run ends (s).
+STOP_HOLD = 0.05
+END_HOLD = 0.1
 
 
 @dataclass(frozen=True)

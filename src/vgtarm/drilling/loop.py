@@ -16,12 +16,15 @@ from numpy.typing import NDArray
 from .. import checks
 from ..errors import AssemblyError, InputError
 from ..model.robot import Robot
+from . import compiled
 from .bone import Bone, bone_from_dict, layer_weights
 from .control import (
     DONE,
     DRILLING,
+    END_HOLD,
     PHASES,
     RETRACTING,
+    STOP_HOLD,
     STOPPING,
     TARE,
     Detector,
@@ -45,11 +48,10 @@ TARGETS = {
     "lateral_deviation": 0.05e-3,
     "axis_error": 1.0e-3,
 }
+#: The loops :func:`drilling_run` runs.
+ENGINES = ("auto", "compiled", "numpy")
 #: Time after full engagement in a layer before its thrust error counts (s).
 ENGAGEMENT_WAIT = 0.05
-#: Hold after the stop before retracting, and after the retract before the run ends (s).
-STOP_HOLD = 0.05
-END_HOLD = 0.1
 #: Columns of :attr:`DrillingResult.series`.
 SERIES = (
     "t",
@@ -122,13 +124,19 @@ def drilling_run(
     *,
     q0: Array | None = None,
     nominal: Bone | None = None,
+    engine: str = "auto",
 ) -> DrillingResult:
     """Drill ``bone`` with ``robot`` (the plant; the controller's model is its parameters with the
     masses times ``settings.model_mass``) along the tool axis at ``q0`` (default the home
     configuration), starting at rest with the tip ``settings.gap`` before the entry surface.
     ``nominal`` is the bone the detector is told of (its layer count and feed exponent; default
     ``bone``). Stops at the breakthrough's detection, retracts ``retract_distance``, and ends;
-    or ends at ``settings.duration`` (``success`` False)."""
+    or ends at ``settings.duration`` (``success`` False).
+
+    ``engine``: ``"compiled"`` (the loop in C, :mod:`.compiled`; about a hundred times faster),
+    ``"numpy"`` (this module's loop), or ``"auto"``: compiled where the robot's backend is the
+    compiled symbolic library, NumPy otherwise (the recursive model of large stacks)."""
+    checks.choice("engine", engine, ENGINES)
     q = np.array(robot.parameters.home if q0 is None else q0, dtype=np.float64)
     robot.check_assembly(q, where="q0")
     s = check_settings(robot, settings or DrillingSettings(), q)
@@ -144,6 +152,14 @@ def drilling_run(
     exponent = float(told.coefficients[0, 1])  # the thrust's feed exponent of the first layer
     ctrl = HybridController(s, q.copy(), exponent, depth_ref=-s.gap)
     detector = Detector(s, len(told.layers), exponent, told.reference_feed, told.feed_floor)
+    if not compiled.has_functions(robot):
+        checks.refuse(
+            "robot backend",
+            getattr(robot.backend, "kind", type(robot.backend).__name__),
+            "the symbolic model (drilling needs its bias accelerations and forward kinematics)",
+        )
+    if engine == "compiled" or (engine == "auto" and compiled.available(robot)):
+        return _compiled(robot, model, bone, told, s, q, entry, frame, steps)
     qd = np.zeros(robot.n_joints)
     qd0 = qd.copy()
     rows: list[list[float]] = []
@@ -168,6 +184,32 @@ def drilling_run(
     events = tuple(detector.events)
     success = run.phase == DONE
     return DrillingResult(series, np.array(efforts), events, bone, s, success, reason if not success else "done")
+
+
+def _compiled(
+    robot: Robot,
+    model: Robot,
+    bone: Bone,
+    told: Bone,
+    s: DrillingSettings,
+    q: Array,
+    entry: Array,
+    frame: Array,
+    steps: Array,
+) -> DrillingResult:
+    """:func:`drilling_run` through the compiled loop."""
+    if not compiled.available(robot):
+        checks.refuse("engine", "compiled", 'a robot with the compiled symbolic library (this one runs "numpy")')
+    series, efforts, events, status = compiled.compiled_run(robot, model, bone, told, s, q, entry, frame, steps)
+    success = status == compiled.STATUS["VGT_DONE"]
+    if success:
+        reason = "done"
+    elif status == compiled.STATUS["VGT_ABOVE_THRESHOLD"]:
+        reason = f"no breakthrough detected within {s.duration:g} s"
+    else:
+        t = float(series[-1, 0]) if len(series) else 0.0
+        reason = f"the run left the model at t = {t:.3f} s (status {status})"
+    return DrillingResult(series, efforts, events, bone, s, success, reason)
 
 
 def _sample(

@@ -345,3 +345,78 @@ int vgt_ga_decode_single(const vgt_ga_settings *g, long rows, const uint64_t *bi
 void vgt_rng_uniform(uint64_t seed, long n, double *out);
 void vgt_rng_mutation_positions(uint64_t seed, long total, double p, long max_flips, long *positions,
                                 long *n_flips);
+
+/* ---- Force-controlled drilling (drill_loop.c, vgt_drill_control.h; docs/drilling_control.md) ---- */
+
+/* The generated functions the drilling loop calls (the symbolic library's names, Robot's methods). */
+typedef struct {
+    vgt_call tip;         /* q, p -> tip                                           */
+    vgt_call velocity;    /* q, qd, p -> tip velocity, angular velocity            */
+    vgt_call jac;         /* q, p -> J_P, J_W (row-major)                          */
+    vgt_call fk;          /* q, p -> ..., C03 (its last output, row-major)          */
+    vgt_call bias_acc;    /* q, qd, p -> Jdot qd of the tip, angular, bodies ...    */
+    vgt_call mass;        /* q, p -> M (row-major)                                 */
+    vgt_call bias_forces; /* q, qd, p -> C                                         */
+    vgt_call id;          /* q, qd, qdd, f, p -> F                                 */
+    int n_fk_outputs;     /* outputs of fk (C03 is the last)                       */
+    int n_bias_outputs;   /* outputs of bias_acc (the tip's and the angular first) */
+} vgt_drill_model;
+
+/* A layered bone (vgtarm.drilling.Bone) as vgt_drill_forces takes it. */
+typedef struct {
+    int n_layers;
+    const double *boundaries;   /* (n_layers + 1) interface depths (m)                    */
+    const double *coefficients; /* (n_layers, VGT_DRILL_COEFFICIENTS) the law's rows       */
+    double point_length, chisel_length, chisel_share, feed_ref, speed_ref, feed_floor;
+} vgt_drill_bone;
+
+/* A drilling run's settings (vgtarm.drilling.control.DrillingSettings, SI units) and what the
+ * controller is told of the bone (its layer count and the law's feed exponent and feed scales). */
+typedef struct {
+    int n_joints;
+    double dt;                  /* control period (s)                                        */
+    int substeps;               /* plant steps per period                                    */
+    double set_point;           /* thrust (N)                                                */
+    double feed_limit;          /* (m/s)                                                     */
+    double spindle_speed;       /* (rad/s)                                                   */
+    int mode;                   /* 0 explicit force control, 1 admittance                     */
+    int feedback;               /* 0 the observer's estimate, 1 a tip force sensor            */
+    double tare_time;           /* (s)                                                       */
+    double velocity_keep;       /* the velocity filter's weight of its previous value        */
+    double observer_keep;       /* exp(-K_O dt)                                              */
+    double hold_frequency, axial_frequency, null_frequency; /* (Hz)                          */
+    double force_gain, force_rate, feed_lead;
+    double admittance_mass, admittance_time, admittance_share;
+    double estimate_time, feed_time, layer_change;
+    int layer_samples;
+    double breakthrough_fraction;
+    int breakthrough_samples;
+    double settle_time, retract_distance, retract_speed;
+    double stop_hold, end_hold; /* hold after the stop and after the retract (s)             */
+    long max_samples;           /* the run's longest length (samples)                        */
+    int tool_torque;            /* 1: the cutting torque acts on the end-effector             */
+    double exponent;            /* the told bone's thrust feed exponent                       */
+    int told_layers;            /* the told bone's layer count                                */
+    double told_feed_ref, told_feed_floor;
+    double gap;                 /* the tip's start before the entry surface (m)              */
+} vgt_drill_settings;
+
+/* One drilling run of an n_joints robot (nj): inputs, then what the run writes. */
+typedef struct {
+    const double *q0;              /* (nj) start, at rest                                     */
+    const double *p_plant, *p_ctrl;/* parameter vectors                                      */
+    const double *steps;           /* (nj) encoder steps (0: exact)                          */
+    const double *entry;           /* (3) entry point (m, F0)                                */
+    const double *frame;           /* (3, 3) row-major: columns e1, e2, the drilling axis      */
+    const double *tool_axis;       /* (3) the tool's axis in the end-effector frame            */
+    double *series;                /* (max_samples, 13) vgtarm.drilling.loop.SERIES             */
+    double *efforts;               /* (max_samples, nj)                                       */
+    double *events;                /* (max_events, 3): t, kind (0 contact, 1 softer, 2 harder,  */
+    long max_events;               /* 3 breakthrough), layer                                  */
+    long n_samples, n_events;      /* out                                                     */
+} vgt_drill_run;
+
+/* Run the drilling loop: VGT_DONE when the run ended after its retract, VGT_ABOVE_THRESHOLD when
+ * max_samples passed without a breakthrough, or a failure status (the samples so far kept). */
+int vgt_drill_simulate(const vgt_drill_model *m, const vgt_drill_settings *s, const vgt_drill_bone *bone,
+                       vgt_drill_run *r);

@@ -1,0 +1,91 @@
+"""The compiled drilling loop (``drill_loop.c``, ``vgt_drill_control.h``) against the NumPy loop
+(``vgtarm.drilling.loop``), its independent reference: with exact sensing the two runs are the same
+path to rounding in both force-control modes and with either feedback; with the encoders, where a
+rounding can move one reading by a step and the two noise sequences part, every measure of the
+summary agrees; the robot without the compiled library is refused one line."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vgtarm.drilling import bone_from_dict, load_bone
+from vgtarm.drilling import compiled as compiled_loop
+from vgtarm.drilling.control import DrillingSettings
+from vgtarm.drilling.loop import ENGINES, SERIES, drilling_run
+from vgtarm.errors import InputError
+from vgtarm.model.recursive.backend import RecursiveBackend
+from vgtarm.model.robot import Robot
+
+from .test_drilling_control import FEMUR
+
+SMALL = {"feed_limit": 2.0e-3, "gap": 0.2e-3, "duration": 8.0}
+EXACT = {"encoder_resolution": 0.0, "twist_resolution": 0.0}
+
+
+@pytest.fixture(scope="module")
+def small_bone():
+    data = load_bone(FEMUR).to_dict()
+    data["drill"]["diameter"] = 1.0e-3
+    data["layers"] = [
+        {"material": "cortical", "thickness": 1.0e-3},
+        {"material": "cancellous", "thickness": 1.2e-3},
+        {"material": "cortical", "thickness": 1.0e-3},
+    ]
+    return bone_from_dict(data, source="small bone")
+
+
+def _pair(robot, bone, **settings):
+    s = DrillingSettings(**SMALL, **settings)
+    return drilling_run(robot, bone, s, engine="compiled"), drilling_run(robot, bone, s, engine="numpy")
+
+
+@pytest.mark.parametrize(
+    ("mode", "feedback"), [("admittance", "observer"), ("explicit", "observer"), ("admittance", "sensor")]
+)
+def test_exact_sensing_is_the_numpy_path(robot, small_bone, mode, feedback):
+    fast, slow = _pair(robot, small_bone, mode=mode, feedback=feedback, **EXACT)
+    assert fast.success and slow.success
+    assert fast.series.shape == slow.series.shape
+    assert [(k, layer) for _, k, layer in fast.events] == [(k, layer) for _, k, layer in slow.events]
+    np.testing.assert_allclose([t for t, *_ in fast.events], [t for t, *_ in slow.events], atol=1e-12)
+    for i, name in enumerate(SERIES):
+        scale = max(float(np.max(np.abs(slow.series[:, i]))), 1e-9)
+        error = float(np.max(np.abs(fast.series[:, i] - slow.series[:, i])))
+        assert error <= 1e-8 * scale, (name, error, scale)
+    np.testing.assert_allclose(fast.efforts, slow.efforts, rtol=0, atol=1e-8 * np.max(np.abs(slow.efforts)))
+
+
+def test_with_encoders_every_measure_agrees(robot, small_bone):
+    fast, slow = _pair(robot, small_bone, mode="admittance")
+    a, b = fast.summary(), slow.summary()
+    assert a["success"] and b["success"]
+    assert a["false_detections"] == b["false_detections"] == 0
+    assert abs(a["protrusion"] - b["protrusion"]) <= 5e-6
+    assert abs(a["detection_delay"] - b["detection_delay"]) <= 0.005
+    for x, y in zip(a["layers"], b["layers"], strict=True):
+        assert x["thrust_error_rms"] == pytest.approx(y["thrust_error_rms"], rel=0.05, abs=0.02)
+    assert a["lateral_deviation_max"] == pytest.approx(b["lateral_deviation_max"], rel=0.2)
+    assert a["axis_error_max"] == pytest.approx(b["axis_error_max"], rel=0.2)
+
+
+def test_the_run_without_a_breakthrough_ends_at_its_duration(robot, small_bone):
+    s = DrillingSettings(**{**SMALL, "duration": 0.3})
+    fast = drilling_run(robot, small_bone, s, engine="compiled")
+    slow = drilling_run(robot, small_bone, s, engine="numpy")
+    assert not fast.success and fast.reason == slow.reason == "no breakthrough detected within 0.3 s"
+    assert fast.series.shape == slow.series.shape == (301, len(SERIES))
+
+
+def test_a_robot_without_the_loops_functions_is_refused(robot):
+    from vgtarm.model.stack.description import reference_stack
+
+    stack = reference_stack()
+    recursive = Robot(stack, RecursiveBackend(stack))
+    assert not compiled_loop.available(recursive) and compiled_loop.available(robot)
+    bone = load_bone(FEMUR)
+    for engine in ENGINES:
+        with pytest.raises(InputError, match=r"^robot backend = '\w+': expected the symbolic model"):
+            drilling_run(recursive, bone, DrillingSettings(duration=0.01), engine=engine)
+    with pytest.raises(InputError, match=r"^engine = 'fast': expected one of"):
+        drilling_run(robot, bone, DrillingSettings(duration=0.01), engine="fast")
