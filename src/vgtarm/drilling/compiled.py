@@ -13,6 +13,7 @@ rounding can move a reading by a step, on every measure of the summary).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -23,17 +24,32 @@ from ..model.backends import CompiledBackend
 from ..model.interface import enum, ffi
 from ..model.robot import Robot
 from .bone import Bone
-from .control import END_HOLD, STOP_HOLD
+from .control import END_HOLD, STOP_HOLD, DrillingSetup
 
 Array = NDArray[np.float64]
 
 #: The generated functions of ``vgt_drill_model``, by field (the symbolic library's names).
 FUNCTIONS = ("tip", "velocity", "jac", "fk", "bias_acc", "mass", "bias_forces", "id")
-#: The event kinds of ``vgt_drill_run.events`` (``vgt_drill_control.h``), in code order.
-EVENT_KINDS = ("contact", "softer", "harder", "breakthrough")
+#: The event kinds of ``vgt_drill_run.events`` (enum ``vgt_drill_event`` of ``vgtarm.h``), in code order.
+EVENT_KINDS = tuple(
+    name.removeprefix("VGT_DRILL_").lower() for name, _ in sorted(enum("vgt_drill_event").items(), key=lambda x: x[1])
+)
 #: Longest list of events a run keeps (contact, each interface, the breakthrough, spares).
 MAX_EVENTS = 64
 _STATUS = enum("vgt_status")
+
+
+@dataclass(frozen=True)
+class CompiledRun:
+    """What one compiled run wrote: the series ``(samples, 13)`` (:data:`.loop.SERIES`), the
+    efforts ``(samples, n)``, the detector's events ``(t, kind, layer)``, the status
+    (``vgt_status``) and, when asked for, the encoder readings ``(samples, n)``."""
+
+    series: Array
+    efforts: Array
+    events: tuple[tuple[float, str, int], ...]
+    status: int
+    readings: Array | None = None
 
 
 def available(robot: Robot) -> bool:
@@ -117,20 +133,11 @@ def _ptr(array: Array) -> Any:
     return ffi().cast("double *", array.ctypes.data)
 
 
-def compiled_run(
-    robot: Robot,
-    model: Robot,
-    bone: Bone,
-    told: Bone,
-    s: Any,
-    q0: Array,
-    entry: Array,
-    frame: Array,
-    steps: Array,
-) -> tuple[Array, Array, tuple[tuple[float, str, int], ...], int]:
-    """One run in C: the series ``(samples, 13)``, the efforts ``(samples, n)``, the detector's
-    events and the status (``vgt_status``). ``robot`` is the plant, ``model`` the controller's
-    model (the same library, its own parameters)."""
+def compiled_run(setup: DrillingSetup, *, readings: bool = False) -> CompiledRun:
+    """One run in C of ``setup`` (:func:`.loop.drilling_setup`; see :class:`CompiledRun`);
+    ``readings``: keep the encoder readings."""
+    robot, model, bone, told, s = setup.robot, setup.model, setup.bone, setup.told, setup.settings
+    q0, entry, frame, steps = setup.q0, setup.entry, setup.frame, setup.steps
     backend = robot.backend
     if not isinstance(backend, CompiledBackend):
         raise VgtarmError("the compiled drilling loop needs the robot's compiled symbolic library")
@@ -148,6 +155,8 @@ def compiled_run(
         "efforts": np.zeros((max_samples, n)),
         "events": np.zeros((MAX_EVENTS, 3)),
     }
+    if readings:
+        arrays["q_meas"] = np.zeros((max_samples, n))
     boundaries = np.ascontiguousarray(bone.boundaries, dtype=np.float64)
     coefficients = np.ascontiguousarray(bone.coefficients, dtype=np.float64)
     c_bone = ffi().new(
@@ -169,7 +178,8 @@ def compiled_run(
     status = backend.library.vgt_drill_simulate(_model(backend), _settings(robot, s, told, max_samples), c_bone, run)
     k, e = int(run.n_samples), int(run.n_events)
     events = tuple((float(t), EVENT_KINDS[int(kind)], int(layer)) for t, kind, layer in arrays["events"][:e])
-    return arrays["series"][:k].copy(), arrays["efforts"][:k].copy(), events, int(status)
+    kept = arrays["q_meas"][:k].copy() if readings else None
+    return CompiledRun(arrays["series"][:k].copy(), arrays["efforts"][:k].copy(), events, int(status), kept)
 
 
 #: ``vgt_status`` codes by name, for the loop's reasons.

@@ -138,6 +138,24 @@ def _check_actuators(robot: Robot, set_point: float, q: Array) -> None:
         )
 
 
+@dataclass(frozen=True)
+class DrillingSetup:
+    """What a drilling run starts from, checked (:func:`~.loop.drilling_setup`): the plant ``robot``, the
+    controller's ``model``, the ``bone`` drilled and the one the detector is ``told`` of, the
+    ``settings``, the start ``q0``, the target tool ``frame`` (columns ``e1``, ``e2``, the axis),
+    the ``entry`` point (m, F0) and the encoder ``steps`` of each joint."""
+
+    robot: Robot
+    model: Robot
+    bone: Bone
+    told: Bone
+    settings: DrillingSettings
+    q0: Array
+    frame: Array
+    entry: Array
+    steps: Array
+
+
 # -- the plant ------------------------------------------------------------------------------------
 
 

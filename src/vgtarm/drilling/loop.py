@@ -30,6 +30,7 @@ from .control import (
     Detector,
     DrillingPlant,
     DrillingSettings,
+    DrillingSetup,
     HybridController,
     Sensing,
     check_settings,
@@ -117,6 +118,33 @@ class _Run:
     previous_thrust: float = 0.0
 
 
+def drilling_setup(
+    robot: Robot,
+    bone: Bone,
+    settings: DrillingSettings | None = None,
+    *,
+    q0: Array | None = None,
+    nominal: Bone | None = None,
+) -> DrillingSetup:
+    """The :class:`DrillingSetup` of :func:`drilling_run`'s arguments, each checked (one line
+    naming the field otherwise); the exported controller (:mod:`vgtarm.export.drilling`) starts
+    from the same."""
+    q = np.array(robot.parameters.home if q0 is None else q0, dtype=np.float64)
+    robot.check_assembly(q, where="q0")
+    s = check_settings(robot, settings or DrillingSettings(), q)
+    if not compiled.has_functions(robot):
+        checks.refuse(
+            "robot backend",
+            getattr(robot.backend, "kind", type(robot.backend).__name__),
+            "the symbolic model (drilling needs its bias accelerations and forward kinematics)",
+        )
+    frame = _frame(robot, q)
+    entry = robot.tip_position(q) + s.gap * frame[:, 2]
+    model = robot.with_parameters(robot.parameters.scaled(mass=s.model_mass))
+    steps = np.array([s.encoder_resolution if u == "m" else s.twist_resolution for u in robot.joint_units])
+    return DrillingSetup(robot, model, bone, nominal or bone, s, q, frame, entry, steps)
+
+
 def drilling_run(
     robot: Robot,
     bone: Bone,
@@ -137,29 +165,16 @@ def drilling_run(
     ``"numpy"`` (this module's loop), or ``"auto"``: compiled where the robot's backend is the
     compiled symbolic library, NumPy otherwise (the recursive model of large stacks)."""
     checks.choice("engine", engine, ENGINES)
-    q = np.array(robot.parameters.home if q0 is None else q0, dtype=np.float64)
-    robot.check_assembly(q, where="q0")
-    s = check_settings(robot, settings or DrillingSettings(), q)
-    frame = _frame(robot, q)
-    axis = frame[:, 2]
-    entry = robot.tip_position(q) + s.gap * axis
-    model = robot.with_parameters(robot.parameters.scaled(mass=s.model_mass))
-    plant = DrillingPlant(robot, bone, entry, axis, s.spindle_speed, s.tool_torque)
-    told = nominal or bone
-    steps = np.array([s.encoder_resolution if u == "m" else s.twist_resolution for u in robot.joint_units])
+    setup = drilling_setup(robot, bone, settings, q0=q0, nominal=nominal)
+    if engine == "compiled" or (engine == "auto" and compiled.available(robot)):
+        return _compiled(setup)
+    s, q, frame, entry, model, told = setup.settings, setup.q0.copy(), setup.frame, setup.entry, setup.model, setup.told
+    plant = DrillingPlant(robot, bone, entry, frame[:, 2], s.spindle_speed, s.tool_torque)
     keep_v = math.exp(-2.0 * math.pi * s.velocity_filter_hz * s.dt)
-    sensing = Sensing(model, steps, s.dt, keep_v, math.exp(-s.observer_gain * s.dt))
+    sensing = Sensing(model, setup.steps, s.dt, keep_v, math.exp(-s.observer_gain * s.dt))
     exponent = float(told.coefficients[0, 1])  # the thrust's feed exponent of the first layer
     ctrl = HybridController(s, q.copy(), exponent, depth_ref=-s.gap)
     detector = Detector(s, len(told.layers), exponent, told.reference_feed, told.feed_floor)
-    if not compiled.has_functions(robot):
-        checks.refuse(
-            "robot backend",
-            getattr(robot.backend, "kind", type(robot.backend).__name__),
-            "the symbolic model (drilling needs its bias accelerations and forward kinematics)",
-        )
-    if engine == "compiled" or (engine == "auto" and compiled.available(robot)):
-        return _compiled(robot, model, bone, told, s, q, entry, frame, steps)
     qd = np.zeros(robot.n_joints)
     qd0 = qd.copy()
     rows: list[list[float]] = []
@@ -186,21 +201,13 @@ def drilling_run(
     return DrillingResult(series, np.array(efforts), events, bone, s, success, reason if not success else "done")
 
 
-def _compiled(
-    robot: Robot,
-    model: Robot,
-    bone: Bone,
-    told: Bone,
-    s: DrillingSettings,
-    q: Array,
-    entry: Array,
-    frame: Array,
-    steps: Array,
-) -> DrillingResult:
+def _compiled(setup: DrillingSetup) -> DrillingResult:
     """:func:`drilling_run` through the compiled loop."""
-    if not compiled.available(robot):
+    if not compiled.available(setup.robot):
         checks.refuse("engine", "compiled", 'a robot with the compiled symbolic library (this one runs "numpy")')
-    series, efforts, events, status = compiled.compiled_run(robot, model, bone, told, s, q, entry, frame, steps)
+    s = setup.settings
+    run = compiled.compiled_run(setup)
+    series, efforts, events, status = run.series, run.efforts, run.events, run.status
     success = status == compiled.STATUS["VGT_DONE"]
     if success:
         reason = "done"
@@ -209,7 +216,7 @@ def _compiled(
     else:
         t = float(series[-1, 0]) if len(series) else 0.0
         reason = f"the run left the model at t = {t:.3f} s (status {status})"
-    return DrillingResult(series, efforts, events, bone, s, success, reason)
+    return DrillingResult(series, efforts, events, setup.bone, s, success, reason)
 
 
 def _sample(

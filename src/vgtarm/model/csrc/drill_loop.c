@@ -194,6 +194,7 @@ static int drill_run(const vgt_drill_model *m, drill_work *wk, double *memory, c
             break;
         }
         memcpy(r->efforts + k * nj, F, sizeof F);
+        if (r->q_meas) memcpy(r->q_meas + k * nj, qm, sizeof qm);
         r->n_samples = k + 1;
         if (st.phase == VGT_DRILL_DONE) {
             status = VGT_DONE;

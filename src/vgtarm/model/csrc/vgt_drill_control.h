@@ -20,36 +20,8 @@
 #define VGT_DRILL_SERIES 13
 #define VGT_DRILL_STATE_DOUBLES(nj) (10 * (nj))
 
-enum vgt_drill_phase { VGT_DRILL_TARE = 0, VGT_DRILL_DRILLING, VGT_DRILL_STOPPING, VGT_DRILL_RETRACTING, VGT_DRILL_DONE };
-enum vgt_drill_event { VGT_DRILL_CONTACT = 0, VGT_DRILL_SOFTER, VGT_DRILL_HARDER, VGT_DRILL_BREAKTHROUGH };
-
 /* Evaluates one generated function; 0 on success (defined by the includer). */
 static int vgt_drill_call(const vgt_call *c, void *work, int n_in, const double **in, int n_out, double **out);
-
-/* The controller's state between periods. */
-typedef struct {
-    /* sensing: the last three readings (oldest first), the last two efforts and raw velocities */
-    int n_meas, n_efforts, n_raw, observing;
-    double *q_meas, *efforts, *v_filtered, *v_raw, *tau_hat, *q_centre, *velocity0;
-    /* the run's phase and the tare */
-    int phase;
-    double offset, tare;
-    long tare_n;
-    double stopped_at, retracted_at, previous_thrust;
-    /* the axial loop */
-    double depth_ref, feed_ref, integral, stop_depth, feed_f;
-    int limited;
-    /* the detector */
-    double thrust_f, det_feed_f, specific, level, quiet_until;
-    int count, layer, softer, started;
-    double *events;
-    long max_events, n_events;
-} vgt_drill_state;
-
-/* What one period gives besides the effort. */
-typedef struct {
-    double estimate, observed, push, depth, feed;
-} vgt_drill_output;
 
 /* The state at the start of a run with the tip `gap` before the entry, at rest at q0 (memory: the
  * VGT_DRILL_STATE_DOUBLES(nj) doubles the state uses). */

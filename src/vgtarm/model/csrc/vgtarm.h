@@ -411,10 +411,47 @@ typedef struct {
     const double *tool_axis;       /* (3) the tool's axis in the end-effector frame            */
     double *series;                /* (max_samples, 13) vgtarm.drilling.loop.SERIES             */
     double *efforts;               /* (max_samples, nj)                                       */
+    double *q_meas;                /* (max_samples, nj) the encoder readings (NULL: not kept)   */
     double *events;                /* (max_events, 3): t, kind (0 contact, 1 softer, 2 harder,  */
     long max_events;               /* 3 breakthrough), layer                                  */
     long n_samples, n_events;      /* out                                                     */
 } vgt_drill_run;
+
+/* The phases of a drilling run and the detector's events (vgtarm.drilling.control.PHASES). */
+enum vgt_drill_phase {
+    VGT_DRILL_TARE = 0,       /* holding still while the observer's offset is measured */
+    VGT_DRILL_DRILLING = 1,   /* the thrust regulated, the detector watching            */
+    VGT_DRILL_STOPPING = 2,   /* the feed stopped at the breakthrough                   */
+    VGT_DRILL_RETRACTING = 3, /* moving back along the axis                              */
+    VGT_DRILL_DONE = 4
+};
+enum vgt_drill_event { VGT_DRILL_CONTACT = 0, VGT_DRILL_SOFTER = 1, VGT_DRILL_HARDER = 2, VGT_DRILL_BREAKTHROUGH = 3 };
+
+/* The drilling controller's state between periods (vgt_drill_control.h; its joint-space arrays
+ * point into memory the caller gives: 10 nj doubles). */
+typedef struct {
+    int n_meas, n_efforts, n_raw;  /* readings (<= 3), efforts (<= 2), raw velocities (<= 2) kept */
+    double *q_meas, *efforts, *v_filtered, *v_raw, *tau_hat, *q_centre;
+    int phase;                     /* an enum vgt_drill_phase                                     */
+    double offset, tare;           /* the tare's offset (N) and its running sum                    */
+    long tare_n;
+    double stopped_at, retracted_at, previous_thrust;
+    double depth_ref, feed_ref, integral, stop_depth, feed_f; /* the axial loop                    */
+    int limited;                   /* explicit mode: on the position loop at the feed limit         */
+    double thrust_f, det_feed_f, specific, level, quiet_until; /* the detector                     */
+    int count, layer, softer, started;
+    double *events;                /* (max_events, 3): t, an enum vgt_drill_event, layer           */
+    long max_events, n_events;
+} vgt_drill_state;
+
+/* What one period of the drilling controller gives besides the efforts. */
+typedef struct {
+    double estimate;  /* the thrust fed back (N)                         */
+    double observed;  /* the observer's thrust, tared (N)                */
+    double push;      /* the explicit mode's axial force (N)             */
+    double depth;     /* the measured depth (m) and feed (m/s)           */
+    double feed;
+} vgt_drill_output;
 
 /* Run the drilling loop: VGT_DONE when the run ended after its retract, VGT_ABOVE_THRESHOLD when
  * max_samples passed without a breakthrough, or a failure status (the samples so far kept). */
