@@ -1,5 +1,5 @@
 """``vgtarm drill``: drill a layered bone under hybrid force and position control in the tool frame
-(:func:`vgtarm.drilling.drilling_run`, in NumPy), the thrust regulated from the observer's estimate,
+(:func:`vgtarm.drilling.drilling_run`, the compiled loop), the thrust regulated from the observer's estimate,
 the layers and the breakthrough detected, then the drill retracted.
 
 The folder ``--out`` gets ``timeseries.csv`` (the run's series, SI units, a column per
@@ -43,6 +43,14 @@ def add_parser(sub: Any) -> None:
             "summary.json and drilling.png."
         ),
     )
+    add_drilling_flags(parser)
+    parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="the folder to write")
+    add_config(parser)
+    parser.set_defaults(run=cmd_drill)
+
+
+def add_drilling_flags(parser: argparse.ArgumentParser) -> None:
+    """The run's flags, shared by ``vgtarm drill`` and ``vgtarm export drilling``."""
     parser.add_argument("--bone", type=Path, required=True, metavar="FILE", help="a bone file (examples/bones/)")
     parser.add_argument(
         "--mode", choices=("admittance", "explicit"), default="admittance", help="the force loop (default admittance)"
@@ -57,9 +65,49 @@ def add_parser(sub: Any) -> None:
     parser.add_argument(
         "--feedback", choices=("observer", "sensor"), default="observer", help="the thrust fed back (default observer)"
     )
-    parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="the folder to write")
+
+
+def drilling_settings(args: argparse.Namespace) -> Any:
+    """The :class:`~vgtarm.drilling.DrillingSettings` of the flags of :func:`add_drilling_flags`."""
+    from ...drilling import DrillingSettings
+
+    return DrillingSettings(
+        set_point=args.set_point,
+        feed_limit=1e-3 * args.feed,
+        spindle_speed=RPM * args.spindle,
+        mode=args.mode,
+        feedback=args.feedback,
+    )
+
+
+def add_export_parser(formats: Any) -> None:
+    """Register ``vgtarm export drilling`` on the ``export`` command's formats."""
+    parser = formats.add_parser(
+        "drilling",
+        help="the force-controlled drilling controller as dependency-free C99 (bit for bit with vgtarm drill)",
+        description=(
+            "Write the drilling controller of the run `vgtarm drill` makes with the same flags as a C99 folder: "
+            "the controller model's functions (CasADi), the run's numbers, the simulation's own per-period "
+            "code, vgtd_replay and a Makefile; compiled with strict flags before it is put in place."
+        ),
+    )
+    add_drilling_flags(parser)
+    parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="the folder to write (new)")
     add_config(parser)
-    parser.set_defaults(run=cmd_drill)
+    parser.set_defaults(run=cmd_export_drilling)
+
+
+def cmd_export_drilling(args: argparse.Namespace) -> int:
+    """Export the drilling controller."""
+    from ...drilling import load_bone
+    from ...export.drilling import export_drilling
+
+    check_output_folder(args.out, "--out", inputs=[args.config, args.bone], owned=())
+    robot = load_robot(args.config)
+    bone = load_bone(args.bone)
+    done = export_drilling(robot, bone, args.out, drilling_settings(args))
+    print(f"written    {escape(str(done))}: make builds libvgtd.a and vgtd_replay")
+    return 0
 
 
 def _series_csv(result: Any, names: tuple[str, ...]) -> str:
@@ -80,19 +128,13 @@ def _events_csv(events: tuple[tuple[float, str, int], ...]) -> str:
 
 def cmd_drill(args: argparse.Namespace) -> int:
     """Run the drilling, print its measures, write the folder."""
-    from ...drilling import SERIES, TARGETS, DrillingSettings, drilling_run, load_bone
+    from ...drilling import SERIES, TARGETS, drilling_run, load_bone
 
     inputs = [args.config, args.bone]
     check_output_folder(args.out, "--out", inputs=inputs, owned=DRILL_FILES)  # before the work
     robot = load_robot(args.config)
     bone = load_bone(args.bone)
-    settings = DrillingSettings(
-        set_point=args.set_point,
-        feed_limit=1e-3 * args.feed,
-        spindle_speed=RPM * args.spindle,
-        mode=args.mode,
-        feedback=args.feedback,
-    )
+    settings = drilling_settings(args)
     result = drilling_run(robot, bone, settings)
     summary = result.summary()
     print(f"bone       {escape(str(args.bone))}: {len(bone.layers)} layers, {1e3 * bone.thickness:.2f} mm")

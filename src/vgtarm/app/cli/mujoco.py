@@ -12,6 +12,7 @@ from ...export import command as export_command
 from ...fileio import atomic_write_text, check_output_file
 from ...model.robot import load_robot
 from . import check_path
+from . import drill as cli_drill
 from .options import add_config, positive_float, positive_int, seed_number, whole_number
 
 
@@ -81,6 +82,7 @@ def add_parsers(sub: Any) -> None:
     )
     export_command.add_arguments(controller)
     controller.set_defaults(run=export_command.run)
+    cli_drill.add_export_parser(formats)
 
     check_parser = sub.add_parser(
         "check", help="check the robot: our dynamics against MuJoCo's, or a path against its actuator limits"

@@ -393,7 +393,7 @@ static int vgt_drill_control(vgt_drill_state *st, const vgt_drill_settings *s, c
     vgt_drill_measure(st, s, qm, qd0);
     if (vgt_drill_observe(st, s, m, work, p)) return 1;
     const double *vm = st->v_filtered;
-    double J[nt * nj], Jdot_qd[nt], held_error[4], held_rate[4], depth, feed, M[nj * nj], C[nj];
+    double J[VGT_DRILL_TASK * nj], Jdot_qd[VGT_DRILL_TASK], held_error[4], held_rate[4], depth, feed, M[nj * nj], C[nj];
     if (vgt_drill_task(m, work, nj, p, qm, vm, entry, frame, tool_axis, J, Jdot_qd, held_error, held_rate, &depth,
                        &feed, M, C))
         return 1;
@@ -405,7 +405,7 @@ static int vgt_drill_control(vgt_drill_state *st, const vgt_drill_settings *s, c
     st->previous_thrust = sensor_thrust;
     vgt_drill_advance(st, s, t, depth, feed, estimate, observed);
     /* the law (HybridController.effort) */
-    double L[nj * nj], MinvJt[nj * nt], Lam[nt * nt];
+    double L[nj * nj], MinvJt[nj * VGT_DRILL_TASK], Lam[VGT_DRILL_TASK * VGT_DRILL_TASK];
     memcpy(L, M, sizeof L);
     if (!vgt_drill_cholesky(nj, L)) return 1;
     for (int r = 0; r < nt; ++r) {
@@ -419,7 +419,7 @@ static int vgt_drill_control(vgt_drill_state *st, const vgt_drill_settings *s, c
             for (int j = 0; j < nj; ++j) v += J[r * nj + j] * MinvJt[j * nt + c];
             Lam[r * nt + c] = v;
         }
-    double LL[nt * nt];
+    double LL[VGT_DRILL_TASK * VGT_DRILL_TASK];
     memcpy(LL, Lam, sizeof LL);
     for (int r = 0; r < nt; ++r) /* symmetric part: the factor reads the lower triangle */
         for (int c = 0; c < r; ++c) LL[r * nt + c] = 0.5 * (Lam[r * nt + c] + Lam[c * nt + r]);
@@ -443,7 +443,7 @@ static int vgt_drill_control(vgt_drill_state *st, const vgt_drill_settings *s, c
     vgt_drill_solve(nt, LL, rhs, Ft); /* Lambda (acc - Jdot qd) with Lambda = (J M^-1 J^T)^-1 */
     Ft[4] += axial_force;
     const double wp = 2.0 * VGT_DRILL_PI * s->null_frequency;
-    double target[nj], posture[nj], y[nt];
+    double target[nj], posture[nj], y[VGT_DRILL_TASK];
     for (int j = 0; j < nj; ++j) target[j] = wp * wp * (st->q_centre[j] - qm[j]) - 2.0 * wp * vm[j];
     for (int i = 0; i < nj; ++i) {
         double v = 0.0;
