@@ -7,6 +7,7 @@ with its summary against the issue's targets and its figure."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -153,6 +154,7 @@ def drilling_run(
     q0: Array | None = None,
     nominal: Bone | None = None,
     engine: str = "auto",
+    plant: Callable[..., DrillingPlant] = DrillingPlant,
 ) -> DrillingResult:
     """Drill ``bone`` with ``robot`` (the plant; the controller's model is its parameters with the
     masses times ``settings.model_mass``) along the tool axis at ``q0`` (default the home
@@ -163,13 +165,19 @@ def drilling_run(
 
     ``engine``: ``"compiled"`` (the loop in C, :mod:`.compiled`; about a hundred times faster),
     ``"numpy"`` (this module's loop), or ``"auto"``: compiled where the robot's backend is the
-    compiled symbolic library, NumPy otherwise (the recursive model of large stacks)."""
+    compiled symbolic library, NumPy otherwise.
+
+    ``plant``: the class of the true robot drilling (called as :class:`~.control.DrillingPlant`
+    is): another plant runs the NumPy loop (``engine`` ``"compiled"`` is then refused), as
+    :func:`vgtarm.mujoco_bridge.drilling.mujoco_drilling_run` does with MuJoCo's dynamics."""
     checks.choice("engine", engine, ENGINES)
     setup = drilling_setup(robot, bone, settings, q0=q0, nominal=nominal)
-    if engine == "compiled" or (engine == "auto" and compiled.available(robot)):
+    if plant is not DrillingPlant and engine == "compiled":
+        checks.refuse("engine", engine, '"numpy" or "auto" with a plant of its own (the compiled loop has its own)')
+    if plant is DrillingPlant and (engine == "compiled" or (engine == "auto" and compiled.available(robot))):
         return _compiled(setup)
     s, q, frame, entry, model, told = setup.settings, setup.q0.copy(), setup.frame, setup.entry, setup.model, setup.told
-    plant = DrillingPlant(robot, bone, entry, frame[:, 2], s.spindle_speed, s.tool_torque)
+    truth = plant(robot, bone, entry, frame[:, 2], s.spindle_speed, s.tool_torque)
     keep_v = math.exp(-2.0 * math.pi * s.velocity_filter_hz * s.dt)
     sensing = Sensing(model, setup.steps, s.dt, keep_v, math.exp(-s.observer_gain * s.dt))
     exponent = float(told.coefficients[0, 1])  # the thrust's feed exponent of the first layer
@@ -184,7 +192,7 @@ def drilling_run(
     for k in range(int(round(s.duration / s.dt)) + 1):
         t = k * s.dt
         try:
-            row, F = _sample(t, q, qd, qd0, plant, sensing, ctrl, detector, run, frame, entry)
+            row, F = _sample(t, q, qd, qd0, truth, sensing, ctrl, detector, run, frame, entry)
         except (AssemblyError, InputError) as error:
             reason = f"the run left the model at t = {t:.3f} s: {error}"
             break
@@ -192,7 +200,7 @@ def drilling_run(
         efforts.append(F)
         if run.phase == DONE:
             break
-        q, qd = plant.step(q, qd, F, s.dt, s.substeps)
+        q, qd = truth.step(q, qd, F, s.dt, s.substeps)
     else:
         reason = f"no breakthrough detected within {s.duration:g} s"
     series = np.array(rows, dtype=np.float64).reshape(-1, len(SERIES))
