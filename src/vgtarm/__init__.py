@@ -49,7 +49,7 @@ if TYPE_CHECKING:  # the names as static type checkers and editors see them
     from .calibration import calibrate, exciting_trajectory, identify, plan_poses
     from .control import ComputedForceControl, Gains, SwitchingControl
     from .design import cartesian_stiffness, deflection, dexterity, workspace_volume
-    from .drilling import load_bone
+    from .drilling import DrillingSettings, drilling_run, load_bone
     from .errors import (
         AssemblyError,
         ConfigError,
@@ -61,7 +61,7 @@ if TYPE_CHECKING:  # the names as static type checkers and editors see them
     )
     from .experiment import PRESETS, Experiment
     from .experiment.cases import case_study, run_case
-    from .export import export_controller
+    from .export import export_controller, export_drilling
     from .ga import GAOptions
     from .ik import AxisPath, IKOptions, IKResult, OrientationPath, PointSolution, inverse_kinematics, solve_point
     from .model import (
@@ -149,6 +149,9 @@ _SOURCES: dict[str, tuple[str, str]] = {
     "exciting_trajectory": ("calibration", "exciting_trajectory"),
     # bone drilling: the tool's thrust and torque through a layered bone
     "load_bone": ("drilling", "load_bone"),
+    "DrillingSettings": ("drilling", "DrillingSettings"),
+    "drilling_run": ("drilling", "drilling_run"),
+    "export_drilling": ("export", "export_drilling"),
     # one run as a record (every option declared once), the presets
     "Experiment": ("experiment", "Experiment"),
     "PRESETS": ("experiment", "PRESETS"),
@@ -219,6 +222,7 @@ __all__ = [
     "Scenario",
     "SimulationError",
     "SimulationResult",
+    "DrillingSettings",
     "Study",
     "SwitchingControl",
     "UnreachableError",
@@ -234,9 +238,11 @@ __all__ = [
     "design",
     "dexterity",
     "drilling",
+    "drilling_run",
     "exciting_trajectory",
     "export",
     "export_controller",
+    "export_drilling",
     "ga",
     "identify",
     "ik",
