@@ -7,7 +7,9 @@ Two modes, one of them required:
   joint readings and measured ``x, y, z`` (optionally ``qw, qx, qy, qz``); the folder ``--out`` gets
   the corrected robot file ``robot.toml`` (the input's format), ``report.md`` (every parameter with
   its standard error, or undetermined; the undetermined combinations; the sensor offsets),
-  ``parameters.csv``, ``residuals.csv`` and the figure ``residuals.png``.
+  ``parameters.csv``, ``residuals.csv``, the figures ``residuals.png`` and ``singular_values.png``,
+  and the page ``calibration.html`` (:mod:`vgtarm.app.reports.calibration_page`: the fit, the
+  identifiability, the parameters, the poses' conditioning against random poses, the figures).
 - ``--plan-poses K``: choose ``K`` poses that make the identification well conditioned; the folder
   gets ``poses.csv`` (the joints to command and the nominal tool point: replace ``x, y, z`` with the
   measured ones and give it back with ``--measurements``) and ``plan.md`` (the condition number
@@ -28,8 +30,12 @@ from ...calibration.kinematic import (
     DEFAULT_POSITION_NOISE,
     DEFAULT_RTOL,
     Calibration,
+    Identifiability,
+    Measurements,
     PosePlan,
+    ToolModel,
     calibrate,
+    candidate_poses,
     plan_poses,
     read_measurements,
 )
@@ -40,8 +46,18 @@ from ...model.robot import Robot, load_robot
 from .options import add_config, positive_float, positive_int
 
 #: The files ``vgtarm calibrate`` writes in its folder (and may replace there).
-CALIBRATE_FILES = ("robot.toml", "report.md", "parameters.csv", "residuals.csv", "residuals.png")
+CALIBRATE_FILES = (
+    "robot.toml",
+    "report.md",
+    "parameters.csv",
+    "residuals.csv",
+    "residuals.png",
+    "singular_values.png",
+    "calibration.html",
+)
 PLAN_FILES = ("poses.csv", "plan.md")
+#: Random sets of poses the measured ones are compared with on the page (as ``plan.md`` does).
+RANDOM_TRIALS = 20
 
 
 def add_parser(sub: Any) -> None:
@@ -52,7 +68,8 @@ def add_parser(sub: Any) -> None:
         description=(
             "With --measurements: fit every length of the robot file and each leg sensor's zero offset to "
             "measured tool positions (a CSV: one column per joint, x, y, z in m; optionally qw, qx, qy, qz), "
-            "report what the poses determine and write the corrected robot file. With --plan-poses K: choose K "
+            "report what the poses determine and write the corrected robot file and the page calibration.html. "
+            "With --plan-poses K: choose K "
             "poses that determine the parameters well and write them as a CSV to measure."
         ),
     )
@@ -78,12 +95,17 @@ def add_parser(sub: Any) -> None:
         action="store_false",
         help="fit the lengths alone: the leg sensors are trusted to read true lengths (no zero offsets)",
     )
-    parser.add_argument("--seed", type=int, default=0, help="--plan-poses: seed of the candidate poses (default 0)")
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="seed of the candidate poses (--plan-poses: chosen from; --measurements: compared with; default 0)",
+    )
     parser.add_argument(
         "--candidates",
         type=positive_int,
         default=DEFAULT_CANDIDATES,
-        help=f"--plan-poses: random configurations to choose from (default {DEFAULT_CANDIDATES})",
+        help=f"random configurations to choose from or compare with (default {DEFAULT_CANDIDATES})",
     )
     parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="the folder to write")
     add_config(parser)
@@ -92,6 +114,8 @@ def add_parser(sub: Any) -> None:
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     """Run the chosen mode and write its folder."""
+    from ..reports.calibration_page import calibration_html
+
     if args.plan_poses is not None:
         return _plan(args)
     inputs = [args.config, args.measurements]
@@ -106,14 +130,143 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         f"fit        {result.message}: {result.iterations} iterations, RMS residual {1e3 * result.rms_residual:.4g} mm"
     )
     print(result.identifiability.text())
+    conditioning = pose_conditioning(
+        robot, result, measurements, candidates=args.candidates, seed=args.seed, sensor_offsets=args.sensor_offsets
+    )
+    summary = calibration_summary(robot, result, measurements, str(args.measurements), args.noise, conditioning)
     with atomic_folder(args.out, "--out", inputs=inputs, owned=CALIBRATE_FILES, checked=True) as folder:
         atomic_write_text(folder / "robot.toml", result.robot_toml())
         atomic_write_text(folder / "report.md", _report(robot, result, str(args.measurements)))
         atomic_write_text(folder / "parameters.csv", _parameters_csv(result))
         atomic_write_text(folder / "residuals.csv", _residuals_csv(result))
         result.figure().savefig(folder / "residuals.png", dpi=110)
+        singular_value_figure(result.identifiability).savefig(folder / "singular_values.png", dpi=110)
+        pictures = [folder / "residuals.png", folder / "singular_values.png"]
+        atomic_write_text(folder / "calibration.html", calibration_html(summary, pictures))
     print(f"written    {escape(str(args.out))}: {', '.join(CALIBRATE_FILES)}")
     return 0 if result.success else 1
+
+
+def _condition_number(blocks: np.ndarray) -> float:
+    """Largest over smallest singular value of stacked Jacobian blocks ``(K, rows, m)``."""
+    s = np.linalg.svd(blocks.reshape(-1, blocks.shape[2]), compute_uv=False)
+    return float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
+
+
+def pose_conditioning(
+    robot: Robot, result: Calibration, measurements: Measurements, *, candidates: int, seed: int, sensor_offsets: bool
+) -> dict[str, Any]:
+    """How well the measured poses condition the identification: the condition number of the free
+    parameters' Jacobian over them (positions only, at the fitted values), and the same for
+    :data:`RANDOM_TRIALS` sets of as many random poses (``candidates`` seeded configurations within
+    the limits, :func:`~vgtarm.calibration.kinematic.candidate_poses`), as ``plan.md`` compares a plan."""
+    model = ToolModel(robot, sensor_offsets=sensor_offsets)
+    free = result.identifiability.free
+    _, jacobian = model.evaluate(measurements.q, result.values)
+    found: dict[str, Any] = {"condition_number": _condition_number(jacobian[:, :, free]), "random": None}
+    pool = candidate_poses(robot, candidates, seed=seed)
+    count = len(measurements)
+    if len(pool) < count:
+        return found
+    _, blocks = model.evaluate(pool, result.values)
+    blocks = blocks[:, :, free]
+    usable = np.isfinite(blocks).all(axis=(1, 2))
+    blocks = blocks[usable]
+    if len(blocks) < count:
+        return found
+    rng = np.random.default_rng([seed, 1])
+    values = np.array(
+        [_condition_number(blocks[rng.choice(len(blocks), count, replace=False)]) for _ in range(RANDOM_TRIALS)]
+    )
+    found["random"] = {
+        "trials": RANDOM_TRIALS,
+        "candidates": len(blocks),
+        "seed": seed,
+        "median": float(np.median(values)),
+        "best": float(values.min()),
+        "worst": float(values.max()),
+    }
+    return found
+
+
+def calibration_summary(
+    robot: Robot,
+    result: Calibration,
+    measurements: Measurements,
+    source: str,
+    noise: float,
+    conditioning: dict[str, Any],
+) -> dict[str, Any]:
+    """The data of ``calibration.html`` (SI units): the fit, the identifiability, every parameter
+    (``None`` for the value and error of a held one: undetermined), the pose ``conditioning``
+    (:func:`pose_conditioning`) and the written robot file's name."""
+    analysis = result.identifiability
+    held = [status == "held" for status in result.status]
+    parameters = [
+        {
+            "name": name,
+            "nominal": float(x0),
+            "identified": None if h else float(x),
+            "standard_error": None if h else float(se),
+            "status": status,
+        }
+        for name, x0, x, se, status, h in zip(
+            result.names, result.nominal, result.values, result.standard_errors, result.status, held, strict=True
+        )
+    ]
+    return {
+        "robot": robot.parameters.name,
+        "joints": robot.n_joints,
+        "measurements": source,
+        "poses": len(measurements),
+        "orientation": measurements.rotation is not None,
+        "noise_m": noise,
+        "fit": {
+            "success": result.success,
+            "message": result.message,
+            "iterations": result.iterations,
+            "evaluations": result.evaluations,
+            "rms_residual_m": result.rms_residual,
+            "nominal_rms_residual_m": float(np.sqrt(np.mean(result.nominal_residuals[:, :3] ** 2))),
+            "sigma": result.sigma,
+        },
+        "identifiability": {
+            "rank": analysis.rank,
+            "parameters": len(analysis.names),
+            "tolerance": analysis.tolerance,
+            "singular_values": analysis.singular_values.tolist(),
+            "condition_number": analysis.condition_number,
+            "undetermined": list(analysis.combinations),
+        },
+        "parameters": parameters,
+        "offsets": result.offsets,
+        "conditioning": conditioning,
+        "robot_file": "robot.toml",
+    }
+
+
+def singular_value_figure(analysis: Identifiability) -> Any:
+    """The singular values of the weighted identification Jacobian (1/m, log scale), the
+    undetermined ones (at most the tolerance, drawn at it) apart; returns the figure (never shown)."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(8, 3.2), layout="constrained")
+    ax = fig.add_subplot()
+    s = np.asarray(analysis.singular_values, dtype=float)
+    k = np.arange(1, len(s) + 1)
+    determined = s > analysis.tolerance
+    ax.bar(k[determined], s[determined], label="determined")
+    if (~determined).any():
+        drawn = np.full(int((~determined).sum()), analysis.tolerance)
+        ax.bar(k[~determined], drawn, color="#d62728", label="not determined (drawn at the tolerance)")
+    ax.axhline(analysis.tolerance, color="0.4", lw=0.8, ls="--", label="tolerance")
+    ax.set_yscale("log")
+    ax.set_xticks(k)
+    ax.set_xlabel("direction")
+    ax.set_ylabel("singular value (1/m)")
+    ax.set_title(f"Identification Jacobian: rank {analysis.rank} of {len(s)}")
+    ax.legend(fontsize=8)
+    return fig
 
 
 def _plan(args: argparse.Namespace) -> int:

@@ -7,8 +7,10 @@ Two modes (:mod:`vgtarm.calibration.dynamic`, :mod:`vgtarm.calibration.excitatio
   ``s1, ..., s1_d, ..., s1_dd, ...``, as ``vgtarm retime``'s ``joints.csv``).
 - ``vgtarm identify --data FILE --out DIR [--config FILE]``: identify from a measurement file and
   write the identified robot (``identified_robot.toml``, which :func:`vgtarm.load_robot` reads),
-  the table of base parameters with their standard errors (``base_parameters.csv``) and the
-  residual figure (``residuals.png``).
+  the table of base parameters with their standard errors (``base_parameters.csv``), the figures
+  ``residuals.png`` (force residuals) and ``trajectory.png`` (the data's joint positions), and the
+  page ``identification.html`` (:mod:`vgtarm.app.reports.calibration_page`: the trajectory, the
+  base parameters, the physical consistency of each body, the validation numbers, the figures).
 
 The measurement file is a CSV with a header: ``t`` (s), each joint's position (its name: ``s1``...),
 its force (``s1_F``..., N or N m) and optionally its rate and acceleration (``s1_d``, ``s1_dd``...).
@@ -27,7 +29,15 @@ from typing import Any
 import numpy as np
 import scipy.signal
 
-from ...calibration.dynamic import Identification, identify
+from ...calibration.dynamic import (
+    RANK_TOLERANCE,
+    STANDARD_UNITS,
+    Identification,
+    body_standard,
+    identify,
+    is_consistent,
+    regressor,
+)
 from ...calibration.excitation import exciting_trajectory
 from ...errors import InputError, escape
 from ...fileio import atomic_folder, atomic_write_text, check_output_folder, read_text_limited
@@ -36,10 +46,18 @@ from ...model.stack.description import robot_to_toml
 from .options import add_config, positive_float, positive_int, seed_number
 
 #: The files each mode writes in its folder.
-IDENTIFY_FILES = ("identified_robot.toml", "base_parameters.csv", "residuals.png")
+IDENTIFY_FILES = (
+    "identified_robot.toml",
+    "base_parameters.csv",
+    "residuals.png",
+    "trajectory.png",
+    "identification.html",
+)
 EXCITE_FILES = ("excitation.csv",)
 #: Largest measurement file read (bytes).
 DATA_LIMIT = 2**28
+#: Fraction of the samples (the last ones) the page's hold-out check predicts from a fit to the others.
+HOLDOUT_FRACTION = 0.3
 
 
 def add_parser(sub: Any) -> None:
@@ -50,7 +68,8 @@ def add_parser(sub: Any) -> None:
         description=(
             "With --data: fit the base inertial and friction parameters to the measured forces and write the "
             "physically consistent identified robot (identified_robot.toml), the base parameters with their "
-            "standard errors (base_parameters.csv) and the residuals (residuals.png). With --excite: write an "
+            "standard errors (base_parameters.csv), the residuals (residuals.png), the data's trajectory "
+            "(trajectory.png) and the page identification.html. With --excite: write an "
             "exciting trajectory for the robot (excitation.csv)."
         ),
     )
@@ -70,6 +89,8 @@ def add_parser(sub: Any) -> None:
 
 def cmd_identify(args: argparse.Namespace) -> int:
     """Run the chosen mode; return the exit code."""
+    from ..reports.calibration_page import identification_html
+
     if args.excite:
         return _excite(args)
     inputs = [args.config, args.data]
@@ -82,10 +103,16 @@ def cmd_identify(args: argparse.Namespace) -> int:
     print(f"residual   RMS {result.rms_least_squares:.4g} (least squares), {result.rms_consistent:.4g} (consistent)")
     if result.base.undetermined:
         print(f"undetermined (kept at the prior): {', '.join(result.base.undetermined)}")
+    summary = identification_summary(robot, result, (q, qd, qdd, forces), str(args.data))
     with atomic_folder(args.out, "--out", inputs=inputs, owned=IDENTIFY_FILES, checked=True) as folder:
         atomic_write_text(folder / "identified_robot.toml", robot_to_toml(result.parameters, header=_header(args)))
         atomic_write_text(folder / "base_parameters.csv", base_table(result))
+        written = load_robot(folder / "identified_robot.toml", model=getattr(args, "model", None))
+        summary["validation"]["rms_file"] = _rms(forces - written.inverse_dynamics(q, qd, qdd))
         residual_figure(result, robot.joint_names).savefig(folder / "residuals.png", dpi=110)
+        trajectory_figure(robot, q).savefig(folder / "trajectory.png", dpi=110)
+        pictures = [folder / "residuals.png", folder / "trajectory.png"]
+        atomic_write_text(folder / "identification.html", identification_html(summary, pictures))
     print(f"written    {escape(str(args.out))}: {', '.join(IDENTIFY_FILES)}")
     return 0
 
@@ -207,4 +234,172 @@ def residual_figure(result: Identification, names: tuple[str, ...]) -> Any:
         ax.set_ylabel(f"{names[k]}\n(RMS {np.sqrt(np.mean(result.residual[:, k] ** 2)):.3g})", fontsize=8)
     axes[-1].set_xlabel("sample")
     fig.suptitle("Force residuals of the identified model (N, N m for twists)")
+    return fig
+
+
+def _rms(values: np.ndarray, axis: int | None = None) -> Any:
+    """Root mean square of ``values`` (over ``axis``; all of them by default)."""
+    rms = np.sqrt(np.mean(np.square(values), axis=axis))
+    return float(rms) if axis is None else rms
+
+
+def holdout_check(
+    robot: Robot, result: Identification, data: tuple[np.ndarray, ...], fraction: float = HOLDOUT_FRACTION
+) -> dict[str, Any] | None:
+    """Predict the last ``fraction`` of the samples from a least-squares fit of the base parameters
+    (weighted by each joint's noise, as :func:`~vgtarm.calibration.dynamic.identify`) to the others:
+    the RMS residual of the fit and of the prediction (N, N m), or ``None`` when the first part does
+    not excite every base parameter (its base regressor is rank deficient)."""
+    q, qd, qdd, forces = data
+    samples, n = q.shape
+    split = int(round((1.0 - fraction) * samples))
+    design = result.base.regressor(regressor(robot, q, qd, qdd))  # (N, n, r)
+    weights = 1.0 / np.maximum(result.noise, np.finfo(float).tiny)
+    train = (design[:split] * weights[:, None]).reshape(-1, design.shape[2])
+    norms = np.linalg.norm(train, axis=0)
+    if not 0 < split < samples or not (norms > 0).all():
+        return None
+    if np.linalg.matrix_rank(train / norms, tol=RANK_TOLERANCE * np.linalg.norm(train / norms, 2)) < train.shape[1]:
+        return None
+    estimate = np.linalg.lstsq(train, (forces[:split] * weights).reshape(-1), rcond=None)[0]
+    residual = forces - design @ estimate
+    return {
+        "fit_samples": split,
+        "test_samples": samples - split,
+        "rms_fit": _rms(residual[:split]),
+        "rms_prediction": _rms(residual[split:]),
+    }
+
+
+def _base_unit(result: Identification, index: int, units: tuple[str, ...]) -> str:
+    """The unit of the standard parameter ``index`` (a body's ten, then the joints' viscous ones)."""
+    bodies = 10 * len(result.parameters.bodies)
+    if index < bodies:
+        return STANDARD_UNITS[index % 10]
+    return "N m s/rad" if units[index - bodies] == "rad" else "N s/m"
+
+
+def _consistency(robot: Robot, result: Identification) -> dict[str, Any]:
+    """Each identified body's mass, centre of mass, principal moments about it, least triangle
+    margin and whether its pseudo-inertia is positive definite; the viscous coefficients."""
+    bodies = []
+    for body in result.parameters.bodies:
+        moments = np.linalg.eigvalsh(np.asarray(body.inertia_matrix, dtype=float))  # ascending
+        bodies.append(
+            {
+                "name": body.name,
+                "mass": float(body.mass),
+                "com_m": [float(c) for c in body.com],
+                "principal_moments": moments.tolist(),
+                "triangle_margin": float(moments[0] + moments[1] - moments[2]),
+                "consistent": is_consistent(body_standard(body)),
+            }
+        )
+    viscous = dict(zip(robot.joint_names, (float(v) for v in result.parameters.viscous), strict=True))
+    return {"bodies": bodies, "viscous": viscous, "success": result.success, "message": result.message}
+
+
+def _trajectory(robot: Robot, result: Identification, data: tuple[np.ndarray, ...]) -> dict[str, Any]:
+    """The data's condition number and, per joint, its limits, range, largest rate and acceleration
+    and RMS force."""
+    q, qd, qdd, forces = data
+    lower, upper = robot.joint_limits()
+    joints = [
+        {
+            "name": name,
+            "unit": unit,
+            "lower": float(lower[k]),
+            "upper": float(upper[k]),
+            "min": float(q[:, k].min()),
+            "max": float(q[:, k].max()),
+            "span_used": float((q[:, k].max() - q[:, k].min()) / (upper[k] - lower[k])),
+            "max_rate": float(np.abs(qd[:, k]).max()),
+            "max_acceleration": float(np.abs(qdd[:, k]).max()),
+            "rms_force": float(_rms(forces[:, k])),
+        }
+        for k, (name, unit) in enumerate(zip(robot.joint_names, robot.joint_units, strict=True))
+    ]
+    return {"condition_number": result.condition_number, "joints": joints}
+
+
+def identification_summary(
+    robot: Robot, result: Identification, data: tuple[np.ndarray, ...], source: str
+) -> dict[str, Any]:
+    """The data of ``identification.html`` (SI units) from the prior ``robot``, the ``result`` and
+    the ``data`` ``(q, qd, qdd, forces)`` it was identified from (``source``: the file): the
+    trajectory, the base parameters, the consistency checks and the validation numbers (its
+    ``rms_file``, of the written robot file read back, is filled in by the command)."""
+    q, qd, qdd, forces = data
+    prior = result.base.of(result.prior)
+    base = [
+        {
+            "label": label,
+            "unit": _base_unit(result, lead, robot.joint_units),
+            "least_squares": float(ls),
+            "standard_error": float(se),
+            "consistent": float(c),
+            "prior": float(p),
+        }
+        for label, lead, ls, se, c, p in zip(
+            result.base.labels,
+            result.base.independent,
+            result.least_squares,
+            result.standard_errors,
+            result.consistent,
+            prior,
+            strict=True,
+        )
+    ]
+    residual = _rms(result.residual, axis=0)
+    rms_force = _rms(forces, axis=0)
+    joints = [
+        {
+            "name": name,
+            "noise": float(result.noise[k]),
+            "rms_residual": float(residual[k]),
+            "rms_force": float(rms_force[k]),
+        }
+        for k, name in enumerate(robot.joint_names)
+    ]
+    return {
+        "robot": robot.parameters.name,
+        "joints": robot.n_joints,
+        "data": source,
+        "samples": result.samples,
+        "robot_file": "identified_robot.toml",
+        "trajectory": _trajectory(robot, result, data),
+        "base": {
+            "standard": len(result.base.names),
+            "parameters": base,
+            "undetermined": list(result.base.undetermined),
+        },
+        "consistency": _consistency(robot, result),
+        "validation": {
+            "rms_prior": _rms(forces - robot.inverse_dynamics(q, qd, qdd)),
+            "rms_least_squares": result.rms_least_squares,
+            "rms_consistent": result.rms_consistent,
+            "rms_file": None,
+            "holdout": holdout_check(robot, result, data),
+            "joints": joints,
+        },
+    }
+
+
+def trajectory_figure(robot: Robot, q: np.ndarray) -> Any:
+    """Each joint's position in the data as a fraction of its range (0: lower limit, 1: upper)
+    against the sample; returns the figure (never shown)."""
+    from matplotlib.figure import Figure
+
+    from ...markup import mpl_text
+
+    lower, upper = robot.joint_limits()
+    fig = Figure(figsize=(8.0, 3.5), layout="constrained")
+    ax = fig.add_subplot()
+    for k, name in enumerate(robot.joint_names):
+        ax.plot((q[:, k] - lower[k]) / (upper[k] - lower[k]), lw=0.8, label=mpl_text(name))
+    ax.set_ylim(-0.05, 1.05)
+    ax.set_xlabel("sample")
+    ax.set_ylabel("position (fraction of the range)")
+    ax.set_title("The trajectory of the data")
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.0, 0.5))
     return fig
