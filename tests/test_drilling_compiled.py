@@ -89,3 +89,28 @@ def test_a_robot_without_the_loops_functions_is_refused(robot):
             drilling_run(recursive, bone, DrillingSettings(duration=0.01), engine=engine)
     with pytest.raises(InputError, match=r"^engine = 'fast': expected one of"):
         drilling_run(robot, bone, DrillingSettings(duration=0.01), engine="fast")
+
+
+@pytest.fixture(scope="module")
+def tight_robot(tmp_path_factory):
+    """The paper robot with actuators whose legs' peak force (44 N) the drilling reaches."""
+    from pathlib import Path
+
+    from vgtarm.model.robot import load_robot
+
+    text = (Path(FEMUR).parents[1] / "paper_robot_with_actuators.toml").read_text()
+    path = tmp_path_factory.mktemp("tight") / "tight.toml"
+    path.write_text(text.replace("force = 200.0", "force = 44.0"))
+    return load_robot(path)
+
+
+def test_the_actuators_clip_the_efforts_in_both_loops(tight_robot, small_bone):
+    fast, slow = _pair(tight_robot, small_bone, **EXACT)
+    force = tight_robot.actuators.force
+    assert fast.success and slow.success
+    at_limit = np.abs(fast.efforts) >= force - 1e-12
+    assert at_limit.any() and np.all(np.abs(fast.efforts) <= force)  # clipped, and never beyond
+    assert np.array_equal(at_limit, np.abs(slow.efforts) >= force - 1e-12)
+    for i, name in enumerate(SERIES):
+        scale = max(float(np.max(np.abs(slow.series[:, i]))), 1e-9)
+        assert float(np.max(np.abs(fast.series[:, i] - slow.series[:, i]))) <= 1e-8 * scale, name

@@ -47,8 +47,21 @@ def _replayed(folder: Path, text: str, n: int) -> tuple[np.ndarray, np.ndarray, 
     return efforts, estimate, [int(row[-1]) for row in rows]
 
 
-@pytest.mark.parametrize(("mode", "feedback"), [("admittance", "observer"), ("explicit", "sensor")])
-def test_the_export_is_the_simulation_bit_for_bit(robot, small_bone, tmp_path, mode, feedback):
+@pytest.fixture(scope="module")
+def tight_robot(tmp_path_factory):
+    """The paper robot with actuators whose legs' peak force (44 N) the drilling reaches."""
+    text = (ROOT / "examples" / "paper_robot_with_actuators.toml").read_text()
+    path = tmp_path_factory.mktemp("tight") / "tight.toml"
+    path.write_text(text.replace("force = 200.0", "force = 44.0"))
+    return load_robot(path)
+
+
+@pytest.mark.parametrize(
+    ("mode", "feedback", "actuators"),
+    [("admittance", "observer", False), ("explicit", "sensor", False), ("admittance", "observer", True)],
+)
+def test_the_export_is_the_simulation_bit_for_bit(robot, tight_robot, small_bone, tmp_path, mode, feedback, actuators):
+    robot = tight_robot if actuators else robot
     settings = DrillingSettings(mode=mode, feedback=feedback, feed_limit=2.0e-3, gap=0.2e-3, duration=8.0)
     run = compiled.compiled_run(drilling_setup(robot, small_bone, settings), readings=True)
     assert run.status == compiled.STATUS["VGT_DONE"]
@@ -58,6 +71,8 @@ def test_the_export_is_the_simulation_bit_for_bit(robot, small_bone, tmp_path, m
     assert np.array_equal(efforts, run.efforts)  # every bit
     assert np.array_equal(estimate, run.series[:, 4])
     assert phases == [int(p) for p in run.series[:, 9]]
+    if actuators:  # the exported controller clipped where the simulation's did
+        assert np.any(np.abs(efforts) >= robot.actuators.force - 1e-12)
     for source in folder.glob("*.c"):
         code = re.sub(r"/\*.*?\*/", "", source.read_text(), flags=re.S)
         assert not re.search(r"\b(malloc|calloc|realloc|free)\s*\(", code), source.name

@@ -23,7 +23,6 @@ from ..errors import VgtarmError
 from ..model.backends import CompiledBackend
 from ..model.interface import enum, ffi
 from ..model.robot import Robot
-from .bone import Bone
 from .control import END_HOLD, STOP_HOLD, DrillingSetup
 
 Array = NDArray[np.float64]
@@ -79,9 +78,11 @@ def _model(backend: CompiledBackend) -> Any:
     )
 
 
-def _settings(robot: Robot, s: Any, told: Bone, max_samples: int) -> Any:
-    """``vgt_drill_settings`` of the run's settings ``s`` (checked) and the told bone."""
-    fields = {
+def settings_fields(setup: DrillingSetup) -> dict[str, float | int]:
+    """The fields of ``vgt_drill_settings`` for ``setup`` (its settings, checked, and the bone the
+    controller is told of), by name: the compiled loop's structure and the export's defaults."""
+    s, told = setup.settings, setup.told
+    fields: dict[str, float | int] = {
         name: getattr(s, name)
         for name in (
             "dt",
@@ -112,21 +113,21 @@ def _settings(robot: Robot, s: Any, told: Bone, max_samples: int) -> Any:
         )
     }
     fields.update(
-        n_joints=robot.n_joints,
+        n_joints=setup.robot.n_joints,
         mode=0 if s.mode == "explicit" else 1,
         feedback=1 if s.feedback == "sensor" else 0,
         velocity_keep=math.exp(-2.0 * math.pi * s.velocity_filter_hz * s.dt),
         observer_keep=math.exp(-s.observer_gain * s.dt),
         stop_hold=STOP_HOLD,
         end_hold=END_HOLD,
-        max_samples=max_samples,
+        max_samples=int(round(s.duration / s.dt)) + 1,
         tool_torque=int(s.tool_torque),
         exponent=float(told.coefficients[0, 1]),
         told_layers=len(told.layers),
         told_feed_ref=told.reference_feed,
         told_feed_floor=told.feed_floor,
     )
-    return ffi().new("vgt_drill_settings *", fields)
+    return fields
 
 
 def _ptr(array: Array) -> Any:
@@ -136,13 +137,14 @@ def _ptr(array: Array) -> Any:
 def compiled_run(setup: DrillingSetup, *, readings: bool = False) -> CompiledRun:
     """One run in C of ``setup`` (:func:`.loop.drilling_setup`; see :class:`CompiledRun`);
     ``readings``: keep the encoder readings."""
-    robot, model, bone, told, s = setup.robot, setup.model, setup.bone, setup.told, setup.settings
+    robot, model, bone = setup.robot, setup.model, setup.bone
     q0, entry, frame, steps = setup.q0, setup.entry, setup.frame, setup.steps
     backend = robot.backend
     if not isinstance(backend, CompiledBackend):
         raise VgtarmError("the compiled drilling loop needs the robot's compiled symbolic library")
     n = robot.n_joints
-    max_samples = int(round(s.duration / s.dt)) + 1
+    fields = settings_fields(setup)
+    max_samples = int(fields["max_samples"])
     arrays = {
         "q0": np.ascontiguousarray(q0, dtype=np.float64),
         "p_plant": np.ascontiguousarray(robot.parameter_vector, dtype=np.float64),
@@ -173,9 +175,17 @@ def compiled_run(setup: DrillingSetup, *, readings: bool = False) -> CompiledRun
             "feed_floor": bone.feed_floor,
         },
     )
-    run = ffi().new("vgt_drill_run *", {name: _ptr(a) for name, a in arrays.items()})
+    c_settings = ffi().new("vgt_drill_settings *", fields)
+    limits = {}
+    if robot.actuators is not None:  # the controller clips to them, the plant delivers through them
+        act = robot.actuators
+        limits = {"force_limit": act.force, "speed_limit": act.speed, "force_speed": act.force_speed.astype(float)}
+        limits = {k: np.ascontiguousarray(v, dtype=np.float64) for k, v in limits.items()}
+        c_settings.force_limit = _ptr(limits["force_limit"])
+    pointers = {name: _ptr(a) for name, a in {**arrays, **limits}.items() if name != "force_limit"}
+    run = ffi().new("vgt_drill_run *", pointers)
     run.max_events = MAX_EVENTS
-    status = backend.library.vgt_drill_simulate(_model(backend), _settings(robot, s, told, max_samples), c_bone, run)
+    status = backend.library.vgt_drill_simulate(_model(backend), c_settings, c_bone, run)
     k, e = int(run.n_samples), int(run.n_events)
     events = tuple((float(t), EVENT_KINDS[int(kind)], int(layer)) for t, kind, layer in arrays["events"][:e])
     kept = arrays["q_meas"][:k].copy() if readings else None

@@ -190,9 +190,12 @@ class DrillingPlant:
         """Joint accelerations under the efforts ``F`` with the thrust taken semi-implicitly over a
         step ``h`` (s): the cut is a stiff damper (``d thrust / d feed`` up to 1e5 N s/m), so
         ``(M + h b j j^T) qdd = F - C - j thrust - J_w^T axis torque`` with ``j = J_P^T axis``,
-        ``b = d thrust / d feed``. ``h = 0`` gives :meth:`Robot.forward_dynamics` exactly. Also
-        returns the thrust at ``(q, qd)`` (N)."""
+        ``b = d thrust / d feed``. ``h = 0`` gives :meth:`Robot.forward_dynamics` exactly. With
+        actuators (the robot file's ``[actuators]``) ``F`` is first what they deliver at ``qd``
+        (:meth:`~vgtarm.model.actuators.Actuators.saturate`). Also returns the thrust at ``(q, qd)`` (N)."""
         r = self.robot
+        if r.actuators is not None:  # what the actuators deliver at this velocity (vgt_saturate)
+            F = r.actuators.saturate(F, qd)
         thrust, torque, _, damping = self.forces(q, qd)
         j = r.tip_jacobian(q).T @ self.axis
         rhs = F - r.bias_forces(q, qd) - j * thrust

@@ -253,6 +253,9 @@ def _sample(
     run.previous_thrust = thrust
     _advance(t, run, ctrl, detector, ts, estimate, observed)
     F, push = ctrl.effort(ts, vm, qm, tau_hat, estimate, run.phase, observed)
+    actuators = sensing.model.actuators
+    if actuators is not None:  # the controller clips to the peak forces (vgt_clip); the observer gets it
+        F = np.minimum(np.maximum(F, -actuators.force), actuators.force)
     sensing.applied(F)
     true_axis = plant.robot.tool_axis(q)
     offset = plant.robot.tip_position(q) - entry

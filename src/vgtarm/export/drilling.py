@@ -50,7 +50,7 @@ FUNCTIONS = ("tip", "jac", "fk", "bias_acc", "mass", "bias_forces", "id")
 COPIED = {"vgtd_controller.h": "vgtd_controller.h", "vgtd_controller.c": "vgtd_controller.c"}
 COPIED.update({"vgtd_replay.c": "vgtd_replay.c", "Makefile.drilling": "Makefile"})
 #: The simulation's headers copied beside them.
-SHARED = ("vgtarm.h", "vgt_drill_control.h")
+SHARED = ("vgtarm.h", "vgt_control.h", "vgt_drill_control.h")
 _MODEL_CSRC = Path(__file__).resolve().parent.parent / "model" / "csrc"
 #: Integer fields of ``vgt_drill_settings``; the rest are doubles.
 _INTEGER_FIELDS = {"n_joints", "substeps", "mode", "feedback", "layer_samples", "breakthrough_samples"}
@@ -102,6 +102,7 @@ def _write(folder: Path, setup: Any) -> None:
         f"#define VGTD_MAX_EVENTS {compiled.MAX_EVENTS}",
         f"#define VGTD_FK_OUTPUTS {n_fk}",
         f"#define VGTD_BIAS_OUTPUTS {n_bias}",
+        f"#define VGTD_ACTUATORS {int(robot.actuators is not None)}",
         f'#define VGTD_JOINT_NAMES "{_c_string(", ".join(robot.joint_names))}"',
         f'#define VGTD_BONE "{_c_string(setup.told.name)}"',
         "#endif",
@@ -122,6 +123,7 @@ def _write(folder: Path, setup: Any) -> None:
         _top_array("vgtd_frame", np.asarray(setup.frame).ravel()),
         _top_array("vgtd_tool_axis", robot.tool_rotation[:, 2]),
         _top_array("vgtd_steps", setup.steps),
+        _top_array("vgtd_force_limit", np.zeros(robot.n_joints) if robot.actuators is None else robot.actuators.force),
         "void vgtd_default_settings(vgt_drill_settings *s)",
         "{",
         "    memset(s, 0, sizeof *s);",

@@ -3,6 +3,7 @@
 #include <math.h>
 #include <string.h>
 
+#include "vgt_control.h" /* vgt_clip */
 #include "vgtd_controller.h"
 #include "vgtc_model.h"
 
@@ -35,6 +36,7 @@ int vgtd_init(vgtd_context *c)
 {
     memset(c, 0, sizeof *c);
     vgtd_default_settings(&c->settings);
+    if (VGTD_ACTUATORS) c->settings.force_limit = vgtd_force_limit;
     c->model.tip = vgtd_function(vgt_tip);
     c->model.jac = vgtd_function(vgt_jac);
     c->model.fk = vgtd_function(vgt_fk);

@@ -61,6 +61,8 @@ extern const double vgtd_entry[3];         /* the entry point (m, F0)           
 extern const double vgtd_frame[9];         /* row-major, columns e1, e2, the drilling axis   */
 extern const double vgtd_tool_axis[3];     /* the tool's axis in the end-effector frame      */
 extern const double vgtd_steps[VGTD_NJ];   /* the encoders' steps (for the replay's readings) */
+extern const double vgtd_force_limit[VGTD_NJ]; /* the actuators' peak forces (N, N m), used when */
+                                               /* VGTD_ACTUATORS: the efforts are clipped to them */
 
 #ifdef __cplusplus
 }

@@ -10,6 +10,7 @@
 #include <string.h>
 
 #include "vgtarm.h"
+#include "vgt_control.h" /* vgt_clip, vgt_saturate */
 #include "vgt_drill.h"
 
 typedef struct {
@@ -87,6 +88,12 @@ static int plant_step(const vgt_drill_model *m, drill_work *wk, const vgt_drill_
     if (vgt_drill_call(&m->bias_forces, wk, 3, in_qv, 1, out_C)) return 1;
     const double axis[3] = {r->frame[2], r->frame[5], r->frame[8]};
     const double thrust = tr.forces[0], torque = tr.forces[1], damping = tr.forces[3];
+    double delivered[nj];
+    if (s->force_limit) { /* what the actuators deliver at this velocity */
+        memcpy(delivered, F, sizeof delivered);
+        vgt_saturate(nj, s->force_limit, r->speed_limit, r->force_speed, qd, delivered);
+        F = delivered;
+    }
     for (int j = 0; j < nj; ++j) {
         j_axis[j] = JP[j] * axis[0] + JP[nj + j] * axis[1] + JP[2 * nj + j] * axis[2];
         rhs[j] = F[j] - C[j] - j_axis[j] * thrust;

@@ -6,8 +6,9 @@
  * run the same code bit for bit. No heap: the caller gives the joint-space memory
  * (VGT_DRILL_STATE_DOUBLES(nj) doubles) and the work arrays of the generated functions.
  *
- * Include after vgtarm.h (the structures) and with vgt_drill_call defined by the includer: the
- * function that evaluates one generated function (its arguments and results given).
+ * Include after vgtarm.h (the structures) and vgt_control.h (vgt_clip), with vgt_drill_call
+ * defined by the includer: the function that evaluates one generated function (its arguments and
+ * results given).
  */
 #ifndef VGT_DRILL_CONTROL_H
 #define VGT_DRILL_CONTROL_H
@@ -466,6 +467,7 @@ static int vgt_drill_control(vgt_drill_state *st, const vgt_drill_settings *s, c
         }
         F[j] = task + C[j] - st->tau_hat[j] + (posture[j] - back);
     }
+    if (s->force_limit) vgt_clip(nj, s->force_limit, F); /* the observer gets the effort applied */
     vgt_drill_applied(st, nj, F);
     out->estimate = estimate;
     out->observed = observed;

@@ -399,6 +399,8 @@ typedef struct {
     int told_layers;            /* the told bone's layer count                                */
     double told_feed_ref, told_feed_floor;
     double gap;                 /* the tip's start before the entry surface (m)              */
+    const double *force_limit;  /* (nj) the actuators' peak forces the controller clips its   */
+                                /* efforts to (vgt_clip), NULL: no actuators                 */
 } vgt_drill_settings;
 
 /* One drilling run of an n_joints robot (nj): inputs, then what the run writes. */
@@ -412,6 +414,8 @@ typedef struct {
     double *series;                /* (max_samples, 13) vgtarm.drilling.loop.SERIES             */
     double *efforts;               /* (max_samples, nj)                                       */
     double *q_meas;                /* (max_samples, nj) the encoder readings (NULL: not kept)   */
+    const double *speed_limit;     /* (nj) with settings.force_limit: the plant delivers the    */
+    const double *force_speed;     /* efforts through the force-speed lines (vgt_saturate)     */
     double *events;                /* (max_events, 3): t, kind (0 contact, 1 softer, 2 harder,  */
     long max_events;               /* 3 breakthrough), layer                                  */
     long n_samples, n_events;      /* out                                                     */
