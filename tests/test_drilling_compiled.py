@@ -114,3 +114,18 @@ def test_the_actuators_clip_the_efforts_in_both_loops(tight_robot, small_bone):
     for i, name in enumerate(SERIES):
         scale = max(float(np.max(np.abs(slow.series[:, i]))), 1e-9)
         assert float(np.max(np.abs(fast.series[:, i] - slow.series[:, i]))) <= 1e-8 * scale, name
+
+
+def test_a_hidden_transition_arms_the_breakthrough_in_both_loops(robot, small_bone):
+    """A near cortex as soft as the cancellous bone (1000 kg/m^3: 6.6 N against 5.6 N) hides the
+    first transition; both loops arm the breakthrough by depth and stop at the same sample."""
+    data = small_bone.to_dict()
+    data["layers"][0]["density"] = 1000.0
+    soft = bone_from_dict(data, source="soft near cortex")
+    s = DrillingSettings(**{**SMALL, "feed_limit": 1.0e-3, "duration": 10.0}, **EXACT)
+    fast = drilling_run(robot, soft, s, engine="compiled", nominal=small_bone)
+    slow = drilling_run(robot, soft, s, engine="numpy", nominal=small_bone)
+    assert [k for _, k, _ in fast.events] == [k for _, k, _ in slow.events] == ["contact", "armed", "breakthrough"]
+    assert [t for t, *_ in fast.events] == pytest.approx([t for t, *_ in slow.events], abs=1e-12)
+    assert fast.summary()["protrusion"] == pytest.approx(slow.summary()["protrusion"], abs=1e-9)
+    assert fast.summary()["protrusion"] < 0.2e-3

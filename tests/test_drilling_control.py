@@ -280,6 +280,35 @@ def test_a_faster_feed_at_the_same_bone_is_no_layer_change():
     assert [e[1] for e in detector.events] == ["contact"]
 
 
+def _hidden_transition(arm_depth):
+    """Three layers whose first transition (20 N to 16 N: 20 %) is below the detector's 30 %, the
+    second a clear rise; then the thrust falls away at 10.5 mm. Returns the detector's events and
+    the sample it fired at."""
+    detector = Detector(DrillingSettings(), 3, 0.6, 1e-3, 5e-5, arm_depth)
+    depth = np.arange(12000) * 1e-6  # 1 mm/s at 1 ms
+    thrust = np.where(depth < 3e-3, 20.0, np.where(depth < 8e-3, 16.0, 30.0))
+    thrust = np.where(depth < 10.5e-3, thrust, np.maximum(30.0 - (depth - 10.5e-3) * 2e4, 0.0))
+    at = None
+    for k, (f, d) in enumerate(zip(thrust, depth, strict=True)):
+        if detector.update(k * 1e-3, f, 1e-3, d):  # the loop stops the feed here
+            at = k
+            break
+    return [e[1] for e in detector.events], at
+
+
+def test_a_hidden_transition_arms_the_breakthrough_by_depth():
+    from vgtarm.drilling.control import arm_depth
+
+    kinds, k = _hidden_transition((math.inf, math.inf))  # without arming: the exit is taken for a softer layer
+    assert kinds == ["contact", "softer"] and k is None
+    told = perturbed_bone(load_bone(FEMUR), 0, 0.0)  # told layers end at 3.2 and 9.2 mm: armed at 6.44 mm
+    early, late = arm_depth(told, DrillingSettings())
+    assert early == pytest.approx(0.7 * float(told.boundaries[-2])) and late == pytest.approx(1.3 * early / 0.7)
+    kinds, k = _hidden_transition((early, late))
+    assert kinds == ["contact", "armed", "breakthrough"]
+    assert 10500 < k < 10500 + 200  # fired within the drop: 10 % of 30 N is 0.15 mm at 1 mm/s
+
+
 # -- refusals and helpers ---------------------------------------------------------------------------
 
 

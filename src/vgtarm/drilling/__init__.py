@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from .bone import (
     COEFFICIENT_NAMES,
+    FEMUR,
     HEADER,
     Bone,
     Drill,
@@ -39,6 +40,7 @@ from .loop import SERIES, TARGETS, DrillingResult, drilling_figure, drilling_run
 __all__ = [
     "COEFFICIENT_NAMES",
     "FEEDBACKS",
+    "FEMUR",
     "HEADER",
     "MODES",
     "PHASES",

@@ -55,6 +55,9 @@ Array = NDArray[np.float64]
 
 #: The C header with the same arithmetic (static inline functions, C99, no heap).
 HEADER = Path(__file__).resolve().parent.parent / "model" / "csrc" / "vgt_drill.h"
+#: The femur's bone file shipped with the package (the same as ``examples/bones/femur_diaphysis.toml``):
+#: ``vgtarm reproduce`` drills it.
+FEMUR = Path(__file__).resolve().parent / "data" / "femur_diaphysis.toml"
 #: Largest bone file read (bytes).
 BONE_FILE_LIMIT = 2**20
 #: Most layers a bone may have.

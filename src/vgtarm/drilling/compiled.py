@@ -23,7 +23,7 @@ from ..errors import VgtarmError
 from ..model.backends import CompiledBackend
 from ..model.interface import enum, ffi
 from ..model.robot import Robot
-from .control import END_HOLD, STOP_HOLD, DrillingSetup
+from .control import END_HOLD, STOP_HOLD, DrillingSetup, arm_depth
 
 Array = NDArray[np.float64]
 
@@ -126,6 +126,8 @@ def settings_fields(setup: DrillingSetup) -> dict[str, float | int]:
         told_layers=len(told.layers),
         told_feed_ref=told.reference_feed,
         told_feed_floor=told.feed_floor,
+        arm_depth=arm_depth(told, s)[0],
+        arm_depth_late=arm_depth(told, s)[1],
     )
     return fields
 

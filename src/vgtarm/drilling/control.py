@@ -71,6 +71,7 @@ class DrillingSettings:
     breakthrough_fraction: float = 0.9  # detector: specific thrust below this share of its peak
     breakthrough_samples: int = 5  # detector: samples the drop must last
     settle_time: float = 0.1  # detector: time after a detection before the level is tracked again (s)
+    arm_margin: float = 0.3  # detector: the breakthrough is armed by depth this share short of the last layer's start
     retract_distance: float = 1.0e-3  # (m)
     retract_speed: float = 2.0e-3  # (m/s)
     duration: float = 40.0  # longest run (s)
@@ -113,6 +114,7 @@ def check_settings(robot: Robot, settings: DrillingSettings, q: Array | None = N
         checks.positive(name, getattr(s, name))
     checks.number("layer_change", s.layer_change, above=0.0, below=1.0)
     checks.number("breakthrough_fraction", s.breakthrough_fraction, above=0.0, below=1.0)
+    checks.number("arm_margin", s.arm_margin, minimum=0.0, below=1.0)
     checks.whole("layer_samples", s.layer_samples, minimum=1)
     checks.whole("breakthrough_samples", s.breakthrough_samples, minimum=1)
     checks.flag("tool_torque", s.tool_torque)
@@ -154,6 +156,16 @@ class DrillingSetup:
     frame: Array
     entry: Array
     steps: Array
+
+
+def arm_depth(told: Bone, settings: DrillingSettings) -> tuple[float, float]:
+    """The depths (m) past which the detector arms the breakthrough although its layer count says
+    it is not in the last layer yet: ``(early, late)``, the told bone's last layer's start less and
+    plus ``arm_margin`` of it. Early when the count is behind by two or more (a transition was
+    missed for sure: no bone within the margin has its last layer start later), late when it is
+    behind by one (the last transition itself was missed)."""
+    start = float(told.boundaries[-2])
+    return start * (1.0 - settings.arm_margin), start * (1.0 + settings.arm_margin)
 
 
 # -- the plant ------------------------------------------------------------------------------------
@@ -439,13 +451,16 @@ class Detector:
     transition is ``c`` off its layer's level by more than ``layer_change`` for ``layer_samples``
     samples; the breakthrough is ``c`` below ``breakthrough_fraction`` of its peak in the last
     layer for ``breakthrough_samples`` samples. ``n_layers`` and the feed exponent come from the
-    bone the controller is told of (the nominal file)."""
+    bone the controller is told of (the nominal file). A transition that the contrast of a
+    perturbed bone hides would leave the breakthrough unarmed: past the depths of :func:`arm_depth`
+    the detector arms it anyway (an ``armed`` event), the level tracked from there."""
 
     settings: DrillingSettings
     n_layers: int
     exponent: float
     reference_feed: float
     feed_floor: float
+    arm_depth: tuple[float, float] = (math.inf, math.inf)  # (early, late) depths arming it (m), see arm_depth
     thrust_f: float = 0.0
     feed_f: float = 0.0
     specific: float = 0.0
@@ -457,8 +472,9 @@ class Detector:
     quiet_until: float = 0.0
     events: list[tuple[float, str, int]] = field(default_factory=list)
 
-    def update(self, t: float, thrust: float, feed: float) -> bool:
-        """Take the sample at time ``t`` (s); True when the breakthrough is detected now."""
+    def update(self, t: float, thrust: float, feed: float, depth: float = -math.inf) -> bool:
+        """Take the sample at time ``t`` (s) with the measured ``depth`` (m); True when the
+        breakthrough is detected now."""
         s = self.settings
         a = math.exp(-s.dt / s.estimate_time)
         b = math.exp(-s.dt / s.feed_time)
@@ -471,6 +487,11 @@ class Detector:
             if self.thrust_f > 0.25 * s.set_point:
                 self._event(t, "contact", 0, c)
             return False
+        early, late = self.arm_depth
+        behind = self.n_layers - 1 - self.layer  # a transition the bone's contrast hid: armed by depth
+        if (behind >= 2 and depth >= early) or (behind == 1 and depth >= late):
+            self._event(t, "armed", self.n_layers - 1, c)
+            self.quiet_until = t  # the level is tracked from now
         # the level: the peak since entering a harder layer, the trough since entering a softer one
         self.level = min(self.level, c) if self.softer else max(self.level, c)
         if t < self.quiet_until:

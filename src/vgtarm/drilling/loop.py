@@ -6,6 +6,7 @@ with its summary against the issue's targets and its figure."""
 
 from __future__ import annotations
 
+import io
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -34,6 +35,7 @@ from .control import (
     DrillingSetup,
     HybridController,
     Sensing,
+    arm_depth,
     check_settings,
     task_state,
     tool_wrench,
@@ -93,6 +95,19 @@ class DrillingResult:
     def summary(self) -> dict[str, Any]:
         """The run's measures against :data:`TARGETS` (see ``docs/drilling_control.md``)."""
         return summarise(self)
+
+    def series_csv(self) -> str:
+        """The series as CSV text: a header of :data:`SERIES`, then a line per sample with every
+        double as it is (``%.17g``)."""
+        stream = io.StringIO()
+        stream.write(",".join(SERIES) + "\n")
+        np.savetxt(stream, self.series, delimiter=",", fmt="%.17g")
+        return stream.getvalue()
+
+    def events_csv(self) -> str:
+        """The detector's events as CSV text, ``t,kind,layer`` (the detector's own names: no user text)."""
+        lines = ["t,kind,layer"] + [f"{t:.6g},{kind},{layer}" for t, kind, layer in self.events]
+        return "\n".join(lines) + "\n"
 
     def figure(self, fig: Any = None) -> Any:
         """Thrust (true, estimate, set point), depth and the specific thrust against time with the
@@ -182,7 +197,7 @@ def drilling_run(
     sensing = Sensing(model, setup.steps, s.dt, keep_v, math.exp(-s.observer_gain * s.dt))
     exponent = float(told.coefficients[0, 1])  # the thrust's feed exponent of the first layer
     ctrl = HybridController(s, q.copy(), exponent, depth_ref=-s.gap)
-    detector = Detector(s, len(told.layers), exponent, told.reference_feed, told.feed_floor)
+    detector = Detector(s, len(told.layers), exponent, told.reference_feed, told.feed_floor, arm_depth(told, s))
     qd = np.zeros(robot.n_joints)
     qd0 = qd.copy()
     rows: list[list[float]] = []
@@ -296,7 +311,7 @@ def _advance(
             ctrl.depth_ref, ctrl.feed_ref = ts.depth, 0.0
         return
     if run.phase == DRILLING:
-        if detector.update(t, estimate, ts.feed):
+        if detector.update(t, estimate, ts.feed, ts.depth):
             run.phase, run.stopped_at = STOPPING, t
             ctrl.stop(ts.depth)
     elif run.phase == STOPPING and t >= run.stopped_at + STOP_HOLD:
@@ -357,16 +372,21 @@ def summarise(result: DrillingResult) -> dict[str, Any]:
     truth_drop = float(t[dropped[0]]) if dropped.size else math.nan
     detected = [e for e in result.events if e[1] == "breakthrough"]
     t_detect = detected[0][0] if detected else math.nan
-    transitions = []
+    # each detection belongs to the last interface the tip crossed before it (by time, not by the
+    # detector's count, which a hidden transition puts off); a second one for that interface, or
+    # one before any crossing, is false
+    crossings = [_crossing(t, depth, float(edge)) for edge in bone.boundaries[1:-1]]
+    matched: dict[int, tuple[float, str, int]] = {}
     used = set()
-    for i, edge in enumerate(bone.boundaries[1:-1]):
-        true_t = _crossing(t, depth, float(edge))
-        found = [e for e in result.events if e[1] in ("softer", "harder") and e[2] == i + 1]
-        if found:
-            used.add(found[0])
-        transitions.append(
-            {"interface": i + 1, "true_time": true_t, "detected_time": found[0][0] if found else math.nan}
-        )
+    for event in (e for e in result.events if e[1] in ("softer", "harder")):
+        before = [i for i, c in enumerate(crossings) if math.isfinite(c) and c <= event[0]]
+        if before and before[-1] not in matched:
+            matched[before[-1]] = event
+            used.add(event)
+    transitions = [
+        {"interface": i + 1, "true_time": c, "detected_time": matched[i][0] if i in matched else math.nan}
+        for i, c in enumerate(crossings)
+    ]
     false = [e for e in result.events if e[1] in ("softer", "harder") and e not in used]
     if detected and math.isfinite(true_break) and detected[0][0] < true_break:
         false.append(detected[0])

@@ -51,6 +51,7 @@ from ...simulation.scenario import senses
 from ...version import __version__
 from . import calibrate as cli_calibrate
 from . import drill as cli_drill
+from . import drill_study as cli_drill_study
 from . import identify as cli_identify
 from . import mujoco as cli_mujoco
 from . import presets
@@ -798,6 +799,7 @@ def build_parser() -> argparse.ArgumentParser:
     cli_calibrate.add_parser(sub)  # calibrate
     cli_identify.add_parser(sub)  # identify
     cli_drill.add_parser(sub)  # drill
+    cli_drill_study.add_parser(sub)  # drill-study
     _add_quiet(sub)
     _accept_negative_numbers(parser)
 

@@ -11,14 +11,10 @@ the specific thrust against time with the detections marked). Methods: docs/dril
 from __future__ import annotations
 
 import argparse
-import csv
-import io
 import json
 import math
 from pathlib import Path
 from typing import Any
-
-import numpy as np
 
 from ...errors import escape
 from ...fileio import atomic_folder, atomic_write_text, check_output_folder, json_value
@@ -110,25 +106,9 @@ def cmd_export_drilling(args: argparse.Namespace) -> int:
     return 0
 
 
-def _series_csv(result: Any, names: tuple[str, ...]) -> str:
-    stream = io.StringIO()
-    stream.write(",".join(names) + "\n")
-    np.savetxt(stream, result.series, delimiter=",", fmt="%.17g")  # every double as it is
-    return stream.getvalue()
-
-
-def _events_csv(events: tuple[tuple[float, str, int], ...]) -> str:
-    stream = io.StringIO()
-    writer = csv.writer(stream, lineterminator="\n")
-    writer.writerow(["t", "kind", "layer"])
-    for t, kind, layer in events:
-        writer.writerow([f"{t:.6g}", kind, layer])  # the detector's own names, no user text
-    return stream.getvalue()
-
-
 def cmd_drill(args: argparse.Namespace) -> int:
     """Run the drilling, print its measures, write the folder."""
-    from ...drilling import SERIES, TARGETS, drilling_run, load_bone
+    from ...drilling import TARGETS, drilling_run, load_bone
 
     inputs = [args.config, args.bone]
     check_output_folder(args.out, "--out", inputs=inputs, owned=DRILL_FILES)  # before the work
@@ -154,8 +134,8 @@ def cmd_drill(args: argparse.Namespace) -> int:
             mark = "ok" if value <= target else "over"
             print(f"{name:<20} {scale * value:.4g} {unit} (target {scale * target:g} {unit}: {mark})")
     with atomic_folder(args.out, "--out", inputs=inputs, owned=DRILL_FILES, checked=True) as folder:
-        atomic_write_text(folder / "timeseries.csv", _series_csv(result, SERIES))
-        atomic_write_text(folder / "events.csv", _events_csv(result.events))
+        atomic_write_text(folder / "timeseries.csv", result.series_csv())
+        atomic_write_text(folder / "events.csv", result.events_csv())
         atomic_write_text(folder / "summary.json", json.dumps(json_value(summary), indent=2) + "\n")
         result.figure().savefig(folder / "drilling.png", dpi=100)
     print(f"written    {escape(str(args.out))}: {', '.join(DRILL_FILES)}")

@@ -262,8 +262,10 @@ static void vgt_drill_event(vgt_drill_state *st, const vgt_drill_settings *s, do
     st->quiet_until = t + s->settle_time;
 }
 
-/* One sample of the detector (Detector.update): 1 when the breakthrough is detected now. */
-static int vgt_drill_detect(vgt_drill_state *st, const vgt_drill_settings *s, double t, double thrust, double feed)
+/* One sample of the detector (Detector.update) at the measured depth (m): 1 when the breakthrough
+ * is detected now. */
+static int vgt_drill_detect(vgt_drill_state *st, const vgt_drill_settings *s, double t, double thrust, double feed,
+                            double depth)
 {
     const double a = exp(-s->dt / s->estimate_time);
     const double b = exp(-s->dt / s->feed_time);
@@ -276,6 +278,11 @@ static int vgt_drill_detect(vgt_drill_state *st, const vgt_drill_settings *s, do
     if (st->layer < 0) {
         if (st->thrust_f > 0.25 * s->set_point) vgt_drill_event(st, s, t, VGT_DRILL_CONTACT, 0, c);
         return 0;
+    }
+    const int behind = s->told_layers - 1 - st->layer; /* a transition the bone's contrast hid: armed by depth */
+    if ((behind >= 2 && depth >= s->arm_depth) || (behind == 1 && depth >= s->arm_depth_late)) {
+        vgt_drill_event(st, s, t, VGT_DRILL_ARMED, s->told_layers - 1, c);
+        st->quiet_until = t;
     }
     st->level = st->softer ? fmin(st->level, c) : fmax(st->level, c);
     if (t < st->quiet_until) return 0;
@@ -366,7 +373,7 @@ static void vgt_drill_advance(vgt_drill_state *st, const vgt_drill_settings *s, 
         return;
     }
     if (st->phase == VGT_DRILL_DRILLING) {
-        if (vgt_drill_detect(st, s, t, estimate, feed)) {
+        if (vgt_drill_detect(st, s, t, estimate, feed, depth)) {
             st->phase = VGT_DRILL_STOPPING;
             st->stopped_at = t;
             st->depth_ref = depth;

@@ -399,6 +399,8 @@ typedef struct {
     int told_layers;            /* the told bone's layer count                                */
     double told_feed_ref, told_feed_floor;
     double gap;                 /* the tip's start before the entry surface (m)              */
+    double arm_depth;           /* depths (m) past which the breakthrough is armed with the   */
+    double arm_depth_late;      /* layer count behind by two or more, and by one             */
     const double *force_limit;  /* (nj) the actuators' peak forces the controller clips its   */
                                 /* efforts to (vgt_clip), NULL: no actuators                 */
 } vgt_drill_settings;
@@ -416,8 +418,8 @@ typedef struct {
     double *q_meas;                /* (max_samples, nj) the encoder readings (NULL: not kept)   */
     const double *speed_limit;     /* (nj) with settings.force_limit: the plant delivers the    */
     const double *force_speed;     /* efforts through the force-speed lines (vgt_saturate)     */
-    double *events;                /* (max_events, 3): t, kind (0 contact, 1 softer, 2 harder,  */
-    long max_events;               /* 3 breakthrough), layer                                  */
+    double *events;                /* (max_events, 3): t, kind (enum vgt_drill_event), layer   */
+    long max_events;
     long n_samples, n_events;      /* out                                                     */
 } vgt_drill_run;
 
@@ -429,7 +431,13 @@ enum vgt_drill_phase {
     VGT_DRILL_RETRACTING = 3, /* moving back along the axis                              */
     VGT_DRILL_DONE = 4
 };
-enum vgt_drill_event { VGT_DRILL_CONTACT = 0, VGT_DRILL_SOFTER = 1, VGT_DRILL_HARDER = 2, VGT_DRILL_BREAKTHROUGH = 3 };
+enum vgt_drill_event {
+    VGT_DRILL_CONTACT = 0,
+    VGT_DRILL_SOFTER = 1,
+    VGT_DRILL_HARDER = 2,
+    VGT_DRILL_BREAKTHROUGH = 3,
+    VGT_DRILL_ARMED = 4 /* the breakthrough armed by depth, a transition having been missed */
+};
 
 /* The drilling controller's state between periods (vgt_drill_control.h; its joint-space arrays
  * point into memory the caller gives: 10 nj doubles). */
