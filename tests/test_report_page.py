@@ -50,6 +50,8 @@ SECTIONS = [
     "The low-force preset (issue 22)",
     "The trade-off: tip error against actuator force (issue 22)",
     "Tool tasks: drilling and cutting",
+    "Drilling bone under force control",
+    "The spread over seeded bones",
     "What bounds the remaining error",
 ]
 
@@ -165,7 +167,7 @@ def test_reproduced_page_in_a_real_browser(reproduction):
     plots = 4  # tip error, efforts, paths, the mechanism along case 1
     with browser_tab(reproduction / "report.html", plots) as (tab, problems):
         shown = tab.evaluate(
-            """() => Array.from(document.querySelectorAll('h1, h2, h3')).map(h => ({
+            """() => Array.from(document.querySelectorAll('h1, h2, h3, h4')).map(h => ({
                 text: h.textContent, visible: h.getBoundingClientRect().height > 0}))"""
         )
         images = tab.evaluate("() => Array.from(document.images).map(i => i.complete && i.naturalWidth > 0)")

@@ -33,6 +33,7 @@ from ..pictures.plotting import plot_efforts, plot_path_3d, plot_tip_error, save
 from ..pool import Inline, Workers
 from . import force_study
 from .beyond import BOUNDS_HEADING, BeyondRun, beyond_figure, beyond_runs, beyond_section, run_beyond_one
+from .drilling_section import drilling_available, drilling_section
 from .html import runs_from_reproduction, write_html_report
 from .low_force import PresetRun, low_force_runs, low_force_section, run_low_force_one
 from .runs import TABLE_COLUMNS, RunSpec, folder_cell, mm, paper_runs, table_row
@@ -168,6 +169,10 @@ def _reproduce_into(
         beyond = _with_low_force(beyond, section, folder)
     if tools:  # after the runs of sensing and force, before what bounds their error
         beyond = _before_bounds(beyond, tool_section({r: made.tool_results[r] for r in tools}))
+    if beyond_paper and drilling_available(robot):  # issue 38: the thrust under force control
+        if progress:
+            progress("drilling bone (compiled loop)", len(specs), len(specs))
+        beyond = _before_bounds(beyond, drilling_section(robot, folder))
     if beyond:
         text += "\n" + "\n".join(beyond) + "\n"
     if seeds:
