@@ -17,6 +17,7 @@ single_threaded_blas()  # as the vgtarm command does, before NumPy is imported
 
 from . import (  # noqa: E402
     bench_calibration,
+    bench_drilling,
     bench_export,
     bench_export_ga,
     bench_footprint,
@@ -58,6 +59,7 @@ MODULES: dict[str, Any] = {
     "tools": bench_tool_tasks,
     "retime": bench_retime,
     "calibration": bench_calibration,
+    "drilling": bench_drilling,
 }
 #: Groups run when none is named (``stacks`` is long: it compiles ten libraries from cold).
 DEFAULT = [name for name in MODULES if name not in ("stacks", "pathwide", "recursive-control")]
