@@ -40,6 +40,13 @@ def add_parser(sub: Any) -> None:
         ),
     )
     add_drilling_flags(parser)
+    parser.add_argument(
+        "--posture",
+        choices=("home", "stiffest"),
+        default="home",
+        help="the posture held: home, or the one stiffest along the tool's axis with home's tool pose "
+        "(needs the robot file's [stiffness]; default home)",
+    )
     parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="the folder to write")
     add_config(parser)
     parser.set_defaults(run=cmd_drill)
@@ -115,7 +122,17 @@ def cmd_drill(args: argparse.Namespace) -> int:
     robot = load_robot(args.config)
     bone = load_bone(args.bone)
     settings = drilling_settings(args)
-    result = drilling_run(robot, bone, settings)
+    q0 = None
+    if args.posture == "stiffest":
+        from ...design import stiffest_posture
+
+        posture = stiffest_posture(robot, robot.parameters.home, thrust=settings.set_point)
+        q0 = posture.q
+        print(
+            f"posture    stiffest along the axis: {posture.stiffness:.4g} N/m (home {posture.stiffness0:.4g} N/m, "
+            f"{100 * (posture.stiffness / posture.stiffness0 - 1):+.3g} %)"
+        )
+    result = drilling_run(robot, bone, settings, q0=q0)
     summary = result.summary()
     print(f"bone       {escape(str(args.bone))}: {len(bone.layers)} layers, {1e3 * bone.thickness:.2f} mm")
     print(f"run        {args.mode} force control, {args.feedback}; {escape(result.reason)}")
