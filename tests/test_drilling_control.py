@@ -335,3 +335,19 @@ def test_perturbed_bones_are_seeded_and_bounded(femur):
     for layer, base in zip(a.layers, femur.layers, strict=True):
         assert 0.7 * base.thickness <= layer.thickness <= 1.3 * base.thickness
         assert 0.7 * base.density <= layer.density <= 1.3 * base.density
+
+
+def test_a_breakthrough_before_the_far_surface_is_a_false_detection(robot, small_bone):
+    """The drill stopped short (the apex never crossed the far surface) by a breakthrough detection:
+    the hole is unfinished, and the summary counts the detection as false."""
+    from vgtarm.drilling.loop import DrillingResult
+
+    t = np.arange(0.0, 2.0, 1e-3)
+    series = np.zeros((t.size, len(SERIES)))
+    series[:, SERIES.index("t")] = t
+    series[:, SERIES.index("depth")] = np.minimum(t * 2e-3, 0.9 * small_bone.thickness)
+    series[:, SERIES.index("phase")] = DRILLING
+    events = ((0.1, "contact", 0), (1.9, "breakthrough", 3))
+    result = DrillingResult(series, np.zeros((t.size, robot.n_joints)), events, small_bone, DrillingSettings(), True, "done")
+    summary = result.summary()
+    assert math.isnan(summary["breakthrough_true_time"]) and summary["false_detections"] == 1

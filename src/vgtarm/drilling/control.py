@@ -66,7 +66,7 @@ class DrillingSettings:
     admittance_share: float = 0.5  # admittance: share of the thrust error the feed corrects at once
     estimate_time: float = 0.005  # detector: time constant of the thrust estimate's filter (s)
     feed_time: float = 0.03  # detector: time constant of the feed's filter (s)
-    layer_change: float = 0.3  # detector: relative change of the specific thrust that marks a layer
+    layer_change: float = 0.2  # detector: relative change of the specific thrust that marks a layer
     layer_samples: int = 20  # detector: samples the change must last
     breakthrough_fraction: float = 0.9  # detector: specific thrust below this share of its peak
     breakthrough_samples: int = 5  # detector: samples the drop must last

@@ -388,8 +388,8 @@ def summarise(result: DrillingResult) -> dict[str, Any]:
         for i, c in enumerate(crossings)
     ]
     false = [e for e in result.events if e[1] in ("softer", "harder") and e not in used]
-    if detected and math.isfinite(true_break) and detected[0][0] < true_break:
-        false.append(detected[0])
+    if detected and not (math.isfinite(true_break) and detected[0][0] >= true_break):
+        false.append(detected[0])  # a breakthrough before the tip crossed the far surface: the hole unfinished
     errors = _layer_errors(result)
     rms = [e["thrust_error_rms"] for e in errors]
     return {
