@@ -24,7 +24,6 @@ from vgtarm.drilling.study import (
     DrillingStudy,
     DrillingStudyResult,
     check_drilling_study,
-    csv_cell,
     load_drilling_study,
     meets_targets,
     parse_drilling_study,
@@ -32,6 +31,7 @@ from vgtarm.drilling.study import (
     run_drilling_study,
 )
 from vgtarm.errors import ConfigError, InputError
+from vgtarm.markup import csv_cell
 
 ROOT = Path(__file__).resolve().parents[1]
 BONES = ROOT / "examples" / "bones"

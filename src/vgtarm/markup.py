@@ -28,6 +28,7 @@ plain character.
 
 from __future__ import annotations
 
+import math
 import re
 from urllib.parse import quote
 
@@ -117,3 +118,27 @@ def html_table(header: list[str] | tuple[str, ...], rows: list[list[object]], *,
     body = "".join("<tr>" + "".join(f"<td>{html_text(c)}</td>" for c in row) + "</tr>" for row in rows)
     title = f"<caption>{html_text(caption)}</caption>" if caption else ""
     return f"<table>{title}<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+
+#: First characters that make a spreadsheet read a CSV cell as a formula.
+FORMULA_STARTS = ("=", "+", "-", "@", "\t", "\r")
+
+
+def spreadsheet_text(text: str) -> str:
+    """``text`` as a CSV cell a spreadsheet shows as text: with a leading ``'`` when its first
+    character is one of :data:`FORMULA_STARTS` (the usual defence against formula injection; the
+    spreadsheet hides the quote), else unchanged."""
+    return f"'{text}" if text.startswith(FORMULA_STARTS) else text
+
+
+def csv_cell(value: object) -> object:
+    """A table value as a CSV cell: floats in full (``repr``), None and non-finite numbers empty,
+    text made safe for spreadsheets (:func:`spreadsheet_text`), anything else as it is; the CSV
+    writer quotes commas, quotes and line breaks."""
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return ""
+    if isinstance(value, float):
+        return repr(value)
+    if isinstance(value, str):
+        return spreadsheet_text(value)
+    return value

@@ -39,7 +39,7 @@ import numpy as np
 from .. import checks
 from ..errors import ConfigError, InputError, cut
 from ..fileio import parse_toml, read_text_limited
-from ..markup import mpl_text
+from ..markup import csv_cell, mpl_text
 from ..model.robot import Robot, definition_of
 from .bone import Bone, load_bone
 from .control import FEEDBACKS, MODES, DrillingSettings, check_settings
@@ -71,9 +71,6 @@ FEED_STREAM = 38
 STUDY_FILE_LIMIT = 2**20
 MAX_POINTS = 100_000
 NAME_LENGTH = 200
-#: The first characters that make a spreadsheet read a CSV cell as a formula (as
-#: :data:`vgtarm.study.store.FORMULA_STARTS`): such a text cell gets a leading ``'``.
-FORMULA_STARTS = ("=", "+", "-", "@", "\t", "\r")
 #: The measures of a row besides the per-layer ones, in the table's order.
 MEASURES = (
     "thrust_error_rms_max",
@@ -524,20 +521,6 @@ def meets_targets(row: Mapping[str, Any]) -> dict[str, bool]:
     return met
 
 
-def csv_cell(value: Any) -> Any:
-    """A row's value as a CSV cell (the rule of :mod:`vgtarm.study.store`'s ``results.csv``): floats
-    in full (``repr``), None and non-finite numbers empty, text that would start a spreadsheet
-    formula (:data:`FORMULA_STARTS`) with a leading ``'``; the CSV writer quotes commas, quotes and
-    line breaks."""
-    if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return ""
-    if isinstance(value, float):
-        return repr(value)
-    if isinstance(value, str):
-        return f"'{value}" if value.startswith(FORMULA_STARTS) else value
-    return value
-
-
 @dataclass(frozen=True)
 class DrillingStudyResult:
     """A study's runs: the ``study``, its ``points``, one row of measures per point (``rows``: dicts
@@ -675,7 +658,6 @@ __all__ = [
     "DrillingStudyResult",
     "Pool",
     "check_drilling_study",
-    "csv_cell",
     "drilling_study_figure",
     "load_drilling_study",
     "meets_targets",

@@ -37,7 +37,6 @@ import errno
 import fnmatch
 import io
 import json
-import math
 import os
 import re
 import stat
@@ -45,6 +44,7 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
+from .. import markup
 from ..errors import InputError, cut, shown
 from ..fileio import (
     OutputPathError,
@@ -60,9 +60,11 @@ from ..fileio import (
 from ..kinds import found_columns
 from .spec import Point
 
-#: First characters that make a spreadsheet read a cell as a formula (or, tab and carriage
-#: return, that some of them drop before reading the rest as one).
-FORMULA_STARTS = ("=", "+", "-", "@", "\t", "\r")
+#: First characters that make a spreadsheet read a cell as a formula (:mod:`vgtarm.markup`, where
+#: the rule lives, with :func:`~vgtarm.markup.spreadsheet_text` and :func:`~vgtarm.markup.csv_cell`).
+FORMULA_STARTS = markup.FORMULA_STARTS
+spreadsheet_text = markup.spreadsheet_text
+csv_cell = markup.csv_cell
 
 #: Summary figures that measure the machine, not the run (they differ between two runs of a row).
 TIMING_COLUMNS = (
@@ -424,23 +426,9 @@ def read_table(folder: str | Path) -> list[dict[str, Any]]:
     return list(table.to_pylist())
 
 
-def spreadsheet_text(text: str) -> str:
-    """``text`` as a CSV cell a spreadsheet shows as text: with a leading ``'`` when its first
-    character is one of :data:`FORMULA_STARTS` (the usual defence against formula injection; the
-    spreadsheet hides the quote), else unchanged."""
-    return f"'{text}" if text.startswith(FORMULA_STARTS) else text
-
-
 def _cell(value: Any) -> Any:
-    """A table value as a CSV cell: numbers as they are (floats in full), text made safe for
-    spreadsheets, None and non-finite numbers empty."""
-    if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return ""
-    if isinstance(value, float):
-        return repr(value)
-    if isinstance(value, str):
-        return spreadsheet_text(value)
-    return value
+    """A table value as a CSV cell (:func:`vgtarm.markup.csv_cell`)."""
+    return csv_cell(value)
 
 
 def _arrow_column(values: list[Any]) -> Any:
