@@ -348,6 +348,8 @@ def test_a_breakthrough_before_the_far_surface_is_a_false_detection(robot, small
     series[:, SERIES.index("depth")] = np.minimum(t * 2e-3, 0.9 * small_bone.thickness)
     series[:, SERIES.index("phase")] = DRILLING
     events = ((0.1, "contact", 0), (1.9, "breakthrough", 3))
-    result = DrillingResult(series, np.zeros((t.size, robot.n_joints)), events, small_bone, DrillingSettings(), True, "done")
+    result = DrillingResult(
+        series, np.zeros((t.size, robot.n_joints)), events, small_bone, DrillingSettings(), True, "done"
+    )
     summary = result.summary()
     assert math.isnan(summary["breakthrough_true_time"]) and summary["false_detections"] == 1
