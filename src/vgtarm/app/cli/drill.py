@@ -40,13 +40,6 @@ def add_parser(sub: Any) -> None:
         ),
     )
     add_drilling_flags(parser)
-    parser.add_argument(
-        "--posture",
-        choices=("home", "stiffest"),
-        default="home",
-        help="the posture held: home, or the one stiffest along the tool's axis with home's tool pose "
-        "(needs the robot file's [stiffness]; default home)",
-    )
     parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="the folder to write")
     add_config(parser)
     parser.set_defaults(run=cmd_drill)
@@ -69,6 +62,14 @@ def add_drilling_flags(parser: argparse.ArgumentParser) -> None:
         "--feedback", choices=("observer", "sensor"), default="observer", help="the thrust fed back (default observer)"
     )
 
+    parser.add_argument(
+        "--posture",
+        choices=("home", "stiffest"),
+        default="home",
+        help="the posture held: home, or the one stiffest along the tool's axis with home's tool pose "
+        "(needs the robot file's [stiffness]; default home)",
+    )
+
 
 def drilling_settings(args: argparse.Namespace) -> Any:
     """The :class:`~vgtarm.drilling.DrillingSettings` of the flags of :func:`add_drilling_flags`."""
@@ -81,6 +82,21 @@ def drilling_settings(args: argparse.Namespace) -> Any:
         mode=args.mode,
         feedback=args.feedback,
     )
+
+
+def start_posture(robot: Any, args: argparse.Namespace, settings: Any) -> Any:
+    """The posture the run starts from and holds: None for home, else the one stiffest along the
+    tool's axis with home's tool pose (:func:`vgtarm.design.stiffest_posture`), printed."""
+    if args.posture != "stiffest":
+        return None
+    from ...design import stiffest_posture
+
+    posture = stiffest_posture(robot, robot.parameters.home, thrust=settings.set_point)
+    print(
+        f"posture    stiffest along the axis: {posture.stiffness:.4g} N/m (home {posture.stiffness0:.4g} N/m, "
+        f"{100 * (posture.stiffness / posture.stiffness0 - 1):+.3g} %)"
+    )
+    return posture.q
 
 
 def add_export_parser(formats: Any) -> None:
@@ -108,7 +124,8 @@ def cmd_export_drilling(args: argparse.Namespace) -> int:
     check_output_folder(args.out, "--out", inputs=[args.config, args.bone], owned=())
     robot = load_robot(args.config)
     bone = load_bone(args.bone)
-    done = export_drilling(robot, bone, args.out, drilling_settings(args))
+    settings = drilling_settings(args)
+    done = export_drilling(robot, bone, args.out, settings, q0=start_posture(robot, args, settings))
     print(f"written    {escape(str(done))}: make builds libvgtd.a and vgtd_replay")
     return 0
 
@@ -122,17 +139,7 @@ def cmd_drill(args: argparse.Namespace) -> int:
     robot = load_robot(args.config)
     bone = load_bone(args.bone)
     settings = drilling_settings(args)
-    q0 = None
-    if args.posture == "stiffest":
-        from ...design import stiffest_posture
-
-        posture = stiffest_posture(robot, robot.parameters.home, thrust=settings.set_point)
-        q0 = posture.q
-        print(
-            f"posture    stiffest along the axis: {posture.stiffness:.4g} N/m (home {posture.stiffness0:.4g} N/m, "
-            f"{100 * (posture.stiffness / posture.stiffness0 - 1):+.3g} %)"
-        )
-    result = drilling_run(robot, bone, settings, q0=q0)
+    result = drilling_run(robot, bone, settings, q0=start_posture(robot, args, settings))
     summary = result.summary()
     print(f"bone       {escape(str(args.bone))}: {len(bone.layers)} layers, {1e3 * bone.thickness:.2f} mm")
     print(f"run        {args.mode} force control, {args.feedback}; {escape(result.reason)}")
