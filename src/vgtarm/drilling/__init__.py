@@ -1,7 +1,8 @@
 """Bone drilling: the layered bone, the drill, and the thrust and torque of the cutting law
 (:mod:`vgtarm.drilling.bone`; the same arithmetic in C in ``model/csrc/vgt_drill.h``; ``docs/drilling.md``),
-and a first drilling loop under hybrid force and position control in the tool frame with layer
-and breakthrough detection from the observer's estimate (:mod:`.control`, :mod:`.loop`, in NumPy;
+and the drilling loop under hybrid force and position control in the tool frame with layer and
+breakthrough detection from the observer's estimate (:mod:`.control`, :mod:`.loop`; in C by
+:mod:`.compiled`, held to the NumPy loop; studies of seeded bones in :mod:`.study`;
 ``docs/drilling_control.md``)."""
 
 from __future__ import annotations
@@ -32,13 +33,25 @@ from .control import (
     Detector,
     DrillingPlant,
     DrillingSettings,
+    DrillingSetup,
     HybridController,
     check_settings,
 )
-from .loop import SERIES, TARGETS, DrillingResult, drilling_figure, drilling_run, perturbed_bone, summarise
+from .loop import (
+    ENGINES,
+    SERIES,
+    TARGETS,
+    DrillingResult,
+    drilling_figure,
+    drilling_run,
+    drilling_setup,
+    perturbed_bone,
+    summarise,
+)
 
 __all__ = [
     "COEFFICIENT_NAMES",
+    "ENGINES",
     "FEEDBACKS",
     "FEMUR",
     "HEADER",
@@ -53,6 +66,7 @@ __all__ = [
     "DrillingPlant",
     "DrillingResult",
     "DrillingSettings",
+    "DrillingSetup",
     "HybridController",
     "Layer",
     "Material",
@@ -62,6 +76,7 @@ __all__ = [
     "drilling_forces",
     "drilling_forces_at",
     "drilling_run",
+    "drilling_setup",
     "engagement",
     "engagement_slope",
     "feed_law",
