@@ -117,9 +117,9 @@ def test_pose_conditioning_agrees_with_the_identifiability_analysis(robot: vgtar
     direction's (``sigma / s_min``: ``var x_i = sigma^2 sum_j V_ij^2 / s_j^2``)."""
     measured = K.read_measurements(MEASUREMENTS, robot)
     result = K.calibrate(robot, measured)
-    found = calibrate_cli.pose_conditioning(robot, result, measured, candidates=3000, seed=0, sensor_offsets=True)
+    found = K.pose_conditioning(robot, result, measured, candidates=3000, seed=0, sensor_offsets=True)
     assert found["condition_number"] == pytest.approx(result.identifiability.condition_number, rel=1e-9)
-    assert found["random"]["trials"] == calibrate_cli.RANDOM_TRIALS
+    assert found["random"]["trials"] == K.RANDOM_TRIALS
     assert found["condition_number"] < found["random"]["best"] <= found["random"]["median"] <= found["random"]["worst"]
     worst = result.sigma / result.identifiability.singular_values[-1]
     assert np.nanmax(result.standard_errors) <= worst * (1 + 1e-9)
@@ -186,7 +186,7 @@ def test_hold_out_check_is_exact_on_noise_free_data_and_refuses_an_unexcited_fit
     q, qd, qdd = trajectory.q, trajectory.qd, trajectory.qdd
     forces = robot.inverse_dynamics(q, qd, qdd)
     result = dynamic.identify(robot, q, qd, qdd, forces)
-    found = identify_cli.holdout_check(robot, result, (q, qd, qdd, forces))
+    found = dynamic.holdout_check(robot, result, (q, qd, qdd, forces))
     assert found is not None and found["fit_samples"] + found["test_samples"] == len(q)
     assert found["rms_prediction"] <= 1e-9 * float(np.sqrt(np.mean(forces**2)))
     split, n = found["fit_samples"], robot.n_joints
@@ -195,7 +195,7 @@ def test_hold_out_check_is_exact_on_noise_free_data_and_refuses_an_unexcited_fit
         np.concatenate([np.zeros((split, n)), qd[split:]]),
         np.concatenate([np.zeros((split, n)), qdd[split:]]),
     )
-    assert identify_cli.holdout_check(robot, result, (*still, robot.inverse_dynamics(*still))) is None
+    assert dynamic.holdout_check(robot, result, (*still, robot.inverse_dynamics(*still))) is None
 
 
 # -- hostile names and the browser -------------------------------------------------------------------

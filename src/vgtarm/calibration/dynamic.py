@@ -636,3 +636,39 @@ def simulated_forces(
     rng = np.random.default_rng(checks.seed("seed", seed))
     forces = robot.inverse_dynamics(q, qd, qdd)
     return forces + sigma * rng.standard_normal(forces.shape)
+
+
+#: Share of the samples :func:`holdout_check` predicts from a fit to the rest.
+HOLDOUT_FRACTION = 0.3
+
+
+def _rms_of(values: Array) -> float:
+    return float(np.sqrt(np.mean(np.square(values))))
+
+
+def holdout_check(
+    robot: Robot, result: Identification, data: tuple[np.ndarray, ...], fraction: float = HOLDOUT_FRACTION
+) -> dict[str, Any] | None:
+    """Predict the last ``fraction`` of the samples from a least-squares fit of the base parameters
+    (weighted by each joint's noise, as :func:`~vgtarm.calibration.dynamic.identify`) to the others:
+    the RMS residual of the fit and of the prediction (N, N m), or ``None`` when the first part does
+    not excite every base parameter (its base regressor is rank deficient)."""
+    q, qd, qdd, forces = data
+    samples, n = q.shape
+    split = int(round((1.0 - fraction) * samples))
+    design = result.base.regressor(regressor(robot, q, qd, qdd))  # (N, n, r)
+    weights = 1.0 / np.maximum(result.noise, np.finfo(float).tiny)
+    train = (design[:split] * weights[:, None]).reshape(-1, design.shape[2])
+    norms = np.linalg.norm(train, axis=0)
+    if not 0 < split < samples or not (norms > 0).all():
+        return None
+    if np.linalg.matrix_rank(train / norms, tol=RANK_TOLERANCE * np.linalg.norm(train / norms, 2)) < train.shape[1]:
+        return None
+    estimate = np.linalg.lstsq(train, (forces[:split] * weights).reshape(-1), rcond=None)[0]
+    residual = forces - design @ estimate
+    return {
+        "fit_samples": split,
+        "test_samples": samples - split,
+        "rms_fit": _rms_of(residual[:split]),
+        "rms_prediction": _rms_of(residual[split:]),
+    }

@@ -1076,3 +1076,49 @@ def _exp(w: Array) -> Array:
     k = w / angle
     K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
     return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+
+
+#: Random pose sets :func:`pose_conditioning` compares the measured poses with.
+RANDOM_TRIALS = 20
+
+
+def _condition_number(blocks: np.ndarray) -> float:
+    """Largest over smallest singular value of stacked Jacobian blocks ``(K, rows, m)``."""
+    s = np.linalg.svd(blocks.reshape(-1, blocks.shape[2]), compute_uv=False)
+    return float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
+
+
+def pose_conditioning(
+    robot: Robot, result: Calibration, measurements: Measurements, *, candidates: int, seed: int, sensor_offsets: bool
+) -> dict[str, Any]:
+    """How well the measured poses condition the identification: the condition number of the free
+    parameters' Jacobian over them (positions only, at the fitted values), and the same for
+    :data:`RANDOM_TRIALS` sets of as many random poses (``candidates`` seeded configurations within
+    the limits, :func:`~vgtarm.calibration.kinematic.candidate_poses`), as ``plan.md`` compares a plan."""
+    model = ToolModel(robot, sensor_offsets=sensor_offsets)
+    free = result.identifiability.free
+    _, jacobian = model.evaluate(measurements.q, result.values)
+    found: dict[str, Any] = {"condition_number": _condition_number(jacobian[:, :, free]), "random": None}
+    pool = candidate_poses(robot, candidates, seed=seed)
+    count = len(measurements)
+    if len(pool) < count:
+        return found
+    _, blocks = model.evaluate(pool, result.values)
+    blocks = blocks[:, :, free]
+    usable = np.isfinite(blocks).all(axis=(1, 2))
+    blocks = blocks[usable]
+    if len(blocks) < count:
+        return found
+    rng = np.random.default_rng([seed, 1])
+    values = np.array(
+        [_condition_number(blocks[rng.choice(len(blocks), count, replace=False)]) for _ in range(RANDOM_TRIALS)]
+    )
+    found["random"] = {
+        "trials": RANDOM_TRIALS,
+        "candidates": len(blocks),
+        "seed": seed,
+        "median": float(np.median(values)),
+        "best": float(values.min()),
+        "worst": float(values.max()),
+    }
+    return found

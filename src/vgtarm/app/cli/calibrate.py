@@ -33,10 +33,9 @@ from ...calibration.kinematic import (
     Identifiability,
     Measurements,
     PosePlan,
-    ToolModel,
     calibrate,
-    candidate_poses,
     plan_poses,
+    pose_conditioning,
     read_measurements,
 )
 from ...errors import escape
@@ -56,8 +55,6 @@ CALIBRATE_FILES = (
     "calibration.html",
 )
 PLAN_FILES = ("poses.csv", "plan.md")
-#: Random sets of poses the measured ones are compared with on the page (as ``plan.md`` does).
-RANDOM_TRIALS = 20
 
 
 def add_parser(sub: Any) -> None:
@@ -145,48 +142,6 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         atomic_write_text(folder / "calibration.html", calibration_html(summary, pictures))
     print(f"written    {escape(str(args.out))}: {', '.join(CALIBRATE_FILES)}")
     return 0 if result.success else 1
-
-
-def _condition_number(blocks: np.ndarray) -> float:
-    """Largest over smallest singular value of stacked Jacobian blocks ``(K, rows, m)``."""
-    s = np.linalg.svd(blocks.reshape(-1, blocks.shape[2]), compute_uv=False)
-    return float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
-
-
-def pose_conditioning(
-    robot: Robot, result: Calibration, measurements: Measurements, *, candidates: int, seed: int, sensor_offsets: bool
-) -> dict[str, Any]:
-    """How well the measured poses condition the identification: the condition number of the free
-    parameters' Jacobian over them (positions only, at the fitted values), and the same for
-    :data:`RANDOM_TRIALS` sets of as many random poses (``candidates`` seeded configurations within
-    the limits, :func:`~vgtarm.calibration.kinematic.candidate_poses`), as ``plan.md`` compares a plan."""
-    model = ToolModel(robot, sensor_offsets=sensor_offsets)
-    free = result.identifiability.free
-    _, jacobian = model.evaluate(measurements.q, result.values)
-    found: dict[str, Any] = {"condition_number": _condition_number(jacobian[:, :, free]), "random": None}
-    pool = candidate_poses(robot, candidates, seed=seed)
-    count = len(measurements)
-    if len(pool) < count:
-        return found
-    _, blocks = model.evaluate(pool, result.values)
-    blocks = blocks[:, :, free]
-    usable = np.isfinite(blocks).all(axis=(1, 2))
-    blocks = blocks[usable]
-    if len(blocks) < count:
-        return found
-    rng = np.random.default_rng([seed, 1])
-    values = np.array(
-        [_condition_number(blocks[rng.choice(len(blocks), count, replace=False)]) for _ in range(RANDOM_TRIALS)]
-    )
-    found["random"] = {
-        "trials": RANDOM_TRIALS,
-        "candidates": len(blocks),
-        "seed": seed,
-        "median": float(np.median(values)),
-        "best": float(values.min()),
-        "worst": float(values.max()),
-    }
-    return found
 
 
 def calibration_summary(

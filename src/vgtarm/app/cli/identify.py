@@ -30,13 +30,12 @@ import numpy as np
 import scipy.signal
 
 from ...calibration.dynamic import (
-    RANK_TOLERANCE,
     STANDARD_UNITS,
     Identification,
     body_standard,
+    holdout_check,
     identify,
     is_consistent,
-    regressor,
 )
 from ...calibration.excitation import exciting_trajectory
 from ...errors import InputError, escape
@@ -56,8 +55,6 @@ IDENTIFY_FILES = (
 EXCITE_FILES = ("excitation.csv",)
 #: Largest measurement file read (bytes).
 DATA_LIMIT = 2**28
-#: Fraction of the samples (the last ones) the page's hold-out check predicts from a fit to the others.
-HOLDOUT_FRACTION = 0.3
 
 
 def add_parser(sub: Any) -> None:
@@ -241,34 +238,6 @@ def _rms(values: np.ndarray, axis: int | None = None) -> Any:
     """Root mean square of ``values`` (over ``axis``; all of them by default)."""
     rms = np.sqrt(np.mean(np.square(values), axis=axis))
     return float(rms) if axis is None else rms
-
-
-def holdout_check(
-    robot: Robot, result: Identification, data: tuple[np.ndarray, ...], fraction: float = HOLDOUT_FRACTION
-) -> dict[str, Any] | None:
-    """Predict the last ``fraction`` of the samples from a least-squares fit of the base parameters
-    (weighted by each joint's noise, as :func:`~vgtarm.calibration.dynamic.identify`) to the others:
-    the RMS residual of the fit and of the prediction (N, N m), or ``None`` when the first part does
-    not excite every base parameter (its base regressor is rank deficient)."""
-    q, qd, qdd, forces = data
-    samples, n = q.shape
-    split = int(round((1.0 - fraction) * samples))
-    design = result.base.regressor(regressor(robot, q, qd, qdd))  # (N, n, r)
-    weights = 1.0 / np.maximum(result.noise, np.finfo(float).tiny)
-    train = (design[:split] * weights[:, None]).reshape(-1, design.shape[2])
-    norms = np.linalg.norm(train, axis=0)
-    if not 0 < split < samples or not (norms > 0).all():
-        return None
-    if np.linalg.matrix_rank(train / norms, tol=RANK_TOLERANCE * np.linalg.norm(train / norms, 2)) < train.shape[1]:
-        return None
-    estimate = np.linalg.lstsq(train, (forces[:split] * weights).reshape(-1), rcond=None)[0]
-    residual = forces - design @ estimate
-    return {
-        "fit_samples": split,
-        "test_samples": samples - split,
-        "rms_fit": _rms(residual[:split]),
-        "rms_prediction": _rms(residual[split:]),
-    }
 
 
 def _base_unit(result: Identification, index: int, units: tuple[str, ...]) -> str:
