@@ -154,7 +154,7 @@ def calibration_summary(
 ) -> dict[str, Any]:
     """The data of ``calibration.html`` (SI units): the fit, the identifiability, every parameter
     (``None`` for the value and error of a held one: undetermined), the pose ``conditioning``
-    (:func:`pose_conditioning`) and the written robot file's name."""
+    (:func:`~vgtarm.calibration.kinematic.pose_conditioning`) and the written robot file's name."""
     analysis = result.identifiability
     held = [status == "held" for status in result.status]
     parameters = [
