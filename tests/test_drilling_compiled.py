@@ -6,6 +6,8 @@ summary agrees; the robot without the compiled library is refused one line."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -129,3 +131,30 @@ def test_a_hidden_transition_arms_the_breakthrough_in_both_loops(robot, small_bo
     assert [t for t, *_ in fast.events] == pytest.approx([t for t, *_ in slow.events], abs=1e-12)
     assert fast.summary()["protrusion"] == pytest.approx(slow.summary()["protrusion"], abs=1e-9)
     assert fast.summary()["protrusion"] < 0.2e-3
+
+
+def test_the_cap_breaks_out_the_same_in_both_loops_and_is_caught_at_once(robot, small_bone):
+    """With a cap strength the far cortex's cap breaks out before the apex reaches the far surface
+    (at ``cap_thickness`` under the thrust); both loops break it at the same plant step and detect
+    it within the target's 20 ms, the apex stopping short of the surface."""
+    from vgtarm.drilling.bone import cap_thickness
+
+    data = small_bone.to_dict()
+    data["model"]["cap_strength"] = 1.5e8
+    capped = bone_from_dict(data, source="capped")
+    assert capped.to_dict()["model"]["cap_strength"] == 1.5e8
+    s = DrillingSettings(**SMALL, **EXACT)
+    fast = drilling_run(robot, capped, s, engine="compiled")
+    slow = drilling_run(robot, capped, s, engine="numpy")
+    assert math.isfinite(fast.fracture_time) and fast.fracture_time == slow.fracture_time
+    for i, name in enumerate(SERIES):
+        scale = max(float(np.max(np.abs(slow.series[:, i]))), 1e-9)
+        assert float(np.max(np.abs(fast.series[:, i] - slow.series[:, i]))) <= 1e-8 * scale, name
+    summary = fast.summary()
+    assert summary["breakthrough_true_time"] == fast.fracture_time
+    assert 0.0 < summary["detection_delay"] <= 0.020 and summary["false_detections"] == 0
+    assert summary["protrusion"] < 0.0  # the apex never reached the far surface
+    # the cap went where the plate formula puts it: the bone left ahead of the apex at the fracture
+    k = int(np.searchsorted(fast.column("t"), fast.fracture_time))
+    left = capped.thickness - fast.column("depth")[k - 1]
+    assert left == pytest.approx(cap_thickness(capped, float(fast.column("thrust")[k - 1])), rel=0.05)

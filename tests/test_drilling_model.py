@@ -492,3 +492,21 @@ def test_a_bad_chisel_is_refused_naming_the_field(femur, key, value, message):
     with pytest.raises(ConfigError, match=message) as caught:
         _with_drill(femur, **{key: value})
     assert "\n" not in str(caught.value)
+
+
+@pytest.mark.parametrize("value", [0.0, -1.0e8, math.inf, "strong"])
+def test_a_bad_cap_strength_is_one_line_naming_the_field(femur, value):
+    data = femur.to_dict()
+    data["model"]["cap_strength"] = value
+    with pytest.raises(ConfigError, match=r"^cap\.toml: field 'model\.cap_strength' = .*: expected") as caught:
+        bone_from_dict(data, source="cap.toml")
+    assert "\n" not in str(caught.value)
+
+
+def test_the_cap_example_is_the_femur_with_a_cap(femur):
+    from vgtarm.drilling.bone import cap_thickness
+
+    capped = load_bone(Path(__file__).resolve().parents[1] / "examples" / "bones" / "femur_diaphysis_cap.toml")
+    assert capped.layers == femur.layers and capped.cap_strength == 1.5e8 and femur.cap_strength is None
+    assert cap_thickness(capped, 20.0) == pytest.approx(math.sqrt(0.5 * 20.0 / 1.5e8))  # 0.26 mm
+    assert cap_thickness(femur, 20.0) == 0.0

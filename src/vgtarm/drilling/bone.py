@@ -150,6 +150,7 @@ class Bone:
     reference_feed: float
     reference_speed: float
     feed_floor: float
+    cap_strength: float | None = None  # (Pa) the far cortex's cap breaks out (:func:`cap_thickness`); None: never
 
     def material(self, name: str) -> Material:
         """The material called ``name``."""
@@ -228,6 +229,7 @@ class Bone:
                 "reference_feed": self.reference_feed,
                 "reference_speed": self.reference_speed,
                 "feed_floor": self.feed_floor,
+                **({} if self.cap_strength is None else {"cap_strength": self.cap_strength}),
             },
             "materials": materials,
             "layers": [{"material": x.material, "thickness": x.thickness, "density": x.density} for x in self.layers],
@@ -342,10 +344,36 @@ def bone_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> Bone:
     if not isinstance(name, str) or not name.strip() or len(name) > 200:
         checks.refuse(reader.field("name"), name, "a text of 1 to 200 characters", ConfigError)
     drill = _read_drill(reader, data["drill"])
-    model = reader.numbers(data["model"], "model", _MODEL_BOUNDS)
+    table = data["model"]
+    cap = None
+    if isinstance(table, Mapping) and "cap_strength" in table:  # optional: the cap's breakout
+        cap = checks.number(
+            reader.field("model.cap_strength"),
+            table["cap_strength"],
+            above=0.0,
+            maximum=1e10,
+            unit="Pa",
+            error=ConfigError,
+        )
+        table = {key: value for key, value in table.items() if key != "cap_strength"}
+    model = reader.numbers(table, "model", _MODEL_BOUNDS)
     materials = _read_materials(reader, data["materials"])
     layers = _read_layers(reader, data["layers"], {m.name: m for m in materials})
-    return Bone(name.strip(), layers, drill, materials, **model)
+    return Bone(name.strip(), layers, drill, materials, **model, cap_strength=cap)
+
+
+#: The factor ``k`` of :func:`cap_thickness`: the largest bending stress of a thin circular plate
+#: under a central load is about ``k F / t^2`` (Roark's formulas, a simply supported plate under a
+#: load on a small central circle: ``k`` from 0.5 to 0.9 with the load circle; the lower end here).
+CAP_FACTOR = 0.5
+
+
+def cap_thickness(bone: Bone, thrust: float) -> float:
+    """The thickness (m) of bone left ahead of the drill's apex below which the cap breaks out under
+    ``thrust`` (N): ``sqrt(CAP_FACTOR thrust / cap_strength)``; 0 without a cap strength."""
+    if bone.cap_strength is None or thrust <= 0.0:
+        return 0.0
+    return math.sqrt(CAP_FACTOR * thrust / bone.cap_strength)
 
 
 def _read_drill(reader: _Reader, table: object) -> Drill:

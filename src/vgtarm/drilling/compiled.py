@@ -23,6 +23,7 @@ from ..errors import VgtarmError
 from ..model.backends import CompiledBackend
 from ..model.interface import enum, ffi
 from ..model.robot import Robot
+from .bone import CAP_FACTOR
 from .control import END_HOLD, STOP_HOLD, DrillingSetup, arm_depth
 
 Array = NDArray[np.float64]
@@ -49,6 +50,7 @@ class CompiledRun:
     events: tuple[tuple[float, str, int], ...]
     status: int
     readings: Array | None = None
+    fracture_time: float = math.nan
 
 
 def available(robot: Robot) -> bool:
@@ -175,6 +177,8 @@ def compiled_run(setup: DrillingSetup, *, readings: bool = False) -> CompiledRun
             "feed_ref": bone.reference_feed,
             "speed_ref": bone.reference_speed,
             "feed_floor": bone.feed_floor,
+            "cap_strength": 0.0 if bone.cap_strength is None else bone.cap_strength,
+            "cap_factor": CAP_FACTOR,
         },
     )
     c_settings = ffi().new("vgt_drill_settings *", fields)
@@ -191,7 +195,8 @@ def compiled_run(setup: DrillingSetup, *, readings: bool = False) -> CompiledRun
     k, e = int(run.n_samples), int(run.n_events)
     events = tuple((float(t), EVENT_KINDS[int(kind)], int(layer)) for t, kind, layer in arrays["events"][:e])
     kept = arrays["q_meas"][:k].copy() if readings else None
-    return CompiledRun(arrays["series"][:k].copy(), arrays["efforts"][:k].copy(), events, int(status), kept)
+    series, efforts = arrays["series"][:k].copy(), arrays["efforts"][:k].copy()
+    return CompiledRun(series, efforts, events, int(status), kept, float(run.fracture_time))
 
 
 #: ``vgt_status`` codes by name, for the loop's reasons.

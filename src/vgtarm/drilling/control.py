@@ -11,15 +11,17 @@ moment ``-torque * axis`` (the spindle housing takes the reaction of the cutting
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .. import checks
 from ..model.robot import Robot
-from .bone import Bone, drilling_forces_at
+from .bone import Bone, cap_thickness, drilling_forces_at
 
 Array = NDArray[np.float64]
 
@@ -171,10 +173,21 @@ def arm_depth(told: Bone, settings: DrillingSettings) -> tuple[float, float]:
 # -- the plant ------------------------------------------------------------------------------------
 
 
+@dataclass
+class CapState:
+    """Whether the far cortex's cap has broken out, and when (s; NaN: not yet); ``clock`` is the
+    time of the control period the plant is stepping (s), set by the loop."""
+
+    broken_at: float = math.nan
+    clock: float = 0.0
+
+
 @dataclass(frozen=True)
 class DrillingPlant:
     """The true robot drilling ``bone`` along ``axis`` (unit, F0) from ``entry`` (m, F0) at
-    ``spindle_speed`` (rad/s)."""
+    ``spindle_speed`` (rad/s). With the bone's ``cap_strength`` the cap ahead of the apex breaks
+    out once thinner than :func:`~.bone.cap_thickness` under the thrust (checked at each plant
+    step), and the last layer cuts no more (``cap``)."""
 
     robot: Robot
     bone: Bone
@@ -182,6 +195,22 @@ class DrillingPlant:
     axis: Array
     spindle_speed: float
     tool_torque: bool = True
+    cap: CapState = field(default_factory=CapState)
+
+    @cached_property
+    def _capless(self) -> Bone:
+        """The bone without its last layer: what still cuts once the cap is out."""
+        return dataclasses.replace(self.bone, layers=self.bone.layers[:-1])
+
+    def _check_cap(self, q: Array, qd: Array, t: float) -> None:
+        """Break the cap at time ``t`` (s) if the bone left ahead of the apex is thinner than
+        :func:`~.bone.cap_thickness` under the thrust at ``(q, qd)``."""
+        bone = self.bone
+        if bone.cap_strength is None or not math.isnan(self.cap.broken_at):
+            return
+        depth, _ = self.depth_feed(q, qd)
+        if depth > float(bone.boundaries[-2]) and bone.thickness - depth < cap_thickness(bone, self.forces(q, qd)[0]):
+            self.cap.broken_at = t
 
     def depth_feed(self, q: Array, qd: Array) -> tuple[float, float]:
         """Tip depth past the entry surface along the axis (m) and the feed (m/s)."""
@@ -192,7 +221,8 @@ class DrillingPlant:
     def forces(self, q: Array, qd: Array) -> tuple[float, float, float, float]:
         """The drill's ``(thrust, torque, d thrust / d depth, d thrust / d feed)`` at ``(q, qd)``."""
         depth, feed = self.depth_feed(q, qd)
-        return drilling_forces_at(self.bone, depth, feed, self.spindle_speed)
+        bone = self.bone if math.isnan(self.cap.broken_at) else self._capless
+        return drilling_forces_at(bone, depth, feed, self.spindle_speed)
 
     def tip_force(self, q: Array, qd: Array) -> Array:
         """The bone's force on the tip (N, F0): ``-thrust * axis``."""
@@ -220,7 +250,8 @@ class DrillingPlant:
         """The state after ``dt`` (s) under the constant efforts ``F``: ``substeps`` steps of
         semi-implicit Euler (velocity first) with the semi-implicit thrust."""
         h = dt / substeps
-        for _ in range(substeps):
+        for i in range(substeps):
+            self._check_cap(q, qd, self.cap.clock + i * h)
             qdd, _ = self.acceleration(q, qd, F, h)
             qd = qd + h * qdd
             q = q + h * qd

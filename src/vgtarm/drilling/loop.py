@@ -88,6 +88,7 @@ class DrillingResult:
     settings: DrillingSettings
     success: bool
     reason: str
+    fracture_time: float = math.nan  # when the far cortex's cap broke out (s; NaN: it did not)
 
     def column(self, name: str) -> Array:
         """The column ``name`` of :data:`SERIES`."""
@@ -217,13 +218,15 @@ def drilling_run(
         efforts.append(F)
         if run.phase == DONE:
             break
+        truth.cap.clock = t
         q, qd = truth.step(q, qd, F, s.dt, s.substeps)
     else:
         reason = f"no breakthrough detected within {s.duration:g} s"
     series = np.array(rows, dtype=np.float64).reshape(-1, len(SERIES))
     events = tuple(detector.events)
     success = run.phase == DONE
-    return DrillingResult(series, np.array(efforts), events, bone, s, success, reason if not success else "done")
+    reason = reason if not success else "done"
+    return DrillingResult(series, np.array(efforts), events, bone, s, success, reason, truth.cap.broken_at)
 
 
 def _compiled(setup: DrillingSetup) -> DrillingResult:
@@ -241,7 +244,7 @@ def _compiled(setup: DrillingSetup) -> DrillingResult:
     else:
         t = float(series[-1, 0]) if len(series) else 0.0
         reason = f"the run left the model at t = {t:.3f} s (status {status})"
-    return DrillingResult(series, efforts, events, setup.bone, s, success, reason)
+    return DrillingResult(series, efforts, events, setup.bone, s, success, reason, run.fracture_time)
 
 
 def _sample(
@@ -334,7 +337,7 @@ def _crossing(t: Array, x: Array, level: float) -> float:
 def _layer_errors(result: DrillingResult) -> list[dict[str, float]]:
     """Per layer: the RMS of the true thrust's error to the set point while drilling with the point
     wholly in the layer, from :data:`ENGAGEMENT_WAIT` after its full engagement to the next
-    interface, and the share of those samples at the feed limit."""
+    interface (or the cap's breakout), and the share of those samples at the feed limit."""
     t, depth, thrust = result.column("t"), result.column("depth"), result.column("thrust")
     feed, phase = result.column("feed"), result.column("phase")
     edges, length = result.bone.boundaries, result.bone.point_length
@@ -344,6 +347,8 @@ def _layer_errors(result: DrillingResult) -> list[dict[str, float]]:
         start = _crossing(t, depth, edges[i] + length)
         inside = (depth >= edges[i] + length) & (depth <= edges[i + 1]) & (phase == DRILLING)
         inside &= t >= start + ENGAGEMENT_WAIT if math.isfinite(start) else False
+        if math.isfinite(result.fracture_time):  # the cap out, the last layer cuts no more
+            inside &= t < result.fracture_time
         error = thrust[inside] - s.set_point
         out.append(
             {
@@ -359,14 +364,17 @@ def _layer_errors(result: DrillingResult) -> list[dict[str, float]]:
 
 def summarise(result: DrillingResult) -> dict[str, Any]:
     """The measures of ``result``: per-layer thrust error, protrusion past the far surface (m),
-    the breakthrough's true time (the tip crossing the far surface) and the detection's delay
-    after it (s), the delay after the true last layer's engagement fell below the detector's
-    fraction (the estimator's and detector's own latency), the largest lateral deviation (m) and
-    axis error (rad) from the tare to the end, each layer transition's true and detected times,
-    the detections not preceded by a true crossing (false), and the largest joint efforts."""
+    the breakthrough's true time (the tip crossing the far surface, or the cap breaking out if that
+    came first) and the detection's delay after it (s), the delay after the true last layer's
+    engagement fell below the detector's fraction (the estimator's and detector's own latency), the
+    largest lateral deviation (m) and axis error (rad) from the tare to the end, each layer
+    transition's true and detected times, the detections not preceded by a true crossing (false),
+    and the largest joint efforts."""
     t, depth = result.column("t"), result.column("depth")
     bone, s = result.bone, result.settings
     true_break = _crossing(t, depth, bone.thickness)
+    if math.isfinite(result.fracture_time):  # the cap broke out before the apex reached the surface
+        true_break = min(true_break, result.fracture_time) if math.isfinite(true_break) else result.fracture_time
     weight, _ = layer_weights(bone, depth)
     last = weight[:, -1]
     past = depth > bone.thickness

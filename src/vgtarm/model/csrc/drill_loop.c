@@ -51,6 +51,7 @@ typedef struct {
 static int truth(const vgt_drill_model *m, drill_work *wk, const vgt_drill_settings *s, const vgt_drill_bone *bone,
                  const vgt_drill_run *r, const double *q, const double *qd, drill_truth *out)
 {
+    const int layers = bone->n_layers - (isnan(r->fracture_time) ? 0 : 1); /* the cap out: the last layer cuts no more */
     double V[3], W[3];
     const double *in_q[2] = {q, r->p_plant};
     double *out_tip[1] = {out->tip};
@@ -62,7 +63,7 @@ static int truth(const vgt_drill_model *m, drill_work *wk, const vgt_drill_setti
     double offset[3] = {out->tip[0] - r->entry[0], out->tip[1] - r->entry[1], out->tip[2] - r->entry[2]};
     out->depth = vgt_drill_dot3(axis, offset);
     out->feed = vgt_drill_dot3(axis, V);
-    vgt_drill_forces(bone->n_layers, bone->boundaries, bone->coefficients, bone->point_length, bone->chisel_length,
+    vgt_drill_forces(layers, bone->boundaries, bone->coefficients, bone->point_length, bone->chisel_length,
                      bone->chisel_share, bone->feed_ref, bone->speed_ref, bone->feed_floor, out->depth, out->feed,
                      s->spindle_speed, out->forces);
     return 0;
@@ -71,12 +72,20 @@ static int truth(const vgt_drill_model *m, drill_work *wk, const vgt_drill_setti
 /* One plant step of h (s) under F: (M + h b j j^T) qdd = F - C - j thrust - J_W^T axis torque,
  * then semi-implicit Euler (DrillingPlant.acceleration and step). */
 static int plant_step(const vgt_drill_model *m, drill_work *wk, const vgt_drill_settings *s,
-                      const vgt_drill_bone *bone, const vgt_drill_run *r, double h, const double *F, double *q,
+                      const vgt_drill_bone *bone, vgt_drill_run *r, double t, double h, const double *F, double *q,
                       double *qd)
 {
     const int nj = s->n_joints;
     drill_truth tr;
     if (truth(m, wk, s, bone, r, q, qd, &tr)) return 1;
+    if (bone->cap_strength > 0.0 && isnan(r->fracture_time) && tr.depth > bone->boundaries[bone->n_layers - 1]) {
+        const double thickness = bone->boundaries[bone->n_layers];
+        const double critical = tr.forces[0] > 0.0 ? sqrt(bone->cap_factor * tr.forces[0] / bone->cap_strength) : 0.0;
+        if (thickness - tr.depth < critical) { /* the cap breaks out: the forces without the last layer */
+            r->fracture_time = t;
+            if (truth(m, wk, s, bone, r, q, qd, &tr)) return 1;
+        }
+    }
     double JP[3 * nj], Jw[3 * nj], M[nj * nj], C[nj], j_axis[nj], rhs[nj], qdd[nj];
     const double *in_q[2] = {q, r->p_plant};
     double *out_jac[2] = {JP, Jw};
@@ -175,6 +184,7 @@ static int drill_run(const vgt_drill_model *m, drill_work *wk, double *memory, c
     const double h = s->dt / steps;
     int status = VGT_ABOVE_THRESHOLD;
     r->n_samples = 0;
+    r->fracture_time = NAN;
     for (long k = 0; k < s->max_samples; ++k) {
         const double t = k * s->dt;
         drill_truth tr;
@@ -208,7 +218,7 @@ static int drill_run(const vgt_drill_model *m, drill_work *wk, double *memory, c
             break;
         }
         int failed = 0;
-        for (int i = 0; i < steps && !failed; ++i) failed = plant_step(m, wk, s, bone, r, h, F, q, qd);
+        for (int i = 0; i < steps && !failed; ++i) failed = plant_step(m, wk, s, bone, r, t + i * h, h, F, q, qd);
         if (failed) {
             status = VGT_FUNCTION_FAILED;
             break;

@@ -368,6 +368,8 @@ typedef struct {
     const double *boundaries;   /* (n_layers + 1) interface depths (m)                    */
     const double *coefficients; /* (n_layers, VGT_DRILL_COEFFICIENTS) the law's rows       */
     double point_length, chisel_length, chisel_share, feed_ref, speed_ref, feed_floor;
+    double cap_strength;        /* (Pa) the cap ahead of the apex breaks out once thinner than */
+    double cap_factor;          /* sqrt(cap_factor thrust / cap_strength); 0: never          */
 } vgt_drill_bone;
 
 /* A drilling run's settings (vgtarm.drilling.control.DrillingSettings, SI units) and what the
@@ -421,6 +423,7 @@ typedef struct {
     double *events;                /* (max_events, 3): t, kind (enum vgt_drill_event), layer   */
     long max_events;
     long n_samples, n_events;      /* out                                                     */
+    double fracture_time;          /* out: when the cap broke out (s), NaN if it did not       */
 } vgt_drill_run;
 
 /* The phases of a drilling run and the detector's events (vgtarm.drilling.control.PHASES). */
