@@ -272,6 +272,8 @@ def _sample(
     estimate = run.previous_thrust if s.feedback == "sensor" else observed
     run.previous_thrust = thrust
     _advance(t, run, ctrl, detector, ts, estimate, observed)
+    if run.phase == STOPPING and run.stopped_at == t:  # the bone is gone: so is its force from the estimate
+        tau_hat = sensing.tau_hat = tau_hat + ts.J[4] * observed
     F, push = ctrl.effort(ts, vm, qm, tau_hat, estimate, run.phase, observed)
     actuators = sensing.model.actuators
     if actuators is not None:  # the controller clips to the peak forces (vgt_clip); the observer gets it

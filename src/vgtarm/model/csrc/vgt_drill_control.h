@@ -412,6 +412,8 @@ static int vgt_drill_control(vgt_drill_state *st, const vgt_drill_settings *s, c
     const double estimate = s->feedback == 1 ? st->previous_thrust : observed;
     st->previous_thrust = sensor_thrust;
     vgt_drill_advance(st, s, t, depth, feed, estimate, observed);
+    if (st->phase == VGT_DRILL_STOPPING && st->stopped_at == t) /* the bone is gone: so is its force */
+        for (int j = 0; j < nj; ++j) st->tau_hat[j] += J[4 * nj + j] * observed; /* from the estimate */
     /* the law (HybridController.effort) */
     double L[nj * nj], MinvJt[nj * VGT_DRILL_TASK], Lam[VGT_DRILL_TASK * VGT_DRILL_TASK];
     memcpy(L, M, sizeof L);
