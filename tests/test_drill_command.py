@@ -43,3 +43,16 @@ def test_a_bad_bone_file_is_refused_in_one_line_and_nothing_is_written(tmp_path,
     error = capsys.readouterr().err.strip().splitlines()
     assert len(error) == 1 and "thickness" in error[0]
     assert not out.exists()
+
+
+def test_a_bone_whose_cap_breaks_out_is_caught_within_the_target(tmp_path, capsys):
+    """The femur with the far cortex's cap breaking out: the command says when, the detection comes
+    within the 20 ms target of the breakout, and the apex never reaches the far surface."""
+    out = tmp_path / "run"
+    cap = FEMUR.with_name("femur_diaphysis_cap.toml")
+    assert main(["drill", "--bone", str(cap), "--out", str(out), "-q"]) == 0
+    assert "cap        broke out at" in capsys.readouterr().out
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["breakthrough_true_time"] == summary["cap_breakout_time"]
+    assert 0.0 < summary["detection_delay"] <= summary["targets"]["detection_delay"]
+    assert summary["protrusion"] < 0.0 and summary["false_detections"] == 0

@@ -411,6 +411,7 @@ def summarise(result: DrillingResult) -> dict[str, Any]:
         "thrust_error_rms_max": float(np.nanmax(rms)) if np.isfinite(rms).any() else math.nan,
         "protrusion": float(np.max(depth) - bone.thickness),
         "breakthrough_true_time": true_break,
+        "cap_breakout_time": result.fracture_time,
         "breakthrough_detected_time": t_detect,
         "detection_delay": t_detect - true_break,
         "detection_delay_after_drop": t_detect - truth_drop,

@@ -143,6 +143,9 @@ def cmd_drill(args: argparse.Namespace) -> int:
     summary = result.summary()
     print(f"bone       {escape(str(args.bone))}: {len(bone.layers)} layers, {1e3 * bone.thickness:.2f} mm")
     print(f"run        {args.mode} force control, {args.feedback}; {escape(result.reason)}")
+    if math.isfinite(result.fracture_time):
+        short = 1e3 * -summary["protrusion"]
+        print(f"cap        broke out at {result.fracture_time:.4f} s, the apex {short:.3g} mm short of the far surface")
     for layer in summary["layers"]:
         limited = f", {100 * layer['at_feed_limit']:.0f} % of it at the feed limit" if layer["at_feed_limit"] else ""
         print(
