@@ -10,6 +10,7 @@ from __future__ import annotations
 from .bone import (
     COEFFICIENT_NAMES,
     FEMUR,
+    FEMUR_CAP,
     HEADER,
     Bone,
     Drill,
@@ -54,6 +55,7 @@ __all__ = [
     "ENGINES",
     "FEEDBACKS",
     "FEMUR",
+    "FEMUR_CAP",
     "HEADER",
     "MODES",
     "PHASES",

@@ -58,6 +58,8 @@ HEADER = Path(__file__).resolve().parent.parent / "model" / "csrc" / "vgt_drill.
 #: The femur's bone file shipped with the package (the same as ``examples/bones/femur_diaphysis.toml``):
 #: ``vgtarm reproduce`` drills it.
 FEMUR = Path(__file__).resolve().parent / "data" / "femur_diaphysis.toml"
+#: The same femur with its far cortex's cap breaking out (``examples/bones/femur_diaphysis_cap.toml``).
+FEMUR_CAP = FEMUR.with_name("femur_diaphysis_cap.toml")
 #: Largest bone file read (bytes).
 BONE_FILE_LIMIT = 2**20
 #: Most layers a bone may have.

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from ...drilling import FEMUR, DrillingResult, DrillingSettings, drilling_run, load_bone
+from ...drilling import FEMUR, FEMUR_CAP, DrillingResult, DrillingSettings, drilling_run, load_bone
 from ...drilling.loop import TARGETS
 from ...drilling.study import DrillingStudy, DrillingStudyResult, run_drilling_study
 from ...fileio import atomic_write_text, json_value
@@ -28,6 +28,8 @@ from ..pictures.plotting import save_figure
 #: The force loops shown, and the study's seeded bones.
 MODES = ("admittance", "explicit")
 STUDY_SEEDS = 20
+#: The run on the femur whose far cortex's cap breaks out (admittance).
+CAP_RUN = "admittance_cap_breakout"
 #: The section's figures (beside the report) and folders (under ``beyond/``).
 RUN_FIGURE = "drilling_{mode}.png"
 SPREAD_FIGURE = "drilling_spread.png"
@@ -44,6 +46,7 @@ def drilling_section(robot: Robot, folder: Path, *, seeds: int = STUDY_SEEDS) ->
     """Run the section into ``folder`` (the reproduction's) and return its Markdown lines."""
     bone = load_bone(FEMUR)
     runs = {mode: drilling_run(robot, bone, DrillingSettings(mode=mode)) for mode in MODES}
+    runs[CAP_RUN] = drilling_run(robot, load_bone(FEMUR_CAP), DrillingSettings(mode="admittance"))
     for mode, result in runs.items():
         _save_run(result, folder / FOLDER.format(name=mode))
         save_figure(result.figure(), folder / RUN_FIGURE.format(mode=mode))
@@ -85,8 +88,9 @@ def _lines(bone: str, runs: dict[str, DrillingResult], study: DrillingStudyResul
     for mode, result in runs.items():
         s = result.summary()
         per_layer = ", ".join(f"{e['thrust_error_rms']:.2f}" for e in s["layers"])
+        label = "admittance, the cap breaking out" if mode == CAP_RUN else mode
         lines.append(
-            f"| {mode} | {per_layer} | {1e3 * s['protrusion']:.3f} | {_ms(s['detection_delay'])} "
+            f"| {label} | {per_layer} | {1e3 * s['protrusion']:.3f} | {_ms(s['detection_delay'])} "
             f"| {1e6 * s['lateral_deviation_max']:.1f} | {1e3 * s['axis_error_max']:.3f} | {s['false_detections']} "
             f"| `{FOLDER.format(name=mode)}` |"
         )
@@ -97,12 +101,16 @@ def _lines(bone: str, runs: dict[str, DrillingResult], study: DrillingStudyResul
         f"crosses the far surface, lateral deviation ≤ {1e3 * TARGETS['lateral_deviation']:g} mm, axis ≤ "
         f"{1e3 * TARGETS['axis_error']:g} mrad. The cancellous layer cannot reach 20 N under the 1 mm/s feed "
         "limit (it needs about 8 mm/s), and the delay is set by how the drill's point leaves the far cortex "
-        '(docs/drilling_control.md, "Results against the issue\'s targets").',
+        "(docs/drilling_control.md, \"Results against the issue's targets\"). On the femur whose far cortex's cap "
+        "breaks out (`femur_diaphysis_cap.toml`, 150 MPa: the cap goes 0.26 mm before the surface, as bone breaks "
+        "through in practice) the delay is counted from the breakout, the apex never reaches the surface (a "
+        "negative protrusion) and the 20 ms target is met.",
         "",
     ]
     for mode in runs:
+        caption = "admittance, the cap breaking out" if mode == CAP_RUN else mode
         lines += [
-            f"![Drilling the femur, {mode}: thrust, depth and the specific thrust, detections marked]"
+            f"![Drilling the femur, {caption}: thrust, depth and the specific thrust, detections marked]"
             f"({RUN_FIGURE.format(mode=mode)})",
             "",
         ]
