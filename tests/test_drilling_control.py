@@ -353,3 +353,16 @@ def test_a_breakthrough_before_the_far_surface_is_a_false_detection(robot, small
     )
     summary = result.summary()
     assert math.isnan(summary["breakthrough_true_time"]) and summary["false_detections"] == 1
+
+
+def test_the_figure_shows_a_bone_name_as_text(robot, small_bone):
+    """A bone file's name is the user's: a ``$`` in it is drawn, not read as math."""
+    import io
+
+    data = small_bone.to_dict()
+    data["name"] = "cut $x^{ here"
+    bone = bone_from_dict(data, source="named bone")
+    result = drilling_run(robot, bone, DrillingSettings(**{**SMALL, "duration": 0.2}))
+    fig = result.figure()
+    fig.savefig(io.BytesIO(), format="png")  # an unbalanced $ would raise in mathtext here
+    assert fig._suptitle.get_text().startswith("cut \\$x^{ here")

@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 from .. import checks
 from ..errors import AssemblyError, InputError
+from ..markup import mpl_text
 from ..model.robot import Robot
 from . import compiled
 from .bone import Bone, bone_from_dict, layer_weights
@@ -453,7 +454,8 @@ def drilling_figure(result: DrillingResult, fig: Any = None) -> Any:
         for ax in axes:
             ax.axvline(time, color="r" if kind == "breakthrough" else "g", ls="--", lw=1.0)
     axes[0].legend(loc="upper right", fontsize="small")
-    fig.suptitle(f"{result.bone.name}: {result.settings.mode}, {PHASES[int(result.column('phase')[-1])]}")
+    phase = PHASES[int(result.column("phase")[-1])]
+    fig.suptitle(f"{mpl_text(result.bone.name)}: {result.settings.mode}, {phase}")  # the name is the user's
     return fig
 
 

@@ -22,6 +22,7 @@ from ...drilling import FEMUR, FEMUR_CAP, DrillingResult, DrillingSettings, dril
 from ...drilling.loop import TARGETS
 from ...drilling.study import DrillingStudy, DrillingStudyResult, run_drilling_study
 from ...fileio import atomic_write_text, json_value
+from ...markup import md_text
 from ...model.robot import Robot
 from ..pictures.plotting import save_figure
 
@@ -75,7 +76,7 @@ def _lines(bone: str, runs: dict[str, DrillingResult], study: DrillingStudyResul
         "### Drilling bone under force control",
         "",
         "Beyond the paper, which treats the tool only as a disturbance: the paper robot drills the femur's "
-        f"bone file ({bone}: cortex, cancellous bone, cortex) along its tool axis at home. The thrust is "
+        f"bone file ({md_text(bone)}: cortex, cancellous bone, cortex) along its tool axis at home. The thrust is "
         "regulated to 20 N from the momentum observer's estimate alone (1 µm encoders, the controller's "
         "model 10 % heavy), the tip held on the axis and the axis in angle, the feed at most 1 mm/s at "
         "1000 rpm; the layers and the breakthrough are detected from the estimate, then the feed stops and "
