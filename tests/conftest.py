@@ -6,6 +6,7 @@ import os
 import pty
 import subprocess
 from pathlib import Path
+from typing import Any
 
 from vgtarm._entry import single_threaded_blas
 
@@ -47,6 +48,33 @@ FD_STEP = 6e-6
 @pytest.fixture(scope="session")
 def robot() -> vgtarm.Robot:
     return vgtarm.load_robot()
+
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def small_bone_of(near: float, cancellous: float, far: float) -> Any:
+    """The femur's bone file with a 1 mm drill (a 0.5 mm point) and three layers of the given
+    thicknesses (m): cortex, cancellous bone, cortex; short runs for the drilling tests."""
+    from vgtarm.drilling import bone_from_dict, load_bone
+
+    data = load_bone(EXAMPLES / "bones" / "femur_diaphysis.toml").to_dict()
+    data["drill"]["diameter"] = 1.0e-3
+    data["layers"] = [
+        {"material": "cortical", "thickness": near},
+        {"material": "cancellous", "thickness": cancellous},
+        {"material": "cortical", "thickness": far},
+    ]
+    return bone_from_dict(data, source="small bone")
+
+
+@pytest.fixture(scope="session")
+def tight_robot(tmp_path_factory: pytest.TempPathFactory) -> vgtarm.Robot:
+    """The paper robot with actuators whose legs' peak force (44 N) the drilling reaches."""
+    text = (EXAMPLES / "paper_robot_with_actuators.toml").read_text()
+    path = tmp_path_factory.mktemp("tight") / "tight.toml"
+    path.write_text(text.replace("force = 200.0", "force = 44.0"))
+    return vgtarm.load_robot(path)
 
 
 def random_configurations(robot: vgtarm.Robot, n: int, seed: int = 0, margin: float = 0.01) -> np.ndarray:

@@ -19,6 +19,7 @@ from vgtarm.errors import InputError
 from vgtarm.model.recursive.backend import RecursiveBackend
 from vgtarm.model.robot import Robot
 
+from .conftest import small_bone_of
 from .test_drilling_control import FEMUR
 
 SMALL = {"feed_limit": 2.0e-3, "gap": 0.2e-3, "duration": 8.0}
@@ -27,14 +28,7 @@ EXACT = {"encoder_resolution": 0.0, "twist_resolution": 0.0}
 
 @pytest.fixture(scope="module")
 def small_bone():
-    data = load_bone(FEMUR).to_dict()
-    data["drill"]["diameter"] = 1.0e-3
-    data["layers"] = [
-        {"material": "cortical", "thickness": 1.0e-3},
-        {"material": "cancellous", "thickness": 1.2e-3},
-        {"material": "cortical", "thickness": 1.0e-3},
-    ]
-    return bone_from_dict(data, source="small bone")
+    return small_bone_of(1.0e-3, 1.2e-3, 1.0e-3)
 
 
 def _pair(robot, bone, **settings):
@@ -91,19 +85,6 @@ def test_a_robot_without_the_loops_functions_is_refused(robot):
             drilling_run(recursive, bone, DrillingSettings(duration=0.01), engine=engine)
     with pytest.raises(InputError, match=r"^engine = 'fast': expected one of"):
         drilling_run(robot, bone, DrillingSettings(duration=0.01), engine="fast")
-
-
-@pytest.fixture(scope="module")
-def tight_robot(tmp_path_factory):
-    """The paper robot with actuators whose legs' peak force (44 N) the drilling reaches."""
-    from pathlib import Path
-
-    from vgtarm.model.robot import load_robot
-
-    text = (Path(FEMUR).parents[1] / "paper_robot_with_actuators.toml").read_text()
-    path = tmp_path_factory.mktemp("tight") / "tight.toml"
-    path.write_text(text.replace("force = 200.0", "force = 44.0"))
-    return load_robot(path)
 
 
 def test_the_actuators_clip_the_efforts_in_both_loops(tight_robot, small_bone):

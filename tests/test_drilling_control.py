@@ -20,6 +20,8 @@ from vgtarm.drilling.loop import SERIES, TARGETS, drilling_run, perturbed_bone
 from vgtarm.errors import InputError
 from vgtarm.model.robot import load_robot
 
+from .conftest import small_bone_of
+
 ROOT = Path(__file__).resolve().parents[1]
 FEMUR = ROOT / "examples" / "bones" / "femur_diaphysis.toml"
 
@@ -30,16 +32,9 @@ def femur():
 
 
 @pytest.fixture(scope="module")
-def small_bone(femur):
+def small_bone():
     """Three layers thick enough for a 1 mm drill (point length 0.5 mm) to engage each fully."""
-    data = femur.to_dict()
-    data["drill"]["diameter"] = 1.0e-3
-    data["layers"] = [
-        {"material": "cortical", "thickness": 1.2e-3},
-        {"material": "cancellous", "thickness": 1.5e-3},
-        {"material": "cortical", "thickness": 1.2e-3},
-    ]
-    return bone_from_dict(data, source="small bone")
+    return small_bone_of(1.2e-3, 1.5e-3, 1.2e-3)
 
 
 @pytest.fixture(scope="module")

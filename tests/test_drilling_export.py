@@ -13,13 +13,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vgtarm.drilling import bone_from_dict, compiled, load_bone
+from vgtarm.drilling import compiled
 from vgtarm.drilling.control import DrillingSettings
 from vgtarm.drilling.loop import drilling_setup
 from vgtarm.errors import InputError
 from vgtarm.export.drilling import export_drilling, replay_inputs
 from vgtarm.model.robot import load_robot
 
+from .conftest import small_bone_of
 from .test_drilling_control import FEMUR
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -28,14 +29,7 @@ pytestmark = pytest.mark.skipif(shutil.which("make") is None or shutil.which("cc
 
 @pytest.fixture(scope="module")
 def small_bone():
-    data = load_bone(FEMUR).to_dict()
-    data["drill"]["diameter"] = 1.0e-3
-    data["layers"] = [
-        {"material": "cortical", "thickness": 1.0e-3},
-        {"material": "cancellous", "thickness": 1.2e-3},
-        {"material": "cortical", "thickness": 1.0e-3},
-    ]
-    return bone_from_dict(data, source="small bone")
+    return small_bone_of(1.0e-3, 1.2e-3, 1.0e-3)
 
 
 def _replayed(folder: Path, text: str, n: int) -> tuple[np.ndarray, np.ndarray, list[int]]:
@@ -45,15 +39,6 @@ def _replayed(folder: Path, text: str, n: int) -> tuple[np.ndarray, np.ndarray, 
     efforts = np.array([[float.fromhex(x) for x in row[:n]] for row in rows])
     estimate = np.array([float.fromhex(row[n]) for row in rows])
     return efforts, estimate, [int(row[-1]) for row in rows]
-
-
-@pytest.fixture(scope="module")
-def tight_robot(tmp_path_factory):
-    """The paper robot with actuators whose legs' peak force (44 N) the drilling reaches."""
-    text = (ROOT / "examples" / "paper_robot_with_actuators.toml").read_text()
-    path = tmp_path_factory.mktemp("tight") / "tight.toml"
-    path.write_text(text.replace("force = 200.0", "force = 44.0"))
-    return load_robot(path)
 
 
 @pytest.mark.parametrize(

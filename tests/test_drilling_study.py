@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from vgtarm.drilling import bone_from_dict, load_bone
+from vgtarm.drilling import load_bone
 from vgtarm.drilling.control import DrillingSettings
 from vgtarm.drilling.loop import TARGETS, drilling_run, perturbed_bone
 from vgtarm.drilling.study import (
@@ -33,6 +33,8 @@ from vgtarm.drilling.study import (
 from vgtarm.errors import ConfigError, InputError
 from vgtarm.markup import csv_cell
 
+from .conftest import small_bone_of
+
 ROOT = Path(__file__).resolve().parents[1]
 BONES = ROOT / "examples" / "bones"
 EXAMPLE = ROOT / "examples" / "studies" / "drilling_bones.toml"
@@ -41,14 +43,7 @@ SHORT = DrillingSettings(gap=0.2e-3, duration=8.0)
 
 @pytest.fixture(scope="module")
 def small_bone():
-    data = load_bone(BONES / "femur_diaphysis.toml").to_dict()
-    data["drill"]["diameter"] = 1.0e-3
-    data["layers"] = [
-        {"material": "cortical", "thickness": 1.2e-3},
-        {"material": "cancellous", "thickness": 1.5e-3},
-        {"material": "cortical", "thickness": 1.2e-3},
-    ]
-    return bone_from_dict(data, source="small bone")
+    return small_bone_of(1.2e-3, 1.5e-3, 1.2e-3)
 
 
 @pytest.fixture(scope="module")
