@@ -10,7 +10,7 @@
 #include <string.h>
 
 #include "vgtarm.h"
-#include "vgt_control.h" /* vgt_clip, vgt_saturate */
+#include "vgt_control.h" /* vgt_clip, vgt_saturate, vgt_cholesky */
 #include "vgt_drill.h"
 
 typedef struct {
@@ -111,7 +111,7 @@ static int plant_step(const vgt_drill_model *m, drill_work *wk, const vgt_drill_
     }
     for (int i = 0; i < nj; ++i)
         for (int j = 0; j < nj; ++j) M[i * nj + j] += (h * damping) * j_axis[i] * j_axis[j];
-    if (!vgt_drill_cholesky(nj, M)) return 1;
+    if (!vgt_cholesky(nj, M)) return 1;
     vgt_drill_solve(nj, M, rhs, qdd);
     for (int j = 0; j < nj; ++j) {
         qd[j] += h * qdd[j];

@@ -80,6 +80,26 @@ static inline void vgt_subtract_estimate(int n, const double *tau, double *F)
     for (int i = 0; i < n; ++i) F[i] -= tau[i];
 }
 
+/* The Cholesky factor of the symmetric n x n matrix A (row-major), in place in its lower triangle;
+ * 0 as soon as a pivot is not positive (A is not positive definite), 1 otherwise (about n^3 / 6
+ * multiplications). The GA's definiteness test and the drilling controller's solves share it. */
+static inline int vgt_cholesky(int n, double *A)
+{
+    for (int j = 0; j < n; ++j) {
+        double d = A[j * n + j];
+        for (int k = 0; k < j; ++k) d -= A[j * n + k] * A[j * n + k];
+        if (!(d > 0.0)) return 0;
+        d = sqrt(d);
+        A[j * n + j] = d;
+        for (int i = j + 1; i < n; ++i) {
+            double v = A[i * n + j];
+            for (int k = 0; k < j; ++k) v -= A[i * n + k] * A[j * n + k];
+            A[i * n + j] = v / d;
+        }
+    }
+    return 1;
+}
+
 /* The controller's clip of its effort F to its actuators' peak forces: |F_i| <= force[i] (INFINITY:
  * no actuator), as NumPy's minimum(maximum(F, -force), force). The force-speed line is the plant's
  * (vgt_saturate): a back-EMF acts continuously, and a controller that clipped to it at its sampled

@@ -6,7 +6,7 @@
  * run the same code bit for bit. No heap: the caller gives the joint-space memory
  * (VGT_DRILL_STATE_DOUBLES(nj) doubles) and the work arrays of the generated functions.
  *
- * Include after vgtarm.h (the structures) and vgt_control.h (vgt_clip), with vgt_drill_call
+ * Include after vgtarm.h (the structures) and vgt_control.h (vgt_clip, vgt_cholesky), with vgt_drill_call
  * defined by the includer: the function that evaluates one generated function (its arguments and
  * results given).
  */
@@ -50,26 +50,7 @@ static void vgt_drill_start(vgt_drill_state *st, int nj, const double *q0, doubl
 
 /* ---- small dense algebra (row-major) ---------------------------------------------------------- */
 
-/* Cholesky factor of the symmetric positive definite A (n, n) in place (lower triangle); 0 when
- * A is not positive definite. */
-static int vgt_drill_cholesky(int n, double *A)
-{
-    for (int j = 0; j < n; ++j) {
-        double d = A[j * n + j];
-        for (int k = 0; k < j; ++k) d -= A[j * n + k] * A[j * n + k];
-        if (!(d > 0.0)) return 0;
-        d = sqrt(d);
-        A[j * n + j] = d;
-        for (int i = j + 1; i < n; ++i) {
-            double v = A[i * n + j];
-            for (int k = 0; k < j; ++k) v -= A[i * n + k] * A[j * n + k];
-            A[i * n + j] = v / d;
-        }
-    }
-    return 1;
-}
-
-/* x = A^-1 b with L the factor of A (vgt_drill_cholesky); b and x may be the same. */
+/* x = A^-1 b with L the factor of A (vgt_cholesky, vgt_control.h); b and x may be the same. */
 static void vgt_drill_solve(int n, const double *L, const double *b, double *x)
 {
     for (int i = 0; i < n; ++i) {
@@ -174,7 +155,7 @@ static int vgt_drill_tool_force(const vgt_drill_model *m, void *work, int nj, co
             N[c * 6 + r] = s;
         }
     }
-    if (!vgt_drill_cholesky(6, N)) return 1;
+    if (!vgt_cholesky(6, N)) return 1;
     vgt_drill_solve(6, N, b, w);
     force[0] = w[0];
     force[1] = w[1];
@@ -417,7 +398,7 @@ static int vgt_drill_control(vgt_drill_state *st, const vgt_drill_settings *s, c
     /* the law (HybridController.effort) */
     double L[nj * nj], MinvJt[nj * VGT_DRILL_TASK], Lam[VGT_DRILL_TASK * VGT_DRILL_TASK];
     memcpy(L, M, sizeof L);
-    if (!vgt_drill_cholesky(nj, L)) return 1;
+    if (!vgt_cholesky(nj, L)) return 1;
     for (int r = 0; r < nt; ++r) {
         double col[nj];
         vgt_drill_solve(nj, L, J + r * nj, col);
@@ -433,7 +414,7 @@ static int vgt_drill_control(vgt_drill_state *st, const vgt_drill_settings *s, c
     memcpy(LL, Lam, sizeof LL);
     for (int r = 0; r < nt; ++r) /* symmetric part: the factor reads the lower triangle */
         for (int c = 0; c < r; ++c) LL[r * nt + c] = 0.5 * (Lam[r * nt + c] + Lam[c * nt + r]);
-    if (!vgt_drill_cholesky(nt, LL)) return 1;
+    if (!vgt_cholesky(nt, LL)) return 1;
     const double wn = 2.0 * VGT_DRILL_PI * s->hold_frequency;
     double acc[VGT_DRILL_TASK] = {0.0, 0.0, 0.0, 0.0, 0.0};
     for (int r = 0; r < 4; ++r) acc[r] = -wn * wn * held_error[r] - 2.0 * wn * held_rate[r];

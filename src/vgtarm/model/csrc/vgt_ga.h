@@ -56,6 +56,8 @@
 #include <stdint.h>
 #include <string.h>
 
+#include "vgt_control.h" /* vgt_cholesky */
+
 #ifndef VGT_GA_LANES
 #define VGT_GA_LANES 8
 #endif
@@ -396,23 +398,7 @@ static inline void ga_safe_point(const ga_safe *g, int nj, double diagonal, doub
 
 /* Whether the symmetric nj x nj matrix S (row-major) is positive definite: a Cholesky
  * factorisation whose pivots stay positive (exact test, about nj^3 / 6 multiplications). */
-static inline int ga_positive_definite(int nj, double *S)
-{
-    int i, j, k;
-    for (j = 0; j < nj; ++j) {
-        double d = S[j * nj + j];
-        for (k = 0; k < j; ++k) d -= S[j * nj + k] * S[j * nj + k];
-        if (!(d > 0.0)) return 0;
-        d = sqrt(d);
-        S[j * nj + j] = d;
-        for (i = j + 1; i < nj; ++i) {
-            double v = S[i * nj + j];
-            for (k = 0; k < j; ++k) v -= S[i * nj + k] * S[j * nj + k];
-            S[i * nj + j] = v / d;
-        }
-    }
-    return 1;
-}
+static inline int ga_positive_definite(int nj, double *S) { return vgt_cholesky(nj, S); }
 
 /* The safe variant's repair and admission of one candidate: kp (nj x nj, row-major) is replaced by
  * its symmetric part Ks and kv by kv0 I. With Kv a multiple of the identity, Ks and Kv share their
