@@ -151,6 +151,16 @@ def _rotate(k: Array, angle: Array, v: Array) -> Array:
     return np.asarray(v * c + np.cross(k, v) * s + (1 - c) * (v @ k)[:, None] * k)
 
 
+def _turning(d0: Array, d: Array, angle: Array, speed: Array, acceleration: Array) -> tuple[Array, Array, Array]:
+    """The unit vector ``d0`` turned towards ``d`` about their common normal by ``angle`` ``(N,)``, with
+    its rate and acceleration for the angle's ``speed`` and ``acceleration``."""
+    k = np.cross(d0, d) / np.linalg.norm(np.cross(d0, d))
+    direction = _rotate(k, angle, d0)
+    across = np.cross(k, direction)
+    rate = speed[:, None] * across
+    return direction, rate, acceleration[:, None] * across + speed[:, None] ** 2 * np.cross(k, across)
+
+
 def drilling(
     entry: ArrayLike,
     axis: ArrayLike,
@@ -215,19 +225,13 @@ def drilling(
     direction, rate, turning = np.tile(d, (t.size, 1)), np.zeros((t.size, 3)), np.zeros((t.size, 3))
     # approach: a straight line from p0 while the axis turns from d0 onto d, on one profile u in [0, 1]
     on = phase == 0
-    u = _move(local[on], approach, approach_speed, ramp) if approach > 0 else None
-    if u is not None:
+    if approach > 0:
+        u = _move(local[on], approach, approach_speed, ramp)
         fraction = (u.s / approach, u.v / approach, u.a / approach, u.j / approach)
-        line = above - p0
-        position[on] = p0 + np.outer(fraction[0], line)
-        velocity[on], acceleration[on], jerk[on] = (np.outer(f, line) for f in fraction[1:])
+        position[on], velocity[on], acceleration[on], jerk[on] = (np.outer(f, above - p0) for f in fraction)
+        position[on] += p0
         if turn > 0:
-            k = np.cross(d0, d) / np.linalg.norm(np.cross(d0, d))
-            direction[on] = _rotate(k, turn * fraction[0], d0)
-            rate[on] = turn * fraction[1][:, None] * np.cross(k, direction[on])
-            turning[on] = turn * fraction[2][:, None] * np.cross(k, direction[on]) + (
-                turn * fraction[1][:, None]
-            ) ** 2 * np.cross(k, np.cross(k, direction[on]))
+            direction[on], rate[on], turning[on] = _turning(d0, d, *(turn * f for f in fraction[:3]))
     # plunge, dwell, retract: along the axis from ``above``
     along = (
         (1, _move(local[phase == 1], clearance + depth, feed, ramp), 1.0),
