@@ -370,13 +370,13 @@ def _file_limit(size: int) -> Callable[[], None]:
 @pytest.mark.parametrize("backend", ["auto", "compiled"])
 def test_a_file_size_limit_that_cuts_the_generated_c_is_named(tmp_path, backend):
     cache = private_cache(tmp_path)
-    config = EXAMPLES / "planar_module.toml"  # about 0.5 MB of generated C
+    config = EXAMPLES / "planar_module.toml"  # its generated C: 0.8 MB, a file per function, the largest 0.2 MB
     done = vgtarm_command(
-        home_args(config), environment(cache, VGTARM_BACKEND=backend), preexec_fn=_file_limit(300_000)
+        home_args(config), environment(cache, VGTARM_BACKEND=backend), preexec_fn=_file_limit(150_000)
     )
     found = lines(done.stderr)
     assert len(found) == 1, found
-    reason = "the file size limit (ulimit -f) of 300,000 bytes (300 kB) stopped the build: vgtarm_model.c stopped"
+    reason = "the file size limit (ulimit -f) of 150,000 bytes (150 kB) stopped the build: vgtarm_model.c stopped"
     assert reason in found[0] and "raise it (ulimit -f unlimited)" in found[0] and "compiler" not in found[0]
     if backend == "auto":
         assert done.returncode == 0 and "tip" in done.stdout and "using CasADi's interpreter instead" in found[0]
@@ -411,3 +411,37 @@ def test_a_build_of_sources_that_changed_meanwhile_is_refused(tmp_path):
     ):
         building.run("compile", compiler, folder, PAPER, "0" * 20, budget.estimate(PAPER))
     assert sorted(p.name for p in folder.iterdir()) == [building.RESULT]  # the caller removes its build folder
+
+
+def test_a_build_runs_as_many_compilers_as_processors_and_memory_allow(monkeypatch):
+    """The generated C is compiled a file per function, as many at once as there are processors this
+    process may use, and no more than the memory holds at the whole model's estimated peak."""
+    from vgtarm.model import budget, compiling
+    from vgtarm.model.definition import PAPER
+
+    peak = budget.estimate(PAPER).compiler_bytes
+    monkeypatch.setattr(compiling, "usable_cpus", lambda: 8)
+    monkeypatch.setenv("VGTARM_MEMORY_LIMIT", str(int(3.5 * peak)))
+    assert compiling._jobs(PAPER) == 3
+    monkeypatch.setenv("VGTARM_MEMORY_LIMIT", str(int(0.5 * peak)))
+    assert compiling._jobs(PAPER) == 1  # one compiler at least: the budget refuses what cannot fit
+    monkeypatch.setenv("VGTARM_MEMORY_LIMIT", str(int(100 * peak)))
+    assert compiling._jobs(PAPER) == 8
+
+
+def test_the_generated_c_is_a_file_per_function_largest_first(tmp_path):
+    """Each function's C is in a file of its own (so that they compile in parallel), the largest first,
+    and the first file carries CasADi's size checks, which the library is opened with."""
+    from vgtarm.model import codegen, compiling
+    from vgtarm.model.backends import _GENERATED_NAME
+
+    builders = codegen.builders_for(PAPER)
+    built = {key: builders[key]() for key in ("fk", "fd", "mass")}
+    units = compiling._generated_units(built, tmp_path)
+    assert [unit.name for unit in units] == [f"{_GENERATED_NAME}{suffix}.c" for suffix in ("", "_1", "_2")]
+    texts = [unit.read_text() for unit in units]
+    assert f"{_GENERATED_NAME}_casadi_int_size" in texts[0]
+    holding = [[key for key in built if f"int vgt_{key}(const casadi_real** arg" in text] for text in texts]
+    assert sorted(map(len, holding)) == [1, 1, 1], holding  # every function in exactly one file
+    sizes = [built[keys[0]].n_instructions() for keys in holding]
+    assert sizes == sorted(sizes, reverse=True) and sizes[0] > sizes[-1], (holding, sizes)

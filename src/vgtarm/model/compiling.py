@@ -15,12 +15,15 @@ import inspect
 import os
 import shutil
 import subprocess
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import casadi as ca
 
 from .. import compiler as compilers
 from ..errors import shown
+from ..machine import usable_cpus
+from ..memory import memory_limit
 from . import budget, interface
 from .backends import _GENERATED_NAME, Signature, build_functions
 from .definition import PAPER, Definition
@@ -33,7 +36,9 @@ _CFLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off")
 #: with :data:`_CFLAGS`): its straight-line code is ten times the paper robot's (17 MB of C for six
 #: modules, 12.6 MB with common-subexpression elimination), and GCC's -O2 spent 4 min 19 s on it
 #: where -O1 took 1 min 22 s (measured on this 2-core machine; 77 s with the elimination). Neither
-#: changes a floating-point result: no contraction, no fast math.
+#: changes a floating-point result: no contraction, no fast math. With the tool tasks' and the
+#: effort criterion's functions the six-module arm's C grew to 27 MB (187 s at -O1 in one file; a
+#: file per function on two cores, :func:`_generated_units`, 126 s for the whole build).
 _STACK_GENERATED_CFLAGS = ("-O1", "-fPIC", "-ffp-contract=off")
 #: Default limit (s) of one compiler command (:mod:`vgtarm.compiler`, before
 #: ``$VGTARM_COMPILER_TIME_LIMIT``): the build process sets it from its model's estimate
@@ -95,20 +100,11 @@ def _compile(compiler: str, workdir: Path, definition: Definition = PAPER) -> tu
     without a 10-20 s compile each.
     """
     built = build_functions(definition)
-    generator = ca.CodeGenerator(f"{_GENERATED_NAME}.c", {"with_header": False})
-    for f in built.values():
-        generator.add(f)
-    generator.generate(str(workdir) + os.sep)
     (workdir / "layout.c").write_text(interface.layout_source())
-    sources = [str(workdir / f"{_GENERATED_NAME}.c"), str(workdir / "layout.c")]
-    sources += [str(path) for path in sorted(_CSRC.glob("*.c"))]
+    flags = tuple(flag for flag in _CFLAGS if flag != "-shared") if definition == PAPER else _STACK_GENERATED_CFLAGS
+    objects = _compile_units(compiler, _generated_units(built, workdir), flags, _jobs(definition))
+    sources = [*objects, str(workdir / "layout.c")] + [str(path) for path in sorted(_CSRC.glob("*.c"))]
     library = workdir / "library.so"
-    if definition != PAPER:  # a stack: its generated code compiled apart (_STACK_GENERATED_CFLAGS)
-        generated = workdir / f"{_GENERATED_NAME}.o"
-        _run_compiler(compiler, [compiler, *_STACK_GENERATED_CFLAGS, "-c", "-o", str(generated), sources[0]])
-        if not generated.is_file():
-            raise _Unavailable(f"the C compiler {shown(compiler, 80)} wrote no object file")
-        sources[0] = str(generated)
     base = [compiler, *_CFLAGS, "-I", str(_CSRC), "-o", str(library), *sources, "-lm"]
     failure = ""
     for command in (base[:1] + ["-fopenmp"] + base[1:], base):
@@ -119,8 +115,51 @@ def _compile(compiler: str, workdir: Path, definition: Definition = PAPER) -> tu
     raise _Unavailable(failure)
 
 
+def _generated_units(built: dict[str, ca.Function], workdir: Path) -> list[Path]:
+    """CasADi's C of the functions ``built``, a file each (the largest first), so that the compiler
+    can take them in parallel: a long stack's largest functions take most of its compile (the
+    effort criterion's rates alone 45 of the six-module arm's 187 s at ``-O1``). The first file
+    carries CasADi's ``<prefix>_casadi_int_size`` checks (:data:`_GENERATED_NAME`); each file keeps
+    its own copy of CasADi's static helpers."""
+    order = sorted(built, key=lambda key: -built[key].n_instructions())
+    units = []
+    for index, key in enumerate(order):
+        name = _GENERATED_NAME if index == 0 else f"{_GENERATED_NAME}_{index}"
+        generator = ca.CodeGenerator(f"{name}.c", {"with_header": False})
+        generator.add(built[key])
+        generator.generate(str(workdir) + os.sep)
+        units.append(workdir / f"{name}.c")
+    return units
+
+
+def _compile_units(compiler: str, units: list[Path], flags: tuple[str, ...], jobs: int) -> list[str]:
+    """Compile every file of ``units`` into an object file beside it, ``jobs`` compilers at a time
+    (in the order given); the objects' paths, or :class:`_Unavailable` for the first that failed."""
+
+    def one(unit: Path) -> str:
+        product = unit.with_suffix(".o")
+        _run_compiler(compiler, [compiler, *flags, "-c", "-o", str(product), str(unit)])
+        if not product.is_file():
+            raise _Unavailable(f"the C compiler {shown(compiler, 80)} wrote no object file")
+        return str(product)
+
+    with ThreadPoolExecutor(max_workers=jobs) as pool:
+        return list(pool.map(one, units))
+
+
+def _jobs(definition: Definition) -> int:
+    """How many compilers a build runs at once: one per processor this process may use, as many as
+    the memory holds at the whole model's estimated peak (:mod:`.budget`; one file's is less)."""
+    processors = usable_cpus()
+    available, _ = memory_limit()
+    if available is None:
+        return processors
+    return max(1, min(processors, int(available // budget.estimate(definition).compiler_bytes)))
+
+
 def _recipe() -> bytes:
     """How this module turns the generated C into a library: the source of :func:`_compile` and
     every flag it uses (the rest of this module finds and runs the compiler; it is not hashed)."""
     flags = (_CFLAGS, _STACK_GENERATED_CFLAGS, _GENERATED_NAME)
-    return inspect.getsource(_compile).encode() + repr(flags).encode()
+    steps = (_compile, _generated_units, _compile_units)
+    return b"".join(inspect.getsource(step).encode() for step in steps) + repr(flags).encode()
