@@ -445,3 +445,37 @@ def test_the_generated_c_is_a_file_per_function_largest_first(tmp_path):
     assert sorted(map(len, holding)) == [1, 1, 1], holding  # every function in exactly one file
     sizes = [built[keys[0]].n_instructions() for keys in holding]
     assert sizes == sorted(sizes, reverse=True) and sizes[0] > sizes[-1], (holding, sizes)
+
+
+@pytest.mark.skipif(compiled.find_compiler() is None, reason="no C compiler")
+def test_a_compiler_without_openmp_builds_the_library_without_it(tmp_path):
+    """A compiler that refuses ``-fopenmp`` (as one without OpenMP does) still builds a working
+    library, its drivers compiled again without it and the generated files' objects kept."""
+    import ctypes
+    import tomllib
+
+    from vgtarm.model import compiling
+    from vgtarm.model.robot import definition_of, robot_parameters_from_dict
+
+    real = compiled.find_compiler()
+    log = tmp_path / "commands.log"
+    fake = tmp_path / "cc-without-openmp"
+    fake.write_text(
+        "#!/bin/sh\n"
+        f'echo "$*" >> "{log}"\n'
+        'for a in "$@"; do [ "$a" = -fopenmp ] && { echo "error: unsupported option -fopenmp" >&2; exit 1; }; done\n'
+        f'exec "{real}" "$@"\n'
+    )
+    fake.chmod(0o755)
+    parameters = robot_parameters_from_dict(tomllib.loads((EXAMPLES / "planar_module.toml").read_text()))
+    work = tmp_path / "build"
+    work.mkdir()
+    library, signatures = compiling._compile(str(fake), work, definition_of(parameters))
+    assert "fk" in signatures
+    ctypes.CDLL(str(library)).vgt_fk  # noqa: B018  (a library the loader opens, with the model's functions)
+    commands = log.read_text().splitlines()
+    generated = [c for c in commands if Path(c.split()[-1]).name.startswith("vgtarm_model")]
+    assert len(generated) == len(signatures), "each generated file compiled once, kept for the second try"
+    assert any("-fopenmp" in c.split() for c in commands)  # tried, refused
+    assert any("-fopenmp" not in c.split() and c.split()[-1].endswith("/ga.c") for c in commands)
+    assert "-fopenmp" not in commands[-1].split() and "-shared" in commands[-1].split()  # the link, without

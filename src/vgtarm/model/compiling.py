@@ -15,7 +15,7 @@ import inspect
 import os
 import shutil
 import subprocess
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from pathlib import Path
 
 import casadi as ca
@@ -101,14 +101,22 @@ def _compile(compiler: str, workdir: Path, definition: Definition = PAPER) -> tu
     """
     built = build_functions(definition)
     (workdir / "layout.c").write_text(interface.layout_source())
-    flags = tuple(flag for flag in _CFLAGS if flag != "-shared") if definition == PAPER else _STACK_GENERATED_CFLAGS
-    objects = _compile_units(compiler, _generated_units(built, workdir), flags, _jobs(definition))
-    sources = [*objects, str(workdir / "layout.c")] + [str(path) for path in sorted(_CSRC.glob("*.c"))]
+    generated = tuple(flag for flag in _CFLAGS if flag != "-shared") if definition == PAPER else _STACK_GENERATED_CFLAGS
+    drivers = [workdir / "layout.c", *sorted(_CSRC.glob("*.c"))]
+    driver_flags = (*(flag for flag in _CFLAGS if flag != "-shared"), "-I", str(_CSRC))
+    units = [(unit, generated) for unit in _generated_units(built, workdir)]
     library = workdir / "library.so"
-    base = [compiler, *_CFLAGS, "-I", str(_CSRC), "-o", str(library), *sources, "-lm"]
     failure = ""
-    for command in (base[:1] + ["-fopenmp"] + base[1:], base):
-        done = _run(compiler, command)
+    kept: dict[tuple[Path, tuple[str, ...]], str] = {}  # what the first try compiled, for the second
+    for openmp in (("-fopenmp",), ()):  # the drivers' threads where the compiler has OpenMP
+        # the largest generated file first, then the drivers (ga.c takes seconds), then the rest
+        own = [(driver, (*openmp, *driver_flags)) for driver in drivers]
+        try:
+            objects = _compile_units(compiler, [*units[:1], *own, *units[1:]], workdir, _jobs(definition), kept)
+        except _Failed as exc:
+            failure = str(exc)
+            continue
+        done = _run(compiler, [compiler, *openmp, "-shared", "-o", str(library), *objects, "-lm"])
         if done.returncode == 0 and library.is_file():
             return library, {key: Signature.of(f) for key, f in built.items()}
         failure = _compiler_failure(compiler, done)
@@ -132,19 +140,46 @@ def _generated_units(built: dict[str, ca.Function], workdir: Path) -> list[Path]
     return units
 
 
-def _compile_units(compiler: str, units: list[Path], flags: tuple[str, ...], jobs: int) -> list[str]:
-    """Compile every file of ``units`` into an object file beside it, ``jobs`` compilers at a time
-    (in the order given); the objects' paths, or :class:`_Unavailable` for the first that failed."""
+class _Failed(_Unavailable):
+    """A compiler command ran and failed (as one without OpenMP does on ``-fopenmp``): worth a second
+    try without it, where a compiler that cannot run or runs past its limit is not."""
 
-    def one(unit: Path) -> str:
-        product = unit.with_suffix(".o")
-        _run_compiler(compiler, [compiler, *flags, "-c", "-o", str(product), str(unit)])
-        if not product.is_file():
-            raise _Unavailable(f"the C compiler {shown(compiler, 80)} wrote no object file")
+
+def _compile_units(
+    compiler: str,
+    units: list[tuple[Path, tuple[str, ...]]],
+    folder: Path,
+    jobs: int,
+    kept: dict[tuple[Path, tuple[str, ...]], str],
+) -> list[str]:
+    """Compile every C file of ``units`` with its flags into an object file in ``folder``, ``jobs``
+    compilers at a time (in the order given); the objects' paths. ``kept`` holds the objects of
+    ``(file, flags)`` already compiled (an earlier try's), and gets this call's. At the first failure
+    nothing more is started, and the failure is raised (:class:`_Failed`, or :class:`_Unavailable`
+    from :func:`_run`) once the compilers running have ended."""
+
+    def one(unit: tuple[Path, tuple[str, ...]]) -> str:
+        if unit in kept:
+            return kept[unit]
+        source, flags = unit
+        product = folder / f"{source.stem}.o"
+        done = _run(compiler, [compiler, *flags, "-c", "-o", str(product), str(source)])
+        if done.returncode != 0:
+            raise _Failed(_compiler_failure(compiler, done))
+        kept[unit] = str(product)
         return str(product)
 
-    with ThreadPoolExecutor(max_workers=jobs) as pool:
-        return list(pool.map(one, units))
+    pool = ThreadPoolExecutor(max_workers=jobs)
+    try:
+        futures = [pool.submit(one, unit) for unit in units]
+        wait(futures, return_when=FIRST_EXCEPTION)
+        for future in futures:
+            if future.done() and future.exception() is not None:
+                pool.shutdown(wait=True, cancel_futures=True)
+                future.result()
+        return [future.result() for future in futures]
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _jobs(definition: Definition) -> int:
