@@ -297,3 +297,20 @@ def test_one_cpu_count_sizes_the_workers_and_the_ga_threads():
     assert done.stdout.split() == ["1", "1", "1"]
     sources = [p.read_text() for p in PACKAGE.rglob("*.py") if p.name != "machine.py"]
     assert not [s for s in sources if "sched_getaffinity" in s or "cpu_count(" in s]
+
+
+#: The longest a function of the package may be (lines, its docstring included): issue 34's bound.
+LONGEST_FUNCTION = 80
+
+
+def test_no_function_of_the_package_is_longer_than_the_bound():
+    """Every function and method in ``src/`` is at most :data:`LONGEST_FUNCTION` lines, so that each
+    reads on one screen (a long one is split where its steps are)."""
+    long = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                lines = (node.end_lineno or node.lineno) - node.lineno + 1
+                if lines > LONGEST_FUNCTION:
+                    long.append(f"{path.relative_to(PACKAGE)}:{node.lineno} {node.name} ({lines} lines)")
+    assert not long, long

@@ -341,3 +341,16 @@ def finite_array(
         where = f"{name}[{', '.join(map(str, index))}]" if index and name else name
         refuse(where, float(array[index]), "a finite number", error)
     return array
+
+
+def comma_numbers(name: str, text: str, count: int, meaning: str, *, error: Error = InputError) -> NDArray[np.float64]:
+    """``count`` comma-separated finite numbers written in ``text`` (``"0,0.26,0.97"``), or one ``error``
+    line naming ``name``, showing the text and saying what it means."""
+    cells = text.split(",") if isinstance(text, str) else []
+    try:
+        values = np.array([float(cell) for cell in cells], dtype=np.float64)
+    except ValueError:
+        values = np.array([np.nan])
+    if values.shape != (count,) or not np.isfinite(values).all():
+        raise error(f"{name} {shown(text)}: expected {count} finite numbers separated by commas ({meaning})")
+    return values

@@ -161,6 +161,16 @@ def _turning(d0: Array, d: Array, angle: Array, speed: Array, acceleration: Arra
     return direction, rate, acceleration[:, None] * across + speed[:, None] ** 2 * np.cross(k, across)
 
 
+def _clock(spans: tuple[float, ...], dt: float) -> tuple[Array, Array, Array, Array, Array]:
+    """The samples of motions lasting ``spans`` (s) one after the other: the times, each motion's start
+    and end, each sample's motion (the last one's end included in it) and its time from that start."""
+    ends = np.cumsum(spans)
+    t = _times(float(ends[-1]), dt)
+    starts = np.concatenate([[0.0], ends[:-1]])
+    phase = np.minimum(np.searchsorted(ends, t, side="right"), len(spans) - 1)
+    return t, starts, ends, phase, t - starts[phase]
+
+
 def drilling(
     entry: ArrayLike,
     axis: ArrayLike,
@@ -216,11 +226,7 @@ def drilling(
         dwell,
         _profile(clearance + depth, approach_speed, ramp)[1],
     )
-    ends = np.cumsum(spans)
-    t = _times(float(ends[-1]), dt)
-    starts = np.concatenate([[0.0], ends[:-1]])
-    phase = np.minimum(np.searchsorted(ends, t, side="right"), 3)
-    local = t - starts[phase]
+    t, starts, ends, phase, local = _clock(spans, dt)
     position, velocity, acceleration, jerk = (np.zeros((t.size, 3)) for _ in range(4))
     direction, rate, turning = np.tile(d, (t.size, 1)), np.zeros((t.size, 3)), np.zeros((t.size, 3))
     # approach: a straight line from p0 while the axis turns from d0 onto d, on one profile u in [0, 1]
@@ -233,12 +239,9 @@ def drilling(
         if turn > 0:
             direction[on], rate[on], turning[on] = _turning(d0, d, *(turn * f for f in fraction[:3]))
     # plunge, dwell, retract: along the axis from ``above``
-    along = (
-        (1, _move(local[phase == 1], clearance + depth, feed, ramp), 1.0),
-        (3, _move(local[phase == 3], clearance + depth, approach_speed, ramp), -1.0),
-    )
-    for index, motion, sign in along:
+    for index, speed, sign in ((1, feed, 1.0), (3, approach_speed, -1.0)):
         on = phase == index
+        motion = _move(local[on], clearance + depth, speed, ramp)
         base = above if sign > 0 else e + depth * d
         position[on] = base + np.outer(sign * motion.s, d)
         velocity[on], acceleration[on], jerk[on] = (np.outer(sign * f, d) for f in (motion.v, motion.a, motion.j))

@@ -62,7 +62,7 @@ _REFERENCES: dict[tuple[Any, ...], JointReference] = {}
 
 def _reference(experiment: Experiment, files: Mapping[str, str]) -> JointReference:
     """The experiment's joint reference, cached by what it depends on (robot, path, sampling, rates,
-    duration, criterion)."""
+    duration, criterion, tool task)."""
     o = experiment.options
     key = (
         files.get("robot"),
@@ -71,7 +71,7 @@ def _reference(experiment: Experiment, files: Mapping[str, str]) -> JointReferen
         experiment.dt,
         o["rates"],
         o["duration"],
-        tuple(sorted(experiment.ik_options().items())),
+        tuple((k, v.tobytes() if isinstance(v, np.ndarray) else v) for k, v in sorted(experiment.ik_options().items())),
     )
     if key not in _REFERENCES:
         if len(_REFERENCES) >= 16:

@@ -174,6 +174,35 @@ IK_OPTIONS: tuple[Option, ...] = (
         help=f"--criterion effort: the weight of eq. 12's joint-limit cost beside the efforts "
         f"(default {DEFAULT_JOINT_LIMIT_WEIGHT:g})",
     ),
+    Option(
+        "axis",
+        str,
+        None,
+        "a unit vector written x,y,z (F0)",
+        metavar="X,Y,Z",
+        help="a tool-axis task: the tool's axis held along this unit vector while the tip follows the path, "
+        "its spin free (default: the tip alone)",
+    ),
+    Option(
+        "cone_degrees",
+        float,
+        None,
+        "a half-angle in (0, 90) degrees",
+        low=0.0,
+        high=90.0,
+        strict=True,
+        flag="--cone",
+        metavar="DEG",
+        help="with --axis: the axis only within this half-angle of it (degrees)",
+    ),
+    Option(
+        "entry_point",
+        str,
+        None,
+        "a point written x,y,z (m, F0)",
+        metavar="X,Y,Z",
+        help="a tool-axis task: the tool's axis through this point while the tip follows the path (keyhole work)",
+    ),
 )
 
 #: The path's sampling of the reference and how much of it is run (a study gives them in its

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from .. import (
+    checks,
     mujoco_bridge,  # noqa: F401  (registers the MuJoCo plant, in a study's workers too)
     paths,
 )
@@ -46,6 +47,8 @@ from .presets import PRESETS, applied_settings
 
 #: A gain of the experiment: one value for every joint, or one per joint.
 Gain = float | tuple[float, ...]
+#: The options of a tool-axis task, as refusals name them.
+TOOL_TASK_NAMES = ("axis", "cone_degrees", "entry_point")
 
 
 @dataclass(frozen=True)
@@ -107,6 +110,7 @@ class Experiment:
         object.__setattr__(self, "robot", str(robot) if isinstance(robot, Path) else robot)
         object.__setattr__(self, "options", _Frozen(filled))
         self.scenario_options()  # the scenario's own checks (two options together), before any work
+        self.tool_task()  # likewise
 
     def __getattr__(self, name: str) -> Any:
         """An option's value by its name (``experiment.seed``)."""
@@ -144,25 +148,38 @@ class Experiment:
     def reference(self, robot: Robot | None = None) -> JointReference:
         """The joint reference: the inverse kinematics of the path with the criterion, cut to ``duration``."""
         robot = robot or self.robot_model()
-        if self.case is not None:
-            desired = case_path(robot, self.case, self.dt)
-            name = f"case {self.case}"
-        else:
-            assert self.path is not None
-            desired, name = self.path, self.path.name
+        desired = self.desired(robot)
+        name = f"case {self.case}" if self.case is not None else desired.name
         ik = robot.inverse_kinematics(desired, solver="fast", rates=self.options["rates"], **self.ik_options())
         reference = JointReference.of(ik, name=name)
         duration = self.options["duration"]
         return reference if duration is None else truncate_reference(reference, duration)
 
+    def desired(self, robot: Robot | None = None) -> paths.TipPath:
+        """The desired tip path: the case's (placed for ``robot``, default the experiment's) or the one given."""
+        if self.case is not None:
+            return case_path(robot or self.robot_model(), self.case, self.dt)
+        assert self.path is not None
+        return self.path
+
     def ik_options(self) -> dict[str, Any]:
-        """The inverse kinematics' criterion options: none for eq. 12; for the effort criterion its
-        joint-limit weight and the expected cutting force (the tool force's, else 0)."""
+        """The inverse kinematics' options: the tool task (:meth:`tool_task`) and the criterion's (none
+        for eq. 12; for the effort criterion its joint-limit weight and the expected cutting force,
+        the tool force's, else 0)."""
+        task = self.tool_task()
         if self.options["criterion"] == "joint_limits":
-            return {}
+            return task
         force = float(self.options["cutting_force"]) if self.options["external_force"] else 0.0
         weight = float(self.options["joint_limit_weight"])
-        return {"criterion": str(self.options["criterion"]), "joint_limit_weight": weight, "tool_force": force}
+        return {**task, "criterion": str(self.options["criterion"]), "joint_limit_weight": weight, "tool_force": force}
+
+    def tool_task(self) -> dict[str, Any]:
+        """The inverse kinematics' keywords of the tool-axis task of ``axis``, ``cone_degrees`` and
+        ``entry_point`` (:func:`vgtarm.ik.axis.tool_task_keywords`); ``{}``: the tip alone."""
+        from ..ik.axis import tool_task_keywords
+
+        o = self.options
+        return tool_task_keywords(o["axis"], o["cone_degrees"], o["entry_point"], names=TOOL_TASK_NAMES)
 
     def controller(self, n_joints: int) -> ComputedForceControl | SwitchingControl:
         """The controller with the experiment's gains (default: the case's; a path: case 1's)."""
@@ -335,6 +352,8 @@ def _robot_of_record(value: object) -> str | None:
 def _checked(name: str, value: Any) -> Any:
     """``value`` of the option ``name`` checked by its declaration (``kp``, ``kv``: one gain, or one per joint)."""
     declaration = all_options()[name]
+    if name in ("axis", "entry_point") and value is not None and not isinstance(value, str):  # three numbers
+        return ",".join(repr(float(v)) for v in checks.finite_array(name, value, (3,)))
     if name in ("kp", "kv") and isinstance(value, tuple | list | np.ndarray):
         return tuple(float(declaration.convert(v, where=f"{name}[{i}]")) for i, v in enumerate(value))  # type: ignore[arg-type]
     return declaration.convert(value)

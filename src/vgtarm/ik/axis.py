@@ -35,10 +35,12 @@ acceleration exactly.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .. import checks
 from ..checks import Error
 from ..errors import InputError, shown
 
@@ -231,6 +233,44 @@ def cone_angle(value: object, name: str = "cone") -> float:
             f"{name} = {shown(value)}: expected a half-angle in (0, 90) degrees, given in rad (0 to {0.5 * np.pi:.6g})"
         )
     return angle
+
+
+def tool_task_keywords(
+    axis: object = None,
+    cone: object = None,
+    entry_point: object = None,
+    *,
+    names: tuple[str, str, str] = ("axis", "cone", "entry_point"),
+) -> dict[str, Any]:
+    """The inverse kinematics' keywords of a tool-axis task as a user writes it: ``axis`` a unit
+    vector (``"x,y,z"`` or three numbers), ``cone`` its half-angle in degrees (with ``axis`` only),
+    ``entry_point`` a point (``"x,y,z"`` or three numbers, m), not both ``axis`` and ``entry_point``;
+    ``{}`` when none is given. ``cone`` is returned in rad, as :func:`vgtarm.inverse_kinematics`
+    takes it. A refusal is one line naming ``names`` (the record's fields, or the command's flags)."""
+    axis_name, cone_name, entry_name = names
+    out: dict[str, Any] = {}
+    if axis is not None:
+        values = _written(axis_name, axis, "the direction of the tool's axis x,y,z, a unit vector")
+        out["axis"] = unit_directions(values, 1, axis_name)[0]
+    if entry_point is not None:
+        out["entry_point"] = _written(entry_name, entry_point, "the entry point x,y,z in m")
+    if cone is not None:
+        if axis is None:
+            raise InputError(f"{cone_name} {shown(cone)}: a cone needs its axis, {axis_name} X,Y,Z")
+        degrees = checks.comma_numbers(cone_name, str(cone), 1, "the cone's half-angle in degrees, in (0, 90)")[0]
+        if not 0.0 < degrees < 90.0:
+            raise InputError(f"{cone_name} {shown(cone)}: expected a half-angle in (0, 90) degrees")
+        out["cone"] = float(np.radians(degrees))
+    if axis is not None and entry_point is not None:
+        raise InputError(f"{axis_name} and {entry_name}: expected one of them (the entry point sets the axis)")
+    return out
+
+
+def _written(name: str, value: object, meaning: str) -> Array:
+    """Three numbers written ``"x,y,z"`` or given as a sequence, refused in one line naming ``name``."""
+    if isinstance(value, str):
+        return checks.comma_numbers(name, value, 3, meaning)
+    return checks.finite_array(name, value, (3,)).astype(float)
 
 
 def compiled_target(frame: Array, tool: Array) -> Array:

@@ -44,6 +44,7 @@ from ...fileio import (
     read_text_limited,
 )
 from ...ik import CSV_COLUMNS, write_csv
+from ...ik.axis import entry_point_target, tool_task_keywords
 from ...model.parameters import JOINT_NAMES, JOINT_UNITS, ROBOT_FILE_LIMIT
 from ...model.robot import Robot, load_robot
 from ...paths import TipPath as DesiredPath
@@ -70,6 +71,7 @@ from .options import (
     positive_int_at_most,
     register_numbers,
 )
+from .tool_flags import FLAGS as TOOL_FLAGS
 from .tool_flags import ik_pointing, numbers
 
 if TYPE_CHECKING:
@@ -172,6 +174,10 @@ def _simulate(args: argparse.Namespace) -> int:
     if args.plant_engine == "mujoco":
         from ... import mujoco_bridge  # noqa: F401  (registers the MuJoCo plant)
     experiment = _experiment(args, robot, desired, gains)
+    if args.entry_point is not None:  # off the tip's path, said naming the flag, before the IK
+        tip = experiment.desired(robot)
+        point = experiment.tool_task()["entry_point"]
+        entry_point_target(point, tip.position, tip.velocity, tip.acceleration, "--entry-point")
     label = f"case {args.case}" if desired is None else escape(desired.name)
     with (
         tqdm(total=100, desc=f"{label} {args.controller}", unit="%", disable=args.quiet, leave=False) as bar,
@@ -202,6 +208,7 @@ def _check_simulate_options(args: argparse.Namespace) -> dict[str, Any]:
     if (args.case is None) == (args.path is None):
         raise InputError("give exactly one of --case 1|2 and --path FILE")
     _criterion(args)  # a criterion option without its criterion: refused before the work
+    tool_task_keywords(args.axis, args.cone_degrees, args.entry_point, names=TOOL_FLAGS)  # naming the flags
     scm_options = _scm_options(args)  # refused before any work
     _unused_options(args)
     return scm_options
@@ -277,6 +284,9 @@ _SUMMARY_KEYS = (
     "max_tip_error_m",
     "rms_tip_error_m",
     "max_tip_error_after_transient_m",
+    "max_axis_error_rad",
+    "max_axis_error_after_transient_rad",
+    "max_entry_distance_m",
     "peak_force_n",
     "rms_force_n",
     "chatter_n",

@@ -9,38 +9,25 @@ from typing import Any
 
 import numpy as np
 
-from ...errors import InputError, shown
+from ... import checks
+from ...errors import InputError
+
+#: The flags of a tool-axis task, in the order of :func:`vgtarm.ik.axis.tool_task_keywords`'s names.
+FLAGS = ("--axis", "--cone", "--entry-point")
 
 
 def numbers(text: str, field: str, count: int, meaning: str) -> np.ndarray:
     """``count`` comma-separated finite numbers of the option ``field``, or one line naming it."""
-    cells = text.split(",")
-    try:
-        values = np.array([float(cell) for cell in cells])
-    except ValueError:
-        values = np.array([np.nan])
-    if values.shape != (count,) or not np.isfinite(values).all():
-        raise InputError(f"{field} {shown(text)}: expected {count} finite numbers separated by commas ({meaning})")
-    return values
+    return checks.comma_numbers(field, text, count, meaning)
 
 
 def ik_pointing(args: argparse.Namespace) -> dict[str, Any]:
-    """``--axis`` (a unit vector) and ``--entry-point`` (a point): the keywords of the tool-axis tasks."""
-    from ...ik.axis import unit_directions
+    """``--axis`` (a unit vector), ``--cone`` (degrees) and ``--entry-point`` (a point): the keywords of
+    the tool-axis tasks (:func:`vgtarm.ik.axis.tool_task_keywords`, naming the flags); with ``--pose``
+    refused too."""
+    from ...ik.axis import tool_task_keywords
 
-    out: dict[str, Any] = {}
-    if args.axis is not None:
-        values = numbers(args.axis, "--axis", 3, "the direction of the tool's axis x,y,z, a unit vector")
-        out["axis"] = unit_directions(values, 1, "--axis")[0]
-    if args.entry_point is not None:
-        out["entry_point"] = numbers(args.entry_point, "--entry-point", 3, "the entry point x,y,z in m")
-    if args.cone is not None:
-        if args.axis is None:
-            raise InputError(f"--cone {shown(args.cone)}: a cone needs its axis, --axis X,Y,Z")
-        degrees = numbers(args.cone, "--cone", 1, "the cone's half-angle in degrees, in (0, 90)")[0]
-        if not 0.0 < degrees < 90.0:
-            raise InputError(f"--cone {shown(args.cone)}: expected a half-angle in (0, 90) degrees")
-        out["cone"] = float(np.radians(degrees))
+    out = tool_task_keywords(args.axis, args.cone, args.entry_point, names=FLAGS)
     given = [
         flag for flag, on in (("--pose", args.pose), ("--axis", args.axis), ("--entry-point", args.entry_point)) if on
     ]
