@@ -188,7 +188,7 @@ def test_bar_helper_is_silent_with_quiet_and_off_a_terminal(monkeypatch: pytest.
 
 @pytest.mark.skipif(compiled.find_compiler() is None, reason="no C compiler")
 def test_quiet_silences_a_model_build_on_a_terminal(tmp_path: Path) -> None:
-    """The cheapest long build (two modules, about 7 s estimated: it shows its phases on a terminal,
+    """The cheapest long build (one module, about 10 s estimated: it shows its phases on a terminal,
     tests/test_build_budget.py) shows nothing with ``-q``."""
     cache = tmp_path / "cache"
     cache.mkdir(mode=0o700)

@@ -16,19 +16,25 @@ in one line when the estimate exceeds:
 One compiler command of a build runs under a limit of its own (:mod:`vgtarm.compiler`):
 ``$VGTARM_COMPILER_TIME_LIMIT`` seconds, else :func:`compiler_limit` of the estimate: ten times the
 estimated compile and at least :data:`COMPILER_LIMIT_FLOOR` (10 min for the paper's robot, whose
-compile took 60 s on this 2-core machine under load; about 12 min for six modules).
+compile took 60 s on this 2-core machine under load; about 42 min for six modules: one compiler command
+compiles one file of the build, each well within it).
 
 The fits (least squares of ``y = c n^a`` in log-log, 2-core x86_64 vm, CasADi 3.8.2, gcc 12.2;
-stacks of the benchmark family, ``k`` modules, ``3k + ceil(k/2)`` joints):
+stacks of the benchmark family, ``k`` modules, ``3k + ceil(k/2)`` joints). The symbolic
+construction and the compiler were measured again on 2026-11-28 (4 to 21 joints, fit on 7 to 21),
+after the tool tasks' and the effort criterion's functions had made them several times the
+2026-11-25 figures (the six-module arm's generated C 27 MB):
 
-- symbolic construction of every function: ``3.09e-4 n^3.09`` s (measured 4 to 42 joints, fit on
-  14 to 42), holding ``0.19 n^2.07`` MiB (the same runs);
+- symbolic construction of every function: ``0.0134 n^2.39`` s; holding ``0.19 n^2.07`` MiB
+  (2026-11-25, measured 4 to 42 joints, fit on 14 to 42);
 - the build process with the generated C: ``0.293 n^2.00`` MiB above its ``95`` MiB of Python,
-  CasADi and NumPy (measured 4 to 28 joints, fit on 14 to 28); it waits while the compiler runs;
-- the compiler: ``0.245 n^1.87`` s of CPU (measured 4 to 35 joints) and a peak of
-  ``2.88 n^2.04`` MiB: measured 4 to 28 joints, the exponent fitted on 14 to 28 and the curve put
-  through the largest measurement (2.58 GB at 28 joints), so that it errs on the high side, and
-  never below the 180 MiB it takes for the smallest stack;
+  CasADi and NumPy (2026-11-25, measured 4 to 28 joints, fit on 14 to 28); it waits while the
+  compilers run;
+- the compiler: ``0.648 n^1.96`` s of CPU, all files one after the other (the measurements scatter
+  from 0.57 to 1.57 times the curve); a file per function, compiled in parallel
+  (:mod:`.compiling`), whose largest file peaks at ``30.05 n^1.42`` MiB: the curve put through the
+  highest of the measurements (1.81 GB at 21 joints), so that it errs on the high side, and never
+  below the 180 MiB it takes for the smallest stack;
 - the mass matrix alone (what ``vgtarm describe`` evaluates): ``1.06e-5 n^3.13`` s (21 to 70 joints).
 
 The paper's fixed robot is measured apart (its C is compiled whole at ``-O2``).
@@ -59,11 +65,11 @@ _MIB = float(1 << 20)
 #: ``(c, a)`` of ``c n^a``: symbolic construction (s) and its memory (MiB), the build process with
 #: the generated C (MiB), compiler CPU (s) and peak memory (MiB), the mass matrix alone (s). See
 #: the module docstring.
-SYMBOLIC_SECONDS = (3.09e-4, 3.09)
+SYMBOLIC_SECONDS = (0.0134, 2.39)
 SYMBOLIC_MIB = (0.190, 2.07)
 GENERATION_MIB = (0.293, 2.00)
-COMPILER_SECONDS = (0.245, 1.87)
-COMPILER_MIB = (2.88, 2.04)
+COMPILER_SECONDS = (0.648, 1.96)
+COMPILER_MIB = (30.05, 1.42)
 MASS_SECONDS = (1.06e-5, 3.13)
 #: The compiler's peak for the smallest stack (MiB): the least it takes.
 COMPILER_FLOOR_MIB = 180.0
@@ -123,7 +129,8 @@ def describe_model(definition: Definition) -> str:
     """The model for a message: the paper's robot, or a stack with its name and size."""
     if isinstance(definition, StackDefinition):
         stack = definition.stack
-        return f"stack {shown(stack.name)} ({len(definition.structure)} modules, {definition.n_joints} joints)"
+        k = len(definition.structure)
+        return f"stack {shown(stack.name)} ({k} module{'' if k == 1 else 's'}, {definition.n_joints} joints)"
     return "the paper's robot"
 
 
@@ -181,7 +188,8 @@ def compiler_limit(cost: BuildEstimate, floor: float = COMPILER_LIMIT_FLOOR) -> 
     ``$VGTARM_COMPILER_TIME_LIMIT`` (:func:`vgtarm.compiler.time_limit`): a generous multiple of the
     estimated compile (:data:`COMPILER_LIMIT_FACTOR`; a busy machine compiles several times more
     slowly), at least ``floor``, so that only a compiler that hangs meets it: 10 min for the
-    paper's robot, about 12 min for six modules, 31 min for ten."""
+    paper's robot, about 42 min for six modules, 1.9 h for ten (the whole estimated compile of one
+    file per function: each command compiles one)."""
     return max(floor, COMPILER_LIMIT_FACTOR * cost.compiler_seconds)
 
 
