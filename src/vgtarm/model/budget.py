@@ -37,7 +37,7 @@ after the tool tasks' and the effort criterion's functions had made them several
   below the 180 MiB it takes for the smallest stack;
 - the mass matrix alone (what ``vgtarm describe`` evaluates): ``1.06e-5 n^3.13`` s (21 to 70 joints).
 
-The paper's fixed robot is measured apart (its C is compiled whole at ``-O2``).
+The paper's fixed robot is measured apart (its C is compiled at ``-O2``).
 """
 
 from __future__ import annotations

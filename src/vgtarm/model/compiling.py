@@ -183,13 +183,16 @@ def _compile_units(
 
 
 def _jobs(definition: Definition) -> int:
-    """How many compilers a build runs at once: one per processor this process may use, as many as
-    the memory holds at the whole model's estimated peak (:mod:`.budget`; one file's is less)."""
+    """How many compilers a build runs at once: one per processor this process may use, and no more
+    than the memory left beside the build process holds at the largest file's estimated peak
+    (:mod:`.budget`); at least one (the budget refuses a build that cannot fit)."""
     processors = usable_cpus()
     available, _ = memory_limit()
     if available is None:
         return processors
-    return max(1, min(processors, int(available // budget.estimate(definition).compiler_bytes)))
+    cost = budget.estimate(definition)
+    room = available - (cost.bytes("compiled") - cost.compiler_bytes)  # the build process's own
+    return max(1, min(processors, int(room // cost.compiler_bytes)))
 
 
 def _recipe() -> bytes:
