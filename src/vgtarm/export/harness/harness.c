@@ -25,7 +25,7 @@ int vgtc_harness_run(const vgt_model *m, const vgt_settings *s, const vgt_run *r
     *controller_status = 0;
     if (nj != VGTC_NJ) return VGT_FUNCTION_FAILED;
     if (!work_alloc(&wk, m)) {
-        work_free(&wk);
+        vgt_work_free(&wk);
         return VGT_NO_MEMORY;
     }
     for (long k = k0; k < k1; ++k) {
@@ -36,7 +36,7 @@ int vgtc_harness_run(const vgt_model *m, const vgt_settings *s, const vgt_run *r
         double *tip = r->tip + 3 * k;
         const double *in_ts[3] = {q, qd, r->p_plant};
         double *out_ts[2] = {tip, V};
-        if (call(&m->tip_state, &wk, 3, in_ts, 2, out_ts)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
+        if (vgt_work_call(&m->tip_state, &wk, 3, in_ts, 2, out_ts)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
         const double *td = r->tip_d + 3 * k;
         double e0 = td[0] - tip[0], e1 = td[1] - tip[1], e2 = td[2] - tip[2];
         r->error[k] = sqrt(e0 * e0 + e1 * e1 + e2 * e2);
@@ -65,7 +65,7 @@ int vgtc_harness_run(const vgt_model *m, const vgt_settings *s, const vgt_run *r
         }
         if (status != VGT_DONE) { *stop = k + 1; break; }
     }
-    work_free(&wk);
+    vgt_work_free(&wk);
     return status;
 }
 
@@ -100,7 +100,7 @@ int vgtc_harness_run_switching(const vgt_model *m, const vgt_settings *s, const 
     *count = 0;
     if (nj != VGTC_NJ) return VGT_FUNCTION_FAILED;
     if (!work_alloc(&wk, m)) {
-        work_free(&wk);
+        vgt_work_free(&wk);
         return VGT_NO_MEMORY;
     }
     for (long k = k0; k < k1; ++k) {
@@ -111,7 +111,7 @@ int vgtc_harness_run_switching(const vgt_model *m, const vgt_settings *s, const 
         double *tip = r->tip + 3 * k;
         const double *in_ts[3] = {q, qd, r->p_plant};
         double *out_ts[2] = {tip, V};
-        if (call(&m->tip_state, &wk, 3, in_ts, 2, out_ts)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
+        if (vgt_work_call(&m->tip_state, &wk, 3, in_ts, 2, out_ts)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
         const double *td = r->tip_d + 3 * k;
         double e0 = td[0] - tip[0], e1 = td[1] - tip[1], e2 = td[2] - tip[2];
         r->error[k] = sqrt(e0 * e0 + e1 * e1 + e2 * e2);
@@ -153,7 +153,7 @@ int vgtc_harness_run_switching(const vgt_model *m, const vgt_settings *s, const 
         }
         if (status != VGT_DONE) { *stop = k + 1; break; }
     }
-    work_free(&wk);
+    vgt_work_free(&wk);
     return status;
 }
 #endif

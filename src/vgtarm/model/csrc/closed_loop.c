@@ -14,6 +14,7 @@
 
 #include "vgtarm.h"
 #include "vgt_control.h" /* the controller's per-period arithmetic, shared with the exported controller */
+#include "vgt_work.h"    /* the generated functions' work arrays */
 
 #ifdef VGT_MARGIN_ROW
 /* A library may sum the margin rows of the assembly check (check_state) with a function of its
@@ -23,47 +24,10 @@
 double VGT_MARGIN_ROW(const double *G, int nj, int row, double margin, const double *q);
 #endif
 
-typedef struct {
-    const double **arg;
-    double **res;
-    vgt_int *iw;
-    double *w;
-} vgt_work;
-
-static vgt_int max_size(const vgt_model *m, int which)
-{
-    const vgt_call *calls[6] = {&m->cfc, &m->fd, &m->tip_state, &m->tip, &m->id, &m->jac};
-    vgt_int best = 0;
-    for (int i = 0; i < 6; ++i) {
-        vgt_int v = which == 0 ? calls[i]->sz_arg : which == 1 ? calls[i]->sz_res : which == 2 ? calls[i]->sz_iw
-                                                                                            : calls[i]->sz_w;
-        best = v > best ? v : best;
-    }
-    return best + 1;
-}
-
 static int work_alloc(vgt_work *wk, const vgt_model *m)
 {
-    wk->arg = malloc(sizeof(double *) * (size_t)max_size(m, 0));
-    wk->res = malloc(sizeof(double *) * (size_t)max_size(m, 1));
-    wk->iw = malloc(sizeof(vgt_int) * (size_t)max_size(m, 2));
-    wk->w = malloc(sizeof(double) * (size_t)max_size(m, 3));
-    return wk->arg && wk->res && wk->iw && wk->w;
-}
-
-static void work_free(vgt_work *wk)
-{
-    free(wk->arg);
-    free(wk->res);
-    free(wk->iw);
-    free(wk->w);
-}
-
-static int call(const vgt_call *c, vgt_work *wk, int n_in, const double **in, int n_out, double **out)
-{
-    for (int i = 0; i < n_in; ++i) wk->arg[i] = in[i];
-    for (int j = 0; j < n_out; ++j) wk->res[j] = out[j];
-    return c->f(wk->arg, wk->res, wk->iw, wk->w, 0);
+    const vgt_call *calls[6] = {&m->cfc, &m->fd, &m->tip_state, &m->tip, &m->id, &m->jac};
+    return vgt_work_alloc(wk, calls, 6);
 }
 
 /* Tool force of one sample: cutting force opposing the tip velocity V plus the disturbance. */
@@ -86,7 +50,7 @@ static int acceleration(const vgt_model *m, const vgt_settings *s, const vgt_run
     double tip[3], V[3], f[3];
     const double *in_ts[3] = {q, qd, r->p_plant};
     double *out_ts[2] = {tip, V};
-    if (call(&m->tip_state, wk, 3, in_ts, 2, out_ts)) return VGT_FUNCTION_FAILED;
+    if (vgt_work_call(&m->tip_state, wk, 3, in_ts, 2, out_ts)) return VGT_FUNCTION_FAILED;
     tool_force(s, V, dist, f);
     if (f_used) memcpy(f_used, f, sizeof f);
     double applied[s->n_joints];
@@ -97,7 +61,7 @@ static int acceleration(const vgt_model *m, const vgt_settings *s, const vgt_run
     }
     const double *in_fd[5] = {q, qd, F, f, r->p_plant};
     double *out_fd[1] = {qdd};
-    if (call(&m->fd, wk, 5, in_fd, 1, out_fd)) return VGT_FUNCTION_FAILED;
+    if (vgt_work_call(&m->fd, wk, 5, in_fd, 1, out_fd)) return VGT_FUNCTION_FAILED;
     return VGT_DONE;
 }
 
@@ -214,7 +178,7 @@ static int estimate(const vgt_model *m, const vgt_settings *s, const vgt_run *r,
         const double *f = s->tool_feedforward ? r->tool_force_expected + 3 * (k - 1) : zero;
         const double *in_fd[5] = {x0, x0 + nj, r->F + nj * (k - 1), f, r->p_ctrl};
         double *out_fd[1] = {a};
-        if (call(&m->fd, wk, 5, in_fd, 1, out_fd)) return VGT_FUNCTION_FAILED;
+        if (vgt_work_call(&m->fd, wk, 5, in_fd, 1, out_fd)) return VGT_FUNCTION_FAILED;
         vgt_kalman_step(nj, s->dt, s->kalman_gain, x0, x0 + nj, x0 + 2 * nj, a, z, q, v, d);
     }
     memcpy(r->qd_meas + nj * k, v, sizeof(double) * (size_t)nj);
@@ -259,7 +223,7 @@ static int observe(const vgt_model *m, const vgt_settings *s, const vgt_run *r, 
         double J[3 * nj], Jw[3 * nj];
         const double *in_j[2] = {r->q_meas + nj * k, r->p_ctrl};
         double *out_j[2] = {J, Jw};
-        if (call(&m->jac, wk, 2, in_j, 2, out_j)) return VGT_FUNCTION_FAILED;
+        if (vgt_work_call(&m->jac, wk, 2, in_j, 2, out_j)) return VGT_FUNCTION_FAILED;
         const double *f = r->f_ext + 3 * (k - 1);
         vgt_force_feedforward(nj, J, f, tau);
         return VGT_DONE;
@@ -275,7 +239,7 @@ static int observe(const vgt_model *m, const vgt_settings *s, const vgt_run *r, 
         for (int i = 0; i < nj; ++i) acc[i] = x[3 * nj + i] + x[2 * nj + i];
         const double *in_k[5] = {x0, x0 + nj, acc, f1, r->p_ctrl};
         double *out_k[1] = {raw};
-        if (call(&m->id, wk, 5, in_k, 1, out_k)) return VGT_FUNCTION_FAILED;
+        if (vgt_work_call(&m->id, wk, 5, in_k, 1, out_k)) return VGT_FUNCTION_FAILED;
         const double keep = exp(-s->observer_gain * s->dt), *tau0 = tau - nj;
         vgt_observer_filter(nj, keep, tau0, raw, F1, tau);
         return VGT_DONE;
@@ -297,7 +261,7 @@ static int observe(const vgt_model *m, const vgt_settings *s, const vgt_run *r, 
     vgt_window_acceleration(nj, s->dt, va, vb, acc);
     const double *in_id[5] = {qa, va, acc, f, r->p_ctrl};
     double *out_id[1] = {raw};
-    if (call(&m->id, wk, 5, in_id, 1, out_id)) return VGT_FUNCTION_FAILED;
+    if (vgt_work_call(&m->id, wk, 5, in_id, 1, out_id)) return VGT_FUNCTION_FAILED;
     const double keep = exp(-s->observer_gain * s->dt), *tau0 = tau - nj;
     vgt_observer_filter(nj, keep, tau0, raw, applied, tau);
     return VGT_DONE;
@@ -311,7 +275,7 @@ static int feed_forward(const vgt_model *m, const vgt_settings *s, const vgt_run
     double J[3 * nj], Jw[3 * nj], tau[nj];
     const double *in_j[2] = {r->q_meas + nj * k, r->p_ctrl};
     double *out_j[2] = {J, Jw};
-    if (call(&m->jac, wk, 2, in_j, 2, out_j)) return VGT_FUNCTION_FAILED;
+    if (vgt_work_call(&m->jac, wk, 2, in_j, 2, out_j)) return VGT_FUNCTION_FAILED;
     vgt_force_feedforward(nj, J, r->tool_force_expected + 3 * k, tau);
     vgt_subtract_estimate(nj, tau, F);
     return VGT_DONE;
@@ -344,7 +308,7 @@ int vgt_simulate_slice(const vgt_model *m, const vgt_settings *s, const vgt_run 
     int status = VGT_DONE;
     *stop = k1;
     if (!work_alloc(&wk, m)) {
-        work_free(&wk);
+        vgt_work_free(&wk);
         return VGT_NO_MEMORY;
     }
     for (long k = k0; k < k1; ++k) {
@@ -357,7 +321,7 @@ int vgt_simulate_slice(const vgt_model *m, const vgt_settings *s, const vgt_run 
             double *tip = r->tip + 3 * k;
             const double *in_ts[3] = {q, qd, r->p_plant};
             double *out_ts[2] = {tip, V};
-            if (call(&m->tip_state, &wk, 3, in_ts, 2, out_ts)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
+            if (vgt_work_call(&m->tip_state, &wk, 3, in_ts, 2, out_ts)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
             const double *td = r->tip_d + 3 * k;
             double e0 = td[0] - tip[0], e1 = td[1] - tip[1], e2 = td[2] - tip[2];
             r->error[k] = sqrt(e0 * e0 + e1 * e1 + e2 * e2);
@@ -371,7 +335,7 @@ int vgt_simulate_slice(const vgt_model *m, const vgt_settings *s, const vgt_run 
                     double tip_m[3];
                     const double *in_m[2] = {r->q_meas + nj * k, r->p_ctrl};
                     double *out_m[1] = {tip_m};
-                    if (call(&m->tip, &wk, 2, in_m, 1, out_m)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
+                    if (vgt_work_call(&m->tip, &wk, 2, in_m, 1, out_m)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
                     double m0 = td[0] - tip_m[0], m1 = td[1] - tip_m[1], m2 = td[2] - tip_m[2];
                     seen = sqrt(m0 * m0 + m1 * m1 + m2 * m2);
                 }
@@ -382,7 +346,7 @@ int vgt_simulate_slice(const vgt_model *m, const vgt_settings *s, const vgt_run 
             const double *qm = r->q_meas + nj * k, *vm = r->qd_meas + nj * k, *tau = r->tau_hat + nj * k;
             const double *in_c[8] = {qm, vm, r->q_d + nj * k, r->qd_d + nj * k, r->qdd_d + nj * k, Kp, Kv, r->p_ctrl};
             double *out_c[1] = {F};
-            if (call(&m->cfc, &wk, 8, in_c, 1, out_c)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
+            if (vgt_work_call(&m->cfc, &wk, 8, in_c, 1, out_c)) { status = VGT_FUNCTION_FAILED; *stop = k; break; }
             vgt_subtract_estimate(nj, tau, F);
             if (s->tool_feedforward && feed_forward(m, s, r, &wk, k, F)) {
                 status = VGT_FUNCTION_FAILED; *stop = k; break;
@@ -409,7 +373,7 @@ int vgt_simulate_slice(const vgt_model *m, const vgt_settings *s, const vgt_run 
         slice->used = used;
         slice->substep = substep;
     }
-    work_free(&wk);
+    vgt_work_free(&wk);
     return status;
 }
 
@@ -430,11 +394,11 @@ static int limited_acceleration(const vgt_model *m, vgt_work *wk, const double *
     const double zero[3] = {0.0, 0.0, 0.0};
     const double *in_c[8] = {q, qd, q_d, qd_d, qdd_d, kp, kv, p_ctrl};
     double *out_c[1] = {F};
-    if (call(&m->cfc, wk, 8, in_c, 1, out_c)) return 1;
+    if (vgt_work_call(&m->cfc, wk, 8, in_c, 1, out_c)) return 1;
     vgt_saturate(nj, act->force, act->speed, act->line, qd, F);
     const double *in_f[5] = {q, qd, F, zero, p_ctrl};
     double *out_f[1] = {a};
-    return call(&m->fd, wk, 5, in_f, 1, out_f) != 0;
+    return vgt_work_call(&m->fd, wk, 5, in_f, 1, out_f) != 0;
 }
 
 /* Predicted tip-error norm of one candidate (see vgt_ga_fitness_limited). */
@@ -471,7 +435,7 @@ static double predict_one(const vgt_model *m, const vgt_settings *s, vgt_work *w
         }
         const double *in_t[2] = {q, p_ctrl};
         double *out_t[1] = {tip};
-        if (call(&m->tip, wk, 2, in_t, 1, out_t)) return INFINITY;
+        if (vgt_work_call(&m->tip, wk, 2, in_t, 1, out_t)) return INFINITY;
         const double *td = tip_d + 3 * (j + 1);
         double d0 = td[0] - tip[0], d1 = td[1] - tip[1], d2 = td[2] - tip[2];
         sum += d0 * d0 + d1 * d1 + d2 * d2;
@@ -514,6 +478,6 @@ int vgt_ga_fitness_limited(const vgt_model *m, const vgt_settings *s, const doub
         fitness[c] = ok ? predict_one(m, s, &wk, p_ctrl, horizon, q0, qd0, q_d, qd_d, qdd_d, tip_d,
                                       force_limit ? &act : NULL, Kp + (long)nj * nj * c, Kv + (long)nj * nj * c)
                         : INFINITY;
-    work_free(&wk);
+    vgt_work_free(&wk);
     return ok ? VGT_DONE : VGT_NO_MEMORY;
 }

@@ -12,35 +12,15 @@
 #include "vgtarm.h"
 #include "vgt_control.h" /* vgt_clip, vgt_saturate, vgt_cholesky */
 #include "vgt_drill.h"
+#include "vgt_work.h"
 
-typedef struct {
-    const double **arg;
-    double **res;
-    vgt_int *iw;
-    double *w;
-} drill_work;
-
+/* The controller's calls (vgt_drill_control.h) go through the work arrays the loop allocated. */
 static int vgt_drill_call(const vgt_call *c, void *work, int n_in, const double **in, int n_out, double **out)
 {
-    drill_work *wk = (drill_work *)work;
-    for (int i = 0; i < n_in; ++i) wk->arg[i] = in[i];
-    for (int j = 0; j < n_out; ++j) wk->res[j] = out[j];
-    return c->f(wk->arg, wk->res, wk->iw, wk->w, 0);
+    return vgt_work_call(c, (vgt_work *)work, n_in, in, n_out, out);
 }
 
 #include "vgt_drill_control.h"
-
-static vgt_int drill_size(const vgt_drill_model *m, int which)
-{
-    const vgt_call *calls[8] = {&m->tip, &m->velocity, &m->jac, &m->fk, &m->bias_acc, &m->mass, &m->bias_forces, &m->id};
-    vgt_int best = 0;
-    for (int i = 0; i < 8; ++i) {
-        const vgt_call *c = calls[i];
-        vgt_int v = which == 0 ? c->sz_arg : which == 1 ? c->sz_res : which == 2 ? c->sz_iw : c->sz_w;
-        best = v > best ? v : best;
-    }
-    return best + 1;
-}
 
 /* The truth at (q, qd): the tip's depth and feed along the axis, the drill's forces (thrust,
  * torque, their slopes), the tip and the tool's axis in F0. */
@@ -48,7 +28,7 @@ typedef struct {
     double depth, feed, forces[4], tip[3];
 } drill_truth;
 
-static int truth(const vgt_drill_model *m, drill_work *wk, const vgt_drill_settings *s, const vgt_drill_bone *bone,
+static int truth(const vgt_drill_model *m, vgt_work *wk, const vgt_drill_settings *s, const vgt_drill_bone *bone,
                  const vgt_drill_run *r, const double *q, const double *qd, drill_truth *out)
 {
     const int layers = bone->n_layers - (isnan(r->fracture_time) ? 0 : 1); /* the cap out: the last layer cuts no more */
@@ -71,7 +51,7 @@ static int truth(const vgt_drill_model *m, drill_work *wk, const vgt_drill_setti
 
 /* One plant step of h (s) under F: (M + h b j j^T) qdd = F - C - j thrust - J_W^T axis torque,
  * then semi-implicit Euler (DrillingPlant.acceleration and step). */
-static int plant_step(const vgt_drill_model *m, drill_work *wk, const vgt_drill_settings *s,
+static int plant_step(const vgt_drill_model *m, vgt_work *wk, const vgt_drill_settings *s,
                       const vgt_drill_bone *bone, vgt_drill_run *r, double t, double h, const double *F, double *q,
                       double *qd)
 {
@@ -121,7 +101,7 @@ static int plant_step(const vgt_drill_model *m, drill_work *wk, const vgt_drill_
 }
 
 /* The row of vgtarm.drilling.loop.SERIES of this sample. */
-static int record(const vgt_drill_model *m, drill_work *wk, const vgt_drill_settings *s, const vgt_drill_run *r,
+static int record(const vgt_drill_model *m, vgt_work *wk, const vgt_drill_settings *s, const vgt_drill_run *r,
                   const vgt_drill_state *st, const drill_truth *tr, const double *q, double t,
                   const vgt_drill_output *o, double *row)
 {
@@ -170,7 +150,7 @@ static int finite_state(int nj, const double *q, const double *qd)
 }
 
 /* The run itself, with the work arrays and the state's memory allocated by vgt_drill_simulate. */
-static int drill_run(const vgt_drill_model *m, drill_work *wk, double *memory, const vgt_drill_settings *s,
+static int drill_run(const vgt_drill_model *m, vgt_work *wk, double *memory, const vgt_drill_settings *s,
                      const vgt_drill_bone *bone, vgt_drill_run *r)
 {
     const int nj = s->n_joints;
@@ -231,18 +211,13 @@ static int drill_run(const vgt_drill_model *m, drill_work *wk, double *memory, c
 int vgt_drill_simulate(const vgt_drill_model *m, const vgt_drill_settings *s, const vgt_drill_bone *bone,
                        vgt_drill_run *r)
 {
-    drill_work wk;
-    wk.arg = malloc(sizeof(double *) * (size_t)drill_size(m, 0));
-    wk.res = malloc(sizeof(double *) * (size_t)drill_size(m, 1));
-    wk.iw = malloc(sizeof(vgt_int) * (size_t)drill_size(m, 2));
-    wk.w = malloc(sizeof(double) * (size_t)drill_size(m, 3));
+    const vgt_call *calls[8] = {&m->tip, &m->velocity, &m->jac, &m->fk, &m->bias_acc, &m->mass, &m->bias_forces, &m->id};
+    vgt_work wk;
+    int ready = vgt_work_alloc(&wk, calls, 8);
     double *memory = malloc(sizeof(double) * (size_t)VGT_DRILL_STATE_DOUBLES(s->n_joints));
     int status = VGT_NO_MEMORY;
-    if (wk.arg && wk.res && wk.iw && wk.w && memory) status = drill_run(m, &wk, memory, s, bone, r);
-    free(wk.arg);
-    free(wk.res);
-    free(wk.iw);
-    free(wk.w);
+    if (ready && memory) status = drill_run(m, &wk, memory, s, bone, r);
+    vgt_work_free(&wk);
     free(memory);
     return status;
 }
