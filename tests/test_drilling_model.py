@@ -510,3 +510,12 @@ def test_the_cap_example_is_the_femur_with_a_cap(femur):
     assert capped.layers == femur.layers and capped.cap_strength == 1.5e8 and femur.cap_strength is None
     assert cap_thickness(capped, 20.0) == pytest.approx(math.sqrt(0.5 * 20.0 / 1.5e8))  # 0.26 mm
     assert cap_thickness(femur, 20.0) == 0.0
+
+
+def test_the_bone_files_shipped_with_the_package_are_the_examples_byte_for_byte():
+    """``vgtarm.drilling.FEMUR`` and ``FEMUR_CAP`` are copies kept in the package (a wheel has no
+    ``examples/``): they stay the example files, so a run of either names the same bone."""
+    from vgtarm.drilling import FEMUR, FEMUR_CAP
+
+    for shipped in (FEMUR, FEMUR_CAP):
+        assert shipped.read_bytes() == (BONES / shipped.name).read_bytes(), shipped.name

@@ -8,6 +8,7 @@ summary gives the axis error; a run without a tool task is the run it was.
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 from pathlib import Path
@@ -124,8 +125,6 @@ def test_a_study_varies_the_tool_axis_and_records_its_error(tmp_path: Path, caps
     )
     out = tmp_path / "runs"
     assert main(["study", "run", str(study), "--out", str(out), "-q"]) == 0
-    import csv
-
     rows = list(csv.DictReader((out / "results.csv").open()))
     assert sorted(row["axis"] for row in rows) == sorted(["0,0,1", TILTED_TEXT])
     assert all(row["success"] == "True" and float(row["max_axis_error_rad"]) < 2e-3 for row in rows)

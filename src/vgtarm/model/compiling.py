@@ -31,7 +31,8 @@ from .library_errors import _Unavailable
 
 #: The drivers compiled into every library (``closed_loop.c``, ``ga.c``, ``batch.c``) and their headers.
 _CSRC = Path(__file__).resolve().parent / "csrc"
-_CFLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off")
+#: Flags of every C file of the paper robot's library and of every library's drivers (linked with ``-shared``).
+_CFLAGS = ("-O2", "-fPIC", "-ffp-contract=off")
 #: Flags of a stack's generated functions, compiled apart before the link with the drivers (built
 #: with :data:`_CFLAGS`): its straight-line code is ten times the paper robot's (17 MB of C for six
 #: modules, 12.6 MB with common-subexpression elimination), and GCC's -O2 spent 4 min 19 s on it
@@ -101,9 +102,9 @@ def _compile(compiler: str, workdir: Path, definition: Definition = PAPER) -> tu
     """
     built = build_functions(definition)
     (workdir / "layout.c").write_text(interface.layout_source())
-    generated = tuple(flag for flag in _CFLAGS if flag != "-shared") if definition == PAPER else _STACK_GENERATED_CFLAGS
+    generated = _CFLAGS if definition == PAPER else _STACK_GENERATED_CFLAGS
     drivers = [workdir / "layout.c", *sorted(_CSRC.glob("*.c"))]
-    driver_flags = (*(flag for flag in _CFLAGS if flag != "-shared"), "-I", str(_CSRC))
+    driver_flags = (*_CFLAGS, "-I", str(_CSRC))
     units = [(unit, generated) for unit in _generated_units(built, workdir)]
     library = workdir / "library.so"
     failure = ""
@@ -173,9 +174,8 @@ def _compile_units(
     try:
         futures = [pool.submit(one, unit) for unit in units]
         wait(futures, return_when=FIRST_EXCEPTION)
-        for future in futures:
+        for future in futures:  # the first failure, raised once the running compilers have ended (below)
             if future.done() and future.exception() is not None:
-                pool.shutdown(wait=True, cancel_futures=True)
                 future.result()
         return [future.result() for future in futures]
     finally:
